@@ -1,0 +1,1 @@
+//! Criterion benchmarks, one group per stage, live in `benches/`.

@@ -1,0 +1,93 @@
+//! Typed errors of the crate. Every message says what went wrong and where.
+
+use std::path::PathBuf;
+
+/// Errors raised while reading, validating or writing a mesh.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// The file could not be opened or read.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file content does not follow its format.
+    #[error("{path}:{line}: {reason}")]
+    Parse {
+        path: PathBuf,
+        /// 1-based line number (0 when the format is binary or the line is unknown).
+        line: usize,
+        reason: String,
+    },
+    /// The mesh was read but is not a usable tetrahedral mesh.
+    #[error("{path}: invalid mesh: {reason}")]
+    Invalid { path: PathBuf, reason: String },
+    /// The file extension does not name a supported format.
+    #[error("{path}: unsupported mesh format (expected .mesh, .msh or .vtk)")]
+    UnsupportedFormat { path: PathBuf },
+}
+
+/// Errors of the physics and solvers.
+#[derive(Debug, thiserror::Error)]
+pub enum FemError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// A configuration value is out of its valid range.
+    #[error("invalid value for `{field}`: {reason}")]
+    InvalidConfig { field: String, reason: String },
+    /// An element is inverted (det F ≤ 0) where the material cannot handle it.
+    #[error(
+        "element {element} is inverted (det F = {det:.3e}); the {material} material is undefined there"
+    )]
+    InvertedElement {
+        element: usize,
+        det: f64,
+        material: &'static str,
+    },
+    /// A non-finite value appeared during a solve.
+    #[error("non-finite value in {what} at step {step}")]
+    NonFinite { what: &'static str, step: usize },
+    /// The solver did not reach its tolerance.
+    #[error(
+        "{solver} did not converge at step {step}: relative gradient {residual:.3e} after {iterations} iterations (tolerance {tolerance:.1e})"
+    )]
+    NotConverged {
+        solver: &'static str,
+        step: usize,
+        iterations: usize,
+        residual: f64,
+        tolerance: f64,
+    },
+    /// The line search found no decrease along a descent direction.
+    #[error("{solver}: line search failed at step {step}, iteration {iteration}")]
+    LineSearchFailed {
+        solver: &'static str,
+        step: usize,
+        iteration: usize,
+    },
+    /// The sparse factorisation failed (the system is not positive definite).
+    #[error("sparse Cholesky factorisation failed: {0}")]
+    Factorization(String),
+    /// Several configuration errors, reported together.
+    #[error("{}", .0.iter().map(|e| format!("  - {e}")).collect::<Vec<_>>().join("\n"))]
+    Many(Vec<FemError>),
+    /// Writing output failed.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl FemError {
+    /// `Ok(())` for no errors, the single error for one, [`FemError::Many`] for several.
+    pub fn collect(mut errors: Vec<FemError>) -> Result<(), FemError> {
+        match errors.len() {
+            0 => Ok(()),
+            1 => Err(errors.remove(0)),
+            _ => Err(FemError::Many(errors)),
+        }
+    }
+}

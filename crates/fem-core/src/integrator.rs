@@ -1,0 +1,791 @@
+//! Implicit Euler posed as an energy minimisation (DESIGN §3):
+//!
+//! u_{n+1} = argmin_u  V(u) + Φ(u, t_{n+1}) − f_gᵀu + 1/(2h²) ‖u − u_n − h u̇_n‖²_M,
+//! u̇_{n+1} = (u_{n+1} − u_n)/h,
+//!
+//! with V the elastic energy, Φ the external force potentials (springs, point loads) and f_g = Mg
+//! the gravity load. The quasi-static mode drops the inertia term and finds static equilibrium,
+//! falling back to automatic load stepping from rest when a direct solve fails.
+//!
+//! Unknowns are the free DOFs only ([`DofMap`]); pinned vertices stay at zero displacement.
+
+use std::time::Instant;
+
+use faer::Side;
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+
+use crate::assembly::{self, AssemblyBuffers, ElementSet};
+use crate::constraints::DofMap;
+use crate::element::Elements;
+use crate::forces::ExternalForce;
+use crate::mass::MassMatrix;
+use crate::material::{AnyMaterial, MaterialConfig};
+use crate::optim::{
+    Lbfgs, NewtonSystem, Objective, Preconditioner, SolveParams, SolverConfig, SolverMethod, newton,
+};
+use crate::sparse::{HessianPattern, NO_SLOT};
+use crate::{FemError, TetMesh, Vec3, with_material};
+
+/// The `[time]` section of a scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeConfig {
+    /// Time step h in seconds.
+    pub step: f64,
+    /// Number of steps to simulate.
+    pub frames: usize,
+    /// Solve for static equilibrium at each frame's loads instead of dynamics.
+    #[serde(default)]
+    pub quasi_static: bool,
+}
+
+impl Default for TimeConfig {
+    fn default() -> Self {
+        Self {
+            step: 0.01,
+            frames: 200,
+            quasi_static: false,
+        }
+    }
+}
+
+impl TimeConfig {
+    pub fn check(&self, errors: &mut Vec<FemError>) {
+        if !(self.step.is_finite() && self.step > 0.0) {
+            errors.push(FemError::InvalidConfig {
+                field: "time.step".into(),
+                reason: format!("must be a positive number of seconds, got {}", self.step),
+            });
+        }
+        if self.frames == 0 {
+            errors.push(FemError::InvalidConfig {
+                field: "time.frames".into(),
+                reason: "must be at least 1".into(),
+            });
+        }
+    }
+}
+
+/// The `[gravity]` section of a scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GravityConfig {
+    /// Gravitational acceleration in m/s².
+    pub acceleration: [f64; 3],
+}
+
+impl Default for GravityConfig {
+    fn default() -> Self {
+        Self {
+            acceleration: [0.0, -9.81, 0.0],
+        }
+    }
+}
+
+/// Everything about the physical problem that does not change during a simulation.
+#[derive(Debug, Clone)]
+pub struct FullSpaceModel {
+    pub mesh: TetMesh,
+    pub elements: Elements,
+    pub material: AnyMaterial,
+    pub youngs_modulus: f64,
+    pub mass: MassMatrix,
+    pub dofs: DofMap,
+    /// Pinned vertices, sorted.
+    pub pinned: Vec<usize>,
+    pub gravity: Vec3,
+    /// Gravity load M g as a full vector.
+    pub gravity_load: Vec<f64>,
+    pub forces: Vec<ExternalForce>,
+    /// E · total rest volume: the size of the terms that cancel in the elastic energy.
+    pub energy_scale: f64,
+}
+
+impl FullSpaceModel {
+    pub fn new(
+        mesh: TetMesh,
+        material: &MaterialConfig,
+        pinned: Vec<usize>,
+        gravity: Vec3,
+        forces: Vec<ExternalForce>,
+    ) -> Result<Self, FemError> {
+        material.validate()?;
+        if !gravity.iter().all(|g| g.is_finite()) {
+            return Err(FemError::InvalidConfig {
+                field: "gravity.acceleration".into(),
+                reason: "must be finite".into(),
+            });
+        }
+        let elements = Elements::new(&mesh);
+        let mass = MassMatrix::new(
+            &elements,
+            mesh.num_vertices(),
+            material.density,
+            material.mass,
+        );
+        let dofs = DofMap::new(&mesh, &pinned);
+        let mut gravity_load = vec![0.0; 3 * mesh.num_vertices()];
+        for (v, &m) in mass.lumped.iter().enumerate() {
+            for c in 0..3 {
+                gravity_load[3 * v + c] = m * gravity[c];
+            }
+        }
+        let energy_scale = material.youngs_modulus * elements.volume.iter().sum::<f64>();
+        Ok(Self {
+            energy_scale,
+            elements,
+            material: material.build(),
+            youngs_modulus: material.youngs_modulus,
+            mass,
+            dofs,
+            pinned,
+            gravity,
+            gravity_load,
+            forces,
+            mesh,
+        })
+    }
+
+    pub fn num_full(&self) -> usize {
+        3 * self.mesh.num_vertices()
+    }
+
+    /// Elastic energy V(u) over all elements.
+    pub fn elastic_energy(&self, u: &[f64], buf: &mut AssemblyBuffers) -> f64 {
+        with_material!(&self.material, |m| assembly::energy(
+            m,
+            &self.elements,
+            ElementSet::All,
+            u,
+            buf
+        ))
+    }
+
+    /// Potential energy of the external forces at time `t`: Φ(u, t) − f_gᵀu.
+    pub fn external_energy(&self, u: &[f64], t: f64) -> f64 {
+        let mut e = -dot(&self.gravity_load, u);
+        for f in &self.forces {
+            e += f.accumulate(t, u, None, None);
+        }
+        e
+    }
+
+    /// A force scale below which gradients count as zero: 1e-12 · E · L² (L the bounding-box
+    /// diagonal), so a body at rest with no load converges at once.
+    fn force_floor(&self) -> f64 {
+        let (lo, hi) = self.mesh.bounding_box();
+        1e-12 * self.youngs_modulus * (hi - lo).norm_squared()
+    }
+}
+
+/// Per-frame numbers, also written to `summary.json`.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct StepReport {
+    pub step: usize,
+    pub time: f64,
+    pub iterations: usize,
+    pub relative_gradient: f64,
+    pub wall_seconds: f64,
+    pub elastic_energy: f64,
+    pub kinetic_energy: f64,
+    /// Φ(u) − f_gᵀu: potential of gravity and of the forces active at this time.
+    pub external_energy: f64,
+    /// Elastic + kinetic + external.
+    pub total_energy: f64,
+    pub max_displacement: f64,
+    /// Load-stepping sub-solves taken (quasi-static only; 0 when the direct solve converged).
+    pub load_steps: usize,
+}
+
+/// Simulation state: displacement and velocity (full vectors) at time `time`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    pub step: usize,
+    pub time: f64,
+    pub u: Vec<f64>,
+    pub v: Vec<f64>,
+}
+
+/// Full-space implicit Euler time stepper.
+#[derive(Debug)]
+pub struct Simulator {
+    pub model: FullSpaceModel,
+    pub time: TimeConfig,
+    pub solver: SolverConfig,
+    pub state: State,
+    buffers: AssemblyBuffers,
+    newton: Option<NewtonParts>,
+    lbfgs: Option<(Lbfgs, FactoredPreconditioner)>,
+}
+
+/// Pattern, symbolic factorisation and value buffers of the free-DOF Hessian, built once.
+struct NewtonParts {
+    pattern: HessianPattern,
+    symbolic: SymbolicLlt<usize>,
+    values: Vec<f64>,
+    mass_slots: Vec<u32>,
+}
+
+impl std::fmt::Debug for NewtonParts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NewtonParts")
+            .field("nnz", &self.pattern.nnz())
+            .finish()
+    }
+}
+
+impl NewtonParts {
+    fn new(model: &FullSpaceModel) -> Result<Self, FemError> {
+        let pattern = HessianPattern::new(&model.elements.tets, &model.dofs);
+        let symbolic = SymbolicLlt::try_new(pattern.symbolic.as_ref(), Side::Lower)
+            .map_err(|e| FemError::Factorization(format!("symbolic analysis: {e:?}")))?;
+        let mass_slots = model
+            .mass
+            .consistent
+            .as_ref()
+            .map(|c| pattern.vertex_csr_slots(c, &model.dofs))
+            .unwrap_or_default();
+        Ok(Self {
+            values: vec![0.0; pattern.nnz()],
+            pattern,
+            symbolic,
+            mass_slots,
+        })
+    }
+
+    /// values += s·M on the free DOFs.
+    fn add_mass(&mut self, model: &FullSpaceModel, s: f64) {
+        match &model.mass.consistent {
+            None => {
+                for (j, &d) in model.dofs.free.iter().enumerate() {
+                    self.values[self.pattern.diag[j]] += s * model.mass.lumped[d / 3];
+                }
+            }
+            Some(csr) => {
+                for (k, &m) in csr.val.iter().enumerate() {
+                    for c in 0..3 {
+                        let slot = self.mass_slots[3 * k + c];
+                        if slot != NO_SLOT {
+                            self.values[slot as usize] += s * m;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Factorises the current values; when the matrix is only semidefinite, adds a growing
+    /// multiple of its mean diagonal until the factorisation succeeds.
+    fn factor(&mut self) -> Result<Llt<usize, f64>, FemError> {
+        let mean_diag = self
+            .pattern
+            .diag
+            .iter()
+            .map(|&s| self.values[s])
+            .sum::<f64>()
+            / self.pattern.dim().max(1) as f64;
+        let mut shift = 0.0;
+        for attempt in 0..12 {
+            let r = Llt::try_new_with_symbolic(
+                self.symbolic.clone(),
+                self.pattern.matrix(&self.values),
+                Side::Lower,
+            );
+            match r {
+                Ok(llt) => return Ok(llt),
+                Err(e) => {
+                    if attempt == 11 || !mean_diag.is_finite() {
+                        return Err(FemError::Factorization(format!("{e:?}")));
+                    }
+                    let next = if shift == 0.0 {
+                        1e-10 * mean_diag.abs().max(f64::MIN_POSITIVE)
+                    } else {
+                        shift * 10.0
+                    };
+                    for &s in &self.pattern.diag {
+                        self.values[s] += next - shift;
+                    }
+                    shift = next;
+                }
+            }
+        }
+        unreachable!("the last attempt returns")
+    }
+}
+
+/// A factorised SPD matrix used as z = P⁻¹ r.
+#[derive(Debug)]
+pub struct FactoredPreconditioner {
+    llt: Llt<usize, f64>,
+}
+
+impl Preconditioner for FactoredPreconditioner {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
+        z.copy_from_slice(r);
+        let n = z.len();
+        self.llt
+            .solve_in_place(faer::MatMut::from_column_major_slice_mut(z, n, 1));
+    }
+}
+
+/// The objective of one implicit Euler step (or one static solve) in free DOFs.
+struct StepObjective<'a> {
+    model: &'a FullSpaceModel,
+    buffers: &'a mut AssemblyBuffers,
+    newton: Option<&'a mut NewtonParts>,
+    /// Time at which forces are evaluated.
+    t: f64,
+    /// 1/h² for dynamics, 0 for quasi-static.
+    inv_h2: f64,
+    /// Inertial prediction ũ = u_n + h u̇_n (full).
+    predicted: &'a [f64],
+    /// Multiplies gravity, point loads and spring offsets (load stepping).
+    load: f64,
+    u: Vec<f64>,
+    grad: Vec<f64>,
+    scratch: Vec<f64>,
+    spring_diag: Vec<f64>,
+    scale: f64,
+    noise: f64,
+}
+
+impl<'a> StepObjective<'a> {
+    fn new(
+        model: &'a FullSpaceModel,
+        buffers: &'a mut AssemblyBuffers,
+        newton: Option<&'a mut NewtonParts>,
+        t: f64,
+        inv_h2: f64,
+        predicted: &'a [f64],
+        load: f64,
+    ) -> Self {
+        let n = model.num_full();
+        Self {
+            model,
+            buffers,
+            newton,
+            t,
+            inv_h2,
+            predicted,
+            load,
+            u: vec![0.0; n],
+            grad: vec![0.0; n],
+            scratch: vec![0.0; n],
+            spring_diag: vec![0.0; n],
+            scale: 0.0,
+            noise: 0.0,
+        }
+    }
+
+    /// External forces at load factor `load`: gradient contributions added to `self.grad`,
+    /// energy returned. Springs are scaled by moving their targets, loads by multiplying.
+    fn external(&mut self) -> f64 {
+        let m = self.model;
+        let mut e = 0.0;
+        for (i, &gl) in m.gravity_load.iter().enumerate() {
+            e -= self.load * gl * self.u[i];
+            self.grad[i] -= self.load * gl;
+        }
+        for f in &m.forces {
+            if self.load == 1.0 {
+                e += f.accumulate(self.t, &self.u, Some(&mut self.grad), None);
+            } else {
+                let mut scaled = f.clone();
+                for k in scaled.keyframes.iter_mut() {
+                    for c in 1..4 {
+                        k[c] *= self.load;
+                    }
+                }
+                e += scaled.accumulate(self.t, &self.u, Some(&mut self.grad), None);
+            }
+        }
+        e
+    }
+}
+
+impl Objective for StepObjective<'_> {
+    fn dim(&self) -> usize {
+        self.model.dofs.num_free()
+    }
+
+    fn value_gradient(&mut self, x: &[f64], g: &mut [f64]) -> f64 {
+        let m = self.model;
+        m.dofs.scatter(x, &mut self.u);
+        let elastic = with_material!(&m.material, |mat| assembly::energy_gradient(
+            mat,
+            &m.elements,
+            ElementSet::All,
+            &self.u,
+            &mut self.grad,
+            self.buffers
+        ));
+        let mut scale = m.force_floor();
+        let mut elastic_norm2 = 0.0;
+        for &d in &m.dofs.free {
+            elastic_norm2 += self.grad[d] * self.grad[d];
+        }
+        scale = scale.max(elastic_norm2.sqrt());
+        // External forces: measure their size on their own for the convergence scale.
+        self.scratch.copy_from_slice(&self.grad);
+        let external = self.external();
+        let mut ext_norm2 = 0.0;
+        for &d in &m.dofs.free {
+            let f = self.grad[d] - self.scratch[d];
+            ext_norm2 += f * f;
+        }
+        scale = scale.max(ext_norm2.sqrt());
+        let mut inertia = 0.0;
+        if self.inv_h2 > 0.0 {
+            for i in 0..self.u.len() {
+                self.scratch[i] = self.u[i] - self.predicted[i];
+            }
+            let (diff, mdiff) = (&self.scratch, &mut self.spring_diag);
+            m.mass.apply(diff, mdiff);
+            let mut in_norm2 = 0.0;
+            for i in 0..self.u.len() {
+                inertia += 0.5 * self.inv_h2 * diff[i] * mdiff[i];
+            }
+            for &d in &m.dofs.free {
+                let f = self.inv_h2 * mdiff[d];
+                self.grad[d] += f;
+                in_norm2 += f * f;
+            }
+            scale = scale.max(in_norm2.sqrt());
+        }
+        self.scale = scale;
+        self.noise =
+            16.0 * f64::EPSILON * (m.energy_scale + elastic.abs() + external.abs() + inertia.abs());
+        m.dofs.gather(&self.grad, g);
+        elastic + external + inertia
+    }
+
+    fn gradient_scale(&self) -> f64 {
+        self.scale
+    }
+
+    fn value_noise(&self) -> f64 {
+        self.noise
+    }
+}
+
+impl NewtonSystem for StepObjective<'_> {
+    fn newton_direction(&mut self, x: &[f64], g: &[f64], d: &mut [f64]) -> Result<(), FemError> {
+        let m = self.model;
+        let parts = self
+            .newton
+            .as_deref_mut()
+            .expect("Newton solves are built with their Hessian parts");
+        m.dofs.scatter(x, &mut self.u);
+        with_material!(&m.material, |mat| assembly::hessian(
+            mat,
+            &m.elements,
+            ElementSet::All,
+            &self.u,
+            true,
+            &parts.pattern,
+            &mut parts.values,
+            self.buffers
+        ));
+        if self.inv_h2 > 0.0 {
+            parts.add_mass(m, self.inv_h2);
+        }
+        self.spring_diag.fill(0.0);
+        for f in &m.forces {
+            f.accumulate(self.t, &self.u, None, Some(&mut self.spring_diag));
+        }
+        for (j, &dof) in m.dofs.free.iter().enumerate() {
+            parts.values[parts.pattern.diag[j]] += self.spring_diag[dof];
+        }
+        let llt = parts.factor()?;
+        for i in 0..d.len() {
+            d[i] = -g[i];
+        }
+        let n = d.len();
+        llt.solve_in_place(faer::MatMut::from_column_major_slice_mut(d, n, 1));
+        Ok(())
+    }
+}
+
+impl Simulator {
+    /// A simulator at rest at time 0.
+    pub fn new(
+        model: FullSpaceModel,
+        time: TimeConfig,
+        solver: SolverConfig,
+    ) -> Result<Self, FemError> {
+        let mut errors = Vec::new();
+        time.check(&mut errors);
+        solver.check(&mut errors);
+        FemError::collect(errors)?;
+        if time.quasi_static
+            && model.pinned.is_empty()
+            && model
+                .forces
+                .iter()
+                .all(|f| f.kind != crate::forces::ForceKind::Spring)
+        {
+            return Err(FemError::InvalidConfig {
+                field: "pin".into(),
+                reason: "a quasi-static scene needs pinned vertices or a spring to hold the body (otherwise it has no equilibrium)".into(),
+            });
+        }
+        let n = model.num_full();
+        Ok(Self {
+            state: State {
+                step: 0,
+                time: 0.0,
+                u: vec![0.0; n],
+                v: vec![0.0; n],
+            },
+            model,
+            time,
+            solver,
+            buffers: AssemblyBuffers::default(),
+            newton: None,
+            lbfgs: None,
+        })
+    }
+
+    fn ensure_newton(&mut self) -> Result<(), FemError> {
+        if self.newton.is_none() {
+            self.newton = Some(NewtonParts::new(&self.model)?);
+        }
+        Ok(())
+    }
+
+    /// Factorises K₀ + M/h² (K₀ alone when quasi-static) once, for L-BFGS.
+    fn ensure_lbfgs(&mut self) -> Result<(), FemError> {
+        if self.lbfgs.is_some() {
+            return Ok(());
+        }
+        self.ensure_newton()?;
+        let parts = self.newton.as_mut().expect("built above");
+        let rest = vec![0.0; self.model.num_full()];
+        with_material!(&self.model.material, |mat| assembly::hessian(
+            mat,
+            &self.model.elements,
+            ElementSet::All,
+            &rest,
+            true,
+            &parts.pattern,
+            &mut parts.values,
+            &mut self.buffers
+        ));
+        if !self.time.quasi_static {
+            parts.add_mass(&self.model, 1.0 / (self.time.step * self.time.step));
+        }
+        let llt = parts.factor()?;
+        self.lbfgs = Some((
+            Lbfgs::new(self.model.dofs.num_free(), self.solver.lbfgs_memory),
+            FactoredPreconditioner { llt },
+        ));
+        Ok(())
+    }
+
+    /// Solves one minimisation at time `t` and load factor `load`, from `x` (free DOFs).
+    fn solve(
+        &mut self,
+        x: &mut [f64],
+        t: f64,
+        predicted: &[f64],
+        load: f64,
+    ) -> Result<crate::optim::SolveStats, FemError> {
+        let params = SolveParams {
+            tolerance: self.solver.tolerance,
+            max_iterations: self.solver.max_iterations,
+            step: self.state.step + 1,
+        };
+        let inv_h2 = if self.time.quasi_static {
+            0.0
+        } else {
+            1.0 / (self.time.step * self.time.step)
+        };
+        match self.solver.method {
+            SolverMethod::Newton => {
+                self.ensure_newton()?;
+                let mut obj = StepObjective::new(
+                    &self.model,
+                    &mut self.buffers,
+                    self.newton.as_mut(),
+                    t,
+                    inv_h2,
+                    predicted,
+                    load,
+                );
+                newton(&mut obj, x, params)
+            }
+            SolverMethod::Lbfgs => {
+                self.ensure_lbfgs()?;
+                let (lbfgs, pre) = self.lbfgs.as_mut().expect("built above");
+                let mut obj = StepObjective::new(
+                    &self.model,
+                    &mut self.buffers,
+                    None,
+                    t,
+                    inv_h2,
+                    predicted,
+                    load,
+                );
+                lbfgs.minimize(&mut obj, pre, x, params)
+            }
+        }
+    }
+
+    /// Advances one time step (or one quasi-static frame) and reports it.
+    pub fn step(&mut self) -> Result<StepReport, FemError> {
+        let start = Instant::now();
+        let h = self.time.step;
+        // Times from the step count, not by accumulation, so frame times stay exact multiples.
+        let t = (self.state.step + 1) as f64 * h;
+        let nf = self.model.dofs.num_free();
+        let mut x = vec![0.0; nf];
+        self.model.dofs.gather(&self.state.u, &mut x);
+        let predicted: Vec<f64> = if self.time.quasi_static {
+            self.state.u.clone()
+        } else {
+            self.state
+                .u
+                .iter()
+                .zip(&self.state.v)
+                .map(|(u, v)| u + h * v)
+                .collect()
+        };
+        self.check_start(&x)?;
+        let mut load_steps = 0;
+        let stats = match self.solve(&mut x, t, &predicted, 1.0) {
+            Ok(s) => s,
+            Err(
+                e @ (FemError::NotConverged { .. }
+                | FemError::LineSearchFailed { .. }
+                | FemError::NonFinite { .. }),
+            ) if self.time.quasi_static => {
+                tracing::info!("direct static solve failed ({e}); stepping the load from rest");
+                let (s, n) = self.load_stepping(&mut x, t, &predicted)?;
+                load_steps = n;
+                s
+            }
+            Err(e) => return Err(e),
+        };
+        let mut u_new = vec![0.0; self.model.num_full()];
+        self.model.dofs.scatter(&x, &mut u_new);
+        if u_new.iter().any(|v| !v.is_finite()) {
+            return Err(FemError::NonFinite {
+                what: "displacement",
+                step: self.state.step + 1,
+            });
+        }
+        if self.time.quasi_static {
+            self.state.v.fill(0.0);
+        } else {
+            for i in 0..u_new.len() {
+                self.state.v[i] = (u_new[i] - self.state.u[i]) / h;
+            }
+        }
+        self.state.u = u_new;
+        self.state.time = t;
+        self.state.step += 1;
+        let mut report = self.report();
+        report.iterations = stats.iterations;
+        report.relative_gradient = stats.relative_gradient;
+        report.load_steps = load_steps;
+        report.wall_seconds = start.elapsed().as_secs_f64();
+        Ok(report)
+    }
+
+    /// Fails with a clear error when the current state is outside the material's domain.
+    fn check_start(&mut self, x: &[f64]) -> Result<(), FemError> {
+        let mut u = vec![0.0; self.model.num_full()];
+        self.model.dofs.scatter(x, &mut u);
+        let e = self.model.elastic_energy(&u, &mut self.buffers);
+        if e.is_finite() {
+            return Ok(());
+        }
+        match assembly::find_inverted(&self.model.elements, ElementSet::All, &u) {
+            Some((element, det)) => Err(FemError::InvertedElement {
+                element,
+                det,
+                material: self.model.material.name(),
+            }),
+            None => Err(FemError::NonFinite {
+                what: "elastic energy",
+                step: self.state.step + 1,
+            }),
+        }
+    }
+
+    /// Continuation in the load factor from rest: λ grows from 0 to 1 with adaptive increments,
+    /// each solve starting from the previous equilibrium.
+    fn load_stepping(
+        &mut self,
+        x: &mut [f64],
+        t: f64,
+        predicted: &[f64],
+    ) -> Result<(crate::optim::SolveStats, usize), FemError> {
+        let mut done = 0.0f64;
+        let mut inc = 0.25f64;
+        let mut solves = 0;
+        let mut base = vec![0.0; x.len()];
+        let mut total_iters = 0;
+        loop {
+            let target = (done + inc).min(1.0);
+            let mut trial = base.clone();
+            match self.solve(&mut trial, t, predicted, target) {
+                Ok(s) => {
+                    solves += 1;
+                    total_iters += s.iterations;
+                    base = trial;
+                    done = target;
+                    if done >= 1.0 {
+                        x.copy_from_slice(&base);
+                        let mut s = s;
+                        s.iterations = total_iters;
+                        return Ok((s, solves));
+                    }
+                    inc *= 2.0;
+                }
+                Err(
+                    e @ (FemError::NotConverged { .. }
+                    | FemError::LineSearchFailed { .. }
+                    | FemError::NonFinite { .. }),
+                ) => {
+                    inc *= 0.5;
+                    if inc < 1e-4 {
+                        return Err(e);
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    }
+
+    /// Energies and displacement of the current state.
+    pub fn report(&mut self) -> StepReport {
+        let u = &self.state.u;
+        let elastic = self.model.elastic_energy(u, &mut self.buffers);
+        let mut scratch = vec![0.0; u.len()];
+        let kinetic = self
+            .model
+            .mass
+            .half_norm_squared(&self.state.v, &mut scratch);
+        let external = self.model.external_energy(u, self.state.time);
+        let max_displacement = u
+            .chunks_exact(3)
+            .map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
+            .fold(0.0, f64::max);
+        StepReport {
+            step: self.state.step,
+            time: self.state.time,
+            elastic_energy: elastic,
+            kinetic_energy: kinetic,
+            external_energy: external,
+            total_energy: elastic + kinetic + external,
+            max_displacement,
+            ..Default::default()
+        }
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}

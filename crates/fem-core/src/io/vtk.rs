@@ -1,0 +1,714 @@
+//! Legacy VTK (`.vtk`) reader for ASCII `DATASET UNSTRUCTURED_GRID` files.
+//!
+//! Supported: the `# vtk DataFile Version x.y` header (2.0 up to 5.1) and a title line, then
+//! `POINTS n float|double|…`, and the cells in either layout:
+//! - classic (≤ 4.2): `CELLS n size` followed by `k i₀ … iₖ₋₁` per cell;
+//! - 5.1: `CELLS n_offsets n_connectivity` followed by `OFFSETS <type>` and
+//!   `CONNECTIVITY <type>` arrays;
+//!
+//! then `CELL_TYPES n`. Only cells of type 10 (`VTK_TETRA`) are kept; other cell types are
+//! ignored. `FIELD` and `METADATA` blocks are skipped, and reading stops at `POINT_DATA` or
+//! `CELL_DATA` (attribute data is not needed). Values may wrap lines freely. `BINARY` files and
+//! other dataset types are rejected. Indices are already 0-based. Errors are
+//! [`MeshError::Parse`] with the 1-based line; the mesh is not validated here.
+
+use std::path::Path;
+
+use super::MAX_ENTITIES;
+use crate::{MeshError, TetMesh, Vec3};
+
+/// VTK cell type of the linear tetrahedron.
+const VTK_TETRA: u64 = 10;
+
+/// Reads the legacy VTK file at `path` (not validated).
+pub fn read(path: &Path) -> Result<TetMesh, MeshError> {
+    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse(&String::from_utf8_lossy(&bytes), path)
+}
+
+/// Parses the text of a legacy VTK file; `path` only names the source in errors.
+pub fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
+    Parser {
+        tokens: Tokens::new(text),
+        path,
+        text_len: text.len(),
+    }
+    .run()
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Token<'a> {
+    text: &'a str,
+    line: usize,
+}
+
+/// Whitespace-separated tokens with their 1-based line numbers.
+#[derive(Debug)]
+struct Tokens<'a> {
+    lines: std::str::Lines<'a>,
+    current: std::str::SplitWhitespace<'a>,
+    line: usize,
+    peeked: Option<Token<'a>>,
+}
+
+impl<'a> Tokens<'a> {
+    fn new(text: &'a str) -> Self {
+        Self {
+            lines: text.lines(),
+            current: "".split_whitespace(),
+            line: 0,
+            peeked: None,
+        }
+    }
+
+    /// A whole raw line (only used for the two header lines, before any token is read).
+    fn raw_line(&mut self) -> Option<(usize, &'a str)> {
+        let line = self.lines.next()?;
+        self.line += 1;
+        Some((self.line, line))
+    }
+
+    fn next(&mut self) -> Option<Token<'a>> {
+        if let Some(t) = self.peeked.take() {
+            return Some(t);
+        }
+        loop {
+            if let Some(text) = self.current.next() {
+                return Some(Token {
+                    text,
+                    line: self.line,
+                });
+            }
+            self.current = self.lines.next()?.split_whitespace();
+            self.line += 1;
+        }
+    }
+
+    fn peek(&mut self) -> Option<Token<'a>> {
+        if self.peeked.is_none() {
+            self.peeked = self.next();
+        }
+        self.peeked
+    }
+}
+
+/// Keywords that start a top-level block of an unstructured grid.
+const BLOCKS: [&str; 7] = [
+    "POINTS",
+    "CELLS",
+    "CELL_TYPES",
+    "POINT_DATA",
+    "CELL_DATA",
+    "FIELD",
+    "METADATA",
+];
+
+fn is_block(token: &str) -> bool {
+    BLOCKS.iter().any(|b| b.eq_ignore_ascii_case(token))
+}
+
+/// At most 40 characters of `s`, for quoting input in messages.
+fn snippet(s: &str) -> String {
+    let mut out: String = s.chars().take(40).collect();
+    if s.chars().nth(40).is_some() {
+        out.push('…');
+    }
+    out
+}
+
+#[derive(Debug)]
+struct Parser<'a> {
+    tokens: Tokens<'a>,
+    path: &'a Path,
+    text_len: usize,
+}
+
+impl<'a> Parser<'a> {
+    fn error(&self, line: usize, reason: impl Into<String>) -> MeshError {
+        MeshError::Parse {
+            path: self.path.to_path_buf(),
+            line,
+            reason: reason.into(),
+        }
+    }
+
+    fn expect(&mut self, what: &dyn Fn() -> String) -> Result<Token<'a>, MeshError> {
+        match self.tokens.next() {
+            Some(t) => Ok(t),
+            None => Err(self.error(
+                self.tokens.line.max(1),
+                format!(
+                    "unexpected end of file: expected {} (truncated file?)",
+                    what()
+                ),
+            )),
+        }
+    }
+
+    fn read_u64(&mut self, what: &dyn Fn() -> String) -> Result<(u64, usize), MeshError> {
+        let t = self.expect(what)?;
+        t.text.parse::<u64>().map(|v| (v, t.line)).map_err(|_| {
+            self.error(
+                t.line,
+                format!(
+                    "expected {} (a non-negative integer), found '{}'",
+                    what(),
+                    snippet(t.text)
+                ),
+            )
+        })
+    }
+
+    fn read_count(&mut self, what: &str, limit: usize) -> Result<usize, MeshError> {
+        let (n, line) = self.read_u64(&|| what.to_string())?;
+        usize::try_from(n)
+            .ok()
+            .filter(|&n| n <= limit)
+            .ok_or_else(|| {
+                self.error(
+                    line,
+                    format!("{what} is {n}, more than the limit of {limit}"),
+                )
+            })
+    }
+
+    /// A 0-based point index, checked against the number of points.
+    fn read_index(
+        &mut self,
+        num_points: usize,
+        what: &dyn Fn() -> String,
+    ) -> Result<usize, MeshError> {
+        let (i, line) = self.read_u64(what)?;
+        usize::try_from(i)
+            .ok()
+            .filter(|&i| i < num_points)
+            .ok_or_else(|| {
+                self.error(
+                    line,
+                    format!(
+                        "{} is {i}, but there are only {num_points} points (indices are 0-based)",
+                        what()
+                    ),
+                )
+            })
+    }
+
+    fn expect_keyword(&mut self, keyword: &str, context: &str) -> Result<Token<'a>, MeshError> {
+        let t = self.expect(&|| format!("{keyword} {context}"))?;
+        if t.text.eq_ignore_ascii_case(keyword) {
+            Ok(t)
+        } else {
+            Err(self.error(
+                t.line,
+                format!("expected {keyword} {context}, found '{}'", snippet(t.text)),
+            ))
+        }
+    }
+
+    /// The data-type word after POINTS, OFFSETS or CONNECTIVITY (`double`, `vtktypeint64`, …).
+    fn read_data_type(&mut self, block: &str) -> Result<(), MeshError> {
+        let t = self.expect(&|| format!("the data type of {block}"))?;
+        if t.text.starts_with(|c: char| c.is_ascii_alphabetic()) && !is_block(t.text) {
+            Ok(())
+        } else {
+            Err(self.error(
+                t.line,
+                format!(
+                    "expected the data type of {block} (float, double, vtktypeint64, …), found '{}'",
+                    snippet(t.text)
+                ),
+            ))
+        }
+    }
+
+    fn run(mut self) -> Result<TetMesh, MeshError> {
+        self.read_header()?;
+        let mut points: Option<Vec<Vec3>> = None;
+        // Per cell: its points if it has exactly four (the only cells that can be tetrahedra).
+        let mut cells: Option<Vec<Option<[usize; 4]>>> = None;
+        let mut tets: Option<Vec<[usize; 4]>> = None;
+        while let Some(tok) = self.tokens.next() {
+            let keyword = tok.text.to_ascii_uppercase();
+            match keyword.as_str() {
+                "POINTS" => {
+                    if points.is_some() {
+                        return Err(self.error(tok.line, "a second POINTS block"));
+                    }
+                    points = Some(self.read_points()?);
+                }
+                "CELLS" => {
+                    let Some(num_points) = points.as_ref().map(Vec::len) else {
+                        return Err(self.error(tok.line, "CELLS comes before POINTS"));
+                    };
+                    if cells.is_some() {
+                        return Err(self.error(tok.line, "a second CELLS block"));
+                    }
+                    cells = Some(self.read_cells(num_points)?);
+                }
+                "CELL_TYPES" => {
+                    let Some(cells) = cells.as_ref() else {
+                        return Err(self.error(tok.line, "CELL_TYPES comes before CELLS"));
+                    };
+                    if tets.is_some() {
+                        return Err(self.error(tok.line, "a second CELL_TYPES block"));
+                    }
+                    tets = Some(self.read_cell_types(cells, tok.line)?);
+                }
+                // Attribute data follows; the mesh is complete.
+                "POINT_DATA" | "CELL_DATA" => break,
+                "FIELD" | "METADATA" => {
+                    while self.tokens.peek().is_some_and(|t| !is_block(t.text)) {
+                        self.tokens.next();
+                    }
+                }
+                _ => {
+                    return Err(self.error(
+                        tok.line,
+                        format!(
+                            "expected POINTS, CELLS, CELL_TYPES, POINT_DATA or CELL_DATA, found '{}'",
+                            snippet(tok.text)
+                        ),
+                    ));
+                }
+            }
+        }
+        let last = self.tokens.line.max(1);
+        let vertices = points.ok_or_else(|| self.error(last, "no POINTS block"))?;
+        if cells.is_none() {
+            return Err(self.error(last, "no CELLS block"));
+        }
+        let tets = tets.ok_or_else(|| self.error(last, "no CELL_TYPES block"))?;
+        Ok(TetMesh { vertices, tets })
+    }
+
+    fn read_header(&mut self) -> Result<(), MeshError> {
+        let Some((line, first)) = self.tokens.raw_line() else {
+            return Err(self.error(1, "empty file: expected '# vtk DataFile Version x.y'"));
+        };
+        let first = first.trim();
+        let is_vtk = first
+            .get(..first.len().min(14))
+            .is_some_and(|p| p.eq_ignore_ascii_case("# vtk DataFile"));
+        if !is_vtk {
+            return Err(self.error(
+                line,
+                format!(
+                    "expected '# vtk DataFile Version x.y' on the first line, found '{}'",
+                    snippet(first)
+                ),
+            ));
+        }
+        if self.tokens.raw_line().is_none() {
+            return Err(self.error(line, "unexpected end of file: expected the title line"));
+        }
+        let t = self.expect(&|| "ASCII or BINARY".into())?;
+        if t.text.eq_ignore_ascii_case("BINARY") {
+            return Err(self.error(
+                t.line,
+                "binary legacy VTK files are not supported: save as ASCII",
+            ));
+        }
+        if !t.text.eq_ignore_ascii_case("ASCII") {
+            return Err(self.error(
+                t.line,
+                format!("expected ASCII or BINARY, found '{}'", snippet(t.text)),
+            ));
+        }
+        self.expect_keyword("DATASET", "after ASCII")?;
+        let t = self.expect(&|| "the dataset type".into())?;
+        if !t.text.eq_ignore_ascii_case("UNSTRUCTURED_GRID") {
+            return Err(self.error(
+                t.line,
+                format!(
+                    "only DATASET UNSTRUCTURED_GRID is supported, found '{}'",
+                    snippet(t.text)
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn read_points(&mut self) -> Result<Vec<Vec3>, MeshError> {
+        let n = self.read_count("the number of POINTS", MAX_ENTITIES)?;
+        self.read_data_type("POINTS")?;
+        // A header may lie about its count: never reserve more than the text could hold.
+        let mut points = Vec::with_capacity(n.min(self.text_len / 6));
+        for k in 0..n {
+            let mut x = [0.0f64; 3];
+            for (axis, slot) in ["x", "y", "z"].iter().zip(&mut x) {
+                let what = || format!("the {axis} coordinate of point {k} of {n}");
+                let t = self.expect(&what)?;
+                *slot = t.text.parse().map_err(|_| {
+                    self.error(
+                        t.line,
+                        format!(
+                            "expected {} (a number), found '{}'",
+                            what(),
+                            snippet(t.text)
+                        ),
+                    )
+                })?;
+                if !slot.is_finite() {
+                    return Err(self.error(
+                        t.line,
+                        format!("{} is not finite ('{}')", what(), snippet(t.text)),
+                    ));
+                }
+            }
+            points.push(Vec3::new(x[0], x[1], x[2]));
+        }
+        Ok(points)
+    }
+
+    fn read_cells(&mut self, num_points: usize) -> Result<Vec<Option<[usize; 4]>>, MeshError> {
+        let n = self.read_count("the number of CELLS", MAX_ENTITIES)?;
+        let size_limit = MAX_ENTITIES.saturating_mul(16);
+        let size = self.read_count("the size of the CELLS list", size_limit)?;
+        if self
+            .tokens
+            .peek()
+            .is_some_and(|t| t.text.eq_ignore_ascii_case("OFFSETS"))
+        {
+            return self.read_offsets_connectivity(n, size, num_points);
+        }
+        let mut cells = Vec::with_capacity(n.min(self.text_len / 8));
+        let mut used = 0usize;
+        for c in 0..n {
+            let what = || format!("the number of points of cell {c} of {n}");
+            let (k, line) = self.read_u64(&what)?;
+            let k = usize::try_from(k).unwrap_or(usize::MAX);
+            used = used
+                .checked_add(k)
+                .and_then(|u| u.checked_add(1))
+                .filter(|&u| u <= size)
+                .ok_or_else(|| {
+                    self.error(
+                        line,
+                        format!(
+                            "cell {c} has {k} points, which overruns the CELLS size of {size} values"
+                        ),
+                    )
+                })?;
+            let mut tet = [0usize; 4];
+            for j in 0..k {
+                let i = self.read_index(num_points, &|| format!("point {j} of cell {c}"))?;
+                if let Some(slot) = tet.get_mut(j) {
+                    *slot = i;
+                }
+            }
+            cells.push((k == 4).then_some(tet));
+        }
+        if used != size {
+            return Err(self.error(
+                self.tokens.line.max(1),
+                format!("CELLS declares a size of {size} values, but its {n} cells hold {used}"),
+            ));
+        }
+        Ok(cells)
+    }
+
+    /// The VTK 5.1 layout: `OFFSETS` (n_offsets values) then `CONNECTIVITY` (size values).
+    fn read_offsets_connectivity(
+        &mut self,
+        num_offsets: usize,
+        size: usize,
+        num_points: usize,
+    ) -> Result<Vec<Option<[usize; 4]>>, MeshError> {
+        self.expect_keyword("OFFSETS", "after CELLS")?;
+        self.read_data_type("OFFSETS")?;
+        let mut offsets = Vec::with_capacity(num_offsets.min(self.text_len / 2));
+        let mut previous = 0usize;
+        for k in 0..num_offsets {
+            let what = || format!("offset {k} of {num_offsets}");
+            let (o, line) = self.read_u64(&what)?;
+            let o = usize::try_from(o).unwrap_or(usize::MAX);
+            let valid = if k == 0 {
+                o == 0
+            } else {
+                o >= previous && o <= size
+            };
+            if !valid {
+                return Err(self.error(
+                    line,
+                    format!(
+                        "{} is {o}: offsets must start at 0, not decrease and not exceed the connectivity size {size}",
+                        what()
+                    ),
+                ));
+            }
+            offsets.push(o);
+            previous = o;
+        }
+        if num_offsets > 0 && previous != size {
+            return Err(self.error(
+                self.tokens.line.max(1),
+                format!("the last offset is {previous}, but the connectivity holds {size} values"),
+            ));
+        }
+        self.expect_keyword("CONNECTIVITY", "after the offsets")?;
+        self.read_data_type("CONNECTIVITY")?;
+        let mut connectivity = Vec::with_capacity(size.min(self.text_len / 2));
+        for k in 0..size {
+            connectivity.push(
+                self.read_index(num_points, &|| format!("connectivity value {k} of {size}"))?,
+            );
+        }
+        Ok(offsets
+            .windows(2)
+            .map(|w| {
+                connectivity
+                    .get(w[0]..w[1])
+                    .and_then(|ids| <[usize; 4]>::try_from(ids).ok())
+            })
+            .collect())
+    }
+
+    fn read_cell_types(
+        &mut self,
+        cells: &[Option<[usize; 4]>],
+        line: usize,
+    ) -> Result<Vec<[usize; 4]>, MeshError> {
+        let n = self.read_count("the number of CELL_TYPES", MAX_ENTITIES)?;
+        if n != cells.len() {
+            return Err(self.error(
+                line,
+                format!(
+                    "CELL_TYPES lists {n} types, but CELLS has {} cells",
+                    cells.len()
+                ),
+            ));
+        }
+        let mut tets = Vec::with_capacity(cells.iter().flatten().count());
+        let mut ignored: std::collections::BTreeMap<u64, usize> = Default::default();
+        for (c, cell) in cells.iter().enumerate() {
+            let (t, line) = self.read_u64(&|| format!("the type of cell {c} of {n}"))?;
+            if t != VTK_TETRA {
+                *ignored.entry(t).or_default() += 1;
+                continue;
+            }
+            let tet = cell.ok_or_else(|| {
+                self.error(
+                    line,
+                    format!("cell {c} has type 10 (tetrahedron) but does not have 4 points"),
+                )
+            })?;
+            tets.push(tet);
+        }
+        let summary = ignored
+            .iter()
+            .map(|(t, k)| format!("{k} of type {t}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        if tets.is_empty() {
+            return Err(self.error(
+                line,
+                format!(
+                    "no tetrahedra (VTK cell type 10) among the {n} cells{}",
+                    if summary.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({summary})")
+                    }
+                ),
+            ));
+        }
+        if !summary.is_empty() {
+            tracing::debug!(
+                "{}: ignored non-tetrahedral cells: {summary}",
+                self.path.display()
+            );
+        }
+        Ok(tets)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two cells: a tetrahedron and a triangle, with attribute data after.
+    const LEGACY: &str = "# vtk DataFile Version 4.2\nsome title\nASCII\nDATASET UNSTRUCTURED_GRID\n\
+        POINTS 5 double\n0 0 0 1 0 0\n0 1 0\n0 0 1 9 9 9\n\
+        CELLS 2 9\n4 0 1 2 3\n3 0 1 4\n\
+        CELL_TYPES 2\n10\n5\n\
+        POINT_DATA 5\nSCALARS s double 1\nLOOKUP_TABLE default\n1 2 3 4 5\n";
+
+    const V51: &str = "# vtk DataFile Version 5.1\nvtk output\nASCII\nDATASET UNSTRUCTURED_GRID\n\
+        FIELD FieldData 1\nTIME 1 1 double\n0.5\n\
+        POINTS 5 float\n0 0 0 1 0 0 0 1 0\n0 0 1 9 9 9\n\
+        METADATA\nINFORMATION 0\n\n\
+        CELLS 3 7\nOFFSETS vtktypeint64\n0 3 7\nCONNECTIVITY vtktypeint64\n0 1 4\n0 1 2 3\n\
+        CELL_TYPES 2\n5\n10\n\
+        CELL_DATA 2\nFIELD FieldData 1\nid 1 2 int\n7 8\n";
+
+    fn parse_str(text: &str) -> Result<TetMesh, MeshError> {
+        parse(text, Path::new("test.vtk"))
+    }
+
+    /// The line and reason of a parse error (panics on anything else, which fails the test).
+    fn parse_error(text: &str) -> (usize, String) {
+        match parse_str(text) {
+            Err(MeshError::Parse { line, reason, .. }) => (line, reason),
+            other => panic!("expected a parse error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn reads_legacy_cells_keeping_only_tetrahedra() {
+        let mesh = parse_str(LEGACY).unwrap();
+        assert_eq!(mesh.vertices.len(), 5);
+        assert_eq!(mesh.vertices[3], Vec3::new(0.0, 0.0, 1.0));
+        assert_eq!(mesh.tets, vec![[0, 1, 2, 3]]);
+    }
+
+    #[test]
+    fn reads_the_5_1_offsets_connectivity_layout() {
+        let mesh = parse_str(V51).unwrap();
+        assert_eq!(mesh, parse_str(LEGACY).unwrap());
+    }
+
+    #[test]
+    fn counts_on_the_next_line_and_crlf_are_fine() {
+        let text = LEGACY
+            .replace("POINTS 5 double", "POINTS\n5\ndouble")
+            .replace('\n', "\r\n");
+        assert_eq!(parse_str(&text).unwrap(), parse_str(LEGACY).unwrap());
+    }
+
+    #[test]
+    fn truncated_files_are_errors() {
+        let cut = &LEGACY[..LEGACY.find("CELL_TYPES").unwrap()];
+        assert!(parse_error(cut).1.contains("CELL_TYPES"));
+        let (line, reason) = parse_error(&LEGACY[..LEGACY.find("3 0 1 4").unwrap() + 4]);
+        assert_eq!(line, 11);
+        assert!(reason.contains("end of file"), "{reason}");
+        for text in [LEGACY, V51] {
+            for end in 0..text.len() {
+                if let Ok(mesh) = parse_str(&text[..end]) {
+                    assert_eq!(mesh.tets, vec![[0, 1, 2, 3]], "prefix of {end} bytes");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_indices_and_sizes_are_reported_with_their_line() {
+        let (line, reason) = parse_error(&LEGACY.replace("4 0 1 2 3", "4 0 1 2 5"));
+        assert_eq!(line, 10);
+        assert!(reason.contains("only 5 points"), "{reason}");
+        let (_, reason) = parse_error(&LEGACY.replace("4 0 1 2 3", "4 0 1 -2 3"));
+        assert!(reason.contains("'-2'"), "{reason}");
+        let (_, reason) = parse_error(&LEGACY.replace("CELLS 2 9", "CELLS 2 8"));
+        assert!(reason.contains("overruns"), "{reason}");
+        let (_, reason) = parse_error(&LEGACY.replace("CELLS 2 9", "CELLS 2 10"));
+        assert!(reason.contains("hold 9"), "{reason}");
+        let (_, reason) =
+            parse_error(&LEGACY.replace("CELL_TYPES 2\n10\n5", "CELL_TYPES 2\n5\n10"));
+        assert!(reason.contains("does not have 4 points"), "{reason}");
+        let (_, reason) = parse_error(&V51.replace("0 3 7", "0 3 8"));
+        assert!(reason.contains("connectivity"), "{reason}");
+        let (_, reason) = parse_error(&V51.replace("0 3 7", "0 3 2"));
+        assert!(reason.contains("offset 2"), "{reason}");
+        let (line, reason) = parse_error(&V51.replace("0 1 2 3", "0 1 2 7"));
+        assert_eq!(line, 19);
+        assert!(reason.contains("only 5 points"), "{reason}");
+        let (_, reason) = parse_error(&LEGACY.replace("CELL_TYPES 2", "CELL_TYPES 3"));
+        assert!(reason.contains("CELLS has 2"), "{reason}");
+    }
+
+    #[test]
+    fn non_finite_coordinates_are_rejected() {
+        for bad in ["nan", "inf", "-1e400", "x"] {
+            let (line, reason) = parse_error(&LEGACY.replace("0 1 0\n", &format!("0 {bad} 0\n")));
+            assert_eq!(line, 7, "{reason}");
+            assert!(reason.contains("y coordinate of point 2"), "{reason}");
+        }
+    }
+
+    #[test]
+    fn huge_counts_fail_fast() {
+        let (line, reason) = parse_error(&LEGACY.replace("POINTS 5", "POINTS 1000000000000"));
+        assert_eq!(line, 5);
+        assert!(reason.contains("limit"), "{reason}");
+        let text = LEGACY.replace("POINTS 5", &format!("POINTS {MAX_ENTITIES}"));
+        assert!(parse_error(&text).1.contains("found 'CELLS'"));
+        assert!(
+            parse_error(&LEGACY.replace("CELLS 2 9", "CELLS 2 99999999999999"))
+                .1
+                .contains("limit")
+        );
+        assert!(
+            parse_error(&LEGACY.replace("3 0 1 4", "18446744073709551615 0 1 4"))
+                .1
+                .contains("overruns")
+        );
+    }
+
+    #[test]
+    fn unsupported_variants_are_rejected_clearly() {
+        assert!(
+            parse_error(&LEGACY.replace("ASCII", "BINARY"))
+                .1
+                .contains("binary")
+        );
+        assert!(
+            parse_error(&LEGACY.replace("UNSTRUCTURED_GRID", "POLYDATA"))
+                .1
+                .contains("POLYDATA")
+        );
+        assert!(parse_error("hello\n").1.contains("# vtk DataFile"));
+        assert!(parse_error("").1.contains("empty"));
+        let (_, reason) =
+            parse_error(&LEGACY.replace("CELL_TYPES 2\n10\n5", "CELL_TYPES 2\n12\n5"));
+        assert!(reason.contains("1 of type 12"), "{reason}");
+        assert!(
+            parse_error(&LEGACY.replace("CELLS", "LINES"))
+                .1
+                .contains("LINES")
+        );
+        let points_after = LEGACY.replace("POINTS 5 double", "CELLS 0 0\nPOINTS 5 double");
+        assert!(parse_error(&points_after).1.contains("before POINTS"));
+    }
+
+    mod fuzz {
+        use super::*;
+        use proptest::prelude::*;
+
+        fn mutate(base: &str, edits: &[(usize, char)]) -> String {
+            let mut chars: Vec<char> = base.chars().collect();
+            let len = chars.len();
+            for &(pos, c) in edits {
+                if let Some(slot) = chars.get_mut(pos % len) {
+                    *slot = c;
+                }
+            }
+            chars.into_iter().collect()
+        }
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(256))]
+
+            #[test]
+            fn arbitrary_text_never_panics(text in "\\PC{0,200}") {
+                let _ = parse_str(&text);
+                let _ = parse_str(&format!("# vtk DataFile Version 4.2\nt\nASCII\nDATASET UNSTRUCTURED_GRID\n{text}"));
+            }
+
+            #[test]
+            fn mutated_valid_files_never_panic(
+                edits in prop::collection::vec((any::<usize>(), any::<char>()), 1..6),
+                digits in prop::collection::vec((any::<usize>(), prop::char::range('0', '9')), 1..4),
+            ) {
+                for base in [LEGACY, V51] {
+                    let _ = parse_str(&mutate(base, &edits));
+                    if let Ok(mesh) = parse_str(&mutate(base, &digits)) {
+                        prop_assert!(mesh.tets.iter().flatten().all(|&i| i < mesh.vertices.len()));
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,372 @@
+//! Stable Neo-Hookean (Smith, de Goes, Kim 2018), and the cofactor helpers shared by the
+//! materials of this module.
+
+use super::corotated::{SignedSvd, signed_svd};
+use super::{Lame, Mat9, Material};
+use crate::Mat3;
+
+/// Stable Neo-Hookean (Smith, de Goes & Kim, "Stable Neo-Hookean Flesh Simulation", 2018),
+/// without the log(I₂ + 1) barrier term.
+///
+/// With I₁ = tr(FᵀF) = ‖F‖², J = det F, cof(F) = ∂J/∂F = J F⁻ᵀ and α = 1 + μ'/λ':
+///
+/// * ψ(F) = μ'/2 (I₁ − 3) + λ'/2 (J − α)² − λ'/2 (1 − α)²
+///   = μ'/2 (I₁ − 3) − μ'(J − 1) + λ'/2 (J − 1)²   (the form evaluated; it needs no α)
+/// * P(F) = μ' F + λ'(J − α) cof(F) = μ' F + (λ'(J − 1) − μ') cof(F)
+/// * ∂P/∂F = μ' I₉ + λ' vec(cof) vec(cof)ᵀ + (λ'(J − 1) − μ') ∂cof/∂F
+///
+/// where ∂cof_ij/∂F_kl = ∂²J/∂F_ij∂F_kl = Σ_{m,n} ε_ikn ε_jlm F_nm: in the column-major
+/// flattening the 3×3 block (j, l) of ∂cof/∂F is −ε_jlm \[f_m\]×, with f_m column m of F and
+/// \[v\]× the cross-product matrix (diagonal blocks are zero).
+///
+/// # Lamé parameters
+///
+/// The constant makes ψ(I) = 0 and the choice of α makes P(I) = 0. Linearising at F = I
+/// (∂cof/∂F(I) = vec(I)vec(I)ᵀ − 𝒯 with 𝒯 the transposition) gives the tangent
+/// μ'(I₉ + 𝒯) + (λ' − μ') vec(I)vec(I)ᵀ, which is linear elasticity's 2μ𝒮 + λ vec(I)vec(I)ᵀ
+/// exactly when μ' = μ and λ' = λ + μ. [`StableNeoHookean::new`] applies this mapping, so a
+/// given (E, ν) means the same thing for every material of this module in the small-strain
+/// limit.
+///
+/// ψ is a polynomial in F: finite for every F, and inverted elements are pushed back through
+/// the (J − α)² term (`INVERSION_SAFE`). It is rotation invariant.
+///
+/// # Projection
+///
+/// [`Material::dpdf_projected`] uses the analytic eigensystem (Smith et al. 2018 §4; Kim &
+/// Eberle, "Dynamic Deformables", 2022, ch. 7). With the rotation-variant SVD F = UΣVᵀ
+/// (U, V rotations, σ₀ ≥ σ₁ ≥ |σ₂|, J = σ₀σ₁σ₂) and c = λ'(J − 1) − μ', for each pair (i, j)
+/// with third index k:
+///
+/// * twist  (u_i v_jᵀ − u_j v_iᵀ)/√2 has eigenvalue μ' + c σ_k,
+/// * flip   (u_i v_jᵀ + u_j v_iᵀ)/√2 has eigenvalue μ' − c σ_k,
+///
+/// and the three scaling modes Σ_i e_i u_i v_iᵀ come from the eigenvectors e of the 3×3 matrix
+/// μ' I + λ' g gᵀ + c [[0, σ₂, σ₁], [σ₂, 0, σ₀], [σ₁, σ₀, 0]] with g = (σ₁σ₂, σ₀σ₂, σ₀σ₁).
+/// The projection subtracts λ q qᵀ for every negative eigenpair from the exact tangent, so it
+/// equals the clamped eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD
+/// (and a 3×3 eigenproblem only when the scaling block is indefinite).
+///
+/// # Derivation
+///
+/// ∂I₁/∂F = 2F and ∂J/∂F = cof(F), so P = μ'F − μ' cof + λ'(J − 1) cof. Differentiating,
+/// ∂(λ'(J − 1) − μ')/∂F = λ' cof and ∂cof/∂F is the Hessian of the cubic J (above). In the
+/// SVD frame the Hessian of J is block diagonal: it couples only the diagonal entries
+/// (entry (i, j) = σ_k) and each off-diagonal pair (F̂_ij, F̂_ji) through the minor
+/// −σ_k F̂_ij F̂_ji, which gives ±σ_k on the flip/twist modes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StableNeoHookean {
+    /// Stable Neo-Hookean shear parameter μ' (= Lamé μ).
+    pub mu_snh: f64,
+    /// Stable Neo-Hookean volume parameter λ' (= Lamé λ + μ; not the Lamé λ).
+    pub lambda_snh: f64,
+}
+
+impl StableNeoHookean {
+    /// Maps the Lamé parameters to μ' = μ, λ' = λ + μ (same small-strain behaviour as
+    /// [`super::LinearElastic`] with the same Lamé parameters).
+    pub fn new(lame: Lame) -> Self {
+        Self {
+            mu_snh: lame.mu,
+            lambda_snh: lame.lambda + lame.mu,
+        }
+    }
+
+    /// The Lamé parameters this material was built from: μ = μ', λ = λ' − μ'.
+    pub fn lame(&self) -> Lame {
+        Lame {
+            mu: self.mu_snh,
+            lambda: self.lambda_snh - self.mu_snh,
+        }
+    }
+
+    /// The rest-stability offset α = 1 + μ'/λ'.
+    pub fn alpha(&self) -> f64 {
+        1.0 + self.mu_snh / self.lambda_snh
+    }
+
+    /// The twist and flip eigenpairs of ∂P/∂F: `(eigenvalue, w)` with unit eigenvector
+    /// vec(w)/√2.
+    fn twist_flip(&self, svd: &SignedSvd, c: f64) -> [(f64, Mat3); 6] {
+        let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
+        let mu = self.mu_snh;
+        let pair = |i: usize, j: usize, k: usize| {
+            let a = u.column(i) * v.column(j).transpose();
+            let b = u.column(j) * v.column(i).transpose();
+            [(mu + c * s[k], a - b), (mu - c * s[k], a + b)]
+        };
+        let [t0, f0] = pair(1, 2, 0);
+        let [t1, f1] = pair(0, 2, 1);
+        let [t2, f2] = pair(0, 1, 2);
+        [t0, t1, t2, f0, f1, f2]
+    }
+
+    /// The 3×3 matrix whose eigenpairs (λ, e) give the scaling eigenpairs (λ, Σ_i e_i u_i v_iᵀ).
+    fn scaling_block(&self, s: &crate::Vec3, c: f64) -> Mat3 {
+        let g = crate::Vec3::new(s[1] * s[2], s[0] * s[2], s[0] * s[1]);
+        let mut a = g * g.transpose() * self.lambda_snh;
+        for i in 0..3 {
+            a[(i, i)] += self.mu_snh;
+        }
+        let off = [(1, 2, 0), (0, 2, 1), (0, 1, 2)];
+        for (i, j, k) in off {
+            a[(i, j)] += c * s[k];
+            a[(j, i)] += c * s[k];
+        }
+        a
+    }
+}
+
+#[allow(non_snake_case)]
+impl Material for StableNeoHookean {
+    const NAME: &'static str = "stable-neo-hookean";
+    const INVERSION_SAFE: bool = true;
+
+    #[inline]
+    fn psi(&self, F: &Mat3) -> f64 {
+        let (mu, la) = (self.mu_snh, self.lambda_snh);
+        let Jm1 = det(F) - 1.0;
+        0.5 * mu * (F.norm_squared() - 3.0) - mu * Jm1 + 0.5 * la * Jm1 * Jm1
+    }
+
+    #[inline]
+    fn pk1(&self, F: &Mat3) -> Mat3 {
+        let cof = cofactor(F);
+        let J = det_from_cofactor(F, &cof);
+        F * self.mu_snh + cof * (self.lambda_snh * (J - 1.0) - self.mu_snh)
+    }
+
+    #[inline]
+    fn psi_pk1(&self, F: &Mat3) -> (f64, Mat3) {
+        let (mu, la) = (self.mu_snh, self.lambda_snh);
+        let cof = cofactor(F);
+        let Jm1 = det_from_cofactor(F, &cof) - 1.0;
+        let psi = 0.5 * mu * (F.norm_squared() - 3.0) - mu * Jm1 + 0.5 * la * Jm1 * Jm1;
+        (psi, F * mu + cof * (la * Jm1 - mu))
+    }
+
+    fn dpdf(&self, F: &Mat3) -> Mat9 {
+        let (mu, la) = (self.mu_snh, self.lambda_snh);
+        let cof = cofactor(F);
+        let J = det_from_cofactor(F, &cof);
+        let mut m = Mat9::zeros();
+        add_outer_upper(&mut m, &cof, &cof, la);
+        mirror_upper(&mut m);
+        for a in 0..9 {
+            m[(a, a)] += mu;
+        }
+        add_cofactor_hessian(&mut m, F, la * (J - 1.0) - mu);
+        m
+    }
+
+    /// Analytic projection (see the type's documentation): the exact tangent minus its negative
+    /// eigenpairs. Non-finite F yields the (non-finite) tangent unchanged.
+    fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
+        let mut m = self.dpdf(F);
+        if !F.iter().all(|x| x.is_finite()) {
+            return m;
+        }
+        let svd = signed_svd(F);
+        let s = &svd.sigma;
+        let c = self.lambda_snh * (s[0] * s[1] * s[2] - 1.0) - self.mu_snh;
+        let mut changed = false;
+        for (val, w) in self.twist_flip(&svd, c) {
+            if val < 0.0 {
+                // q = w/√2, so λ q qᵀ = (λ/2) w wᵀ.
+                add_outer_upper(&mut m, &w, &w, -0.5 * val);
+                changed = true;
+            }
+        }
+        let a = self.scaling_block(s, c);
+        // Sylvester's criterion; on failure (indefinite or borderline) decompose.
+        let pd = a[(0, 0)] > 0.0
+            && a[(0, 0)] * a[(1, 1)] - a[(0, 1)] * a[(0, 1)] > 0.0
+            && a.determinant() > 0.0;
+        if !pd {
+            let Some(eig) = a.try_symmetric_eigen(f64::EPSILON, 1000) else {
+                return super::project_psd(&self.dpdf(F));
+            };
+            for i in 0..3 {
+                let val = eig.eigenvalues[i];
+                if val < 0.0 {
+                    let e = eig.eigenvectors.column(i);
+                    let mut q = Mat3::zeros();
+                    for j in 0..3 {
+                        q += svd.u.column(j) * svd.v.column(j).transpose() * e[j];
+                    }
+                    add_outer_upper(&mut m, &q, &q, -val);
+                    changed = true;
+                }
+            }
+        }
+        if changed {
+            mirror_upper(&mut m);
+        }
+        m
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Helpers shared by the materials of this module.
+
+/// cof(F) = ∂ det F / ∂F = det(F) F⁻ᵀ, computed directly: its columns are f₁×f₂, f₂×f₀, f₀×f₁
+/// for the columns f_i of F. Defined (and smooth) for every F.
+#[allow(non_snake_case)]
+#[inline]
+pub(super) fn cofactor(F: &Mat3) -> Mat3 {
+    let (f0, f1, f2) = (F.column(0), F.column(1), F.column(2));
+    Mat3::from_columns(&[f1.cross(&f2), f2.cross(&f0), f0.cross(&f1)])
+}
+
+/// det F = f₀ · (f₁ × f₂): the same expansion as [`det_from_cofactor`], so ψ and P agree on
+/// the sign of J to the last bit.
+#[allow(non_snake_case)]
+#[inline]
+pub(super) fn det(F: &Mat3) -> f64 {
+    F.column(0).dot(&F.column(1).cross(&F.column(2)))
+}
+
+/// det F = f₀ · cof(F)₀, reusing an already computed cofactor.
+#[allow(non_snake_case)]
+#[inline]
+pub(super) fn det_from_cofactor(F: &Mat3, cof: &Mat3) -> f64 {
+    F.column(0).dot(&cof.column(0))
+}
+
+/// m += s ∂cof(F)/∂F (the Hessian of det F) in the column-major flattening: block (j, l) is
+/// −s ε_jlm \[f_m\]× for j ≠ l, where \[v\]× x = v × x. Exactly symmetric.
+#[allow(non_snake_case)]
+#[inline]
+pub(super) fn add_cofactor_hessian(m: &mut Mat9, F: &Mat3, s: f64) {
+    // Even permutations (j, l, m): ε_jlm = +1, block (j, l) = −s[f_m]×, block (l, j) = +s[f_m]×.
+    for (j, l, c) in [(0, 1, 2), (1, 2, 0), (2, 0, 1)] {
+        let v = F.column(c) * s;
+        // −[v]× = [[0, v₂, −v₁], [−v₂, 0, v₀], [v₁, −v₀, 0]].
+        let neg_hat = [
+            (0, 1, v[2]),
+            (0, 2, -v[1]),
+            (1, 0, -v[2]),
+            (1, 2, v[0]),
+            (2, 0, v[1]),
+            (2, 1, -v[0]),
+        ];
+        for (r, k, x) in neg_hat {
+            m[(r + 3 * j, k + 3 * l)] += x;
+            // Block (l, j) is the transpose of block (j, l).
+            m[(k + 3 * l, r + 3 * j)] += x;
+        }
+    }
+}
+
+/// Upper triangle (row ≤ column) of m += s vec(a) vec(b)ᵀ; finish with [`mirror_upper`].
+#[inline]
+pub(super) fn add_outer_upper(m: &mut Mat9, a: &Mat3, b: &Mat3, s: f64) {
+    let (a, b) = (a.as_slice(), b.as_slice());
+    for j in 0..9 {
+        let sb = s * b[j];
+        for i in 0..=j {
+            m[(i, j)] += a[i] * sb;
+        }
+    }
+}
+
+/// Copies the strict upper triangle of `m` onto its lower triangle.
+#[inline]
+pub(super) fn mirror_upper(m: &mut Mat9) {
+    for j in 0..9 {
+        for i in 0..j {
+            m[(j, i)] = m[(i, j)];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn material() -> StableNeoHookean {
+        StableNeoHookean::new(Lame {
+            mu: 1.3,
+            lambda: 7.9,
+        })
+    }
+
+    fn sample_fs() -> Vec<Mat3> {
+        vec![
+            Mat3::identity(),
+            Mat3::new(1.2, 0.3, -0.1, 0.05, 0.9, 0.2, -0.3, 0.1, 1.1),
+            Mat3::new(0.3, 0.1, 0.0, -0.2, 0.4, 0.1, 0.0, 0.05, -0.6),
+            Mat3::new(2.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, -0.5),
+            Mat3::new(0.1, 1.5, 0.0, 0.0, 0.2, 0.0, 0.7, 0.0, 0.1),
+            Mat3::from_diagonal_element(0.2),
+            Mat3::zeros(),
+        ]
+    }
+
+    #[test]
+    fn analytic_eigensystem_reconstructs_the_tangent() {
+        let m = material();
+        for f in sample_fs() {
+            let svd = signed_svd(&f);
+            let s = &svd.sigma;
+            let c = m.lambda_snh * (s[0] * s[1] * s[2] - 1.0) - m.mu_snh;
+            let mut rec = Mat9::zeros();
+            let mut vecs: Vec<Mat3> = Vec::new();
+            for (val, w) in m.twist_flip(&svd, c) {
+                let q = w / 2f64.sqrt();
+                add_outer_upper(&mut rec, &q, &q, val);
+                vecs.push(q);
+            }
+            let eig = m.scaling_block(s, c).symmetric_eigen();
+            for i in 0..3 {
+                let e = eig.eigenvectors.column(i);
+                let mut q = Mat3::zeros();
+                for j in 0..3 {
+                    q += svd.u.column(j) * svd.v.column(j).transpose() * e[j];
+                }
+                add_outer_upper(&mut rec, &q, &q, eig.eigenvalues[i]);
+                vecs.push(q);
+            }
+            mirror_upper(&mut rec);
+            let a = m.dpdf(&f);
+            assert!((rec - a).norm() <= 1e-12 * a.norm(), "F = {f}");
+            // The nine eigenvectors are orthonormal.
+            for (i, p) in vecs.iter().enumerate() {
+                for (j, q) in vecs.iter().enumerate() {
+                    let d = p.dot(q) - if i == j { 1.0 } else { 0.0 };
+                    assert!(d.abs() < 1e-12, "F = {f}: <q{i}, q{j}> off by {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn analytic_projection_equals_numeric_projection() {
+        let m = material();
+        for f in sample_fs() {
+            let a = m.dpdf_projected(&f);
+            let b = super::super::project_psd(&m.dpdf(&f));
+            assert_eq!(a, a.transpose());
+            assert!((a - b).norm() <= 1e-10 * b.norm().max(1.0), "F = {f}");
+        }
+    }
+
+    #[test]
+    fn cofactor_hessian_matches_finite_differences() {
+        let f = Mat3::new(1.2, 0.3, -0.1, 0.05, 0.9, 0.2, -0.3, 0.1, 1.1);
+        let mut h = Mat9::zeros();
+        add_cofactor_hessian(&mut h, &f, 1.0);
+        let eps = 1e-6;
+        for b in 0..9 {
+            let (mut fp, mut fm) = (f, f);
+            fp.as_mut_slice()[b] += eps;
+            fm.as_mut_slice()[b] -= eps;
+            let d = (cofactor(&fp) - cofactor(&fm)) / (2.0 * eps);
+            for a in 0..9 {
+                assert!((h[(a, b)] - d.as_slice()[a]).abs() < 1e-8);
+            }
+        }
+        let inv_t = f.try_inverse().unwrap().transpose() * f.determinant();
+        assert!((cofactor(&f) - inv_t).norm() < 1e-14);
+    }
+}

@@ -1,0 +1,94 @@
+//! Tetrahedral meshes: storage, validation on load and boundary-surface extraction.
+
+mod config;
+pub mod generate;
+mod validate;
+
+pub use config::MeshConfig;
+
+pub use validate::{ValidationReport, validate};
+
+use crate::Vec3;
+
+/// A linear tetrahedral mesh: rest positions and 0-based vertex indices of each tet.
+///
+/// Tets are positively oriented after [`validate`]: det[X1−X0, X2−X0, X3−X0] > 0.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TetMesh {
+    /// Rest positions, one per vertex.
+    pub vertices: Vec<Vec3>,
+    /// Vertex indices of each tetrahedron.
+    pub tets: Vec<[usize; 4]>,
+}
+
+impl TetMesh {
+    pub fn num_vertices(&self) -> usize {
+        self.vertices.len()
+    }
+
+    pub fn num_tets(&self) -> usize {
+        self.tets.len()
+    }
+
+    /// Signed volume det[X1−X0, X2−X0, X3−X0] / 6 of tet `t`.
+    pub fn signed_volume(&self, t: usize) -> f64 {
+        let [a, b, c, d] = self.tets[t];
+        let x0 = self.vertices[a];
+        (self.vertices[b] - x0)
+            .cross(&(self.vertices[c] - x0))
+            .dot(&(self.vertices[d] - x0))
+            / 6.0
+    }
+
+    /// Axis-aligned bounding box (min, max). Returns zeros for an empty mesh.
+    pub fn bounding_box(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::repeat(f64::INFINITY);
+        let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+        for v in &self.vertices {
+            lo = lo.inf(v);
+            hi = hi.sup(v);
+        }
+        if self.vertices.is_empty() {
+            (Vec3::zeros(), Vec3::zeros())
+        } else {
+            (lo, hi)
+        }
+    }
+
+    /// Boundary triangles: faces that belong to exactly one tet, oriented outward.
+    pub fn surface_triangles(&self) -> Vec<[usize; 3]> {
+        // Faces opposite vertex i of a positively oriented tet, ordered so the normal points outward.
+        const FACES: [[usize; 3]; 4] = [[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]];
+        let mut faces: Vec<([usize; 3], [usize; 3])> = Vec::with_capacity(self.tets.len() * 4);
+        for t in &self.tets {
+            for f in FACES {
+                let tri = [t[f[0]], t[f[1]], t[f[2]]];
+                let mut key = tri;
+                key.sort_unstable();
+                faces.push((key, tri));
+            }
+        }
+        faces.sort_unstable_by_key(|f| f.0);
+        let mut out = Vec::new();
+        let mut i = 0;
+        while i < faces.len() {
+            let mut j = i + 1;
+            while j < faces.len() && faces[j].0 == faces[i].0 {
+                j += 1;
+            }
+            if j - i == 1 {
+                out.push(faces[i].1);
+            }
+            i = j;
+        }
+        out
+    }
+
+    /// Vertices on the boundary surface, sorted and unique.
+    pub fn surface_vertices(&self) -> Vec<usize> {
+        let mut v: Vec<usize> = self.surface_triangles().into_iter().flatten().collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    }
+}

@@ -1,0 +1,106 @@
+//! Checks run on every mesh that enters the program (DESIGN §3).
+
+use std::path::Path;
+
+use super::TetMesh;
+use crate::MeshError;
+
+/// What validation found and fixed.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct ValidationReport {
+    /// Tets whose rest orientation was negative and were flipped (two indices swapped).
+    pub flipped_tets: usize,
+    /// Vertices that no tet references. They are kept (indices stay stable) but carry no mass.
+    pub unreferenced_vertices: usize,
+    /// Smallest |volume| divided by the mean |volume|.
+    pub min_relative_volume: f64,
+}
+
+/// Relative volume below which a tet counts as degenerate: |V_e| < EPS · mean |V|.
+pub const DEGENERATE_RELATIVE_VOLUME: f64 = 1e-10;
+
+/// Validates `mesh` in place: indices in range, finite coordinates, no degenerate tets, positive
+/// orientation (inverted rest tets are flipped and counted). `path` names the source in errors.
+pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, MeshError> {
+    let invalid = |reason: String| MeshError::Invalid {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if mesh.tets.is_empty() {
+        return Err(invalid("the mesh has no tetrahedra".into()));
+    }
+    let n = mesh.vertices.len();
+    if let Some((i, v)) = mesh
+        .vertices
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !v.iter().all(|c| c.is_finite()))
+    {
+        return Err(invalid(format!(
+            "vertex {i} has a non-finite coordinate ({}, {}, {})",
+            v.x, v.y, v.z
+        )));
+    }
+    let mut referenced = vec![false; n];
+    for (t, tet) in mesh.tets.iter().enumerate() {
+        for &i in tet {
+            if i >= n {
+                return Err(invalid(format!(
+                    "tet {t} references vertex {i} but the mesh has {n} vertices"
+                )));
+            }
+            referenced[i] = true;
+        }
+        for a in 0..4 {
+            for b in a + 1..4 {
+                if tet[a] == tet[b] {
+                    return Err(invalid(format!(
+                        "tet {t} uses vertex {} twice ({:?})",
+                        tet[a], tet
+                    )));
+                }
+            }
+        }
+    }
+    let volumes: Vec<f64> = (0..mesh.tets.len())
+        .map(|t| mesh.signed_volume(t))
+        .collect();
+    let mean = volumes.iter().map(|v| v.abs()).sum::<f64>() / volumes.len() as f64;
+    if !(mean > 0.0 && mean.is_finite()) {
+        return Err(invalid("all tetrahedra have zero volume".into()));
+    }
+    let mut report = ValidationReport {
+        min_relative_volume: f64::INFINITY,
+        ..Default::default()
+    };
+    for (t, &v) in volumes.iter().enumerate() {
+        let rel = v.abs() / mean;
+        if rel < DEGENERATE_RELATIVE_VOLUME {
+            return Err(invalid(format!(
+                "tet {t} {:?} is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
+                mesh.tets[t]
+            )));
+        }
+        report.min_relative_volume = report.min_relative_volume.min(rel);
+        if v < 0.0 {
+            mesh.tets[t].swap(2, 3);
+            report.flipped_tets += 1;
+        }
+    }
+    report.unreferenced_vertices = referenced.iter().filter(|r| !**r).count();
+    if report.flipped_tets > 0 {
+        tracing::warn!(
+            "{}: flipped {} inverted rest tets",
+            path.display(),
+            report.flipped_tets
+        );
+    }
+    if report.unreferenced_vertices > 0 {
+        tracing::warn!(
+            "{}: {} vertices are not referenced by any tet",
+            path.display(),
+            report.unreferenced_vertices
+        );
+    }
+    Ok(report)
+}

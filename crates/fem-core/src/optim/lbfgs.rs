@@ -1,0 +1,282 @@
+//! Limited-memory BFGS with a preconditioner as the initial inverse Hessian.
+//!
+//! The two-loop recursion (Nocedal & Wright, Alg. 7.4) with H₀ = P⁻¹: for implicit time stepping
+//! P is the factorised rest-pose system (K₀ + M/h² in full space, its projection in a subspace),
+//! which makes the first iteration a good Newton step and keeps the iteration count low.
+//! All work vectors are owned by [`Lbfgs`] and reused, so a solve allocates nothing.
+
+use super::{
+    Objective, SolveParams, SolveStats, armijo_backtracking, at_roundoff_floor, dot, norm, relative,
+};
+use crate::FemError;
+
+/// Applies z = P⁻¹ r.
+pub trait Preconditioner {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]);
+}
+
+/// The identity preconditioner (plain L-BFGS).
+impl Preconditioner for () {
+    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
+        z.copy_from_slice(r);
+    }
+}
+
+/// L-BFGS state and work buffers for problems of one dimension.
+#[derive(Debug, Clone)]
+pub struct Lbfgs {
+    memory: usize,
+    s: Vec<Vec<f64>>,
+    y: Vec<Vec<f64>>,
+    rho: Vec<f64>,
+    alpha: Vec<f64>,
+    /// Index of the oldest pair in the ring buffer, and the number of pairs held.
+    head: usize,
+    len: usize,
+    g: Vec<f64>,
+    d: Vec<f64>,
+    q: Vec<f64>,
+    x_new: Vec<f64>,
+    g_new: Vec<f64>,
+}
+
+impl Lbfgs {
+    pub fn new(dim: usize, memory: usize) -> Self {
+        let memory = memory.max(1);
+        Self {
+            memory,
+            s: vec![vec![0.0; dim]; memory],
+            y: vec![vec![0.0; dim]; memory],
+            rho: vec![0.0; memory],
+            alpha: vec![0.0; memory],
+            head: 0,
+            len: 0,
+            g: vec![0.0; dim],
+            d: vec![0.0; dim],
+            q: vec![0.0; dim],
+            x_new: vec![0.0; dim],
+            g_new: vec![0.0; dim],
+        }
+    }
+
+    pub fn dim(&self) -> usize {
+        self.g.len()
+    }
+
+    /// Forgets the stored curvature pairs.
+    pub fn reset(&mut self) {
+        self.len = 0;
+        self.head = 0;
+    }
+
+    /// d = −H r by the two-loop recursion.
+    fn direction<P: Preconditioner + ?Sized>(&mut self, precond: &mut P) {
+        self.q.copy_from_slice(&self.g);
+        for k in (0..self.len).rev() {
+            let i = (self.head + k) % self.memory;
+            let a = self.rho[i] * dot(&self.s[i], &self.q);
+            self.alpha[i] = a;
+            for (q, y) in self.q.iter_mut().zip(&self.y[i]) {
+                *q -= a * y;
+            }
+        }
+        precond.apply(&self.q, &mut self.d);
+        for k in 0..self.len {
+            let i = (self.head + k) % self.memory;
+            let b = self.rho[i] * dot(&self.y[i], &self.d);
+            let c = self.alpha[i] - b;
+            for (d, s) in self.d.iter_mut().zip(&self.s[i]) {
+                *d += c * s;
+            }
+        }
+        for d in self.d.iter_mut() {
+            *d = -*d;
+        }
+    }
+
+    /// Stores the pair s = x_new − x, y = g_new − g when it has positive curvature.
+    fn push_pair(&mut self, x: &[f64]) {
+        let slot = if self.len < self.memory {
+            (self.head + self.len) % self.memory
+        } else {
+            let s = self.head;
+            self.head = (self.head + 1) % self.memory;
+            s
+        };
+        for i in 0..x.len() {
+            self.s[slot][i] = self.x_new[i] - x[i];
+            self.y[slot][i] = self.g_new[i] - self.g[i];
+        }
+        let sy = dot(&self.s[slot], &self.y[slot]);
+        if sy > 1e-12 * norm(&self.s[slot]) * norm(&self.y[slot]) && sy > 0.0 {
+            self.rho[slot] = 1.0 / sy;
+            if self.len < self.memory {
+                self.len += 1;
+            }
+        } else if self.len == self.memory {
+            // The overwritten oldest pair is lost either way; undo the head move.
+            self.head = (self.head + self.memory - 1) % self.memory;
+            self.len -= 1;
+        }
+    }
+
+    /// Minimises `objective` from `x` (overwritten). The memory is cleared at the start.
+    pub fn minimize<O: Objective + ?Sized, P: Preconditioner + ?Sized>(
+        &mut self,
+        objective: &mut O,
+        precond: &mut P,
+        x: &mut [f64],
+        params: SolveParams,
+    ) -> Result<SolveStats, FemError> {
+        self.reset();
+        let mut value = objective.value_gradient(x, &mut self.g);
+        if !value.is_finite() || self.g.iter().any(|v| !v.is_finite()) {
+            return Err(FemError::NonFinite {
+                what: "energy at the start of the L-BFGS solve",
+                step: params.step,
+            });
+        }
+        for it in 0..=params.max_iterations {
+            let rel = relative(norm(&self.g), objective.gradient_scale());
+            if rel <= params.tolerance {
+                return Ok(SolveStats {
+                    iterations: it,
+                    relative_gradient: rel,
+                    energy: value,
+                });
+            }
+            if it == params.max_iterations {
+                return Err(FemError::NotConverged {
+                    solver: "L-BFGS",
+                    step: params.step,
+                    iterations: it,
+                    residual: rel,
+                    tolerance: params.tolerance,
+                });
+            }
+            self.direction(precond);
+            if at_roundoff_floor(x, &self.d, rel) {
+                return Ok(SolveStats {
+                    iterations: it,
+                    relative_gradient: rel,
+                    energy: value,
+                });
+            }
+            let mut ls = armijo_backtracking(
+                objective,
+                x,
+                value,
+                &self.g,
+                &self.d,
+                1.0,
+                &mut self.x_new,
+                &mut self.g_new,
+            );
+            if ls.is_none() && self.len > 0 {
+                // Stale curvature pairs: retry with the preconditioned gradient alone.
+                self.reset();
+                self.direction(precond);
+                ls = armijo_backtracking(
+                    objective,
+                    x,
+                    value,
+                    &self.g,
+                    &self.d,
+                    1.0,
+                    &mut self.x_new,
+                    &mut self.g_new,
+                );
+            }
+            match ls {
+                Some(ls) => {
+                    self.push_pair(x);
+                    x.copy_from_slice(&self.x_new);
+                    std::mem::swap(&mut self.g, &mut self.g_new);
+                    value = ls.value;
+                }
+                None => {
+                    objective.value_gradient(x, &mut self.g);
+                    if rel <= params.tolerance.sqrt().min(1e3 * params.tolerance) {
+                        return Ok(SolveStats {
+                            iterations: it,
+                            relative_gradient: rel,
+                            energy: value,
+                        });
+                    }
+                    return Err(FemError::LineSearchFailed {
+                        solver: "L-BFGS",
+                        step: params.step,
+                        iteration: it,
+                    });
+                }
+            }
+        }
+        unreachable!("the loop returns at it == max_iterations")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rosenbrock in n dimensions: a classic non-convex test with minimum at (1, …, 1).
+    struct Rosenbrock;
+    impl Objective for Rosenbrock {
+        fn dim(&self) -> usize {
+            6
+        }
+        fn value_gradient(&mut self, x: &[f64], g: &mut [f64]) -> f64 {
+            g.fill(0.0);
+            let mut f = 0.0;
+            for i in 0..x.len() - 1 {
+                let a = x[i + 1] - x[i] * x[i];
+                let b = 1.0 - x[i];
+                f += 100.0 * a * a + b * b;
+                g[i] += -400.0 * a * x[i] - 2.0 * b;
+                g[i + 1] += 200.0 * a;
+            }
+            f
+        }
+        fn gradient_scale(&self) -> f64 {
+            1.0
+        }
+    }
+
+    #[test]
+    fn lbfgs_minimises_rosenbrock() {
+        let mut x = vec![-1.2, 1.0, -1.2, 1.0, -1.2, 1.0];
+        let mut solver = Lbfgs::new(6, 8);
+        let stats = solver
+            .minimize(
+                &mut Rosenbrock,
+                &mut (),
+                &mut x,
+                SolveParams {
+                    tolerance: 1e-10,
+                    max_iterations: 500,
+                    step: 0,
+                },
+            )
+            .unwrap();
+        assert!(x.iter().all(|v| (v - 1.0).abs() < 1e-7), "{x:?} {stats:?}");
+        assert!(stats.iterations > 10);
+    }
+
+    #[test]
+    fn lbfgs_reports_iteration_cap() {
+        let mut x = vec![-1.2, 1.0, -1.2, 1.0, -1.2, 1.0];
+        let err = Lbfgs::new(6, 3)
+            .minimize(
+                &mut Rosenbrock,
+                &mut (),
+                &mut x,
+                SolveParams {
+                    tolerance: 1e-12,
+                    max_iterations: 3,
+                    step: 7,
+                },
+            )
+            .unwrap_err();
+        assert!(err.to_string().contains("step 7"), "{err}");
+    }
+}

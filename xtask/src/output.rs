@@ -1,0 +1,60 @@
+//! Frame output for ParaView: `frames/frame_NNNNN.vtu` with point data `displacement`, and
+//! `series.pvd` listing them with their times (open the `.pvd`, then "Warp By Vector").
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use fem_core::io::vtu;
+use fem_core::{TetMesh, Vec3};
+
+/// Writes the frames of one simulation and, at the end, the series file.
+#[derive(Debug)]
+pub struct FrameWriter {
+    dir: PathBuf,
+    entries: Vec<(f64, String)>,
+}
+
+impl FrameWriter {
+    /// Prepares `out/frames/`, removing frames an earlier run left there.
+    pub fn new(out: &Path) -> Result<Self> {
+        let frames = out.join("frames");
+        if frames.is_dir() {
+            for entry in std::fs::read_dir(&frames)? {
+                let p = entry?.path();
+                if p.extension().is_some_and(|e| e == "vtu") {
+                    std::fs::remove_file(&p)
+                        .with_context(|| format!("cannot remove old frame {}", p.display()))?;
+                }
+            }
+        }
+        std::fs::create_dir_all(&frames)
+            .with_context(|| format!("cannot create {}", frames.display()))?;
+        Ok(Self {
+            dir: out.to_path_buf(),
+            entries: Vec::new(),
+        })
+    }
+
+    /// Writes one frame with displacement `u` (3 per vertex).
+    pub fn write(&mut self, mesh: &TetMesh, step: usize, time: f64, u: &[f64]) -> Result<()> {
+        let name = format!("frames/frame_{step:05}.vtu");
+        let disp: Vec<Vec3> = u
+            .chunks_exact(3)
+            .map(|c| Vec3::new(c[0], c[1], c[2]))
+            .collect();
+        vtu::write_vtu(&self.dir.join(&name), mesh, &[("displacement", &disp)], &[])?;
+        self.entries.push((time, name));
+        Ok(())
+    }
+
+    pub fn frames_written(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Writes `series.pvd` for the frames written so far.
+    pub fn finish(&self) -> Result<PathBuf> {
+        let path = self.dir.join("series.pvd");
+        vtu::write_pvd(&path, &self.entries)?;
+        Ok(path)
+    }
+}
