@@ -1,6 +1,8 @@
 //! Integration tests of fem-core. Tests that need `../shared/` skip with a printed reason when it
 //! is absent (a user's clone has no `shared/`).
 
+mod assembly;
+mod integrator;
 mod materials;
 mod readers;
 
