@@ -69,6 +69,13 @@ pub enum FemError {
     /// The sparse factorisation failed (the system is not positive definite).
     #[error("sparse Cholesky factorisation failed: {0}")]
     Factorization(String),
+    /// A generated training or test schedule failed to simulate.
+    #[error("schedule {index}: {source}")]
+    Schedule {
+        index: usize,
+        #[source]
+        source: Box<FemError>,
+    },
     /// Several configuration errors, reported together.
     #[error("{}", .0.iter().map(|e| format!("  - {e}")).collect::<Vec<_>>().join("\n"))]
     Many(Vec<FemError>),

@@ -28,6 +28,8 @@ pub mod mass;
 pub mod material;
 pub mod mesh;
 pub mod optim;
+pub mod rng;
+pub mod snapshots;
 pub mod sparse;
 
 pub use error::{FemError, MeshError};

@@ -1,5 +1,31 @@
-//! Reduced implicit Euler in linear (PCA) and nonlinear (autoencoder) subspaces.
+//! Reduced implicit Euler in linear (PCA) and nonlinear (autoencoder) subspaces (DESIGN §8).
 //!
-//! This crate will own the `Subspace` abstraction (latent `z` → PCA coefficients `q`, with Jacobian
-//! and vector–Jacobian product), reduced energies evaluated over cubature elements with partial
-//! decode, and the preconditioned L-BFGS / Newton integrators in latent space.
+//! A [`Subspace`] maps latent coordinates z to PCA coefficients q (linear: q = z; neural:
+//! q = decode(z)), and u = Uq. One step minimises, over z,
+//!
+//! E(z) = Σ_{e∈S} w_e V_e(U_e q(z)) + Φ(Uq(z), t) − f_gᵀUq(z) + 1/(2h²) (q − q̃)ᵀ (UᵀMU) (q − q̃),
+//!
+//! with q̃ = q_n + h q̇_n and ∇E(z) = J(z)ᵀ ∂E/∂q, one vector–Jacobian product. Only the rows of U
+//! of vertices that the element set S or a force touches are ever multiplied ("partial decode");
+//! the full displacement u = Uq is formed only when a frame is written out.
+
+mod reduced;
+mod simulator;
+mod subspace;
+
+pub use reduced::ReducedSpace;
+pub use simulator::{ReducedSimulator, ReducedState, ReducedStepReport};
+pub use subspace::{LinearSubspace, Subspace};
+
+/// Errors of the reduced integrators.
+#[derive(Debug, thiserror::Error)]
+pub enum ReducedError {
+    #[error(transparent)]
+    Fem(#[from] fem_core::FemError),
+    /// The basis does not fit the model.
+    #[error("basis has {rows} rows but the model has {free} free DOFs; rebuild the PCA stage")]
+    BasisShape { rows: usize, free: usize },
+    /// A reduced matrix that must be positive definite is not.
+    #[error("the reduced {what} matrix is not positive definite")]
+    NotPositiveDefinite { what: &'static str },
+}

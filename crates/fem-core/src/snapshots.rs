@@ -1,0 +1,357 @@
+//! Automatic training data (DESIGN §4): a seeded family of force schedules, each simulated in
+//! full space, every frame's free-DOF displacement recorded.
+//!
+//! All loads are springs on random surface patches whose targets move by offsets given as
+//! fractions of the bounding-box diagonal L, with stiffness in units of E·L (E the Young's
+//! modulus), so the same defaults make sense on any mesh and material:
+//! * `pull`: the target ramps to a random offset, holds, then the spring lets go;
+//! * `poke`: a short, quick push of a small patch, released at once;
+//! * `drag`: the target follows a random path through several keyframes, then lets go.
+//!
+//! Schedule `i` of a family depends only on (seed, i), so any subset (a shard) can be simulated
+//! anywhere and merged.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rayon::prelude::*;
+
+use crate::FemError;
+use crate::forces::{ExternalForce, ForceKind};
+use crate::integrator::{FullSpaceModel, Simulator, TimeConfig};
+use crate::optim::SolverConfig;
+use crate::rng::SplitMix64;
+
+/// Kinds of generated schedules.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScheduleKind {
+    Pull,
+    Poke,
+    Drag,
+}
+
+/// The `[training]` and `[test]` sections as written: every key optional, filled from
+/// [`ScheduleConfig::training`] or [`ScheduleConfig::test`].
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduleSection {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedules: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_per_schedule: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinds: Option<Vec<ScheduleKind>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stiffness: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub patch_radius: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gravity_scale: Option<f64>,
+}
+
+impl ScheduleSection {
+    /// The complete configuration, taking unset keys from `defaults`.
+    pub fn resolve(&self, defaults: ScheduleConfig) -> ScheduleConfig {
+        ScheduleConfig {
+            schedules: self.schedules.unwrap_or(defaults.schedules),
+            frames_per_schedule: self
+                .frames_per_schedule
+                .unwrap_or(defaults.frames_per_schedule),
+            seed: self.seed.unwrap_or(defaults.seed),
+            kinds: self.kinds.clone().unwrap_or(defaults.kinds),
+            offset: self.offset.unwrap_or(defaults.offset),
+            stiffness: self.stiffness.unwrap_or(defaults.stiffness),
+            patch_radius: self.patch_radius.unwrap_or(defaults.patch_radius),
+            gravity_scale: self.gravity_scale.unwrap_or(defaults.gravity_scale),
+        }
+    }
+}
+
+/// A complete schedule family: how many, how long, which kinds and how strong.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ScheduleConfig {
+    /// Number of schedules (trajectories).
+    pub schedules: usize,
+    /// Time steps simulated per schedule.
+    pub frames_per_schedule: usize,
+    pub seed: u64,
+    /// Kinds drawn from, uniformly.
+    pub kinds: Vec<ScheduleKind>,
+    /// Range of the target offset, as a fraction of the bounding-box diagonal.
+    pub offset: [f64; 2],
+    /// Range of the total spring stiffness, in units of E·L.
+    pub stiffness: [f64; 2],
+    /// Radius of a grabbed surface patch, as a fraction of the bounding-box diagonal.
+    pub patch_radius: f64,
+    /// Scales the scene's gravity (1 = as in the scene).
+    pub gravity_scale: f64,
+}
+
+impl ScheduleConfig {
+    /// Defaults for training data.
+    pub fn training() -> Self {
+        Self {
+            schedules: 24,
+            frames_per_schedule: 60,
+            seed: 1,
+            kinds: vec![ScheduleKind::Pull, ScheduleKind::Poke],
+            offset: [0.03, 0.2],
+            stiffness: [0.02, 0.1],
+            patch_radius: 0.06,
+            gravity_scale: 1.0,
+        }
+    }
+
+    /// Defaults for held-out test trajectories: another seed and a kind training never saw.
+    pub fn test() -> Self {
+        Self {
+            schedules: 1,
+            frames_per_schedule: 100,
+            seed: 1_000_003,
+            kinds: vec![ScheduleKind::Drag],
+            ..Self::training()
+        }
+    }
+
+    pub fn check(&self, section: &str, errors: &mut Vec<FemError>) {
+        let mut bad = |field: &str, reason: String| {
+            errors.push(FemError::InvalidConfig {
+                field: format!("{section}.{field}"),
+                reason,
+            })
+        };
+        if self.schedules == 0 {
+            bad("schedules", "must be at least 1".into());
+        }
+        if self.frames_per_schedule == 0 {
+            bad("frames_per_schedule", "must be at least 1".into());
+        }
+        if self.kinds.is_empty() {
+            bad("kinds", "name at least one of pull, poke, drag".into());
+        }
+        for (name, r) in [("offset", self.offset), ("stiffness", self.stiffness)] {
+            if !(r[0].is_finite() && r[1].is_finite() && r[0] > 0.0 && r[0] <= r[1]) {
+                bad(name, format!("needs 0 < min ≤ max, got {r:?}"));
+            }
+        }
+        if !(self.patch_radius.is_finite() && self.patch_radius > 0.0) {
+            bad(
+                "patch_radius",
+                format!("must be positive, got {}", self.patch_radius),
+            );
+        }
+        if !(self.gravity_scale.is_finite() && self.gravity_scale >= 0.0) {
+            bad(
+                "gravity_scale",
+                format!("must be non-negative, got {}", self.gravity_scale),
+            );
+        }
+    }
+
+    /// The forces of schedule `index` on `model`'s mesh, with time step `h`.
+    pub fn schedule(&self, model: &FullSpaceModel, index: usize, h: f64) -> Vec<ExternalForce> {
+        let mut rng = SplitMix64::for_item(self.seed, index as u64);
+        let mesh = &model.mesh;
+        let (lo, hi) = mesh.bounding_box();
+        let diag = (hi - lo).norm();
+        let duration = self.frames_per_schedule as f64 * h;
+        let candidates: Vec<usize> = mesh
+            .surface_vertices()
+            .into_iter()
+            .filter(|v| model.pinned.binary_search(v).is_err())
+            .collect();
+        if candidates.is_empty() {
+            return Vec::new();
+        }
+        let kind = self.kinds[rng.below(self.kinds.len())];
+        let center = mesh.vertices[candidates[rng.below(candidates.len())]];
+        let radius = match kind {
+            ScheduleKind::Poke => 0.5 * self.patch_radius * diag,
+            _ => self.patch_radius * diag,
+        };
+        let mut vertices: Vec<usize> = candidates
+            .iter()
+            .copied()
+            .filter(|&v| (mesh.vertices[v] - center).norm() <= radius)
+            .collect();
+        if vertices.is_empty() {
+            vertices.push(candidates[0]);
+        }
+        let stiffness =
+            rng.range(self.stiffness[0], self.stiffness[1]) * model.youngs_modulus * diag;
+        let mut offset = |scale: f64| {
+            let d = rng.unit_vector();
+            let m = rng.range(self.offset[0], self.offset[1]) * diag * scale;
+            [d[0] * m, d[1] * m, d[2] * m]
+        };
+        let (keyframes, start, end) = match kind {
+            ScheduleKind::Pull => {
+                let o = offset(1.0);
+                let ramp = duration * 0.3;
+                let release = duration * 0.55;
+                (
+                    vec![[0.0, 0.0, 0.0, 0.0], [ramp, o[0], o[1], o[2]]],
+                    0.0,
+                    release,
+                )
+            }
+            ScheduleKind::Poke => {
+                let o = offset(0.5);
+                let ramp = (3.0 * h).min(duration * 0.2);
+                (
+                    vec![[0.0, 0.0, 0.0, 0.0], [ramp, o[0], o[1], o[2]]],
+                    0.0,
+                    ramp * 2.0,
+                )
+            }
+            ScheduleKind::Drag => {
+                let mut k = vec![[0.0, 0.0, 0.0, 0.0]];
+                for j in 1..=3 {
+                    let o = offset(1.0);
+                    k.push([duration * 0.18 * j as f64, o[0], o[1], o[2]]);
+                }
+                (k, 0.0, duration * 0.6)
+            }
+        };
+        vec![ExternalForce {
+            kind: ForceKind::Spring,
+            vertices,
+            stiffness,
+            keyframes,
+            start,
+            end,
+        }]
+    }
+}
+
+/// Free-DOF displacements of every frame of the simulated schedules, one column per frame.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SnapshotSet {
+    /// Free DOFs per frame.
+    pub dim: usize,
+    /// Schedule indices in this set, increasing.
+    pub schedules: Vec<usize>,
+    /// Frames recorded per schedule.
+    pub frames_per_schedule: usize,
+    /// Column-major dim × (schedules · frames) displacements.
+    pub data: Vec<f64>,
+}
+
+impl SnapshotSet {
+    pub fn num_frames(&self) -> usize {
+        self.schedules.len() * self.frames_per_schedule
+    }
+
+    /// Frame `j` (column) as a slice.
+    pub fn frame(&self, j: usize) -> &[f64] {
+        &self.data[j * self.dim..(j + 1) * self.dim]
+    }
+
+    /// Combines disjoint sets of the same family into one, ordered by schedule.
+    pub fn merge(parts: Vec<SnapshotSet>) -> Result<SnapshotSet, String> {
+        let first = parts.first().ok_or("no snapshot sets to merge")?;
+        let (dim, fps) = (first.dim, first.frames_per_schedule);
+        let mut blocks: Vec<(usize, &[f64])> = Vec::new();
+        for p in &parts {
+            if p.dim != dim || p.frames_per_schedule != fps {
+                return Err("shards come from different meshes or settings".into());
+            }
+            for (k, &s) in p.schedules.iter().enumerate() {
+                blocks.push((s, &p.data[k * fps * dim..(k + 1) * fps * dim]));
+            }
+        }
+        blocks.sort_by_key(|b| b.0);
+        if blocks.windows(2).any(|w| w[0].0 == w[1].0) {
+            return Err("a schedule appears in two shards".into());
+        }
+        Ok(SnapshotSet {
+            dim,
+            schedules: blocks.iter().map(|b| b.0).collect(),
+            frames_per_schedule: fps,
+            data: blocks.iter().flat_map(|b| b.1.iter().copied()).collect(),
+        })
+    }
+}
+
+/// Simulates one schedule from rest and returns its free-DOF displacement per frame.
+pub fn simulate_schedule(
+    model: &FullSpaceModel,
+    forces: Vec<ExternalForce>,
+    gravity_scale: f64,
+    time: &TimeConfig,
+    solver: &SolverConfig,
+    frames: usize,
+) -> Result<Vec<Vec<f64>>, FemError> {
+    let mut m = model.clone();
+    m.forces = forces;
+    for g in m.gravity_load.iter_mut() {
+        *g *= gravity_scale;
+    }
+    m.gravity *= gravity_scale;
+    let time = TimeConfig {
+        frames,
+        ..time.clone()
+    };
+    let mut sim = Simulator::new(m, time, solver.clone())?;
+    let mut out = Vec::with_capacity(frames);
+    let mut free = vec![0.0; sim.model.dofs.num_free()];
+    for _ in 0..frames {
+        sim.step()?;
+        sim.model.dofs.gather(&sim.state.u, &mut free);
+        out.push(free.clone());
+    }
+    Ok(out)
+}
+
+/// Simulates the schedules `shard.0, shard.0 + shard.1, …` of `config` in parallel.
+/// `progress(done)` is called (from any thread) after each finished schedule.
+pub fn generate(
+    model: &FullSpaceModel,
+    config: &ScheduleConfig,
+    time: &TimeConfig,
+    solver: &SolverConfig,
+    shard: (usize, usize),
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<SnapshotSet, FemError> {
+    let (index, count) = shard;
+    let schedules: Vec<usize> = (index..config.schedules).step_by(count.max(1)).collect();
+    let done = AtomicUsize::new(0);
+    let results: Vec<Result<Vec<Vec<f64>>, FemError>> = schedules
+        .par_iter()
+        .with_max_len(1)
+        .map(|&s| {
+            let forces = config.schedule(model, s, time.step);
+            let r = simulate_schedule(
+                model,
+                forces,
+                config.gravity_scale,
+                time,
+                solver,
+                config.frames_per_schedule,
+            )
+            .map_err(|e| FemError::Schedule {
+                index: s,
+                source: Box::new(e),
+            });
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+            r
+        })
+        .collect();
+    let dim = model.dofs.num_free();
+    let mut data = Vec::with_capacity(dim * schedules.len() * config.frames_per_schedule);
+    for r in results {
+        for frame in r? {
+            data.extend_from_slice(&frame);
+        }
+    }
+    Ok(SnapshotSet {
+        dim,
+        schedules,
+        frames_per_schedule: config.frames_per_schedule,
+        data,
+    })
+}

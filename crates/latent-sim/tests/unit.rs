@@ -1,0 +1,196 @@
+//! Reduced implicit Euler: derivative checks and the full-rank limit.
+
+use fem_core::Vec3;
+use fem_core::constraints::{Axis, Side, VertexSelection};
+use fem_core::forces::{ExternalForce, ForceKind};
+use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
+use fem_core::material::MaterialConfig;
+use fem_core::mesh::generate::{BoxSpec, box_mesh};
+use fem_core::optim::{SolverConfig, SolverMethod};
+use latent_sim::{LinearSubspace, ReducedSimulator, ReducedSpace};
+
+fn model() -> FullSpaceModel {
+    let mesh = box_mesh(&BoxSpec {
+        size: [1.0, 0.2, 0.2],
+        cells: [4, 1, 1],
+        ..Default::default()
+    })
+    .unwrap();
+    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
+        .select(&mesh, "pin")
+        .unwrap();
+    let tip = (0..mesh.num_vertices())
+        .filter(|&v| mesh.vertices[v].x > 0.99)
+        .collect::<Vec<_>>();
+    let spring = ExternalForce {
+        kind: ForceKind::Spring,
+        vertices: tip,
+        stiffness: 2e3,
+        keyframes: vec![[0.0, 0.0, 0.0, 0.0], [0.05, 0.0, 0.1, 0.05]],
+        start: 0.0,
+        end: 0.08,
+    };
+    let material = MaterialConfig {
+        youngs_modulus: 1e5,
+        poisson_ratio: 0.4,
+        ..Default::default()
+    };
+    FullSpaceModel::new(
+        mesh,
+        &material,
+        pinned,
+        Vec3::new(0.0, -9.81, 0.0),
+        vec![spring],
+    )
+    .unwrap()
+}
+
+/// U = M^{-1/2} (the identity, scaled): full rank and mass-orthonormal.
+fn full_rank_basis(model: &FullSpaceModel) -> Vec<f64> {
+    let n = model.dofs.num_free();
+    let mut u = vec![0.0; n * n];
+    for (j, &d) in model.dofs.free.iter().enumerate() {
+        u[j * n + j] = 1.0 / model.mass.lumped[d / 3].sqrt();
+    }
+    u
+}
+
+/// A few smooth, mass-orthonormalised columns.
+fn small_basis(model: &FullSpaceModel, k: usize) -> Vec<f64> {
+    let n = model.dofs.num_free();
+    let mut u = vec![0.0; n * k];
+    for j in 0..k {
+        for (r, &d) in model.dofs.free.iter().enumerate() {
+            let x = model.mesh.vertices[d / 3];
+            u[j * n + r] = ((j + 1) as f64 * x.x + 0.3 * (d % 3) as f64 + j as f64).sin() * x.x;
+        }
+    }
+    // Gram–Schmidt in the lumped mass inner product.
+    let m: Vec<f64> = model
+        .dofs
+        .free
+        .iter()
+        .map(|&d| model.mass.lumped[d / 3])
+        .collect();
+    for j in 0..k {
+        for i in 0..j {
+            let p: f64 = (0..n).map(|r| u[i * n + r] * m[r] * u[j * n + r]).sum();
+            for r in 0..n {
+                u[j * n + r] -= p * u[i * n + r];
+            }
+        }
+        let nn: f64 = (0..n)
+            .map(|r| u[j * n + r].powi(2) * m[r])
+            .sum::<f64>()
+            .sqrt();
+        for r in 0..n {
+            u[j * n + r] /= nn;
+        }
+    }
+    u
+}
+
+fn time(frames: usize) -> TimeConfig {
+    TimeConfig {
+        step: 0.01,
+        frames,
+        quasi_static: false,
+    }
+}
+
+fn solver(method: SolverMethod) -> SolverConfig {
+    SolverConfig {
+        method,
+        tolerance: 1e-10,
+        max_iterations: 500,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn reduced_gradient_matches_finite_differences_with_and_without_cubature() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let subsets = [
+        None,
+        Some((vec![0usize, 3, 7, 11, 20], vec![2.0, 0.5, 1.5, 3.0, 0.7])),
+    ];
+    for cubature in subsets {
+        let space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+        let mut sim = ReducedSimulator::new(
+            m.clone(),
+            space,
+            LinearSubspace::new(k),
+            time(10),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap();
+        // Move away from rest so that inertia, springs and elasticity all contribute.
+        for _ in 0..3 {
+            sim.step().unwrap();
+        }
+        let z: Vec<f64> = sim
+            .state
+            .z
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.01 * (i as f64).cos())
+            .collect();
+        let mut g = vec![0.0; k];
+        sim.objective(&z, &mut g);
+        let gnorm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let mut scratch = vec![0.0; k];
+        for i in 0..k {
+            let h = 1e-6;
+            let (mut zp, mut zm) = (z.clone(), z.clone());
+            zp[i] += h;
+            zm[i] -= h;
+            let fd =
+                (sim.objective(&zp, &mut scratch) - sim.objective(&zm, &mut scratch)) / (2.0 * h);
+            assert!(
+                (fd - g[i]).abs() < 1e-6 * gnorm,
+                "cubature {}: component {i}: {fd} vs {}",
+                cubature.is_some(),
+                g[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
+    let m = model();
+    let n = m.dofs.num_free();
+    let frames = 15;
+    let space = ReducedSpace::new(&m, &full_rank_basis(&m), n, None).unwrap();
+    for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
+        let mut red = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            LinearSubspace::new(n),
+            time(frames),
+            solver(method),
+        )
+        .unwrap();
+        let mut full =
+            Simulator::new(m.clone(), time(frames), solver(SolverMethod::Newton)).unwrap();
+        for f in 0..frames {
+            full.step().unwrap();
+            red.step().unwrap();
+            let u = red.full_displacement();
+            let diff: f64 = u
+                .iter()
+                .zip(&full.state.u)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let size: f64 = full.state.u.iter().map(|a| a * a).sum::<f64>().sqrt();
+            assert!(
+                diff <= 1e-7 * size,
+                "{method:?} frame {f}: {:.2e}",
+                diff / size
+            );
+        }
+    }
+}
