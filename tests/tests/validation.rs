@@ -6,8 +6,9 @@ use std::path::Path;
 
 use serde_json::Value;
 use tests::{relative_difference, scratch_dir, shared_dir};
+use xtask::pipeline::Pipeline;
 use xtask::scene::Scene;
-use xtask::simulate::{Method, SimulateOptions, simulate};
+use xtask::simulate::{Method, SimulateOptions, SimulationResult, Trajectory, simulate};
 
 fn beam_scene(mesh: &Path, model: &str, g: f64, mass: &str, time: &str) -> Scene {
     let text = format!(
@@ -38,15 +39,19 @@ max_iterations = 200
     Scene::from_str(&text, Path::new("."), "validation scene").unwrap()
 }
 
-fn run(scene: &Scene, name: &str) -> xtask::simulate::SimulationResult {
+/// Runs `scene` in full space exactly as `cargo xtask simulate` does.
+fn run(scene: &Scene, name: &str) -> SimulationResult {
+    let out = scratch_dir(name);
     let opts = SimulateOptions {
         method: Method::Full,
-        out: scratch_dir(name),
+        trajectory: Trajectory::Scene,
+        out: out.clone(),
         frames: None,
         every: 0,
         solver: None,
     };
-    simulate(scene, &opts, &mut |_, _| {}).unwrap()
+    let mut pipeline = Pipeline::new(scene, &out.join("cache")).unwrap();
+    simulate(&mut pipeline, &opts, &|_, _| {}, &mut |_, _| {}).unwrap()
 }
 
 fn vec3(v: &Value) -> [f64; 3] {
@@ -81,7 +86,7 @@ fn static_cantilever_tip_matches_reference_at_every_gravity_level() {
             "step = 1.0\nframes = 1\nquasi_static = true",
         );
         let r = run(&scene, &format!("static-linear-{name}"));
-        let u = &r.final_state.u[3 * tip..3 * tip + 3];
+        let u = &r.final_displacement[3 * tip..3 * tip + 3];
         let rel = relative_difference(u, &vec3(&lin["tip_centre_u"]));
         println!("{name} linear: tip {u:?} relative error {rel:.2e}");
         assert!(rel < 1e-6, "{name} linear tip error {rel:.3e}");
@@ -100,7 +105,7 @@ fn static_cantilever_tip_matches_reference_at_every_gravity_level() {
                 "step = 1.0\nframes = 1\nquasi_static = true",
             );
             let r = run(&scene, &format!("static-nh-{name}-{key}"));
-            let u = &r.final_state.u[3 * tip..3 * tip + 3];
+            let u = &r.final_displacement[3 * tip..3 * tip + 3];
             let rel = relative_difference(u, &vec3(&case["tip_centre_u"]));
             let last = r.summary.steps.last().unwrap();
             println!(
@@ -142,16 +147,7 @@ fn implicit_euler_trajectory_matches_reference() {
             mass,
             &format!("step = {dt}\nframes = {steps}"),
         );
-        let opts = SimulateOptions {
-            method: Method::Full,
-            out: scratch_dir(&format!("dynamics-{}", key.replace('|', "-"))),
-            frames: None,
-            every: 0,
-            solver: None,
-        };
-        // Record the tip after every step through the progress callback's companion: re-run
-        // step by step via the summary's energies and the final state.
-        let r = simulate(&scene, &opts, &mut |_, _| {}).unwrap();
+        let r = run(&scene, &format!("dynamics-{}", key.replace('|', "-")));
         let ref_steps = run_ref["steps"].as_array().unwrap();
         let mut worst: f64 = 0.0;
         for (ours, theirs) in r.summary.steps.iter().zip(ref_steps) {
@@ -165,7 +161,7 @@ fn implicit_euler_trajectory_matches_reference() {
                 .max((ours.elastic_energy - el).abs() / el.abs());
         }
         let last = &ref_steps[steps];
-        let u = &r.final_state.u[3 * tip..3 * tip + 3];
+        let u = &r.final_displacement[3 * tip..3 * tip + 3];
         let rel = relative_difference(u, &vec3(&last["tip_centre_u"]));
         println!("{key}: final tip relative error {rel:.2e}, worst energy error {worst:.2e}");
         assert!(rel < 1e-6, "{key}: final tip error {rel:.3e}");

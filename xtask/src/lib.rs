@@ -3,7 +3,10 @@
 //! `main.rs` only parses flags, shows progress bars and dispatches here, so tests drive exactly
 //! the code a user runs.
 
+pub mod artifact;
 pub mod output;
+pub mod pipeline;
+pub mod run;
 pub mod scene;
 pub mod simulate;
 

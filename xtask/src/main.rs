@@ -1,12 +1,14 @@
 //! `cargo xtask …`: the pipeline's command line. Parses flags, shows progress, dispatches.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
+use xtask::pipeline::{Pipeline, StageOutcome};
+use xtask::run::{RunOptions, markdown, run};
 use xtask::scene::Scene;
-use xtask::simulate::{Method, SimulateOptions, simulate};
+use xtask::simulate::{Method, SimulateOptions, Trajectory, simulate};
 
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
@@ -15,26 +17,47 @@ struct Cli {
     command: Command,
 }
 
+/// Flags shared by every command.
+#[derive(clap::Args, Clone)]
+struct Common {
+    /// Scene file (TOML); the built-in cantilever when absent.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Artifact cache folder (default: out/<scene name>/cache).
+    #[arg(long)]
+    cache: Option<PathBuf>,
+}
+
 #[derive(Subcommand)]
 enum Command {
-    /// Run the main job on a scene (the built-in default when none is given).
+    /// The main job: every stage (cached), then each method on the held-out test trajectory,
+    /// compared with the full-space reference.
     Run {
-        #[arg(long)]
-        scene: Option<PathBuf>,
+        #[command(flatten)]
+        common: Common,
         /// Output folder (default: out/<scene name>).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Write every K-th frame.
-        #[arg(long, default_value_t = 1)]
+        /// Write every K-th frame of each method (0: none).
+        #[arg(long, default_value_t = 5)]
         every: usize,
+        /// Methods to compare.
+        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::Pca])]
+        methods: Vec<MethodArg>,
+        /// Held-out test trajectory to simulate.
+        #[arg(long, default_value_t = 0)]
+        trajectory: usize,
     },
-    /// Simulate a scene and write frames ParaView opens.
+    /// Simulate a scene with one method and write frames ParaView opens.
     Simulate {
-        #[arg(long)]
-        scene: Option<PathBuf>,
+        #[command(flatten)]
+        common: Common,
         #[arg(long, value_enum, default_value_t = MethodArg::Full)]
         method: MethodArg,
-        /// Number of frames (overrides the scene's `[time] frames`).
+        /// Drive the simulation with held-out test trajectory N instead of the scene's forces.
+        #[arg(long)]
+        test: Option<usize>,
+        /// Number of frames (overrides the scene).
         #[arg(long)]
         frames: Option<usize>,
         /// Write every K-th frame (and the last); 0 writes only the summary.
@@ -47,17 +70,57 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Stage `snapshots`: simulate the training schedules.
+    Snapshots {
+        #[command(flatten)]
+        common: Common,
+        /// Simulate only shard I of N (every N-th schedule from I), for array jobs.
+        #[arg(long, value_name = "I/N")]
+        shard: Option<String>,
+        /// Combine shards 0..N into the snapshots artifact.
+        #[arg(long, value_name = "N")]
+        merge: Option<usize>,
+    },
+    /// Stage `pca`: the mass-orthonormal basis (runs `snapshots` first if needed).
+    Pca {
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Run the stages in order, skipping cached ones.
+    Pipeline {
+        #[command(flatten)]
+        common: Common,
+        /// Last stage to run.
+        #[arg(long, value_enum, default_value_t = StageArg::Pca)]
+        until: StageArg,
+    },
 }
 
-#[derive(Clone, Copy, ValueEnum)]
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum MethodArg {
     Full,
+    Pca,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Self {
+        match m {
+            MethodArg::Full => Method::Full,
+            MethodArg::Pca => Method::Pca,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
     Newton,
     Lbfgs,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum StageArg {
+    Snapshots,
+    Pca,
 }
 
 fn main() {
@@ -80,7 +143,7 @@ fn load_scene(path: Option<&PathBuf>) -> Result<Scene> {
     }
 }
 
-fn progress_bar(len: u64, what: &str) -> ProgressBar {
+fn bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(
         ProgressStyle::with_template(
@@ -93,63 +156,99 @@ fn progress_bar(len: u64, what: &str) -> ProgressBar {
     bar
 }
 
-fn run_simulation(scene: &Scene, opts: &SimulateOptions) -> Result<()> {
-    let bar = progress_bar(
-        opts.frames.unwrap_or(scene.time.frames) as u64,
-        opts.method.name(),
-    );
-    let result = simulate(scene, opts, &mut |done, _| bar.set_position(done as u64));
-    bar.finish_and_clear();
-    let result = result?;
-    let s = &result.summary;
-    println!(
-        "{}: {} frames of {} ({} vertices, {} tets, {} free DOF) in {:.2} s, median {:.2} ms/step, {} frames written to {}",
-        s.scene,
-        s.steps.len() - 1,
-        s.method.name(),
-        s.vertices,
-        s.tets,
-        s.free_dofs,
-        s.total_seconds,
-        s.median_step_ms,
-        s.frames_written,
-        opts.out.display()
-    );
-    if s.frames_written > 0 {
-        println!("open {} in ParaView", opts.out.join("series.pvd").display());
+fn print_stage(o: &StageOutcome) {
+    if o.cached {
+        println!("{:>10}: unchanged, skipped ({})", o.stage, o.path.display());
+    } else {
+        println!(
+            "{:>10}: computed in {:.1} s → {}",
+            o.stage,
+            o.seconds,
+            o.path.display()
+        );
     }
-    Ok(())
+}
+
+/// A pipeline for the scene, printing a line per stage.
+fn pipeline<'a>(scene: &'a Scene, cache: Option<&PathBuf>, root: &Path) -> Result<Pipeline<'a>> {
+    let cache = cache
+        .cloned()
+        .unwrap_or_else(|| root.join("out").join(&scene.name).join("cache"));
+    let mut p = Pipeline::new(scene, &cache)?;
+    p.on_stage = Box::new(print_stage);
+    Ok(p)
 }
 
 fn dispatch(cli: Cli) -> Result<()> {
     let root = xtask::project_root();
+    // One bar for long stages (schedules or frames); hidden until a stage reports progress.
+    let stage_bar = bar(0, "stage");
+    stage_bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    let stage_progress = |done: usize, total: usize| {
+        if stage_bar.is_hidden() {
+            stage_bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+        stage_bar.set_length(total as u64);
+        stage_bar.set_position(done as u64);
+        if done == total {
+            stage_bar.finish_and_clear();
+            stage_bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+            stage_bar.reset();
+        }
+    };
     match cli.command {
-        Command::Run { scene, out, every } => {
-            let scene = load_scene(scene.as_ref())?;
+        Command::Run {
+            common,
+            out,
+            every,
+            methods,
+            trajectory,
+        } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            p.pca(&stage_progress)?;
             let out = out.unwrap_or_else(|| root.join("out").join(&scene.name));
-            let opts = SimulateOptions {
-                method: Method::Full,
-                out: out.join("full"),
-                frames: None,
+            let opts = RunOptions {
+                out: out.clone(),
                 every,
-                solver: None,
+                methods: methods.into_iter().map(Method::from).collect(),
+                trajectory,
             };
-            run_simulation(&scene, &opts)
+            let method_bar = bar(0, "");
+            let rows = run(&mut p, &opts, &stage_progress, &mut |m, done, total| {
+                method_bar.set_message(m.to_string());
+                method_bar.set_length(total as u64);
+                method_bar.set_position(done as u64);
+            })?;
+            method_bar.finish_and_clear();
+            println!(
+                "\n{} — held-out test trajectory {trajectory}, {} frames\n",
+                scene.name,
+                scene.test().frames_per_schedule
+            );
+            print!("{}", markdown(&rows));
+            println!(
+                "\nreport: {} and report.md; frames: {}/<method>/series.pvd",
+                out.join("report.json").display(),
+                out.display()
+            );
+            Ok(())
         }
         Command::Simulate {
-            scene,
+            common,
             method,
+            test,
             frames,
             every,
             solver,
             out,
         } => {
-            let scene = load_scene(scene.as_ref())?;
-            let method = match method {
-                MethodArg::Full => Method::Full,
-            };
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            let method = Method::from(method);
             let opts = SimulateOptions {
                 method,
+                trajectory: test.map(Trajectory::Test).unwrap_or(Trajectory::Scene),
                 out: out.unwrap_or_else(|| root.join("out").join(&scene.name).join(method.name())),
                 frames,
                 every,
@@ -158,7 +257,103 @@ fn dispatch(cli: Cli) -> Result<()> {
                     SolverArg::Lbfgs => fem_core::optim::SolverMethod::Lbfgs,
                 }),
             };
-            run_simulation(&scene, &opts)
+            let frames_bar = bar(0, method.name());
+            let result = simulate(&mut p, &opts, &stage_progress, &mut |done, total| {
+                frames_bar.set_length(total as u64);
+                frames_bar.set_position(done as u64);
+            });
+            frames_bar.finish_and_clear();
+            let s = result?.summary;
+            println!(
+                "{}: {} steps of {} (dim {}; {} vertices, {} tets) in {:.2} s, median {:.3} ms/step, {} frames written to {}",
+                s.scene,
+                s.steps.len().saturating_sub(1).max(s.reduced_steps.len()),
+                s.method.name(),
+                s.dim,
+                s.vertices,
+                s.tets,
+                s.total_seconds,
+                s.median_step_ms,
+                s.frames_written,
+                opts.out.display()
+            );
+            if s.frames_written > 0 {
+                println!("open {} in ParaView", opts.out.join("series.pvd").display());
+            }
+            Ok(())
+        }
+        Command::Snapshots {
+            common,
+            shard,
+            merge,
+        } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            match (shard, merge) {
+                (Some(_), Some(_)) => bail!("give either --shard or --merge, not both"),
+                (Some(s), None) => {
+                    let (i, n) = parse_shard(&s)?;
+                    p.snapshot_shard(i, n, &stage_progress)?;
+                }
+                (None, Some(n)) => {
+                    let set = p.merge_shards(n)?;
+                    println!("merged {n} shards: {} frames", set.num_frames());
+                }
+                (None, None) => {
+                    let set = p.snapshots(&stage_progress)?;
+                    println!(
+                        "{} frames of {} free DOFs from {} schedules",
+                        set.num_frames(),
+                        set.dim,
+                        set.schedules.len()
+                    );
+                }
+            }
+            Ok(())
+        }
+        Command::Pca { common } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            let fit = p.pca(&stage_progress)?;
+            print_pca(&fit);
+            Ok(())
+        }
+        Command::Pipeline { common, until } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            match until {
+                StageArg::Snapshots => {
+                    p.snapshots(&stage_progress)?;
+                }
+                StageArg::Pca => {
+                    p.pca(&stage_progress)?;
+                }
+            }
+            Ok(())
         }
     }
+}
+
+fn print_pca(fit: &pca::PcaFit) {
+    let s = fit.basis.singular_values();
+    let shown: Vec<String> = s.iter().take(12).map(|v| format!("{v:.3e}")).collect();
+    println!("singular values: {} …", shown.join(" "));
+    println!(
+        "k = {} ({:?}; tolerance met: {}), explained energy {:.6}",
+        fit.chosen_k(),
+        fit.rule,
+        fit.tolerance_met,
+        fit.basis.explained_energy(fit.chosen_k())
+    );
+}
+
+fn parse_shard(s: &str) -> Result<(usize, usize)> {
+    let (i, n) = s
+        .split_once('/')
+        .ok_or_else(|| anyhow::anyhow!("--shard takes I/N, e.g. 0/4; got {s}"))?;
+    let (i, n): (usize, usize) = (i.trim().parse()?, n.trim().parse()?);
+    if n == 0 || i >= n {
+        bail!("--shard {s}: need 0 ≤ I < N");
+    }
+    Ok((i, n))
 }

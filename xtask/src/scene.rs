@@ -11,6 +11,8 @@ use fem_core::integrator::{FullSpaceModel, GravityConfig, TimeConfig};
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::{MeshConfig, ValidationReport};
 use fem_core::optim::SolverConfig;
+use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
+use pca::PcaConfig;
 
 /// The built-in default scene, also shipped as `data/cantilever.toml`.
 pub const DEFAULT_SCENE: &str = include_str!("../../data/cantilever.toml");
@@ -33,6 +35,15 @@ pub struct Scene {
     pub solver: SolverConfig,
     #[serde(default)]
     pub force: Vec<ForceConfig>,
+    /// Generated training schedules (stage `snapshots`).
+    #[serde(default)]
+    pub training: ScheduleSection,
+    /// Held-out test trajectories (ground truth for errors).
+    #[serde(default)]
+    pub test: ScheduleSection,
+    /// Dimension selection of the PCA basis (stage `pca`).
+    #[serde(default)]
+    pub pca: PcaConfig,
     /// Folder that relative paths in the scene are resolved against.
     #[serde(skip)]
     pub base_dir: PathBuf,
@@ -85,6 +96,21 @@ impl Scene {
         self.material.check(&mut errors);
         self.time.check(&mut errors);
         self.solver.check(&mut errors);
+        self.training().check("training", &mut errors);
+        self.test().check("test", &mut errors);
+        let mut pca_errors = Vec::new();
+        self.pca.check(&mut pca_errors);
+        for e in pca_errors {
+            errors.push(match e {
+                pca::PcaError::InvalidConfig { field, reason } => {
+                    FemError::InvalidConfig { field, reason }
+                }
+                other => FemError::InvalidConfig {
+                    field: "pca".into(),
+                    reason: other.to_string(),
+                },
+            });
+        }
         if self.gravity.acceleration.iter().any(|g| !g.is_finite()) {
             errors.push(FemError::InvalidConfig {
                 field: "gravity.acceleration".into(),
@@ -102,6 +128,16 @@ impl Scene {
             bail!("{}: invalid scene:\n{}", self.source, indent(&e));
         }
         Ok(())
+    }
+
+    /// The training schedule family, defaults filled in.
+    pub fn training(&self) -> ScheduleConfig {
+        self.training.resolve(ScheduleConfig::training())
+    }
+
+    /// The test schedule family, defaults filled in.
+    pub fn test(&self) -> ScheduleConfig {
+        self.test.resolve(ScheduleConfig::test())
     }
 
     /// Loads the mesh, selects pins and forces, and builds the full-space model.

@@ -1,40 +1,56 @@
-//! `cargo xtask simulate`: time-step a scene and write frames, a series file and a summary.
+//! `cargo xtask simulate`: time-step a scene with one method and write frames, a series file
+//! and a summary. The same runners serve `cargo xtask run`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use fem_core::integrator::{Simulator, State, StepReport};
+use fem_core::integrator::{FullSpaceModel, Simulator, StepReport, TimeConfig};
 use fem_core::io::write_atomic;
-use fem_core::optim::SolverMethod;
+use fem_core::optim::{SolverConfig, SolverMethod};
+use latent_sim::{LinearSubspace, ReducedSimulator, ReducedSpace, ReducedStepReport};
 
 use crate::output::FrameWriter;
-use crate::scene::Scene;
+use crate::pipeline::{Pipeline, Progress};
 
-/// Simulation methods. Later stages add reduced ones.
+/// Simulation methods.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
     /// Full-space finite elements.
     #[default]
     Full,
+    /// Linear model reduction with the PCA basis, every element evaluated.
+    Pca,
 }
 
 impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::Full => "full",
+            Method::Pca => "pca",
         }
     }
+}
+
+/// Which forces drive the simulation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Trajectory {
+    /// The scene's own `[[force]]` list for `[time] frames` steps.
+    #[default]
+    Scene,
+    /// Held-out test trajectory i of the `[test]` section.
+    Test(usize),
 }
 
 /// What to simulate and what to write.
 #[derive(Debug, Clone)]
 pub struct SimulateOptions {
     pub method: Method,
+    pub trajectory: Trajectory,
     /// Output folder.
     pub out: PathBuf,
-    /// Overrides `[time] frames`.
+    /// Overrides the number of frames.
     pub frames: Option<usize>,
     /// Write every K-th frame (and the last); 0 writes no frames.
     pub every: usize,
@@ -51,96 +67,258 @@ pub struct Summary {
     pub vertices: usize,
     pub tets: usize,
     pub free_dofs: usize,
-    pub flipped_tets: usize,
+    /// Dimension of the simulated space (free DOFs for full, k for PCA).
+    pub dim: usize,
     pub frames_written: usize,
     pub total_seconds: f64,
     pub median_step_ms: f64,
+    /// Per-step numbers of a full-space run (with energies).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub steps: Vec<StepReport>,
+    /// Per-step numbers of a reduced run.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reduced_steps: Vec<ReducedStepReport>,
 }
 
-/// The summary and the final state of a finished simulation.
+/// The summary and the final full displacement of a finished simulation.
 #[derive(Debug)]
 pub struct SimulationResult {
     pub summary: Summary,
-    pub final_state: State,
+    /// Full displacement (3 per vertex) after the last step.
+    pub final_displacement: Vec<f64>,
 }
 
-/// Runs `scene` with `opts`; `progress(done, total)` is called after every step.
+/// One method, stepping.
+#[allow(clippy::large_enum_variant)]
+pub enum Runner {
+    Full(Simulator),
+    Pca(ReducedSimulator<LinearSubspace>),
+}
+
+impl std::fmt::Debug for Runner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Runner::Full(_) => "Runner::Full",
+            Runner::Pca(_) => "Runner::Pca",
+        })
+    }
+}
+
+/// Timing and iterations of one step.
+#[derive(Debug, Clone, Copy)]
+pub struct StepInfo {
+    pub seconds: f64,
+    pub iterations: usize,
+}
+
+impl Runner {
+    /// Builds the runner of `method` on `model` (forces already in place).
+    pub fn new(
+        pipeline: &mut Pipeline<'_>,
+        method: Method,
+        model: FullSpaceModel,
+        time: TimeConfig,
+        solver: SolverConfig,
+        progress: Progress<'_>,
+    ) -> Result<Self> {
+        Ok(match method {
+            Method::Full => Runner::Full(Simulator::new(model, time, solver)?),
+            Method::Pca => {
+                let fit = pipeline.pca(progress)?;
+                let basis = &fit.basis;
+                let columns: Vec<f64> = (0..basis.k())
+                    .flat_map(|j| basis.column(j).iter().copied())
+                    .collect();
+                let space = ReducedSpace::new(&model, &columns, basis.k(), None)?;
+                Runner::Pca(ReducedSimulator::new(
+                    model,
+                    space,
+                    LinearSubspace::new(basis.k()),
+                    time,
+                    solver,
+                )?)
+            }
+        })
+    }
+
+    pub fn step(&mut self) -> Result<StepInfo> {
+        Ok(match self {
+            Runner::Full(s) => {
+                let r = s.step()?;
+                StepInfo {
+                    seconds: r.wall_seconds,
+                    iterations: r.iterations,
+                }
+            }
+            Runner::Pca(s) => {
+                let r = s.step()?;
+                StepInfo {
+                    seconds: r.wall_seconds,
+                    iterations: r.iterations,
+                }
+            }
+        })
+    }
+
+    /// The full displacement of the current state (reconstructed for reduced methods).
+    pub fn displacement(&self) -> Vec<f64> {
+        match self {
+            Runner::Full(s) => s.state.u.clone(),
+            Runner::Pca(s) => s.full_displacement(),
+        }
+    }
+
+    pub fn time(&self) -> f64 {
+        match self {
+            Runner::Full(s) => s.state.time,
+            Runner::Pca(s) => s.state.time,
+        }
+    }
+
+    pub fn model(&self) -> &FullSpaceModel {
+        match self {
+            Runner::Full(s) => &s.model,
+            Runner::Pca(s) => &s.model,
+        }
+    }
+
+    /// Simulated dimension.
+    pub fn dim(&self) -> usize {
+        match self {
+            Runner::Full(s) => s.model.dofs.num_free(),
+            Runner::Pca(s) => s.space.k,
+        }
+    }
+}
+
+/// The model, time and solver settings for `opts.trajectory`.
+pub fn setup(
+    pipeline: &Pipeline<'_>,
+    opts: &SimulateOptions,
+) -> Result<(FullSpaceModel, TimeConfig, SolverConfig)> {
+    let scene = pipeline.scene;
+    let (model, frames) = match opts.trajectory {
+        Trajectory::Scene => (pipeline.model.clone(), scene.time.frames),
+        Trajectory::Test(i) => (pipeline.test_model(i)?, scene.test().frames_per_schedule),
+    };
+    let time = TimeConfig {
+        frames: opts.frames.unwrap_or(frames),
+        ..scene.time.clone()
+    };
+    let mut solver = scene.solver.clone();
+    // Reduced methods default to preconditioned L-BFGS (the paper's solver): their Newton
+    // Hessian costs a k×k projection over every element per iteration.
+    if opts.method != Method::Full {
+        solver.method = SolverMethod::Lbfgs;
+    }
+    if let Some(m) = opts.solver {
+        solver.method = m;
+    }
+    Ok((model, time, solver))
+}
+
+/// Runs one method with `opts`; `progress(done, total)` is called after every step.
 ///
 /// A failing step (divergence, no convergence, an inverted element the material cannot handle)
 /// ends the run with an error naming the step; frames before it stay on disk with their series
 /// file and summary, and the failed state is never written as a frame.
 pub fn simulate(
-    scene: &Scene,
+    pipeline: &mut Pipeline<'_>,
     opts: &SimulateOptions,
+    stage_progress: Progress<'_>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SimulationResult> {
-    let (model, report) = scene.build_model()?;
-    let mut time = scene.time.clone();
-    if let Some(f) = opts.frames {
-        time.frames = f;
-    }
-    let mut solver = scene.solver.clone();
-    if let Some(m) = opts.solver {
-        solver.method = m;
-    }
-    let mut sim = Simulator::new(model, time.clone(), solver.clone())
-        .map_err(|e| anyhow::anyhow!("{}: {e}", scene.source))?;
+    let scene = pipeline.scene;
+    let (model, time, solver) = setup(pipeline, opts)?;
+    let frames = time.frames;
+    let mut runner = Runner::new(
+        pipeline,
+        opts.method,
+        model,
+        time,
+        solver.clone(),
+        stage_progress,
+    )?;
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create output folder {}", opts.out.display()))?;
     let mut writer = FrameWriter::new(&opts.out)?;
     if opts.every > 0 {
-        writer.write(&sim.model.mesh, 0, 0.0, &sim.state.u)?;
+        writer.write(&runner.model().mesh, 0, 0.0, &runner.displacement())?;
     }
     let start = Instant::now();
-    let mut steps = vec![sim.report()];
+    let mut steps = Vec::new();
+    let mut reduced_steps = Vec::new();
+    let mut times = Vec::new();
     let mut failure = None;
-    for k in 1..=time.frames {
-        match sim.step() {
-            Ok(r) => steps.push(r),
-            Err(e) => {
-                failure = Some(e);
-                break;
-            }
+    let mut done = 0;
+    if let Runner::Full(s) = &mut runner {
+        steps.push(s.report());
+    }
+    for k in 1..=frames {
+        let step = match &mut runner {
+            Runner::Full(s) => s.step().map_err(anyhow::Error::from).map(|r| {
+                times.push(r.wall_seconds);
+                steps.push(r);
+            }),
+            Runner::Pca(s) => s.step().map_err(anyhow::Error::from).map(|r| {
+                times.push(r.wall_seconds);
+                reduced_steps.push(r);
+            }),
+        };
+        if let Err(e) = step {
+            failure = Some(e);
+            break;
         }
-        if opts.every > 0 && (k % opts.every == 0 || k == time.frames) {
-            writer.write(&sim.model.mesh, k, sim.state.time, &sim.state.u)?;
+        done = k;
+        if opts.every > 0 && (k % opts.every == 0 || k == frames) {
+            writer.write(
+                &runner.model().mesh,
+                k,
+                runner.time(),
+                &runner.displacement(),
+            )?;
         }
-        progress(k, time.frames);
+        progress(k, frames);
     }
     let total_seconds = start.elapsed().as_secs_f64();
     if opts.every > 0 {
         writer.finish()?;
     }
-    let mut times: Vec<f64> = steps[1..].iter().map(|s| s.wall_seconds * 1e3).collect();
-    times.sort_by(f64::total_cmp);
+    let model = runner.model();
     let summary = Summary {
         scene: scene.name.clone(),
         method: opts.method,
         solver: solver.method,
-        vertices: sim.model.mesh.num_vertices(),
-        tets: sim.model.mesh.num_tets(),
-        free_dofs: sim.model.dofs.num_free(),
-        flipped_tets: report.flipped_tets,
+        vertices: model.mesh.num_vertices(),
+        tets: model.mesh.num_tets(),
+        free_dofs: model.dofs.num_free(),
+        dim: runner.dim(),
         frames_written: writer.frames_written(),
         total_seconds,
-        median_step_ms: times.get(times.len() / 2).copied().unwrap_or(0.0),
+        median_step_ms: median(&times) * 1e3,
         steps,
+        reduced_steps,
     };
     write_json(&opts.out.join("summary.json"), &summary)?;
     if let Some(e) = failure {
         anyhow::bail!(
-            "{}: simulation with method {} stopped: {e}; frames up to step {} are in {}",
+            "{}: simulation with method {} stopped: {e}; frames up to step {done} are in {}",
             scene.source,
             opts.method.name(),
-            sim.state.step,
             opts.out.display()
         );
     }
     Ok(SimulationResult {
         summary,
-        final_state: sim.state,
+        final_displacement: runner.displacement(),
     })
+}
+
+/// Median of a list (0 when empty).
+pub fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// Writes pretty JSON atomically.

@@ -220,10 +220,10 @@ pub struct Simulator {
 }
 
 /// Pattern, symbolic factorisation and value buffers of the free-DOF Hessian, built once.
-struct NewtonParts {
-    pattern: HessianPattern,
+pub(crate) struct NewtonParts {
+    pub(crate) pattern: HessianPattern,
     symbolic: SymbolicLlt<usize>,
-    values: Vec<f64>,
+    pub(crate) values: Vec<f64>,
     mass_slots: Vec<u32>,
 }
 
@@ -236,7 +236,7 @@ impl std::fmt::Debug for NewtonParts {
 }
 
 impl NewtonParts {
-    fn new(model: &FullSpaceModel) -> Result<Self, FemError> {
+    pub(crate) fn new(model: &FullSpaceModel) -> Result<Self, FemError> {
         let pattern = HessianPattern::new(&model.elements.tets, &model.dofs);
         let symbolic = SymbolicLlt::try_new(pattern.symbolic.as_ref(), Side::Lower)
             .map_err(|e| FemError::Factorization(format!("symbolic analysis: {e:?}")))?;
@@ -255,7 +255,7 @@ impl NewtonParts {
     }
 
     /// values += s·M on the free DOFs.
-    fn add_mass(&mut self, model: &FullSpaceModel, s: f64) {
+    pub(crate) fn add_mass(&mut self, model: &FullSpaceModel, s: f64) {
         match &model.mass.consistent {
             None => {
                 for (j, &d) in model.dofs.free.iter().enumerate() {
@@ -277,7 +277,7 @@ impl NewtonParts {
 
     /// Factorises the current values; when the matrix is only semidefinite, adds a growing
     /// multiple of its mean diagonal until the factorisation succeeds.
-    fn factor(&mut self) -> Result<Llt<usize, f64>, FemError> {
+    pub(crate) fn factor(&mut self) -> Result<Llt<usize, f64>, FemError> {
         let mean_diag = self
             .pattern
             .diag

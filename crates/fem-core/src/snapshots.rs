@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use crate::FemError;
 use crate::forces::{ExternalForce, ForceKind};
-use crate::integrator::{FullSpaceModel, Simulator, TimeConfig};
+use crate::integrator::{FullSpaceModel, NewtonParts, Simulator, TimeConfig};
 use crate::optim::SolverConfig;
 use crate::rng::SplitMix64;
 
@@ -83,7 +83,7 @@ pub struct ScheduleConfig {
     pub kinds: Vec<ScheduleKind>,
     /// Range of the target offset, as a fraction of the bounding-box diagonal.
     pub offset: [f64; 2],
-    /// Range of the total spring stiffness, in units of E·L.
+    /// Range of the spring stiffness, as a multiple of the body's stiffness at the patch.
     pub stiffness: [f64; 2],
     /// Radius of a grabbed surface patch, as a fraction of the bounding-box diagonal.
     pub patch_radius: f64,
@@ -100,7 +100,7 @@ impl ScheduleConfig {
             seed: 1,
             kinds: vec![ScheduleKind::Pull, ScheduleKind::Poke],
             offset: [0.03, 0.2],
-            stiffness: [0.02, 0.1],
+            stiffness: [0.5, 3.0],
             patch_radius: 0.06,
             gravity_scale: 1.0,
         }
@@ -152,8 +152,15 @@ impl ScheduleConfig {
         }
     }
 
-    /// The forces of schedule `index` on `model`'s mesh, with time step `h`.
-    pub fn schedule(&self, model: &FullSpaceModel, index: usize, h: f64) -> Vec<ExternalForce> {
+    /// The forces of schedule `index` on `model`'s mesh, with time step `h`; `probe` measures
+    /// the body's stiffness at a patch (see [`StiffnessProbe`]).
+    pub fn schedule(
+        &self,
+        model: &FullSpaceModel,
+        probe: &StiffnessProbe,
+        index: usize,
+        h: f64,
+    ) -> Vec<ExternalForce> {
         let mut rng = SplitMix64::for_item(self.seed, index as u64);
         let mesh = &model.mesh;
         let (lo, hi) = mesh.bounding_box();
@@ -181,10 +188,13 @@ impl ScheduleConfig {
         if vertices.is_empty() {
             vertices.push(candidates[0]);
         }
-        let stiffness =
-            rng.range(self.stiffness[0], self.stiffness[1]) * model.youngs_modulus * diag;
+        let factor = rng.range(self.stiffness[0], self.stiffness[1]);
+        let direction = rng.unit_vector();
+        let stiffness = factor * probe.stiffness(model, &vertices, direction);
+        // The first target offset goes along the probed direction.
+        let mut first = Some(direction);
         let mut offset = |scale: f64| {
-            let d = rng.unit_vector();
+            let d = first.take().unwrap_or_else(|| rng.unit_vector());
             let m = rng.range(self.offset[0], self.offset[1]) * diag * scale;
             [d[0] * m, d[1] * m, d[2] * m]
         };
@@ -225,6 +235,73 @@ impl ScheduleConfig {
             start,
             end,
         }]
+    }
+}
+
+/// The body's stiffness at a surface patch: A = K₀ + M/T² factorised once per mesh.
+pub struct StiffnessProbe {
+    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+}
+
+impl std::fmt::Debug for StiffnessProbe {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("StiffnessProbe")
+    }
+}
+
+impl StiffnessProbe {
+    /// Factorises K₀ + M/T² for `model`, T the time scale of a schedule.
+    pub fn new(model: &FullSpaceModel, time_scale: f64) -> Result<Self, FemError> {
+        let mut parts = NewtonParts::new(model)?;
+        let rest = vec![0.0; model.num_full()];
+        let mut buf = crate::assembly::AssemblyBuffers::default();
+        crate::with_material!(&model.material, |m| crate::assembly::hessian(
+            m,
+            &model.elements,
+            crate::assembly::ElementSet::All,
+            &rest,
+            true,
+            &parts.pattern,
+            &mut parts.values,
+            &mut buf
+        ));
+        parts.add_mass(model, 1.0 / (time_scale * time_scale));
+        Ok(Self {
+            llt: parts.factor()?,
+        })
+    }
+
+    /// 1 / (mean displacement along `direction` of `vertices` under a unit total load along it).
+    pub fn stiffness(
+        &self,
+        model: &FullSpaceModel,
+        vertices: &[usize],
+        direction: [f64; 3],
+    ) -> f64 {
+        use faer::linalg::solvers::Solve;
+        let n = model.dofs.num_free();
+        let mut x = vec![0.0; n];
+        let share = 1.0 / vertices.len() as f64;
+        for &v in vertices {
+            for c in 0..3 {
+                let r = model.dofs.index[3 * v + c];
+                if r != crate::constraints::FIXED {
+                    x[r] = direction[c] * share;
+                }
+            }
+        }
+        self.llt
+            .solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut x, n, 1));
+        let mut mean = 0.0;
+        for &v in vertices {
+            for c in 0..3 {
+                let r = model.dofs.index[3 * v + c];
+                if r != crate::constraints::FIXED {
+                    mean += direction[c] * x[r] * share;
+                }
+            }
+        }
+        if mean > 0.0 { 1.0 / mean } else { 0.0 }
     }
 }
 
@@ -320,11 +397,12 @@ pub fn generate(
     let (index, count) = shard;
     let schedules: Vec<usize> = (index..config.schedules).step_by(count.max(1)).collect();
     let done = AtomicUsize::new(0);
+    let probe = StiffnessProbe::new(model, config.frames_per_schedule as f64 * time.step)?;
     let results: Vec<Result<Vec<Vec<f64>>, FemError>> = schedules
         .par_iter()
         .with_max_len(1)
         .map(|&s| {
-            let forces = config.schedule(model, s, time.step);
+            let forces = config.schedule(model, &probe, s, time.step);
             let r = simulate_schedule(
                 model,
                 forces,

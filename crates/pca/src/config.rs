@@ -1,0 +1,167 @@
+//! The `[pca]` section of a scene: how the basis dimension k is chosen.
+//!
+//! At most one rule may be given; when none is, [`DEFAULT_EXPLAINED_ENERGY`] applies:
+//!
+//! ```toml
+//! [pca]
+//! max_vertex_error = 1e-3   # or: dimension = 40, or: explained_energy = 0.9999
+//! max_dimension = 300       # optional cap on k (default 300)
+//! ```
+
+use crate::PcaError;
+
+/// The explained-energy fraction used when the `[pca]` section names no rule.
+///
+/// `1 − 10⁻⁴` of Σσ², i.e. a relative (mass-weighted) Frobenius reconstruction error of the
+/// snapshots of at most `√(1 − 0.9999) = 1 %`. Energy is the one rule that needs no knowledge of
+/// the data's units or size, which is why it is the default rather than a vertex-error tolerance.
+pub const DEFAULT_EXPLAINED_ENERGY: f64 = 0.9999;
+
+/// The default cap on the basis dimension (AutoDef's limit as well).
+pub const DEFAULT_MAX_DIMENSION: usize = 300;
+
+/// The `[pca]` section of a scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PcaConfig {
+    /// Keep exactly this many columns.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dimension: Option<usize>,
+    /// Keep the smallest k with Σ_{i<k} σ_i² ≥ `explained_energy` · Σ σ_i², a fraction in (0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub explained_energy: Option<f64>,
+    /// Keep the smallest k whose largest per-vertex reconstruction distance over all snapshots is
+    /// at most this (absolute, in the data's units, e.g. metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_vertex_error: Option<f64>,
+    /// Upper bound on k for every rule.
+    pub max_dimension: usize,
+}
+
+impl Default for PcaConfig {
+    fn default() -> Self {
+        Self {
+            dimension: None,
+            explained_energy: None,
+            max_vertex_error: None,
+            max_dimension: DEFAULT_MAX_DIMENSION,
+        }
+    }
+}
+
+/// A resolved, validated dimension-selection rule.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DimensionRule {
+    /// Exactly k columns.
+    Count(usize),
+    /// Smallest k with Σ_{i<k} σ_i² ≥ fraction · Σ σ_i².
+    ExplainedEnergy(f64),
+    /// Smallest k with max over vertices and snapshots of ‖u_v − (U Uᵀ M u)_v‖₂ ≤ tolerance.
+    MaxVertexError(f64),
+}
+
+impl PcaConfig {
+    /// Keep exactly `k` columns.
+    pub fn by_dimension(k: usize) -> Self {
+        Self {
+            dimension: Some(k),
+            ..Self::default()
+        }
+    }
+
+    /// Keep the smallest k explaining `fraction` of Σσ².
+    pub fn by_explained_energy(fraction: f64) -> Self {
+        Self {
+            explained_energy: Some(fraction),
+            ..Self::default()
+        }
+    }
+
+    /// Keep the smallest k whose maximum per-vertex reconstruction distance is ≤ `tolerance`.
+    pub fn by_max_vertex_error(tolerance: f64) -> Self {
+        Self {
+            max_vertex_error: Some(tolerance),
+            ..Self::default()
+        }
+    }
+
+    /// Appends one error per invalid field to `errors` (fields named `pca.<field>`).
+    pub fn check(&self, errors: &mut Vec<PcaError>) {
+        let mut bad = |field: &str, reason: String| {
+            errors.push(PcaError::InvalidConfig {
+                field: format!("pca.{field}"),
+                reason,
+            })
+        };
+        let given: Vec<&str> = [
+            ("dimension", self.dimension.is_some()),
+            ("explained_energy", self.explained_energy.is_some()),
+            ("max_vertex_error", self.max_vertex_error.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(name, set)| set.then_some(name))
+        .collect();
+        if given.len() > 1 {
+            bad(
+                given[1],
+                format!(
+                    "give at most one of `dimension`, `explained_energy`, `max_vertex_error` (got {})",
+                    given
+                        .iter()
+                        .map(|g| format!("`{g}`"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            );
+        }
+        if self.max_dimension == 0 {
+            bad("max_dimension", "must be at least 1, got 0".into());
+        }
+        if let Some(k) = self.dimension {
+            if k == 0 {
+                bad("dimension", "must be at least 1, got 0".into());
+            } else if k > self.max_dimension {
+                bad(
+                    "dimension",
+                    format!("{k} exceeds `pca.max_dimension` = {}", self.max_dimension),
+                );
+            }
+        }
+        match self.explained_energy {
+            Some(f) if !(f.is_finite() && f > 0.0 && f <= 1.0) => bad(
+                "explained_energy",
+                format!("must be a fraction in (0, 1], got {f}"),
+            ),
+            _ => {}
+        }
+        match self.max_vertex_error {
+            Some(t) if !(t.is_finite() && t > 0.0) => bad(
+                "max_vertex_error",
+                format!("must be positive and finite, got {t}"),
+            ),
+            _ => {}
+        }
+    }
+
+    /// `Ok` when every field is valid, otherwise the collected errors.
+    pub fn validate(&self) -> Result<(), PcaError> {
+        let mut errors = Vec::new();
+        self.check(&mut errors);
+        PcaError::collect(errors)
+    }
+
+    /// The validated rule this section describes ([`DEFAULT_EXPLAINED_ENERGY`] when none is given).
+    pub fn rule(&self) -> Result<DimensionRule, PcaError> {
+        self.validate()?;
+        Ok(if let Some(k) = self.dimension {
+            DimensionRule::Count(k)
+        } else if let Some(f) = self.explained_energy {
+            DimensionRule::ExplainedEnergy(f)
+        } else if let Some(t) = self.max_vertex_error {
+            DimensionRule::MaxVertexError(t)
+        } else {
+            DimensionRule::ExplainedEnergy(DEFAULT_EXPLAINED_ENERGY)
+        })
+    }
+}

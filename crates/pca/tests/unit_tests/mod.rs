@@ -1,0 +1,117 @@
+//! Integration tests of pca. Random data comes from a hand-written, seeded generator so every run
+//! sees the same numbers. Tests that need `../shared/` skip with a printed reason when it is absent.
+
+mod config;
+mod inputs;
+mod properties;
+mod reference;
+mod selection;
+mod serde_round_trip;
+
+use std::path::PathBuf;
+
+use faer::Mat;
+
+/// The `shared/` folder beside the repository (or `$LATENT_SHARED_DIR`), if present.
+pub fn shared_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("LATENT_SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"));
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "skipping: {} not found (set LATENT_SHARED_DIR to the shared/ folder to run this test)",
+            dir.display()
+        );
+        None
+    }
+}
+
+/// SplitMix64: tiny, seeded, good enough for test data.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+
+    /// Standard normal (Box–Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform();
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    pub fn normal_mat(&mut self, nrows: usize, ncols: usize) -> Mat<f64> {
+        Mat::from_fn(nrows, ncols, |_, _| self.normal())
+    }
+
+    /// Positive mass diagonal with entries in [0.1, 10), constant over each group of `group` rows
+    /// (a lumped vertex mass repeated per component).
+    pub fn mass(&mut self, n: usize, group: usize) -> Vec<f64> {
+        let per_vertex: Vec<f64> = (0..n / group).map(|_| self.range(0.1, 10.0)).collect();
+        (0..n).map(|i| per_vertex[i / group]).collect()
+    }
+
+    pub fn normal_vec(&mut self, n: usize) -> Vec<f64> {
+        (0..n).map(|_| self.normal()).collect()
+    }
+}
+
+/// Snapshots with a decaying spectrum: S = A · diag(decay^i) · B, n × N.
+pub fn decaying_snapshots(rng: &mut Rng, n: usize, ns: usize, decay: f64) -> Mat<f64> {
+    let r = n.min(ns);
+    let a = rng.normal_mat(n, r);
+    let b = rng.normal_mat(r, ns);
+    let d = Mat::from_fn(r, r, |i, j| if i == j { decay.powi(i as i32) } else { 0.0 });
+    a * d * b
+}
+
+/// Diagonal matrix from its diagonal.
+pub fn diag(d: &[f64]) -> Mat<f64> {
+    Mat::from_fn(d.len(), d.len(), |i, j| if i == j { d[i] } else { 0.0 })
+}
+
+/// Max over vertices and snapshots of ‖s − U UᵀM s‖ per vertex, computed column by column through
+/// `project` / `reconstruct` (independent of the fit's incremental scan and of `max_group_error`).
+pub fn brute_force_max_vertex_error(
+    basis: &pca::PcaBasis,
+    s: faer::MatRef<'_, f64>,
+    group: usize,
+) -> f64 {
+    let mut q = vec![0.0; basis.k()];
+    let mut back = vec![0.0; basis.n()];
+    let mut worst: f64 = 0.0;
+    for j in 0..s.ncols() {
+        let u: Vec<f64> = s.col(j).iter().copied().collect();
+        basis.project(&u, &mut q);
+        basis.reconstruct(&q, &mut back);
+        for v in 0..basis.n() / group {
+            let d: f64 = (0..group)
+                .map(|c| (u[v * group + c] - back[v * group + c]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            worst = worst.max(d);
+        }
+    }
+    worst
+}

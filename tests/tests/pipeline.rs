@@ -1,0 +1,161 @@
+//! The cached pipeline: skipping unchanged stages, recomputing only what changed, shards, and an
+//! end-to-end run of a tiny scene.
+
+use std::path::Path;
+
+use tests::scratch_dir;
+use xtask::pipeline::Pipeline;
+use xtask::run::{RunOptions, run};
+use xtask::scene::Scene;
+use xtask::simulate::Method;
+
+const TINY: &str = r#"
+name = "tiny"
+[mesh]
+generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
+[material]
+youngs_modulus = 1.0e5
+poisson_ratio = 0.4
+density = 1000.0
+[[pin]]
+plane = { axis = "x", side = "min" }
+[time]
+step = 0.02
+frames = 10
+[solver]
+tolerance = 1.0e-8
+[training]
+schedules = 4
+frames_per_schedule = 8
+[test]
+frames_per_schedule = 12
+[pca]
+dimension = 6
+"#;
+
+fn scene(text: &str) -> Scene {
+    Scene::from_str(text, Path::new("."), "tiny.toml").unwrap()
+}
+
+fn no_progress(_: usize, _: usize) {}
+
+fn stages(p: &Pipeline<'_>) -> Vec<(String, bool)> {
+    p.outcomes
+        .iter()
+        .map(|o| (o.stage.clone(), o.cached))
+        .collect()
+}
+
+#[test]
+fn unchanged_scenes_do_no_work_and_pca_changes_reuse_snapshots() {
+    let cache = scratch_dir("pipeline-cache");
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let first = p.pca(&no_progress).unwrap();
+    assert_eq!(
+        stages(&p),
+        [("snapshots".into(), false), ("pca".into(), false)]
+    );
+    // Second run: nothing is computed, the basis is identical.
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let again = p.pca(&no_progress).unwrap();
+    assert_eq!(stages(&p), [("pca".into(), true)]);
+    assert_eq!(first, again);
+    // Changing only [pca]: the snapshots are reused, the basis recomputed.
+    let s2 = scene(&TINY.replace("dimension = 6", "dimension = 4"));
+    let mut p = Pipeline::new(&s2, &cache).unwrap();
+    let fit = p.pca(&no_progress).unwrap();
+    assert_eq!(fit.chosen_k(), 4);
+    assert_eq!(
+        stages(&p),
+        [("snapshots".into(), true), ("pca".into(), false)]
+    );
+    // Changing the physics invalidates both.
+    let s3 = scene(&TINY.replace("youngs_modulus = 1.0e5", "youngs_modulus = 2.0e5"));
+    let mut p = Pipeline::new(&s3, &cache).unwrap();
+    p.pca(&no_progress).unwrap();
+    assert_eq!(
+        stages(&p),
+        [("snapshots".into(), false), ("pca".into(), false)]
+    );
+}
+
+#[test]
+fn a_corrupt_artifact_is_recomputed_not_used() {
+    let cache = scratch_dir("pipeline-corrupt");
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let good = p.snapshots(&no_progress).unwrap();
+    let path = p.outcomes[0].path.clone();
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let again = p.snapshots(&no_progress).unwrap();
+    assert_eq!(stages(&p), [("snapshots".into(), false)]);
+    assert_eq!(good, again);
+}
+
+#[test]
+fn merged_shards_equal_the_unsharded_snapshots() {
+    let s = scene(TINY);
+    let cache = scratch_dir("pipeline-shards");
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    for i in 0..3 {
+        p.snapshot_shard(i, 3, &no_progress).unwrap();
+    }
+    let merged = p.merge_shards(3).unwrap();
+    let cache2 = scratch_dir("pipeline-unsharded");
+    let mut q = Pipeline::new(&s, &cache2).unwrap();
+    let whole = q.snapshots(&no_progress).unwrap();
+    assert_eq!(merged, whole);
+    assert_eq!(whole.num_frames(), 4 * 8);
+    // Missing shards are named.
+    let cache3 = scratch_dir("pipeline-missing-shard");
+    let mut r = Pipeline::new(&s, &cache3).unwrap();
+    r.snapshot_shard(0, 2, &no_progress).unwrap();
+    let err = format!("{:#}", r.merge_shards(2).unwrap_err());
+    assert!(err.contains("shard 1/2"), "{err}");
+}
+
+#[test]
+fn a_tiny_scene_runs_end_to_end() {
+    let s = scene(TINY);
+    let out = scratch_dir("pipeline-run");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 4,
+        methods: vec![Method::Full, Method::Pca],
+        trajectory: 0,
+    };
+    let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    assert_eq!(rows.len(), 2);
+    let (full, pca) = (&rows[0], &rows[1]);
+    assert_eq!(full.method, "full");
+    assert_eq!(full.mean_rel_error, 0.0);
+    assert_eq!(pca.dim, 6);
+    assert!(pca.mean_rel_error.is_finite() && pca.mean_rel_error > 0.0);
+    assert!(pca.max_rel_error < 1.0, "{pca:?}");
+    assert!(pca.ms_per_step > 0.0 && full.ms_per_step > 0.0);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    for key in [
+        "method",
+        "dim",
+        "cubature_elements",
+        "ms_per_step",
+        "hz",
+        "speedup",
+        "mean_rel_error",
+        "max_rel_error",
+        "max_vertex_error",
+    ] {
+        assert!(report[1].get(key).is_some(), "report.json lacks {key}");
+    }
+    assert!(out.join("report.md").is_file());
+    for m in ["full", "pca"] {
+        let pvd = std::fs::read_to_string(out.join(m).join("series.pvd")).unwrap();
+        // Frames 0, 4, 8 and the last (12).
+        assert_eq!(pvd.matches("<DataSet").count(), 4, "{m}: {pvd}");
+    }
+}

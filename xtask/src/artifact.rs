@@ -1,0 +1,266 @@
+//! Stage artifacts on disk: serde + postcard behind a header, written atomically.
+//!
+//! Layout: magic `LATDYN\0a` · format version (u32) · stage name (u16 length + UTF-8) · cache
+//! key (u64) · mesh hash (u64) · payload length (u64) · payload checksum (u64, FNV-1a) ·
+//! payload. Loading checks each in turn and says which stage to re-run when one is off, so a
+//! truncated, corrupted, outdated or foreign file is never used. Writes go to a temporary file
+//! that is renamed into place, so an interrupted stage leaves the previous artifact intact.
+
+use std::path::Path;
+
+use fem_core::io::write_atomic;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+const MAGIC: &[u8; 8] = b"LATDYN\0a";
+
+/// Version of every artifact's layout and meaning; bump it when either changes so old caches
+/// are recomputed instead of misread.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Why an artifact could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ArtifactError {
+    #[error("{path}: cannot read: {source}; re-run `cargo xtask {stage}`")]
+    Io {
+        path: String,
+        stage: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: {reason}; re-run `cargo xtask {stage}` to rebuild it")]
+    Invalid {
+        path: String,
+        stage: String,
+        reason: String,
+    },
+}
+
+/// FNV-1a, 64 bit: a stable hash for cache keys and checksums (it changes on any single-bit
+/// flip). Not for security.
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    fnv1a_continue(0xcbf2_9ce4_8422_2325, bytes)
+}
+
+fn fnv1a_continue(mut h: u64, bytes: &[u8]) -> u64 {
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// Builds a cache key from the things a stage's output depends on.
+#[derive(Debug, Clone)]
+pub struct KeyBuilder(u64);
+
+impl KeyBuilder {
+    /// A key for `stage` at the current [`FORMAT_VERSION`].
+    pub fn new(stage: &str) -> Self {
+        let h = fnv1a(stage.as_bytes());
+        Self(fnv1a_continue(h, &FORMAT_VERSION.to_le_bytes()))
+    }
+
+    /// Mixes in a serialisable value (a scene section, a list of pinned vertices, …).
+    pub fn mix<T: Serialize + ?Sized>(mut self, value: &T) -> Self {
+        let bytes = serde_json::to_vec(value).expect("scene values serialise to JSON");
+        self.0 = fnv1a_continue(self.0, &(bytes.len() as u64).to_le_bytes());
+        self.0 = fnv1a_continue(self.0, &bytes);
+        self
+    }
+
+    /// Mixes in another key (an upstream stage's).
+    pub fn mix_key(mut self, key: u64) -> Self {
+        self.0 = fnv1a_continue(self.0, &key.to_le_bytes());
+        self
+    }
+
+    pub fn finish(self) -> u64 {
+        self.0
+    }
+}
+
+/// Writes `value` as the artifact of `stage`.
+pub fn save<T: Serialize>(
+    path: &Path,
+    stage: &str,
+    key: u64,
+    mesh: u64,
+    value: &T,
+) -> std::io::Result<()> {
+    let payload = postcard::to_allocvec(value).map_err(std::io::Error::other)?;
+    let mut bytes = Vec::with_capacity(payload.len() + 64);
+    bytes.extend_from_slice(MAGIC);
+    bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    bytes.extend_from_slice(&(stage.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(stage.as_bytes());
+    bytes.extend_from_slice(&key.to_le_bytes());
+    bytes.extend_from_slice(&mesh.to_le_bytes());
+    bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&fnv1a(&payload).to_le_bytes());
+    bytes.extend_from_slice(&payload);
+    write_atomic(path, &bytes)
+}
+
+/// What the caller expects of an artifact.
+#[derive(Debug, Clone, Copy)]
+pub struct Expect<'a> {
+    pub stage: &'a str,
+    /// The cache key, when it must match.
+    pub key: Option<u64>,
+    /// The mesh hash, when it must match.
+    pub mesh: Option<u64>,
+}
+
+/// Reads and checks the artifact at `path`.
+pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect<'_>) -> Result<T, ArtifactError> {
+    let shown = path.display().to_string();
+    let stage = expect.stage.to_string();
+    let bytes = std::fs::read(path).map_err(|source| ArtifactError::Io {
+        path: shown.clone(),
+        stage: stage.clone(),
+        source,
+    })?;
+    let invalid = |reason: String| ArtifactError::Invalid {
+        path: shown.clone(),
+        stage: stage.clone(),
+        reason,
+    };
+    let mut r = Reader {
+        bytes: &bytes,
+        at: 0,
+    };
+    let truncated = || invalid("the file is truncated".into());
+    if r.take(8).ok_or_else(truncated)? != MAGIC {
+        return Err(invalid("not an artifact of this tool (bad magic)".into()));
+    }
+    let version = u32::from_le_bytes(r.array().ok_or_else(truncated)?);
+    if version != FORMAT_VERSION {
+        return Err(invalid(format!(
+            "written by format version {version}, this build reads version {FORMAT_VERSION}"
+        )));
+    }
+    let len = u16::from_le_bytes(r.array().ok_or_else(truncated)?) as usize;
+    let name = r.take(len).ok_or_else(truncated)?;
+    if name != expect.stage.as_bytes() {
+        return Err(invalid(format!(
+            "holds stage `{}`, expected `{}`",
+            String::from_utf8_lossy(name),
+            expect.stage
+        )));
+    }
+    let key = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let mesh = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let len = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let sum = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    if let Some(m) = expect.mesh
+        && m != mesh
+    {
+        return Err(invalid(format!(
+            "built for another mesh (mesh hash {mesh:016x}, the scene's is {m:016x})"
+        )));
+    }
+    if let Some(k) = expect.key
+        && k != key
+    {
+        return Err(invalid(format!(
+            "built from other inputs (key {key:016x}, expected {k:016x})"
+        )));
+    }
+    let payload = &bytes[r.at..];
+    if payload.len() as u64 != len {
+        return Err(invalid(format!(
+            "payload is {} bytes, the header says {len} (truncated or padded)",
+            payload.len()
+        )));
+    }
+    if fnv1a(payload) != sum {
+        return Err(invalid("checksum mismatch (the file is corrupted)".into()));
+    }
+    postcard::from_bytes(payload).map_err(|e| invalid(format!("cannot decode: {e}")))
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let end = self.at.checked_add(n)?;
+        let s = self.bytes.get(self.at..end)?;
+        self.at = end;
+        Some(s)
+    }
+
+    fn array<const N: usize>(&mut self) -> Option<[u8; N]> {
+        self.take(N)?.try_into().ok()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("artifact-test-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d.join(name)
+    }
+
+    #[test]
+    fn round_trip_and_every_corruption_is_detected() {
+        let p = tmp("a.art");
+        let value: Vec<f64> = (0..100).map(|i| i as f64 * 0.5).collect();
+        save(&p, "pca", 42, 7, &value).unwrap();
+        let ok = Expect {
+            stage: "pca",
+            key: Some(42),
+            mesh: Some(7),
+        };
+        assert_eq!(load::<Vec<f64>>(&p, ok).unwrap(), value);
+        let msg = |e: ArtifactError| e.to_string();
+        assert!(
+            msg(load::<Vec<f64>>(&p, Expect { key: Some(1), ..ok }).unwrap_err())
+                .contains("other inputs")
+        );
+        assert!(
+            msg(load::<Vec<f64>>(
+                &p,
+                Expect {
+                    mesh: Some(1),
+                    ..ok
+                }
+            )
+            .unwrap_err())
+            .contains("another mesh")
+        );
+        assert!(
+            msg(load::<Vec<f64>>(
+                &p,
+                Expect {
+                    stage: "train",
+                    ..ok
+                }
+            )
+            .unwrap_err())
+            .contains("re-run `cargo xtask train`")
+        );
+        let bytes = std::fs::read(&p).unwrap();
+        // Every truncation and every single-bit flip is rejected.
+        for cut in 0..bytes.len() {
+            std::fs::write(&p, &bytes[..cut]).unwrap();
+            assert!(load::<Vec<f64>>(&p, ok).is_err(), "truncated at {cut}");
+        }
+        for i in 0..bytes.len() {
+            for bit in [0u8, 3, 7] {
+                let mut b = bytes.clone();
+                b[i] ^= 1 << bit;
+                std::fs::write(&p, &b).unwrap();
+                assert!(
+                    load::<Vec<f64>>(&p, ok).is_err(),
+                    "flip at byte {i} bit {bit}"
+                );
+            }
+        }
+    }
+}

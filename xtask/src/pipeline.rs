@@ -1,0 +1,331 @@
+//! The cached stages: snapshots → PCA (→ train → cubature, later), and the full-space reference
+//! on the held-out test trajectory.
+//!
+//! A stage's artifact is stored under a key that hashes what the stage reads: the scene sections,
+//! the mesh content and pinned vertices, the upstream stages' keys and the artifact format
+//! version. A stage whose artifact exists and loads under its key is skipped, so re-running the
+//! pipeline with an unchanged scene does no numerical work, and changing `[pca]` reuses the
+//! snapshots.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
+use fem_core::snapshots::{self, ScheduleConfig, SnapshotSet, StiffnessProbe};
+use pca::{PcaBasis, PcaFit};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::artifact::{self, Expect, KeyBuilder, fnv1a};
+use crate::scene::Scene;
+
+/// The stages, in order.
+pub const STAGES: [&str; 2] = ["snapshots", "pca"];
+
+/// What happened to one stage in a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StageOutcome {
+    pub stage: String,
+    /// Loaded from the cache instead of computed.
+    pub cached: bool,
+    pub seconds: f64,
+    pub path: PathBuf,
+}
+
+/// Progress of a long stage: `(done, total)`.
+pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
+/// The full-space simulation of a held-out test trajectory: the ground truth for errors.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct Reference {
+    /// Free-DOF displacement after each step.
+    pub frames: Vec<Vec<f64>>,
+    /// Wall time of each step (s), measured when the reference was computed.
+    pub step_seconds: Vec<f64>,
+    /// Solver iterations of each step.
+    pub iterations: Vec<usize>,
+}
+
+/// A scene's pipeline with its cache folder and the model every stage shares.
+pub struct Pipeline<'a> {
+    pub scene: &'a Scene,
+    pub model: FullSpaceModel,
+    pub mesh_hash: u64,
+    pub cache: PathBuf,
+    pub outcomes: Vec<StageOutcome>,
+    /// Called after each stage (to print a line).
+    pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
+}
+
+impl std::fmt::Debug for Pipeline<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pipeline")
+            .field("scene", &self.scene.name)
+            .field("cache", &self.cache)
+            .field("outcomes", &self.outcomes)
+            .finish()
+    }
+}
+
+impl<'a> Pipeline<'a> {
+    /// Builds the scene's model; `cache` is the folder for artifacts.
+    pub fn new(scene: &'a Scene, cache: &Path) -> Result<Self> {
+        let (model, _) = scene.build_model()?;
+        let mut bytes =
+            Vec::with_capacity(model.mesh.num_vertices() * 24 + model.mesh.num_tets() * 32);
+        for v in &model.mesh.vertices {
+            for c in v.iter() {
+                bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        for t in &model.mesh.tets {
+            for &i in t {
+                bytes.extend_from_slice(&(i as u64).to_le_bytes());
+            }
+        }
+        std::fs::create_dir_all(cache)
+            .with_context(|| format!("cannot create cache folder {}", cache.display()))?;
+        Ok(Self {
+            scene,
+            mesh_hash: fnv1a(&bytes),
+            model,
+            cache: cache.to_path_buf(),
+            outcomes: Vec::new(),
+            on_stage: Box::new(|_| {}),
+        })
+    }
+
+    /// What every full-space simulation reads: mesh, material, pins, gravity, time step, solver.
+    fn physics_key(&self, stage: &str) -> KeyBuilder {
+        let s = self.scene;
+        KeyBuilder::new(stage)
+            .mix_key(self.mesh_hash)
+            .mix(&s.material)
+            .mix(&self.model.pinned)
+            .mix(&s.gravity)
+            .mix(&(s.time.step, s.time.quasi_static))
+            .mix(&s.solver)
+    }
+
+    pub fn snapshots_key(&self) -> u64 {
+        self.physics_key("snapshots")
+            .mix(&self.scene.training())
+            .finish()
+    }
+
+    pub fn pca_key(&self) -> u64 {
+        KeyBuilder::new("pca")
+            .mix_key(self.snapshots_key())
+            .mix(&self.scene.pca)
+            .finish()
+    }
+
+    fn reference_key(&self, trajectory: usize) -> u64 {
+        self.physics_key("reference")
+            .mix(&self.scene.test())
+            .mix(&trajectory)
+            .finish()
+    }
+
+    fn path(&self, stage: &str, key: u64) -> PathBuf {
+        self.cache.join(format!("{stage}-{key:016x}.art"))
+    }
+
+    /// Loads the artifact of `stage` under `key`, or computes and stores it.
+    fn stage<T: Serialize + DeserializeOwned>(
+        &mut self,
+        stage: &str,
+        key: u64,
+        compute: impl FnOnce(&mut Self) -> Result<T>,
+    ) -> Result<T> {
+        let path = self.path(stage, key);
+        let start = Instant::now();
+        if path.exists() {
+            let expect = Expect {
+                stage,
+                key: Some(key),
+                mesh: Some(self.mesh_hash),
+            };
+            match artifact::load::<T>(&path, expect) {
+                Ok(v) => {
+                    self.record(stage, true, start, path);
+                    return Ok(v);
+                }
+                Err(e) => tracing::warn!("{e}; recomputing"),
+            }
+        }
+        let value = compute(self)?;
+        artifact::save(&path, stage, key, self.mesh_hash, &value)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        self.record(stage, false, start, path);
+        Ok(value)
+    }
+
+    fn record(&mut self, stage: &str, cached: bool, start: Instant, path: PathBuf) {
+        let o = StageOutcome {
+            stage: stage.to_string(),
+            cached,
+            seconds: start.elapsed().as_secs_f64(),
+            path,
+        };
+        (self.on_stage)(&o);
+        self.outcomes.push(o);
+    }
+
+    /// Stage `snapshots`: every training schedule simulated in full space.
+    pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<SnapshotSet> {
+        let key = self.snapshots_key();
+        self.stage("snapshots", key, |p| {
+            let cfg = p.scene.training();
+            p.simulate_shard(&cfg, (0, 1), progress)
+        })
+    }
+
+    fn simulate_shard(
+        &self,
+        cfg: &ScheduleConfig,
+        shard: (usize, usize),
+        progress: Progress<'_>,
+    ) -> Result<SnapshotSet> {
+        let total = shard_len(cfg.schedules, shard);
+        let set = snapshots::generate(
+            &self.model,
+            cfg,
+            &self.scene.time,
+            &self.scene.solver,
+            shard,
+            &|done| progress(done, total),
+        )
+        .map_err(|e| anyhow::anyhow!("{}: stage snapshots: {e}", self.scene.source))?;
+        Ok(set)
+    }
+
+    /// Simulates shard `index` of `count` and stores it as a partial artifact (for cluster
+    /// array jobs); [`merge_shards`](Self::merge_shards) combines them.
+    pub fn snapshot_shard(
+        &mut self,
+        index: usize,
+        count: usize,
+        progress: Progress<'_>,
+    ) -> Result<PathBuf> {
+        if count == 0 || index >= count {
+            bail!("--shard {index}/{count}: need 0 ≤ index < count");
+        }
+        let key = KeyBuilder::new("snapshots-shard")
+            .mix_key(self.snapshots_key())
+            .mix(&(index, count))
+            .finish();
+        self.stage("snapshots-shard", key, |p| {
+            let cfg = p.scene.training();
+            p.simulate_shard(&cfg, (index, count), progress)
+        })?;
+        Ok(self.path("snapshots-shard", key))
+    }
+
+    /// Merges shards `0..count` into the `snapshots` artifact (identical to an unsharded run).
+    pub fn merge_shards(&mut self, count: usize) -> Result<SnapshotSet> {
+        let key = self.snapshots_key();
+        self.stage("snapshots", key, |p| {
+            let mut parts = Vec::with_capacity(count);
+            for index in 0..count {
+                let k = KeyBuilder::new("snapshots-shard")
+                    .mix_key(key)
+                    .mix(&(index, count))
+                    .finish();
+                let path = p.path("snapshots-shard", k);
+                let part: SnapshotSet = artifact::load(
+                    &path,
+                    Expect {
+                        stage: "snapshots-shard",
+                        key: Some(k),
+                        mesh: Some(p.mesh_hash),
+                    },
+                )
+                .with_context(|| format!("shard {index}/{count} is missing or unusable; run `cargo xtask snapshots --shard {index}/{count}`"))?;
+                parts.push(part);
+            }
+            SnapshotSet::merge(parts).map_err(|e| anyhow::anyhow!("merging shards: {e}"))
+        })
+    }
+
+    /// Stage `pca`: the mass-orthonormal basis of the snapshots (which are loaded or computed
+    /// only when the basis itself is not cached).
+    pub fn pca(&mut self, progress: Progress<'_>) -> Result<PcaFit> {
+        let key = self.pca_key();
+        self.stage("pca", key, |p| {
+            let snaps = p.snapshots(progress)?;
+            let mass: Vec<f64> = p
+                .model
+                .dofs
+                .free
+                .iter()
+                .map(|&d| p.model.mass.lumped[d / 3])
+                .collect();
+            let mat =
+                faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+            PcaBasis::fit(mat, Some(&mass), &p.scene.pca, 3)
+                .map_err(|e| anyhow::anyhow!("{}: stage pca: {e}", p.scene.source))
+        })
+    }
+
+    /// The full-space simulation of test trajectory `trajectory` (cached stage `reference`).
+    pub fn reference(&mut self, trajectory: usize, progress: Progress<'_>) -> Result<Reference> {
+        let key = self.reference_key(trajectory);
+        self.stage("reference", key, |p| {
+            let cfg = p.scene.test();
+            let model = p.test_model(trajectory)?;
+            let time = TimeConfig {
+                frames: cfg.frames_per_schedule,
+                ..p.scene.time.clone()
+            };
+            let mut sim = Simulator::new(model, time, p.scene.solver.clone())?;
+            let mut r = Reference {
+                frames: Vec::new(),
+                step_seconds: Vec::new(),
+                iterations: Vec::new(),
+            };
+            let mut free = vec![0.0; sim.model.dofs.num_free()];
+            for f in 0..cfg.frames_per_schedule {
+                let s = sim.step().map_err(|e| {
+                    anyhow::anyhow!(
+                        "{}: full-space reference, test trajectory {trajectory}: {e}",
+                        p.scene.source
+                    )
+                })?;
+                sim.model.dofs.gather(&sim.state.u, &mut free);
+                r.frames.push(free.clone());
+                r.step_seconds.push(s.wall_seconds);
+                r.iterations.push(s.iterations);
+                progress(f + 1, cfg.frames_per_schedule);
+            }
+            Ok(r)
+        })
+    }
+
+    /// The model with test trajectory `trajectory`'s forces and gravity in place of the scene's.
+    pub fn test_model(&self, trajectory: usize) -> Result<FullSpaceModel> {
+        let cfg = self.scene.test();
+        if trajectory >= cfg.schedules {
+            bail!(
+                "test trajectory {trajectory} does not exist ([test] schedules = {})",
+                cfg.schedules
+            );
+        }
+        let mut model = self.model.clone();
+        let probe = StiffnessProbe::new(
+            &self.model,
+            cfg.frames_per_schedule as f64 * self.scene.time.step,
+        )?;
+        model.forces = cfg.schedule(&self.model, &probe, trajectory, self.scene.time.step);
+        for g in model.gravity_load.iter_mut() {
+            *g *= cfg.gravity_scale;
+        }
+        model.gravity *= cfg.gravity_scale;
+        Ok(model)
+    }
+}
+
+fn shard_len(total: usize, (index, count): (usize, usize)) -> usize {
+    (index..total).step_by(count.max(1)).count()
+}
