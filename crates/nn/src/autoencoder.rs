@@ -1,0 +1,458 @@
+//! The autoencoder on PCA coefficients: q ∈ Rᵏ → encoder → z ∈ Rᵈ → decoder → q̂ ∈ Rᵏ, with an
+//! optional per-feature [`InputScaling`] s = (q − shift)/scale in front of the encoder and undone
+//! behind the decoder. Its serialised form is the model artifact.
+//!
+//! The networks see scaled coefficients: encode(q) = enc((q − shift)/scale) and
+//! decode(z) = shift + scale ⊙ dec(z). Hence the decoder Jacobian in original units is
+//! J = diag(scale) J_dec, and Jᵀv = J_decᵀ (scale ⊙ v), Jw = scale ⊙ (J_dec w).
+//!
+//! The training loss is the mean squared reconstruction error of the *scaled* coefficients,
+//! ℒ = 1/(N k) Σ_j ‖dec(enc(s_j)) − s_j‖², which is what [`Autoencoder::loss`] returns.
+
+use faer::{Mat, MatRef};
+use rayon::prelude::*;
+
+use crate::{Activation, InputScaling, Mlp, MlpBatchWorkspace, MlpGradient, MlpWorkspace, NnError};
+
+/// Samples per parallel work item in batched evaluation and training. Fixed (not derived from the
+/// thread count) so that sums over chunks, taken in chunk order, are bit-identical on any number
+/// of threads.
+pub const CHUNK: usize = 64;
+
+/// A trained (or freshly initialised) autoencoder: encoder, decoder and optional input scaling.
+///
+/// Deserialisation checks [`Autoencoder::FORMAT_VERSION`], that the encoder maps k → d and the
+/// decoder d → k, that the scaling has k features, and that every weight is finite.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "AutoencoderData")]
+pub struct Autoencoder {
+    format_version: u32,
+    encoder: Mlp,
+    decoder: Mlp,
+    scaling: Option<InputScaling>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AutoencoderData {
+    format_version: u32,
+    encoder: Mlp,
+    decoder: Mlp,
+    scaling: Option<InputScaling>,
+}
+
+impl TryFrom<AutoencoderData> for Autoencoder {
+    type Error = NnError;
+
+    fn try_from(d: AutoencoderData) -> Result<Self, NnError> {
+        if d.format_version != Autoencoder::FORMAT_VERSION {
+            return Err(NnError::InvalidModel(format!(
+                "format version {} is not the supported version {}",
+                d.format_version,
+                Autoencoder::FORMAT_VERSION
+            )));
+        }
+        Autoencoder::new(d.encoder, d.decoder, d.scaling)
+    }
+}
+
+impl Autoencoder {
+    /// The version of the serialised layout; bumped whenever it changes.
+    pub const FORMAT_VERSION: u32 = 1;
+
+    /// An autoencoder from its parts, checking that they fit together.
+    pub fn new(encoder: Mlp, decoder: Mlp, scaling: Option<InputScaling>) -> Result<Self, NnError> {
+        let bad = |reason: String| Err(NnError::InvalidModel(reason));
+        let (k, d) = (encoder.input_dim(), encoder.output_dim());
+        if decoder.input_dim() != d || decoder.output_dim() != k {
+            return bad(format!(
+                "encoder maps {k} → {d} but decoder maps {} → {}",
+                decoder.input_dim(),
+                decoder.output_dim()
+            ));
+        }
+        if let Some(s) = &scaling
+            && s.dim() != k
+        {
+            return bad(format!(
+                "input scaling has {} features, the encoder takes {k}",
+                s.dim()
+            ));
+        }
+        if !encoder.is_finite() || !decoder.is_finite() {
+            return bad("a weight or bias is not finite".into());
+        }
+        Ok(Self {
+            format_version: Self::FORMAT_VERSION,
+            encoder,
+            decoder,
+            scaling,
+        })
+    }
+
+    /// A freshly initialised autoencoder k → hidden… → d → reversed hidden… → k with `activation`
+    /// on every hidden layer (linear latent and output layers). The encoder is seeded with stream
+    /// 0 of `seed`, the decoder with stream 1.
+    pub fn with_architecture(
+        k: usize,
+        d: usize,
+        hidden: &[usize],
+        activation: Activation,
+        scaling: Option<InputScaling>,
+        seed: u64,
+    ) -> Result<Self, NnError> {
+        let enc_sizes: Vec<usize> = std::iter::once(k)
+            .chain(hidden.iter().copied())
+            .chain(std::iter::once(d))
+            .collect();
+        let dec_sizes: Vec<usize> = enc_sizes.iter().rev().copied().collect();
+        let mut streams = (0..2).map(|i| crate::SplitMix64::for_item(seed, i).next_u64());
+        let encoder = Mlp::new(&enc_sizes, activation, streams.next().unwrap_or(0))?;
+        let decoder = Mlp::new(&dec_sizes, activation, streams.next().unwrap_or(0))?;
+        Self::new(encoder, decoder, scaling)
+    }
+
+    /// k, the number of PCA coefficients.
+    pub fn input_dim(&self) -> usize {
+        self.encoder.input_dim()
+    }
+
+    /// d, the latent dimension.
+    pub fn latent_dim(&self) -> usize {
+        self.encoder.output_dim()
+    }
+
+    pub fn encoder(&self) -> &Mlp {
+        &self.encoder
+    }
+
+    pub fn decoder(&self) -> &Mlp {
+        &self.decoder
+    }
+
+    /// Mutable networks, e.g. for finite-difference checks (the caller keeps them finite).
+    pub fn networks_mut(&mut self) -> (&mut Mlp, &mut Mlp) {
+        (&mut self.encoder, &mut self.decoder)
+    }
+
+    pub fn scaling(&self) -> Option<&InputScaling> {
+        self.scaling.as_ref()
+    }
+
+    /// Every parameter array, encoder first then decoder, in [`Mlp::parameters_mut`] order.
+    pub fn parameters_mut(&mut self) -> impl Iterator<Item = &mut [f64]> {
+        self.encoder
+            .parameters_mut()
+            .chain(self.decoder.parameters_mut())
+    }
+
+    /// Scratch memory for the single-sample operations.
+    pub fn workspace(&self) -> AutoencoderWorkspace {
+        AutoencoderWorkspace {
+            encoder: self.encoder.workspace(),
+            decoder: self.decoder.workspace(),
+            s: vec![0.0; self.input_dim()],
+            z_scratch: vec![0.0; self.latent_dim()],
+        }
+    }
+
+    /// z = encode(q).
+    pub fn encode(&self, q: &[f64], z: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        match &self.scaling {
+            Some(sc) => {
+                assert_eq!(q.len(), sc.dim(), "input length");
+                sc.apply(q, &mut ws.s);
+                self.encoder.forward(&ws.s, z, &mut ws.encoder);
+            }
+            None => self.encoder.forward(q, z, &mut ws.encoder),
+        }
+    }
+
+    /// q = decode(z), in original units. Leaves the state for [`Autoencoder::decode_vjp_cached`].
+    pub fn decode(&self, z: &[f64], q: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        self.decoder.forward(z, q, &mut ws.decoder);
+        if let Some(sc) = &self.scaling {
+            ws.s.copy_from_slice(q);
+            sc.invert(&ws.s, q);
+        }
+    }
+
+    /// out = decode(encode(q)).
+    pub fn reconstruct(&self, q: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        let mut z = std::mem::take(&mut ws.z_scratch);
+        z.resize(self.latent_dim(), 0.0);
+        self.encode(q, &mut z, ws);
+        self.decode(&z, out, ws);
+        ws.z_scratch = z;
+    }
+
+    /// out = J(z)ᵀ v for q = decode(z) in original units.
+    pub fn decode_vjp(&self, z: &[f64], v: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        match &self.scaling {
+            Some(sc) => {
+                scale_into(sc.scale(), v, &mut ws.s);
+                self.decoder.vjp(z, &ws.s, out, &mut ws.decoder);
+            }
+            None => self.decoder.vjp(z, v, out, &mut ws.decoder),
+        }
+    }
+
+    /// out = J(z)ᵀ v at the z of the last [`Autoencoder::decode`] on `ws` (no second forward
+    /// pass: decode, form v = ∂E/∂q, then call this).
+    ///
+    /// # Panics
+    /// If `ws` holds no decode.
+    pub fn decode_vjp_cached(&self, v: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        match &self.scaling {
+            Some(sc) => {
+                scale_into(sc.scale(), v, &mut ws.s);
+                self.decoder.vjp_cached(&ws.s, out, &mut ws.decoder);
+            }
+            None => self.decoder.vjp_cached(v, out, &mut ws.decoder),
+        }
+    }
+
+    /// out = J(z) w for q = decode(z) in original units.
+    pub fn decode_jvp(&self, z: &[f64], w: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        self.decoder.jvp(z, w, out, &mut ws.decoder);
+        if let Some(sc) = &self.scaling {
+            out.iter_mut().zip(sc.scale()).for_each(|(o, s)| *o *= s);
+        }
+    }
+
+    /// out = J(z), the `k × d` decoder Jacobian in original units, column-major.
+    pub fn decode_jacobian(&self, z: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
+        self.decoder.jacobian(z, out, &mut ws.decoder);
+        if let Some(sc) = &self.scaling {
+            for col in out.chunks_exact_mut(sc.dim()) {
+                col.iter_mut().zip(sc.scale()).for_each(|(o, s)| *o *= s);
+            }
+        }
+    }
+
+    /// The training objective on `data` (k × N, one sample per column): the mean squared error
+    /// of the scaled reconstruction (see the module docs). Parallel over fixed chunks.
+    pub fn loss(&self, data: MatRef<'_, f64>) -> Result<f64, NnError> {
+        let x = self.scaled_block(data)?;
+        Ok(self.sum_squared_error(&x) / x.len() as f64)
+    }
+
+    /// decode(encode(q)) for every column of `data` (k × N), in original units.
+    pub fn reconstruct_batch(&self, data: MatRef<'_, f64>) -> Result<Mat<f64>, NnError> {
+        let k = self.input_dim();
+        let mut x = self.scaled_block(data)?;
+        x.par_chunks_mut(k * CHUNK).for_each_init(
+            || self.chunk_workspace(CHUNK),
+            |ws, block| {
+                let c = block.len() / k;
+                let z = self.encoder.forward_batch(block, c, &mut ws.encoder);
+                let y = self.decoder.forward_batch(z, c, &mut ws.decoder);
+                block.copy_from_slice(y);
+            },
+        );
+        Ok(Mat::from_fn(k, data.ncols(), |i, j| {
+            let s = x[j * k + i];
+            match &self.scaling {
+                Some(sc) => sc.shift()[i] + sc.scale()[i] * s,
+                None => s,
+            }
+        }))
+    }
+
+    /// The loss on `data` and its gradient with respect to every weight and bias.
+    pub fn loss_gradient(
+        &self,
+        data: MatRef<'_, f64>,
+    ) -> Result<(f64, AutoencoderGradient), NnError> {
+        let x = self.scaled_block(data)?;
+        let n = data.ncols();
+        let mut engine = GradientEngine::new(self, n);
+        let sum = engine.run(self, &x, n);
+        let grad = engine.grads.swap_remove(0);
+        Ok((sum / x.len() as f64, grad))
+    }
+
+    /// The scaled data as one contiguous k × N column-major block, checking shape and finiteness.
+    pub(crate) fn scaled_block(&self, data: MatRef<'_, f64>) -> Result<Vec<f64>, NnError> {
+        let k = self.input_dim();
+        if data.nrows() != k {
+            return Err(NnError::ShapeMismatch {
+                what: "data",
+                expected: (k, data.ncols()),
+                found: (data.nrows(), data.ncols()),
+            });
+        }
+        let mut x = vec![0.0; k * data.ncols()];
+        let mut raw = vec![0.0; k];
+        for (j, col) in x.chunks_exact_mut(k).enumerate() {
+            for i in 0..k {
+                let v = data[(i, j)];
+                if !v.is_finite() {
+                    return Err(NnError::NonFiniteData {
+                        feature: i,
+                        sample: j,
+                        value: v,
+                    });
+                }
+                raw[i] = v;
+            }
+            match &self.scaling {
+                Some(sc) => sc.apply(&raw, col),
+                None => col.copy_from_slice(&raw),
+            }
+        }
+        Ok(x)
+    }
+
+    /// Σ‖dec(enc(s)) − s‖² over the scaled block `x`, summed chunk by chunk in order.
+    pub(crate) fn sum_squared_error(&self, x: &[f64]) -> f64 {
+        let k = self.input_dim();
+        let per_chunk: Vec<f64> = x
+            .par_chunks(k * CHUNK)
+            .map_init(
+                || self.chunk_workspace(CHUNK),
+                |ws, block| {
+                    let c = block.len() / k;
+                    let z = self.encoder.forward_batch(block, c, &mut ws.encoder);
+                    let y = self.decoder.forward_batch(z, c, &mut ws.decoder);
+                    y.iter().zip(block).map(|(y, s)| (y - s) * (y - s)).sum()
+                },
+            )
+            .collect();
+        per_chunk.iter().sum()
+    }
+
+    fn chunk_workspace(&self, capacity: usize) -> ChunkWorkspace {
+        ChunkWorkspace {
+            encoder: self.encoder.batch_workspace(capacity),
+            decoder: self.decoder.batch_workspace(capacity),
+            resid: vec![0.0; self.input_dim() * capacity],
+            gz: vec![0.0; self.latent_dim() * capacity],
+        }
+    }
+
+    /// Σ‖r‖² of one chunk and the gradient of Σ‖r‖² · `weight` into `grad` (overwritten).
+    fn chunk_loss_gradient(
+        &self,
+        x: &[f64],
+        weight: f64,
+        ws: &mut ChunkWorkspace,
+        grad: &mut AutoencoderGradient,
+    ) -> f64 {
+        let k = self.input_dim();
+        let c = x.len() / k;
+        let ChunkWorkspace {
+            encoder,
+            decoder,
+            resid,
+            gz,
+        } = ws;
+        let z = self.encoder.forward_batch(x, c, encoder);
+        let y = self.decoder.forward_batch(z, c, decoder);
+        let r = &mut resid[..k * c];
+        let mut sum = 0.0;
+        for ((r, y), s) in r.iter_mut().zip(y).zip(x) {
+            let e = y - s;
+            sum += e * e;
+            *r = 2.0 * weight * e;
+        }
+        let gz = &mut gz[..self.latent_dim() * c];
+        self.decoder
+            .backward_batch(z, r, c, &mut grad.decoder, Some(gz), decoder);
+        self.encoder
+            .backward_batch(x, gz, c, &mut grad.encoder, None, encoder);
+        sum
+    }
+}
+
+fn scale_into(scale: &[f64], v: &[f64], out: &mut [f64]) {
+    assert_eq!(v.len(), scale.len(), "cotangent length");
+    for i in 0..v.len() {
+        out[i] = scale[i] * v[i];
+    }
+}
+
+/// Scratch memory for the single-sample operations of an [`Autoencoder`].
+#[derive(Debug, Clone)]
+pub struct AutoencoderWorkspace {
+    encoder: MlpWorkspace,
+    decoder: MlpWorkspace,
+    /// Scaled coefficients (length k).
+    s: Vec<f64>,
+    z_scratch: Vec<f64>,
+}
+
+/// ∂ℒ/∂θ for the encoder and decoder of an [`Autoencoder`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct AutoencoderGradient {
+    pub encoder: MlpGradient,
+    pub decoder: MlpGradient,
+}
+
+impl AutoencoderGradient {
+    pub fn zeros(ae: &Autoencoder) -> Self {
+        Self {
+            encoder: MlpGradient::zeros(&ae.encoder),
+            decoder: MlpGradient::zeros(&ae.decoder),
+        }
+    }
+
+    /// Every array in the order of [`Autoencoder::parameters_mut`].
+    pub fn slices(&self) -> impl Iterator<Item = &[f64]> {
+        self.encoder.slices().chain(self.decoder.slices())
+    }
+
+    fn add_assign(&mut self, other: &Self) {
+        self.encoder.add_assign(&other.encoder);
+        self.decoder.add_assign(&other.decoder);
+    }
+}
+
+/// Per-chunk batch workspaces and gradients of the encoder and decoder.
+#[derive(Debug, Clone)]
+struct ChunkWorkspace {
+    encoder: MlpBatchWorkspace,
+    decoder: MlpBatchWorkspace,
+    resid: Vec<f64>,
+    gz: Vec<f64>,
+}
+
+/// Reusable state for the gradient of Σ‖r‖²/(n k) over a batch of up to `capacity` samples,
+/// computed chunk by chunk in parallel and summed in chunk order (bit-reproducible).
+#[derive(Debug, Clone)]
+pub(crate) struct GradientEngine {
+    workspaces: Vec<ChunkWorkspace>,
+    /// One gradient per chunk; after [`GradientEngine::run`], `grads[0]` holds the total.
+    pub(crate) grads: Vec<AutoencoderGradient>,
+}
+
+impl GradientEngine {
+    pub(crate) fn new(ae: &Autoencoder, capacity: usize) -> Self {
+        let chunks = capacity.div_ceil(CHUNK).max(1);
+        Self {
+            workspaces: (0..chunks).map(|_| ae.chunk_workspace(CHUNK)).collect(),
+            grads: (0..chunks)
+                .map(|_| AutoencoderGradient::zeros(ae))
+                .collect(),
+        }
+    }
+
+    /// Σ‖r‖² over the `n` samples of the scaled block `x`; `grads[0]` = ∇ of Σ‖r‖²/(n k).
+    pub(crate) fn run(&mut self, ae: &Autoencoder, x: &[f64], n: usize) -> f64 {
+        let k = ae.input_dim();
+        let weight = 1.0 / (n * k) as f64;
+        let chunks = n.div_ceil(CHUNK);
+        assert!(chunks <= self.workspaces.len(), "batch exceeds the engine");
+        let sums: Vec<f64> = x[..n * k]
+            .par_chunks(k * CHUNK)
+            .zip(self.workspaces.par_iter_mut())
+            .zip(self.grads.par_iter_mut())
+            .map(|((block, ws), grad)| ae.chunk_loss_gradient(block, weight, ws, grad))
+            .collect();
+        let (first, rest) = self.grads.split_at_mut(1);
+        for g in &rest[..chunks - 1] {
+            first[0].add_assign(g);
+        }
+        sums.iter().sum()
+    }
+}

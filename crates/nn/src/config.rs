@@ -1,0 +1,196 @@
+//! The `[autoencoder]` section of a scene: architecture, training hyper-parameters and how the
+//! latent dimension d is chosen.
+//!
+//! ```toml
+//! [autoencoder]
+//! latent_dim = 6                 # or: latent_dims = [3, 12] with max_vertex_error = 1e-3
+//! hidden = [200, 200]
+//! activation = "elu"             # elu | tanh | softplus | identity | relu (relu: not for simulation)
+//! epochs = 1000
+//! batch_size = 256
+//! learning_rate = 1e-3
+//! validation_fraction = 0.1
+//! patience = 100                 # epochs without improvement before stopping; 0 = never stop early
+//! seed = 0
+//! input_scaling = true
+//! ```
+
+use crate::{Activation, AdamParams, NnError};
+
+/// The latent dimension used when the section names neither `latent_dim` nor `latent_dims`
+/// (AutoDef's "X" example).
+pub const DEFAULT_LATENT_DIM: usize = 6;
+
+/// The `[autoencoder]` section of a scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AutoencoderConfig {
+    /// Train exactly this latent dimension.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latent_dim: Option<usize>,
+    /// Search d = lo..=hi in order for the smallest whose maximum vertex error is at most
+    /// `max_vertex_error` (see [`crate::train_search`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latent_dims: Option<[usize; 2]>,
+    /// The tolerance of the `latent_dims` search (absolute, in the data's units, e.g. metres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_vertex_error: Option<f64>,
+    /// Hidden layer widths of the encoder; the decoder uses them reversed.
+    pub hidden: Vec<usize>,
+    /// The activation of every hidden layer (the latent and output layers are linear).
+    pub activation: Activation,
+    /// Maximum number of passes over the training data.
+    pub epochs: usize,
+    /// Samples per Adam step.
+    pub batch_size: usize,
+    pub learning_rate: f64,
+    pub beta1: f64,
+    pub beta2: f64,
+    pub epsilon: f64,
+    /// Fraction of the samples held out (seeded) for validation and early stopping, in [0, 1).
+    /// With 0 the training loss is monitored instead.
+    pub validation_fraction: f64,
+    /// Stop after this many epochs without a new best monitored loss; 0 disables early stopping.
+    /// The best weights are returned either way.
+    pub patience: usize,
+    /// Seeds initialisation, the validation split and the mini-batch order.
+    pub seed: u64,
+    /// Standardise every coefficient by the training data's mean and standard deviation before
+    /// the encoder (undone after the decoder), so the tiny trailing PCA coefficients train as well
+    /// as the large leading ones. Stored with the model.
+    pub input_scaling: bool,
+}
+
+impl Default for AutoencoderConfig {
+    fn default() -> Self {
+        let adam = AdamParams::default();
+        Self {
+            latent_dim: None,
+            latent_dims: None,
+            max_vertex_error: None,
+            hidden: vec![200, 200],
+            activation: Activation::Elu,
+            epochs: 1000,
+            batch_size: 256,
+            learning_rate: adam.learning_rate,
+            beta1: adam.beta1,
+            beta2: adam.beta2,
+            epsilon: adam.epsilon,
+            validation_fraction: 0.1,
+            patience: 100,
+            seed: 0,
+            input_scaling: true,
+        }
+    }
+}
+
+/// A resolved, validated latent-dimension rule.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LatentRule {
+    /// Exactly d.
+    Fixed(usize),
+    /// The smallest d in lo..=hi whose maximum vertex error is ≤ tolerance.
+    Search {
+        lo: usize,
+        hi: usize,
+        tolerance: f64,
+    },
+}
+
+impl AutoencoderConfig {
+    /// Adam's hyper-parameters from this section.
+    pub fn adam(&self) -> AdamParams {
+        AdamParams {
+            learning_rate: self.learning_rate,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            epsilon: self.epsilon,
+        }
+    }
+
+    /// Appends one error per invalid field to `errors` (fields named `autoencoder.<field>`).
+    pub fn check(&self, errors: &mut Vec<NnError>) {
+        let mut bad = |field: &str, reason: String| {
+            errors.push(NnError::InvalidConfig {
+                field: format!("autoencoder.{field}"),
+                reason,
+            })
+        };
+        match (self.latent_dim, self.latent_dims) {
+            (Some(_), Some(_)) => bad(
+                "latent_dims",
+                "give either `latent_dim` or `latent_dims`, not both".into(),
+            ),
+            (Some(0), None) => bad("latent_dim", "must be at least 1, got 0".into()),
+            (None, Some([lo, hi])) if lo == 0 || lo > hi => bad(
+                "latent_dims",
+                format!("must be a range [lo, hi] with 1 ≤ lo ≤ hi, got [{lo}, {hi}]"),
+            ),
+            _ => {}
+        }
+        match (self.latent_dims.is_some(), self.max_vertex_error) {
+            (true, None) => bad(
+                "max_vertex_error",
+                "is required with `latent_dims` (the search tolerance)".into(),
+            ),
+            (false, Some(_)) => bad(
+                "max_vertex_error",
+                "is only used with `latent_dims`; remove it or give a range".into(),
+            ),
+            (true, Some(t)) if !(t.is_finite() && t > 0.0) => bad(
+                "max_vertex_error",
+                format!("must be positive and finite, got {t}"),
+            ),
+            _ => {}
+        }
+        if let Some(i) = self.hidden.iter().position(|&n| n == 0) {
+            bad("hidden", format!("layer {i} has width 0"));
+        }
+        if self.epochs == 0 {
+            bad("epochs", "must be at least 1, got 0".into());
+        }
+        if self.batch_size == 0 {
+            bad("batch_size", "must be at least 1, got 0".into());
+        }
+        let lr = self.learning_rate;
+        if !(lr.is_finite() && lr > 0.0) {
+            bad(
+                "learning_rate",
+                format!("must be positive and finite, got {lr}"),
+            );
+        }
+        for (field, beta) in [("beta1", self.beta1), ("beta2", self.beta2)] {
+            if !(0.0..1.0).contains(&beta) {
+                bad(field, format!("must be in [0, 1), got {beta}"));
+            }
+        }
+        let eps = self.epsilon;
+        if !(eps.is_finite() && eps > 0.0) {
+            bad("epsilon", format!("must be positive and finite, got {eps}"));
+        }
+        let f = self.validation_fraction;
+        if !(0.0..1.0).contains(&f) {
+            bad("validation_fraction", format!("must be in [0, 1), got {f}"));
+        }
+    }
+
+    /// `Ok` when every field is valid, otherwise the collected errors.
+    pub fn validate(&self) -> Result<(), NnError> {
+        let mut errors = Vec::new();
+        self.check(&mut errors);
+        NnError::collect(errors)
+    }
+
+    /// The validated latent rule ([`DEFAULT_LATENT_DIM`] when none is given).
+    pub fn latent_rule(&self) -> Result<LatentRule, NnError> {
+        self.validate()?;
+        Ok(
+            match (self.latent_dim, self.latent_dims, self.max_vertex_error) {
+                (Some(d), _, _) => LatentRule::Fixed(d),
+                (None, Some([lo, hi]), Some(tolerance)) => LatentRule::Search { lo, hi, tolerance },
+                _ => LatentRule::Fixed(DEFAULT_LATENT_DIM),
+            },
+        )
+    }
+}

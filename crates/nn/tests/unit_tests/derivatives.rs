@@ -1,0 +1,230 @@
+//! VJP, JVP and Jacobian of the MLP and of the autoencoder's decoder against central finite
+//! differences, and their mutual consistency, for every activation.
+
+use nn::{Activation, Autoencoder, InputScaling, Mlp};
+
+use super::{Rng, dot, random_mlp, rel_err};
+
+const SIZES: [usize; 4] = [4, 7, 5, 6];
+
+/// Central-difference Jacobian (n_out × n_in, column-major) of `f` at `z`.
+fn fd_jacobian(f: &mut dyn FnMut(&[f64], &mut [f64]), z: &[f64], n_out: usize) -> Vec<f64> {
+    let h = 1e-5;
+    let mut jac = vec![0.0; n_out * z.len()];
+    let (mut yp, mut ym) = (vec![0.0; n_out], vec![0.0; n_out]);
+    for j in 0..z.len() {
+        let mut zp = z.to_vec();
+        let mut zm = z.to_vec();
+        zp[j] += h;
+        zm[j] -= h;
+        f(&zp, &mut yp);
+        f(&zm, &mut ym);
+        for i in 0..n_out {
+            jac[j * n_out + i] = (yp[i] - ym[i]) / (2.0 * h);
+        }
+    }
+    jac
+}
+
+/// Jᵀv and Jw from a column-major Jacobian.
+fn jt_v(jac: &[f64], v: &[f64], n_in: usize) -> Vec<f64> {
+    let n_out = v.len();
+    (0..n_in)
+        .map(|j| dot(&jac[j * n_out..(j + 1) * n_out], v))
+        .collect()
+}
+
+fn j_w(jac: &[f64], w: &[f64], n_out: usize) -> Vec<f64> {
+    (0..n_out)
+        .map(|i| (0..w.len()).map(|j| jac[j * n_out + i] * w[j]).sum())
+        .collect()
+}
+
+#[test]
+fn mlp_derivatives_match_finite_differences_for_every_activation() {
+    for (a, act) in Activation::ALL.into_iter().enumerate() {
+        let mlp = random_mlp(&SIZES, act, 10 + a as u64);
+        let mut ws = mlp.workspace();
+        let mut rng = Rng::new(100 + a as u64);
+        for trial in 0..5 {
+            let z = rng.vec(4);
+            let v = rng.vec(6);
+            let w = rng.vec(4);
+            let mut fd_ws = mlp.workspace();
+            let fd = fd_jacobian(&mut |x, y| mlp.forward(x, y, &mut fd_ws), &z, 6);
+
+            let mut jac = vec![0.0; 24];
+            mlp.jacobian(&z, &mut jac, &mut ws);
+            let e = rel_err(&jac, &fd);
+            assert!(e <= 1e-7, "{act} trial {trial}: Jacobian rel. error {e:e}");
+
+            let mut vjp = vec![0.0; 4];
+            mlp.vjp(&z, &v, &mut vjp, &mut ws);
+            let e = rel_err(&vjp, &jt_v(&fd, &v, 4));
+            assert!(e <= 1e-7, "{act} trial {trial}: VJP rel. error {e:e}");
+
+            let mut jvp = vec![0.0; 6];
+            mlp.jvp(&z, &w, &mut jvp, &mut ws);
+            let e = rel_err(&jvp, &j_w(&fd, &w, 6));
+            assert!(e <= 1e-7, "{act} trial {trial}: JVP rel. error {e:e}");
+        }
+    }
+}
+
+#[test]
+fn jvp_and_vjp_are_adjoint_and_build_the_jacobian() {
+    for (a, act) in Activation::ALL.into_iter().enumerate() {
+        let mlp = random_mlp(&SIZES, act, 20 + a as u64);
+        let mut ws = mlp.workspace();
+        let mut rng = Rng::new(200 + a as u64);
+        let z = rng.vec(4);
+        let (v, w) = (rng.vec(6), rng.vec(4));
+        let (mut jw, mut jtv) = (vec![0.0; 6], vec![0.0; 4]);
+        mlp.jvp(&z, &w, &mut jw, &mut ws);
+        mlp.vjp(&z, &v, &mut jtv, &mut ws);
+        let (lhs, rhs) = (dot(&jw, &v), dot(&w, &jtv));
+        assert!(
+            (lhs - rhs).abs() <= 1e-13 * (1.0 + lhs.abs()),
+            "{act}: <Jw, v> = {lhs} but <w, Jᵀv> = {rhs}"
+        );
+
+        let mut jac = vec![0.0; 24];
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        for j in 0..4 {
+            let mut e = vec![0.0; 4];
+            e[j] = 1.0;
+            mlp.jvp(&z, &e, &mut jw, &mut ws);
+            assert!(
+                rel_err(&jac[j * 6..(j + 1) * 6], &jw) <= 1e-14,
+                "{act} column {j}"
+            );
+        }
+        for i in 0..6 {
+            let mut e = vec![0.0; 6];
+            e[i] = 1.0;
+            mlp.vjp(&z, &e, &mut jtv, &mut ws);
+            let row: Vec<f64> = (0..4).map(|j| jac[j * 6 + i]).collect();
+            assert!(rel_err(&row, &jtv) <= 1e-14, "{act} row {i}");
+        }
+    }
+}
+
+#[test]
+fn workspace_reuse_leaves_no_stale_state() {
+    let mlp = random_mlp(&SIZES, Activation::Elu, 3);
+    let mut rng = Rng::new(4);
+    let (z1, z2, v) = (rng.vec(4), rng.vec(4), rng.vec(6));
+    let mut shared = mlp.workspace();
+    let mut scratch = vec![0.0; 24];
+    // Run every operation at z1, then each one at z2 must equal a fresh workspace's answer.
+    mlp.jacobian(&z1, &mut scratch, &mut shared);
+    let (mut a, mut b) = (vec![0.0; 4], vec![0.0; 4]);
+    mlp.vjp(&z2, &v, &mut a, &mut shared);
+    mlp.vjp(&z2, &v, &mut b, &mut mlp.workspace());
+    assert_eq!(a, b);
+    // The cached VJP after a forward equals the plain VJP, bit for bit.
+    let mut y = vec![0.0; 6];
+    mlp.forward(&z1, &mut y, &mut shared);
+    mlp.vjp_cached(&v, &mut a, &mut shared);
+    mlp.vjp(&z1, &v, &mut b, &mut shared);
+    assert_eq!(a, b);
+    // A network without hidden layers is affine: J = W.
+    let lin = random_mlp(&[3, 2], Activation::Elu, 5);
+    let mut jac = vec![0.0; 6];
+    lin.jacobian(&[0.1, 0.2, 0.3], &mut jac, &mut lin.workspace());
+    let w = lin.weights(0);
+    for i in 0..2 {
+        for j in 0..3 {
+            assert_eq!(jac[j * 2 + i], w[i * 3 + j]);
+        }
+    }
+}
+
+#[test]
+#[should_panic(expected = "vjp_cached needs a forward pass")]
+fn cached_vjp_without_forward_panics() {
+    let mlp = random_mlp(&SIZES, Activation::Tanh, 3);
+    let mut ws = mlp.workspace();
+    let mut jac = vec![0.0; 24];
+    mlp.jacobian(&[0.0; 4], &mut jac, &mut ws);
+    mlp.vjp_cached(&[1.0; 6], &mut [0.0; 4], &mut ws);
+}
+
+#[test]
+fn decoder_derivatives_are_in_original_units() {
+    let (k, d) = (6, 3);
+    for act in [Activation::Elu, Activation::Softplus] {
+        let encoder = random_mlp(&[k, 5, d], act, 30);
+        let decoder = random_mlp(&[d, 5, 4, k], act, 31);
+        // Scales spanning six orders of magnitude, as PCA coefficients do.
+        let scaling = InputScaling::new(
+            vec![0.5, -1.0, 0.0, 2.0, 1e-3, -1e-4],
+            vec![10.0, 1.0, 0.1, 1e-2, 1e-3, 1e-4],
+        )
+        .unwrap();
+        let ae = Autoencoder::new(encoder, decoder.clone(), Some(scaling.clone())).unwrap();
+        let mut ws = ae.workspace();
+        let mut rng = Rng::new(32);
+        let z = rng.vec(d);
+        let (v, w) = (rng.vec(k), rng.vec(d));
+
+        // decode = shift + scale ⊙ decoder.
+        let (mut q, mut raw) = (vec![0.0; k], vec![0.0; k]);
+        ae.decode(&z, &mut q, &mut ws);
+        decoder.forward(&z, &mut raw, &mut decoder.workspace());
+        for i in 0..k {
+            assert_eq!(q[i], scaling.shift()[i] + scaling.scale()[i] * raw[i]);
+        }
+
+        let mut fd_ws = ae.workspace();
+        let fd = fd_jacobian(&mut |x, y| ae.decode(x, y, &mut fd_ws), &z, k);
+        let mut jac = vec![0.0; k * d];
+        ae.decode_jacobian(&z, &mut jac, &mut ws);
+        assert!(rel_err(&jac, &fd) <= 1e-7, "{act} Jacobian");
+        let mut jtv = vec![0.0; d];
+        ae.decode_vjp(&z, &v, &mut jtv, &mut ws);
+        assert!(rel_err(&jtv, &jt_v(&fd, &v, d)) <= 1e-7, "{act} VJP");
+        let mut jw = vec![0.0; k];
+        ae.decode_jvp(&z, &w, &mut jw, &mut ws);
+        assert!(rel_err(&jw, &j_w(&fd, &w, k)) <= 1e-7, "{act} JVP");
+        let (lhs, rhs) = (dot(&jw, &v), dot(&w, &jtv));
+        assert!((lhs - rhs).abs() <= 1e-12 * (1.0 + lhs.abs()));
+
+        // The cached VJP after decode equals the plain one.
+        let mut cached = vec![0.0; d];
+        ae.decode(&z, &mut q, &mut ws);
+        ae.decode_vjp_cached(&v, &mut cached, &mut ws);
+        assert_eq!(cached, jtv);
+
+        // encode applies the scaling: encode(q) = encoder((q − shift)/scale).
+        let q0 = rng.vec(k);
+        let s: Vec<f64> = (0..k)
+            .map(|i| (q0[i] - scaling.shift()[i]) / scaling.scale()[i])
+            .collect();
+        let (mut z1, mut z2) = (vec![0.0; d], vec![0.0; d]);
+        ae.encode(&q0, &mut z1, &mut ws);
+        ae.encoder()
+            .forward(&s, &mut z2, &mut ae.encoder().workspace());
+        assert_eq!(z1, z2);
+    }
+}
+
+#[test]
+fn derivatives_scale_to_the_autodef_shape() {
+    // 6 → 200 → 200 → 49: the Jacobian columns still equal JVPs of unit vectors.
+    let mlp = Mlp::new(&[6, 200, 200, 49], Activation::Elu, 9).unwrap();
+    let mut ws = mlp.workspace();
+    let z = [0.3, -0.2, 0.5, -0.7, 0.1, 0.9];
+    let mut jac = vec![0.0; 49 * 6];
+    mlp.jacobian(&z, &mut jac, &mut ws);
+    let mut fd_ws = mlp.workspace();
+    let fd = fd_jacobian(&mut |x, y| mlp.forward(x, y, &mut fd_ws), &z, 49);
+    assert!(rel_err(&jac, &fd) <= 1e-7);
+    let mut col = vec![0.0; 49];
+    for j in 0..6 {
+        let mut e = [0.0; 6];
+        e[j] = 1.0;
+        mlp.jvp(&z, &e, &mut col, &mut ws);
+        assert!(rel_err(&jac[j * 49..(j + 1) * 49], &col) <= 1e-13);
+    }
+}
