@@ -470,34 +470,57 @@ impl Objective for StepObjective<'_> {
 }
 
 impl NewtonSystem for StepObjective<'_> {
+    /// Far from the solution the Hessian uses per-element PSD projections (robust). Close to it
+    /// (relative gradient below [`EXACT_HESSIAN_BELOW`]) the exact Hessian is tried first: the
+    /// projection changes the Hessian wherever an element is compressed or bent past its convex
+    /// range, which turns Newton's quadratic convergence into a slow linear one; the exact
+    /// matrix (plus M/h²) is usually still positive definite there, and when its factorisation
+    /// fails the projected one is used.
     fn newton_direction(&mut self, x: &[f64], g: &[f64], d: &mut [f64]) -> Result<(), FemError> {
         let m = self.model;
-        let parts = self
-            .newton
-            .as_deref_mut()
-            .expect("Newton solves are built with their Hessian parts");
         m.dofs.scatter(x, &mut self.u);
-        with_material!(&m.material, |mat| assembly::hessian(
-            mat,
-            &m.elements,
-            ElementSet::All,
-            &self.u,
-            true,
-            &parts.pattern,
-            &mut parts.values,
-            self.buffers
-        ));
-        if self.inv_h2 > 0.0 {
-            parts.add_mass(m, self.inv_h2);
-        }
         self.spring_diag.fill(0.0);
         for f in &m.forces {
             f.accumulate(self.t, &self.u, None, Some(&mut self.spring_diag));
         }
-        for (j, &dof) in m.dofs.free.iter().enumerate() {
-            parts.values[parts.pattern.diag[j]] += self.spring_diag[dof];
+        let near = norm(g) < EXACT_HESSIAN_BELOW * self.scale;
+        let parts = self
+            .newton
+            .as_deref_mut()
+            .expect("Newton solves are built with their Hessian parts");
+        let mut llt = None;
+        for projected in [false, true] {
+            if !projected && !near {
+                continue;
+            }
+            with_material!(&m.material, |mat| assembly::hessian(
+                mat,
+                &m.elements,
+                ElementSet::All,
+                &self.u,
+                projected,
+                &parts.pattern,
+                &mut parts.values,
+                self.buffers
+            ));
+            if self.inv_h2 > 0.0 {
+                parts.add_mass(m, self.inv_h2);
+            }
+            for (j, &dof) in m.dofs.free.iter().enumerate() {
+                parts.values[parts.pattern.diag[j]] += self.spring_diag[dof];
+            }
+            if projected {
+                llt = Some(parts.factor()?);
+            } else if let Ok(f) = Llt::try_new_with_symbolic(
+                parts.symbolic.clone(),
+                parts.pattern.matrix(&parts.values),
+                Side::Lower,
+            ) {
+                llt = Some(f);
+                break;
+            }
         }
-        let llt = parts.factor()?;
+        let llt = llt.expect("the projected attempt always yields a factor or an error");
         for i in 0..d.len() {
             d[i] = -g[i];
         }
@@ -505,6 +528,13 @@ impl NewtonSystem for StepObjective<'_> {
         llt.solve_in_place(faer::MatMut::from_column_major_slice_mut(d, n, 1));
         Ok(())
     }
+}
+
+/// Relative gradient below which Newton tries the exact (unprojected) Hessian first.
+pub const EXACT_HESSIAN_BELOW: f64 = 1e-2;
+
+fn norm(a: &[f64]) -> f64 {
+    a.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
 impl Simulator {
