@@ -18,6 +18,17 @@ const MAGIC: &[u8; 8] = b"LATDYN\0a";
 /// are recomputed instead of misread.
 pub const FORMAT_VERSION: u32 = 1;
 
+/// Version of what each stage computes. Bump a stage's number when its numerical method changes
+/// so that its cached artifacts (and everything downstream, whose keys include its key) are
+/// recomputed, while other stages' caches stay valid.
+pub fn stage_version(stage: &str) -> u32 {
+    match stage {
+        // 2: inputs centred with one common scale instead of per-feature standardisation.
+        "train" => 2,
+        _ => 1,
+    }
+}
+
 /// Why an artifact could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ArtifactError {
@@ -54,10 +65,12 @@ fn fnv1a_continue(mut h: u64, bytes: &[u8]) -> u64 {
 pub struct KeyBuilder(u64);
 
 impl KeyBuilder {
-    /// A key for `stage` at the current [`FORMAT_VERSION`].
+    /// A key for `stage` at the current [`FORMAT_VERSION`] and the stage's own
+    /// [`stage_version`].
     pub fn new(stage: &str) -> Self {
         let h = fnv1a(stage.as_bytes());
-        Self(fnv1a_continue(h, &FORMAT_VERSION.to_le_bytes()))
+        let h = fnv1a_continue(h, &FORMAT_VERSION.to_le_bytes());
+        Self(fnv1a_continue(h, &stage_version(stage).to_le_bytes()))
     }
 
     /// Mixes in a serialisable value (a scene section, a list of pinned vertices, …).

@@ -6,6 +6,7 @@
 pub mod artifact;
 pub mod output;
 pub mod pipeline;
+pub mod plot;
 pub mod run;
 pub mod scene;
 pub mod simulate;

@@ -86,6 +86,12 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Stage `train`: the autoencoder on the PCA coefficients (runs earlier stages if needed);
+    /// writes the loss curve to out/<scene>/train/.
+    Train {
+        #[command(flatten)]
+        common: Common,
+    },
     /// Run the stages in order, skipping cached ones.
     Pipeline {
         #[command(flatten)]
@@ -121,6 +127,7 @@ enum SolverArg {
 enum StageArg {
     Snapshots,
     Pca,
+    Train,
 }
 
 fn main() {
@@ -318,6 +325,16 @@ fn dispatch(cli: Cli) -> Result<()> {
             print_pca(&fit);
             Ok(())
         }
+        Command::Train { common } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            let trained = p.train(&stage_progress)?;
+            let dir = root.join("out").join(&scene.name).join("train");
+            trained.write_loss_curve(&dir)?;
+            print_training(&trained);
+            println!("loss curve: {}", dir.join("loss.svg").display());
+            Ok(())
+        }
         Command::Pipeline { common, until } => {
             let scene = load_scene(common.scene.as_ref())?;
             let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
@@ -327,6 +344,9 @@ fn dispatch(cli: Cli) -> Result<()> {
                 }
                 StageArg::Pca => {
                     p.pca(&stage_progress)?;
+                }
+                StageArg::Train => {
+                    p.train(&stage_progress)?;
                 }
             }
             Ok(())
@@ -344,6 +364,32 @@ fn print_pca(fit: &pca::PcaFit) {
         fit.rule,
         fit.tolerance_met,
         fit.basis.explained_energy(fit.chosen_k())
+    );
+}
+
+fn print_training(t: &xtask::pipeline::TrainedModel) {
+    println!(
+        "autoencoder {k} → {d} → {k}: best epoch {} of {}{}, {:.1} s",
+        t.best_epoch,
+        t.history.len(),
+        if t.stopped_early {
+            " (stopped early)"
+        } else {
+            ""
+        },
+        t.train_seconds,
+        k = t.pca_k,
+        d = t.latent_dim
+    );
+    println!(
+        "max vertex error over the snapshots: autoencoder (d = {}) {:.3e}, PCA with {} columns {:.3e}; PCA needs {} columns to match",
+        t.latent_dim,
+        t.max_vertex_error,
+        t.latent_dim,
+        t.pca_error_at_latent_dim,
+        t.pca_k_matching
+            .map(|k| k.to_string())
+            .unwrap_or_else(|| format!("more than {}", t.pca_k))
     );
 }
 

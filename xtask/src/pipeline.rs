@@ -21,7 +21,7 @@ use crate::artifact::{self, Expect, KeyBuilder, fnv1a};
 use crate::scene::Scene;
 
 /// The stages, in order.
-pub const STAGES: [&str; 2] = ["snapshots", "pca"];
+pub const STAGES: [&str; 3] = ["snapshots", "pca", "train"];
 
 /// What happened to one stage in a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -45,6 +45,27 @@ pub struct Reference {
     pub step_seconds: Vec<f64>,
     /// Solver iterations of each step.
     pub iterations: Vec<usize>,
+}
+
+/// The trained autoencoder and how it compares with PCA on the snapshots (stage `train`).
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct TrainedModel {
+    pub model: nn::Autoencoder,
+    pub latent_dim: usize,
+    /// Columns of the PCA basis it was trained on (its input size).
+    pub pca_k: usize,
+    pub history: Vec<nn::EpochReport>,
+    pub best_epoch: usize,
+    pub stopped_early: bool,
+    /// Every latent dimension tried with its maximum vertex error.
+    pub trials: Vec<(usize, f64)>,
+    /// Largest vertex distance over the snapshots of U·decode(encode(q)) from the snapshot.
+    pub max_vertex_error: f64,
+    /// The same for PCA with as many columns as the latent dimension.
+    pub pca_error_at_latent_dim: f64,
+    /// The smallest PCA dimension whose error is at most the autoencoder's, if any up to k.
+    pub pca_k_matching: Option<usize>,
+    pub train_seconds: f64,
 }
 
 /// A scene's pipeline with its cache folder and the model every stage shares.
@@ -118,6 +139,13 @@ impl<'a> Pipeline<'a> {
         KeyBuilder::new("pca")
             .mix_key(self.snapshots_key())
             .mix(&self.scene.pca)
+            .finish()
+    }
+
+    pub fn train_key(&self) -> u64 {
+        KeyBuilder::new("train")
+            .mix_key(self.pca_key())
+            .mix(&self.scene.autoencoder)
             .finish()
     }
 
@@ -269,6 +297,67 @@ impl<'a> Pipeline<'a> {
         })
     }
 
+    /// Stage `train`: the autoencoder on the snapshots' PCA coefficients, the basis frozen.
+    pub fn train(&mut self, progress: Progress<'_>) -> Result<TrainedModel> {
+        let key = self.train_key();
+        self.stage("train", key, |p| {
+            let snaps = p.snapshots(progress)?;
+            let fit = p.pca(progress)?;
+            let basis = &fit.basis;
+            let s =
+                faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+            let q = basis.project_matrix(s);
+            let error_of = |ae: &nn::Autoencoder| -> f64 {
+                match ae.reconstruct_batch(q.as_ref()) {
+                    Ok(qh) => max_vertex_distance(basis.basis_ref(), qh.as_ref(), s),
+                    Err(_) => f64::INFINITY,
+                }
+            };
+            let start = Instant::now();
+            let cfg = &p.scene.autoencoder;
+            let search = nn::train_search(q.as_ref(), cfg, error_of, |_, r| {
+                progress(r.epoch, r.epochs)
+            })
+            .map_err(|e| anyhow::anyhow!("{}: stage train: {e}", p.scene.source))?;
+            let train_seconds = start.elapsed().as_secs_f64();
+            let chosen = search.chosen_trial();
+            let d = chosen.latent_dim;
+            let pca_error_at_latent_dim = if d <= basis.k() {
+                basis.truncate(d)?.max_group_error(s, 3)?
+            } else {
+                f64::NAN
+            };
+            let mut pca_k_matching = None;
+            for k in 1..=basis.k() {
+                let e = match fit.max_vertex_error_per_k.get(k - 1) {
+                    Some(&e) => e,
+                    None => basis.truncate(k)?.max_group_error(s, 3)?,
+                };
+                if e <= chosen.error {
+                    pca_k_matching = Some(k);
+                    break;
+                }
+            }
+            Ok(TrainedModel {
+                model: chosen.outcome.model.clone(),
+                latent_dim: d,
+                pca_k: basis.k(),
+                history: chosen.outcome.history.clone(),
+                best_epoch: chosen.outcome.best_epoch,
+                stopped_early: chosen.outcome.stopped_early,
+                trials: search
+                    .trials
+                    .iter()
+                    .map(|t| (t.latent_dim, t.error))
+                    .collect(),
+                max_vertex_error: chosen.error,
+                pca_error_at_latent_dim,
+                pca_k_matching,
+                train_seconds,
+            })
+        })
+    }
+
     /// The full-space simulation of test trajectory `trajectory` (cached stage `reference`).
     pub fn reference(&mut self, trajectory: usize, progress: Progress<'_>) -> Result<Reference> {
         let key = self.reference_key(trajectory);
@@ -328,4 +417,73 @@ impl<'a> Pipeline<'a> {
 
 fn shard_len(total: usize, (index, count): (usize, usize)) -> usize {
     (index..total).step_by(count.max(1)).count()
+}
+
+/// Largest ‖u_v − (U q̂)_v‖ over vertices v and snapshot columns, with u the snapshots.
+fn max_vertex_distance(
+    basis: faer::MatRef<'_, f64>,
+    coefficients: faer::MatRef<'_, f64>,
+    snapshots: faer::MatRef<'_, f64>,
+) -> f64 {
+    let rec = basis * coefficients;
+    let mut worst: f64 = 0.0;
+    for j in 0..snapshots.ncols() {
+        for v in 0..snapshots.nrows() / 3 {
+            let mut d2 = 0.0;
+            for c in 0..3 {
+                let d = rec[(3 * v + c, j)] - snapshots[(3 * v + c, j)];
+                d2 += d * d;
+            }
+            worst = worst.max(d2);
+        }
+    }
+    worst.sqrt()
+}
+
+impl TrainedModel {
+    /// Writes `loss.csv` (epoch, training and validation loss) and `loss.svg` into `dir`.
+    pub fn write_loss_curve(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let mut csv = String::from("epoch,train_loss,validation_loss\n");
+        for r in &self.history {
+            let v = r.validation_loss.map(|v| v.to_string()).unwrap_or_default();
+            csv.push_str(&format!("{},{},{}\n", r.epoch, r.train_loss, v));
+        }
+        fem_core::io::write_atomic(&dir.join("loss.csv"), csv.as_bytes())?;
+        let mut series = vec![crate::plot::Series {
+            name: "training".into(),
+            points: self
+                .history
+                .iter()
+                .map(|r| (r.epoch as f64, r.train_loss))
+                .collect(),
+            line: true,
+        }];
+        if self.history.iter().any(|r| r.validation_loss.is_some()) {
+            series.push(crate::plot::Series {
+                name: "validation".into(),
+                points: self
+                    .history
+                    .iter()
+                    .filter_map(|r| Some((r.epoch as f64, r.validation_loss?)))
+                    .collect(),
+                line: true,
+            });
+        }
+        let plot = crate::plot::Plot {
+            title: format!(
+                "autoencoder {} → {} → {} (MSE, scaled units)",
+                self.pca_k, self.latent_dim, self.pca_k
+            ),
+            x_label: "epoch".into(),
+            y_label: "loss".into(),
+            x_scale: crate::plot::Scale::Linear,
+            y_scale: crate::plot::Scale::Log,
+        };
+        fem_core::io::write_atomic(
+            &dir.join("loss.svg"),
+            crate::plot::svg(&plot, &series).as_bytes(),
+        )?;
+        Ok(())
+    }
 }

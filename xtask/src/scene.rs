@@ -44,6 +44,9 @@ pub struct Scene {
     /// Dimension selection of the PCA basis (stage `pca`).
     #[serde(default)]
     pub pca: PcaConfig,
+    /// The autoencoder on the PCA coefficients (stage `train`).
+    #[serde(default)]
+    pub autoencoder: nn::AutoencoderConfig,
     /// Folder that relative paths in the scene are resolved against.
     #[serde(skip)]
     pub base_dir: PathBuf,
@@ -98,6 +101,19 @@ impl Scene {
         self.solver.check(&mut errors);
         self.training().check("training", &mut errors);
         self.test().check("test", &mut errors);
+        let mut nn_errors = Vec::new();
+        self.autoencoder.check(&mut nn_errors);
+        for e in nn_errors {
+            errors.push(match e {
+                nn::NnError::InvalidConfig { field, reason } => {
+                    FemError::InvalidConfig { field, reason }
+                }
+                other => FemError::InvalidConfig {
+                    field: "autoencoder".into(),
+                    reason: other.to_string(),
+                },
+            });
+        }
         let mut pca_errors = Vec::new();
         self.pca.check(&mut pca_errors);
         for e in pca_errors {

@@ -55,9 +55,11 @@ pub struct AutoencoderConfig {
     pub patience: usize,
     /// Seeds initialisation, the validation split and the mini-batch order.
     pub seed: u64,
-    /// Standardise every coefficient by the training data's mean and standard deviation before
-    /// the encoder (undone after the decoder), so the tiny trailing PCA coefficients train as well
-    /// as the large leading ones. Stored with the model.
+    /// Centre every coefficient on the training data's mean and divide all of them by one common
+    /// scale (the RMS of their standard deviations) before the encoder, undone after the decoder
+    /// ([`InputScaling::centre_uniform`](crate::InputScaling::centre_uniform)). The common scale
+    /// keeps the loss proportional to the mass-weighted displacement error for coefficients of a
+    /// mass-orthonormal basis. Stored with the model.
     pub input_scaling: bool,
 }
 

@@ -89,6 +89,38 @@ impl InputScaling {
         Self { shift, scale }
     }
 
+    /// Centring with one common scale: shift = mean of each feature, scale = the root mean square
+    /// of the features' standard deviations, the same for every feature.
+    ///
+    /// This is the scaling training uses. A common scale keeps the relative weight of the
+    /// features in the squared error, which matters for PCA coefficients of a mass-orthonormal
+    /// basis: there ‖q − q̂‖² is the mass-weighted displacement error, and per-feature
+    /// standardisation would make the tiny trailing coefficients count as much as the dominant
+    /// ones.
+    pub fn centre_uniform(data: MatRef<'_, f64>) -> Self {
+        let per_feature = Self::standardize(data);
+        let (k, n) = (data.nrows(), data.ncols());
+        let inv_n = 1.0 / n.max(1) as f64;
+        let mean_var = (0..k)
+            .map(|i| {
+                (0..n)
+                    .map(|j| (data[(i, j)] - per_feature.shift[i]).powi(2))
+                    .sum::<f64>()
+                    * inv_n
+            })
+            .sum::<f64>()
+            / k.max(1) as f64;
+        let common = if mean_var > 0.0 && mean_var.is_finite() {
+            mean_var.sqrt()
+        } else {
+            1.0
+        };
+        Self {
+            shift: per_feature.shift,
+            scale: vec![common; k],
+        }
+    }
+
     /// The number of features.
     pub fn dim(&self) -> usize {
         self.shift.len()

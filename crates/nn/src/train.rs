@@ -96,7 +96,7 @@ pub fn train(
     let val_data = columns(&validation_indices);
     let scaling = config
         .input_scaling
-        .then(|| InputScaling::standardize(train_data.as_ref()));
+        .then(|| InputScaling::centre_uniform(train_data.as_ref()));
     let mut model = Autoencoder::with_architecture(
         k,
         latent_dim,
