@@ -1,0 +1,410 @@
+//! The training matrix: per-element reduced forces over the training poses, normalised per pose.
+//!
+//! For pose i with PCA coefficients q_i (and, for a nonlinear subspace, the Jacobian
+//! J_i = ∂q/∂z, k × d), the reduced force of element e is
+//!
+//! g_{e,i} = J_iᵀ U_eᵀ f_e(U q_i),
+//!
+//! where f_e = ∂V_e/∂u_e is the element's 12-vector gradient and U_e the 12 × k rows of the basis
+//! for its four vertices (zero rows for pinned DOFs). The target is b_i = Σ_e g_{e,i}, the reduced
+//! force of the whole mesh. Each pose's rows (all g_{e,i} and b_i) are divided by ‖b_i‖, so every
+//! pose counts equally whatever its deformation; poses with ‖b_i‖ ≈ 0 (at rest) are skipped. The
+//! stacked matrix A has one column per element and P·d rows; b has P·d entries.
+//!
+//! Memory: A takes 8·P·d·m bytes (m elements) plus 8·P·3n for the pose displacements; 150 poses of
+//! a 49-dimensional basis on 30,000 elements is 1.8 GB. [`CubatureConfig::max_poses`] caps P (a
+//! seeded subsample, as AutoDef fitted on a subset of poses) and [`CubatureConfig::memory_limit_mb`]
+//! turns a larger request into [`CubatureError::MemoryLimit`] instead of an allocation failure.
+
+use faer::MatRef;
+use fem_core::constraints::FIXED;
+use fem_core::integrator::FullSpaceModel;
+use fem_core::rng::SplitMix64;
+use fem_core::with_material;
+use rayon::prelude::*;
+
+use crate::nnls::{check_finite, norm};
+use crate::{CubatureConfig, CubatureError};
+
+/// Poses whose target norm is below this fraction of the largest are treated as at rest.
+pub const ZERO_POSE_TOLERANCE: f64 = 1e-10;
+
+/// Salt of the pose-subsample stream, so it differs from the candidate stream of the same seed.
+const POSE_SALT: u64 = 0x7053_4D50_4C45_0001;
+
+/// Training poses: PCA coefficients and, for a nonlinear subspace, the decoder Jacobians.
+#[derive(Debug, Clone, Copy)]
+pub struct Poses<'a> {
+    /// q_i, k × P: one pose per column.
+    pub q: MatRef<'a, f64>,
+    /// J_i = ∂q/∂z at each pose, P matrices of k × d; `None` for the linear subspace (J = I).
+    pub jacobians: Option<&'a [MatRef<'a, f64>]>,
+}
+
+impl<'a> Poses<'a> {
+    /// Poses of the linear subspace (u = Uq, reduced coordinates q).
+    pub fn linear(q: MatRef<'a, f64>) -> Self {
+        Self { q, jacobians: None }
+    }
+
+    /// Poses of a nonlinear subspace q = q(z), with J_i = ∂q/∂z at pose i.
+    pub fn nonlinear(q: MatRef<'a, f64>, jacobians: &'a [MatRef<'a, f64>]) -> Self {
+        Self {
+            q,
+            jacobians: Some(jacobians),
+        }
+    }
+}
+
+/// The stacked, per-pose normalised reduced forces: A (rows × m, column-major, one column per
+/// element) and the target b = A·1.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainingMatrix {
+    rows: usize,
+    dim: usize,
+    elements: usize,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    pose_indices: Vec<usize>,
+    pose_scales: Vec<f64>,
+    skipped_poses: Vec<usize>,
+}
+
+impl TrainingMatrix {
+    /// Builds the training matrix of `model` for the basis U (`basis`, n_free × k column-major
+    /// on the model's free DOFs) at `poses`, keeping at most `config.max_poses` of them.
+    ///
+    /// Element forces are evaluated in parallel over elements; each element reads only the basis
+    /// rows of its own four vertices.
+    pub fn build(
+        model: &FullSpaceModel,
+        basis: &[f64],
+        k: usize,
+        poses: Poses<'_>,
+        config: &CubatureConfig,
+    ) -> Result<Self, CubatureError> {
+        config.validate()?;
+        let m = model.elements.len();
+        if m == 0 {
+            return Err(CubatureError::NoElements);
+        }
+        let nf = model.dofs.num_free();
+        if k == 0 || basis.len() != nf * k {
+            return Err(CubatureError::ShapeMismatch {
+                what: "basis U (free DOFs × k)",
+                expected: (nf, k),
+                found: (basis.len() / k.max(1), k),
+            });
+        }
+        let num_poses = poses.q.ncols();
+        if num_poses == 0 {
+            return Err(CubatureError::NoPoses);
+        }
+        if poses.q.nrows() != k {
+            return Err(CubatureError::ShapeMismatch {
+                what: "pose coefficients q (k × poses)",
+                expected: (k, num_poses),
+                found: (poses.q.nrows(), num_poses),
+            });
+        }
+        let dim = match poses.jacobians {
+            None => k,
+            Some(js) => {
+                if js.len() != num_poses {
+                    return Err(CubatureError::ShapeMismatch {
+                        what: "Jacobian list (one per pose)",
+                        expected: (num_poses, 1),
+                        found: (js.len(), 1),
+                    });
+                }
+                let d = js[0].ncols();
+                for j in js {
+                    if j.nrows() != k || j.ncols() != d || d == 0 {
+                        return Err(CubatureError::ShapeMismatch {
+                            what: "pose Jacobian J (k × d)",
+                            expected: (k, d.max(1)),
+                            found: (j.nrows(), j.ncols()),
+                        });
+                    }
+                }
+                d
+            }
+        };
+        check_finite("basis U", basis.iter().copied())?;
+        check_finite(
+            "pose coefficients q",
+            (0..num_poses).flat_map(|i| poses.q.col(i).iter().copied()),
+        )?;
+        if let Some(js) = poses.jacobians {
+            check_finite(
+                "pose Jacobians",
+                js.iter()
+                    .flat_map(|j| (0..j.ncols()).flat_map(move |c| j.col(c).iter().copied())),
+            )?;
+        }
+
+        let chosen = subsample(num_poses, config.max_poses, config.seed);
+        let np = chosen.len();
+        let n_full = model.num_full();
+        let rows = np * dim;
+        let bytes = 8u128 * (rows as u128 * m as u128 + np as u128 * n_full as u128);
+        let limit = config.memory_limit_mb as u128 * (1 << 20);
+        if bytes > limit {
+            return Err(CubatureError::MemoryLimit {
+                needed_mb: bytes.div_ceil(1 << 20).min(u64::MAX as u128) as u64,
+                limit_mb: config.memory_limit_mb,
+                poses: np,
+                dim,
+                elements: m,
+            });
+        }
+        tracing::debug!(
+            poses = np,
+            dim,
+            elements = m,
+            mib = (bytes >> 20) as u64,
+            "building the cubature training matrix"
+        );
+
+        // Full displacements u_i = U q_i of the chosen poses.
+        let dofs = &model.dofs;
+        let displacements: Vec<Vec<f64>> = chosen
+            .par_iter()
+            .map(|&i| {
+                let q = poses.q.col(i);
+                let mut u = vec![0.0; n_full];
+                for (j, &qj) in q.iter().enumerate() {
+                    if qj != 0.0 {
+                        for (r, &full) in dofs.free.iter().enumerate() {
+                            u[full] += basis[j * nf + r] * qj;
+                        }
+                    }
+                }
+                u
+            })
+            .collect();
+        let jacobians: Option<Vec<MatRef<'_, f64>>> = poses
+            .jacobians
+            .map(|js| chosen.iter().map(|&i| js[i]).collect());
+
+        let mut a = vec![0.0; rows * m];
+        let elements = &model.elements;
+        with_material!(&model.material, |material| {
+            a.par_chunks_mut(rows).enumerate().for_each_init(
+                || (vec![0.0; 12 * k], vec![0.0; k]),
+                |(ue, g), (e, column)| {
+                    // U_e, 12 × k row-major, zero rows for fixed DOFs.
+                    for (a_local, &v) in elements.tets[e].iter().enumerate() {
+                        for c in 0..3 {
+                            let row = &mut ue[(3 * a_local + c) * k..(3 * a_local + c + 1) * k];
+                            match dofs.index[3 * v + c] {
+                                FIXED => row.fill(0.0),
+                                r => {
+                                    for (j, x) in row.iter_mut().enumerate() {
+                                        *x = basis[j * nf + r];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    for (p, u) in displacements.iter().enumerate() {
+                        let (_, f, _) = elements.energy_gradient(material, e, u, 1.0);
+                        g.fill(0.0);
+                        for (l, &fl) in f.iter().enumerate() {
+                            if fl != 0.0 {
+                                for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
+                                    *gj += uj * fl;
+                                }
+                            }
+                        }
+                        let out = &mut column[p * dim..(p + 1) * dim];
+                        match &jacobians {
+                            None => out.copy_from_slice(g),
+                            Some(js) => {
+                                for (c, o) in out.iter_mut().enumerate() {
+                                    *o =
+                                        js[p].col(c).iter().zip(g.iter()).map(|(x, y)| x * y).sum();
+                                }
+                            }
+                        }
+                    }
+                },
+            );
+        });
+        drop(displacements);
+        // Reported in element order, so the error names the same element on every run.
+        if let Some(idx) = a.iter().position(|x| !x.is_finite()) {
+            return Err(CubatureError::NonFiniteForce {
+                element: idx / rows,
+                pose: chosen[(idx % rows) / dim],
+            });
+        }
+
+        let b = column_sum(&a, rows, m);
+        let scales: Vec<f64> = b.chunks(dim).map(norm).collect();
+        let largest = scales.iter().copied().fold(0.0, f64::max);
+        if largest == 0.0 {
+            return Err(CubatureError::ZeroTarget { poses: np });
+        }
+        let keep: Vec<usize> = (0..np)
+            .filter(|&p| scales[p] > ZERO_POSE_TOLERANCE * largest)
+            .collect();
+        let skipped_poses: Vec<usize> = (0..np)
+            .filter(|p| !keep.contains(p))
+            .map(|p| chosen[p])
+            .collect();
+        if !skipped_poses.is_empty() {
+            tracing::debug!(
+                skipped = skipped_poses.len(),
+                "poses at rest left out of the cubature fit"
+            );
+        }
+        let new_rows = keep.len() * dim;
+        let inv: Vec<f64> = keep.iter().map(|&p| 1.0 / scales[p]).collect();
+        // Compact and normalise in place: the new column e starts at or before the old one.
+        for e in 0..m {
+            for (kp, &p) in keep.iter().enumerate() {
+                let (src, dst) = (e * rows + p * dim, e * new_rows + kp * dim);
+                a.copy_within(src..src + dim, dst);
+                for x in &mut a[dst..dst + dim] {
+                    *x *= inv[kp];
+                }
+            }
+        }
+        a.truncate(new_rows * m);
+        a.shrink_to_fit();
+        let b = column_sum(&a, new_rows, m);
+        Ok(Self {
+            rows: new_rows,
+            dim,
+            elements: m,
+            a,
+            b,
+            pose_indices: keep.iter().map(|&p| chosen[p]).collect(),
+            pose_scales: keep.iter().map(|&p| scales[p]).collect(),
+            skipped_poses,
+        })
+    }
+
+    /// A training matrix from given data: A (rows × elements), b, and the number of reduced
+    /// coordinates per pose `dim` (rows must be a multiple of it). No normalisation is applied.
+    pub fn from_matrix(a: MatRef<'_, f64>, b: &[f64], dim: usize) -> Result<Self, CubatureError> {
+        let (rows, m) = (a.nrows(), a.ncols());
+        if m == 0 {
+            return Err(CubatureError::NoElements);
+        }
+        if rows == 0 || dim == 0 || rows % dim != 0 {
+            return Err(CubatureError::ShapeMismatch {
+                what: "training matrix A (poses·d × elements)",
+                expected: (rows.div_ceil(dim.max(1)).max(1) * dim.max(1), m),
+                found: (rows, m),
+            });
+        }
+        if b.len() != rows {
+            return Err(CubatureError::ShapeMismatch {
+                what: "target b",
+                expected: (rows, 1),
+                found: (b.len(), 1),
+            });
+        }
+        let data: Vec<f64> = (0..m).flat_map(|j| a.col(j).iter().copied()).collect();
+        check_finite("training matrix A", data.iter().copied())?;
+        check_finite("target b", b.iter().copied())?;
+        if b.iter().all(|&x| x == 0.0) {
+            return Err(CubatureError::ZeroTarget { poses: rows / dim });
+        }
+        Ok(Self {
+            rows,
+            dim,
+            elements: m,
+            a: data,
+            b: b.to_vec(),
+            pose_indices: (0..rows / dim).collect(),
+            pose_scales: vec![1.0; rows / dim],
+            skipped_poses: Vec::new(),
+        })
+    }
+
+    /// A as a faer view, rows × elements.
+    pub fn a(&self) -> MatRef<'_, f64> {
+        MatRef::from_column_major_slice(&self.a, self.rows, self.elements)
+    }
+
+    /// Column of element `e`: its normalised reduced forces over all poses.
+    pub fn column(&self, e: usize) -> &[f64] {
+        &self.a[e * self.rows..(e + 1) * self.rows]
+    }
+
+    /// The target b = Σ_e a_e (each pose block has unit norm after normalisation).
+    pub fn b(&self) -> &[f64] {
+        &self.b
+    }
+
+    /// Number of rows, poses × d.
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// Reduced coordinates per pose (k for the linear subspace, d for a nonlinear one).
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Number of elements (columns).
+    pub fn num_elements(&self) -> usize {
+        self.elements
+    }
+
+    /// Number of poses in the matrix.
+    pub fn num_poses(&self) -> usize {
+        self.pose_indices.len()
+    }
+
+    /// Index (into the poses given to [`TrainingMatrix::build`]) of each pose block, in order.
+    pub fn pose_indices(&self) -> &[usize] {
+        &self.pose_indices
+    }
+
+    /// ‖b_i‖ before normalisation for each pose block: the pose's unnormalised reduced force is
+    /// `pose_scales()[p]` times block p of [`TrainingMatrix::b`].
+    pub fn pose_scales(&self) -> &[f64] {
+        &self.pose_scales
+    }
+
+    /// Chosen poses left out because their target force was (numerically) zero.
+    pub fn skipped_poses(&self) -> &[usize] {
+        &self.skipped_poses
+    }
+}
+
+/// Row sums of a column-major rows × m matrix, in element order (deterministic), in parallel over
+/// blocks of rows.
+fn column_sum(a: &[f64], rows: usize, m: usize) -> Vec<f64> {
+    const BLOCK: usize = 64;
+    let mut b = vec![0.0; rows];
+    b.par_chunks_mut(BLOCK).enumerate().for_each(|(blk, out)| {
+        let r0 = blk * BLOCK;
+        for e in 0..m {
+            let col = &a[e * rows + r0..e * rows + r0 + out.len()];
+            for (o, x) in out.iter_mut().zip(col) {
+                *o += x;
+            }
+        }
+    });
+    b
+}
+
+/// The poses kept: all of them, or a seeded uniform subsample of `max` in increasing order.
+fn subsample(n: usize, max: usize, seed: u64) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..n).collect();
+    if n > max {
+        let mut rng = SplitMix64::new(seed ^ POSE_SALT);
+        for i in 0..max {
+            let j = i + rng.below(n - i);
+            idx.swap(i, j);
+        }
+        idx.truncate(max);
+        idx.sort_unstable();
+    }
+    idx
+}

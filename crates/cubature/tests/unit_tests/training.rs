@@ -1,0 +1,272 @@
+//! The training matrix against an independent whole-mesh assembly, pose handling and input errors.
+
+use cubature::{CubatureConfig, CubatureError, CubatureRule, Poses, TrainingMatrix};
+use faer::{Mat, MatRef};
+use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
+use fem_core::integrator::FullSpaceModel;
+use fem_core::rng::SplitMix64;
+use fem_core::with_material;
+
+use super::{beam, modal_basis, norm, normal_mat, random_poses};
+
+/// Uᵀ ∇V(Uq) through whole-mesh assembly, scatter and a dense projection (no per-element rows).
+fn projected_gradient(model: &FullSpaceModel, basis: &[f64], k: usize, q: &[f64]) -> Vec<f64> {
+    let nf = model.dofs.num_free();
+    let u_free: Vec<f64> = (0..nf)
+        .map(|r| (0..k).map(|j| basis[j * nf + r] * q[j]).sum())
+        .collect();
+    let mut u = vec![0.0; model.num_full()];
+    model.dofs.scatter(&u_free, &mut u);
+    let mut grad = vec![0.0; model.num_full()];
+    let mut buf = AssemblyBuffers::default();
+    with_material!(&model.material, |m| assembly::energy_gradient(
+        m,
+        &model.elements,
+        ElementSet::All,
+        &u,
+        &mut grad,
+        &mut buf
+    ));
+    let mut g_free = vec![0.0; nf];
+    model.dofs.gather(&grad, &mut g_free);
+    (0..k)
+        .map(|j| (0..nf).map(|r| basis[j * nf + r] * g_free[r]).sum())
+        .collect()
+}
+
+fn all_ones_rule(m: usize) -> CubatureRule {
+    CubatureRule {
+        elements: (0..m).collect(),
+        weights: vec![1.0; m],
+        training_error: 0.0,
+        tolerance_met: true,
+        error_curve: vec![],
+    }
+}
+
+fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    norm(&d) / norm(b)
+}
+
+#[test]
+fn linear_targets_match_whole_mesh_assembly() {
+    let model = beam([8, 2, 2]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 12, 3);
+    let config = CubatureConfig::default();
+    let data =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+    assert_eq!((data.num_poses(), data.dim(), data.rows()), (12, k, 12 * k));
+    assert_eq!(data.num_elements(), model.elements.len());
+    for (p, &i) in data.pose_indices().iter().enumerate() {
+        let qi: Vec<f64> = q.col(i).iter().copied().collect();
+        let expected = projected_gradient(&model, &basis, k, &qi);
+        let got: Vec<f64> = data.b()[p * k..(p + 1) * k]
+            .iter()
+            .map(|x| x * data.pose_scales()[p])
+            .collect();
+        assert!(
+            rel_diff(&got, &expected) <= 1e-12,
+            "pose {i}: {got:?} vs {expected:?}"
+        );
+        assert!((data.pose_scales()[p] - norm(&expected)).abs() <= 1e-12 * norm(&expected));
+        // Each normalised pose block has unit norm.
+        assert!((norm(&data.b()[p * k..(p + 1) * k]) - 1.0).abs() < 1e-12);
+    }
+    // All elements with weight one reproduce b.
+    let all = all_ones_rule(data.num_elements());
+    assert!(all.evaluate(&data).unwrap() <= 1e-12);
+    assert!(all.pose_errors(&data).unwrap().iter().all(|&e| e <= 1e-12));
+}
+
+#[test]
+fn nonlinear_targets_are_jacobian_transposed() {
+    let model = beam([8, 2, 2]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 6, 4);
+    let d = 3;
+    let mut rng = SplitMix64::new(21);
+    let js: Vec<Mat<f64>> = (0..6).map(|_| normal_mat(&mut rng, k, d)).collect();
+    let views: Vec<MatRef<'_, f64>> = js.iter().map(|j| j.as_ref()).collect();
+    let config = CubatureConfig::default();
+    let data = TrainingMatrix::build(
+        &model,
+        &basis,
+        k,
+        Poses::nonlinear(q.as_ref(), &views),
+        &config,
+    )
+    .unwrap();
+    assert_eq!((data.num_poses(), data.dim()), (6, d));
+    for (p, &i) in data.pose_indices().iter().enumerate() {
+        let qi: Vec<f64> = q.col(i).iter().copied().collect();
+        let g = projected_gradient(&model, &basis, k, &qi);
+        let expected: Vec<f64> = (0..d)
+            .map(|c| (0..k).map(|j| js[i][(j, c)] * g[j]).sum())
+            .collect();
+        let got: Vec<f64> = data.b()[p * d..(p + 1) * d]
+            .iter()
+            .map(|x| x * data.pose_scales()[p])
+            .collect();
+        assert!(
+            rel_diff(&got, &expected) <= 1e-12,
+            "pose {i}: {got:?} vs {expected:?}"
+        );
+    }
+    assert!(all_ones_rule(data.num_elements()).evaluate(&data).unwrap() <= 1e-12);
+}
+
+#[test]
+fn poses_at_rest_are_skipped() {
+    let model = beam([6, 2, 2]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let mut q = random_poses(&model, &basis, &lambda, 5, 8);
+    for j in 0..k {
+        q[(j, 2)] = 0.0;
+    }
+    let config = CubatureConfig::default();
+    let data =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+    assert_eq!(data.skipped_poses(), &[2]);
+    assert_eq!(data.pose_indices(), &[0, 1, 3, 4]);
+    assert_eq!(data.rows(), 4 * k);
+
+    let rest = Mat::<f64>::zeros(k, 3);
+    assert_eq!(
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(rest.as_ref()), &config),
+        Err(CubatureError::ZeroTarget { poses: 3 })
+    );
+}
+
+#[test]
+fn pose_subsample_is_seeded_and_consistent() {
+    let model = beam([6, 2, 2]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 30, 9);
+    let full = TrainingMatrix::build(
+        &model,
+        &basis,
+        k,
+        Poses::linear(q.as_ref()),
+        &CubatureConfig::default(),
+    )
+    .unwrap();
+    let config = CubatureConfig {
+        max_poses: 7,
+        seed: 4,
+        ..Default::default()
+    };
+    let sub = TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+    assert_eq!(sub.num_poses(), 7);
+    let idx = sub.pose_indices().to_vec();
+    assert!(idx.windows(2).all(|w| w[0] < w[1]) && *idx.last().unwrap() < 30);
+    // Same rows as the full build.
+    for (p, &i) in idx.iter().enumerate() {
+        for e in [0, 17, sub.num_elements() - 1] {
+            assert_eq!(
+                &sub.column(e)[p * k..(p + 1) * k],
+                &full.column(e)[i * k..(i + 1) * k]
+            );
+        }
+    }
+    let again =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+    assert_eq!(again, sub);
+    let other = CubatureConfig { seed: 5, ..config };
+    let other =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &other).unwrap();
+    assert_ne!(other.pose_indices(), sub.pose_indices());
+}
+
+#[test]
+fn memory_limit_is_enforced() {
+    let model = beam([20, 4, 4]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 40, 1);
+    // 40 poses × 10 × 1920 elements × 8 bytes plus 40 displacements ≈ 6.3 MiB.
+    let bytes = 8 * (40 * k * model.elements.len() + 40 * model.num_full());
+    let expected_mb = bytes.div_ceil(1 << 20) as u64;
+    assert_eq!(expected_mb, 7);
+    let config = CubatureConfig {
+        memory_limit_mb: 5,
+        ..Default::default()
+    };
+    match TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config) {
+        Err(e @ CubatureError::MemoryLimit { needed_mb, .. }) => {
+            assert_eq!(needed_mb, expected_mb);
+            assert!(e.to_string().contains("cubature.memory_limit_mb"), "{e}")
+        }
+        other => panic!("expected a memory-limit error, got {other:?}"),
+    }
+    let fits = CubatureConfig {
+        memory_limit_mb: 5,
+        max_poses: 30,
+        ..Default::default()
+    };
+    assert!(TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &fits).is_ok());
+}
+
+#[test]
+fn bad_input_is_reported() {
+    let model = beam([4, 1, 1]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 3, 2);
+    let c = CubatureConfig::default();
+    let build = |basis: &[f64], k: usize, poses: Poses<'_>| {
+        TrainingMatrix::build(&model, basis, k, poses, &c)
+    };
+    assert!(matches!(
+        build(&basis[1..], k, Poses::linear(q.as_ref())),
+        Err(CubatureError::ShapeMismatch { .. })
+    ));
+    let q_short = Mat::<f64>::zeros(k - 1, 3);
+    assert!(matches!(
+        build(&basis, k, Poses::linear(q_short.as_ref())),
+        Err(CubatureError::ShapeMismatch { .. })
+    ));
+    let none = Mat::<f64>::zeros(k, 0);
+    assert_eq!(
+        build(&basis, k, Poses::linear(none.as_ref())),
+        Err(CubatureError::NoPoses)
+    );
+    let mut q_nan = q.clone();
+    q_nan[(1, 2)] = f64::NAN;
+    assert!(matches!(
+        build(&basis, k, Poses::linear(q_nan.as_ref())),
+        Err(CubatureError::NonFiniteInput { index, .. }) if index == 2 * k + 1
+    ));
+    let j = Mat::<f64>::zeros(k, 2);
+    let two = [j.as_ref(), j.as_ref()];
+    assert!(matches!(
+        build(&basis, k, Poses::nonlinear(q.as_ref(), &two)),
+        Err(CubatureError::ShapeMismatch { .. })
+    ));
+    let bad_config = CubatureConfig {
+        max_poses: 0,
+        ..Default::default()
+    };
+    assert!(matches!(
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &bad_config),
+        Err(CubatureError::InvalidConfig { .. })
+    ));
+}
+
+#[test]
+fn from_matrix_checks_its_input() {
+    let a = faer::mat![[1.0, 2.0], [3.0, 4.0], [5.0, 6.0], [7.0, 8.0]];
+    let data = TrainingMatrix::from_matrix(a.as_ref(), &[3.0, 7.0, 11.0, 15.0], 2).unwrap();
+    assert_eq!(
+        (data.rows(), data.num_poses(), data.num_elements()),
+        (4, 2, 2)
+    );
+    assert_eq!(data.column(1), &[2.0, 4.0, 6.0, 8.0]);
+    assert!(matches!(
+        TrainingMatrix::from_matrix(a.as_ref(), &[1.0; 4], 3),
+        Err(CubatureError::ShapeMismatch { .. })
+    ));
+    assert!(matches!(
+        TrainingMatrix::from_matrix(a.as_ref(), &[0.0; 4], 2),
+        Err(CubatureError::ZeroTarget { .. })
+    ));
+}
