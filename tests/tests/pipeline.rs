@@ -125,12 +125,18 @@ fn a_tiny_scene_runs_end_to_end() {
     let opts = RunOptions {
         out: out.clone(),
         every: 4,
-        methods: vec![Method::Full, Method::Pca],
+        methods: vec![Method::Full, Method::Pca, Method::PcaCubature],
         trajectory: 0,
     };
     let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
-    assert_eq!(rows.len(), 2);
-    let (full, pca) = (&rows[0], &rows[1]);
+    assert_eq!(rows.len(), 3);
+    let (full, pca, cub) = (&rows[0], &rows[1], &rows[2]);
+    assert_eq!(cub.method, "pca-cubature");
+    assert!(cub.cubature_elements < full.cubature_elements, "{cub:?}");
+    assert!(
+        cub.mean_rel_error.is_finite() && cub.max_rel_error < 1.0,
+        "{cub:?}"
+    );
     assert_eq!(full.method, "full");
     assert_eq!(full.mean_rel_error, 0.0);
     assert_eq!(pca.dim, 6);
@@ -153,7 +159,7 @@ fn a_tiny_scene_runs_end_to_end() {
         assert!(report[1].get(key).is_some(), "report.json lacks {key}");
     }
     assert!(out.join("report.md").is_file());
-    for m in ["full", "pca"] {
+    for m in ["full", "pca", "pca-cubature"] {
         let pvd = std::fs::read_to_string(out.join(m).join("series.pvd")).unwrap();
         // Frames 0, 4, 8 and the last (12).
         assert_eq!(pvd.matches("<DataSet").count(), 4, "{m}: {pvd}");

@@ -42,7 +42,7 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         every: usize,
         /// Methods to compare.
-        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::Pca])]
+        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::Pca, MethodArg::PcaCubature])]
         methods: Vec<MethodArg>,
         /// Held-out test trajectory to simulate.
         #[arg(long, default_value_t = 0)]
@@ -86,6 +86,11 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Stage `cubature`: optimized cubature for the PCA subspace (runs earlier stages if needed).
+    Cubature {
+        #[command(flatten)]
+        common: Common,
+    },
     /// Stage `train`: the autoencoder on the PCA coefficients (runs earlier stages if needed);
     /// writes the loss curve to out/<scene>/train/.
     Train {
@@ -106,6 +111,7 @@ enum Command {
 enum MethodArg {
     Full,
     Pca,
+    PcaCubature,
 }
 
 impl From<MethodArg> for Method {
@@ -113,6 +119,7 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Full => Method::Full,
             MethodArg::Pca => Method::Pca,
+            MethodArg::PcaCubature => Method::PcaCubature,
         }
     }
 }
@@ -127,6 +134,7 @@ enum SolverArg {
 enum StageArg {
     Snapshots,
     Pca,
+    Cubature,
     Train,
 }
 
@@ -325,6 +333,28 @@ fn dispatch(cli: Cli) -> Result<()> {
             print_pca(&fit);
             Ok(())
         }
+        Command::Cubature { common } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            let c = p.cubature(&stage_progress)?;
+            println!(
+                "{} of {} elements, relative force error {:.3e} on the training poses ({}met), {:.3e} on the held-out trajectory, fitted in {:.2} s",
+                c.rule.len(),
+                p.model.elements.len(),
+                c.rule.training_error,
+                if c.rule.tolerance_met {
+                    ""
+                } else {
+                    "tolerance not "
+                },
+                c.held_out_error,
+                c.fit_seconds
+            );
+            let dir = root.join("out").join(&scene.name).join("cubature");
+            c.write_error_curve(&dir)?;
+            println!("error curve: {}", dir.join("error.svg").display());
+            Ok(())
+        }
         Command::Train { common } => {
             let scene = load_scene(common.scene.as_ref())?;
             let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
@@ -344,6 +374,9 @@ fn dispatch(cli: Cli) -> Result<()> {
                 }
                 StageArg::Pca => {
                     p.pca(&stage_progress)?;
+                }
+                StageArg::Cubature => {
+                    p.cubature(&stage_progress)?;
                 }
                 StageArg::Train => {
                     p.train(&stage_progress)?;

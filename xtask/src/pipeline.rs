@@ -21,7 +21,7 @@ use crate::artifact::{self, Expect, KeyBuilder, fnv1a};
 use crate::scene::Scene;
 
 /// The stages, in order.
-pub const STAGES: [&str; 3] = ["snapshots", "pca", "train"];
+pub const STAGES: [&str; 4] = ["snapshots", "pca", "cubature", "train"];
 
 /// What happened to one stage in a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -45,6 +45,15 @@ pub struct Reference {
     pub step_seconds: Vec<f64>,
     /// Solver iterations of each step.
     pub iterations: Vec<usize>,
+}
+
+/// A cubature rule for the PCA subspace and how well it generalises (stage `cubature`).
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct FittedCubature {
+    pub rule: cubature::CubatureRule,
+    /// Relative force error on poses of the held-out test trajectory.
+    pub held_out_error: f64,
+    pub fit_seconds: f64,
 }
 
 /// The trained autoencoder and how it compares with PCA on the snapshots (stage `train`).
@@ -139,6 +148,14 @@ impl<'a> Pipeline<'a> {
         KeyBuilder::new("pca")
             .mix_key(self.snapshots_key())
             .mix(&self.scene.pca)
+            .finish()
+    }
+
+    pub fn cubature_key(&self) -> u64 {
+        KeyBuilder::new("cubature")
+            .mix_key(self.pca_key())
+            .mix_key(self.reference_key(0))
+            .mix(&self.scene.cubature)
             .finish()
     }
 
@@ -294,6 +311,56 @@ impl<'a> Pipeline<'a> {
                 faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
             PcaBasis::fit(mat, Some(&mass), &p.scene.pca, 3)
                 .map_err(|e| anyhow::anyhow!("{}: stage pca: {e}", p.scene.source))
+        })
+    }
+
+    /// Stage `cubature`: a weighted element set reproducing the PCA subspace's reduced elastic
+    /// forces over the snapshots, with its error on the held-out test trajectory.
+    pub fn cubature(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+        let key = self.cubature_key();
+        self.stage("cubature", key, |p| {
+            let snaps = p.snapshots(progress)?;
+            let fit = p.pca(progress)?;
+            let reference = p.reference(0, progress)?;
+            let basis = &fit.basis;
+            let k = basis.k();
+            let columns = basis_columns(basis);
+            let cfg = &p.scene.cubature;
+            let project = |frames: faer::MatRef<'_, f64>| basis.project_matrix(frames);
+            let s =
+                faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+            let q_train = project(s);
+            let err = |e: cubature::CubatureError| {
+                anyhow::anyhow!("{}: stage cubature: {e}", p.scene.source)
+            };
+            let start = Instant::now();
+            let train = cubature::TrainingMatrix::build(
+                &p.model,
+                &columns,
+                k,
+                cubature::Poses::linear(q_train.as_ref()),
+                cfg,
+            )
+            .map_err(err)?;
+            let rule = cubature::fit(&train, cfg).map_err(err)?;
+            let fit_seconds = start.elapsed().as_secs_f64();
+            let held: Vec<f64> = reference.frames.iter().flatten().copied().collect();
+            let h = faer::MatRef::from_column_major_slice(&held, snaps.dim, reference.frames.len());
+            let q_test = project(h);
+            let test = cubature::TrainingMatrix::build(
+                &p.model,
+                &columns,
+                k,
+                cubature::Poses::linear(q_test.as_ref()),
+                cfg,
+            )
+            .map_err(err)?;
+            let held_out_error = rule.evaluate(&test).map_err(err)?;
+            Ok(FittedCubature {
+                rule,
+                held_out_error,
+                fit_seconds,
+            })
         })
     }
 
@@ -482,6 +549,54 @@ impl TrainedModel {
         };
         fem_core::io::write_atomic(
             &dir.join("loss.svg"),
+            crate::plot::svg(&plot, &series).as_bytes(),
+        )?;
+        Ok(())
+    }
+}
+
+/// U as one column-major slice (n_free × k).
+pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
+    (0..basis.k())
+        .flat_map(|j| basis.column(j).iter().copied())
+        .collect()
+}
+
+impl FittedCubature {
+    /// Writes `error.csv` (elements, relative force error on the training poses) and `error.svg`.
+    pub fn write_error_curve(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let mut csv = String::from("elements,relative_error\n");
+        for (n, e) in &self.rule.error_curve {
+            csv.push_str(&format!("{n},{e}\n"));
+        }
+        fem_core::io::write_atomic(&dir.join("error.csv"), csv.as_bytes())?;
+        let series = vec![
+            crate::plot::Series {
+                name: "training poses".into(),
+                points: self
+                    .rule
+                    .error_curve
+                    .iter()
+                    .map(|&(n, e)| (n as f64, e))
+                    .collect(),
+                line: true,
+            },
+            crate::plot::Series {
+                name: "held-out".into(),
+                points: vec![(self.rule.len() as f64, self.held_out_error)],
+                line: false,
+            },
+        ];
+        let plot = crate::plot::Plot {
+            title: "optimized cubature: relative reduced-force error".into(),
+            x_label: "elements".into(),
+            y_label: "relative error".into(),
+            x_scale: crate::plot::Scale::Linear,
+            y_scale: crate::plot::Scale::Log,
+        };
+        fem_core::io::write_atomic(
+            &dir.join("error.svg"),
             crate::plot::svg(&plot, &series).as_bytes(),
         )?;
         Ok(())

@@ -44,6 +44,9 @@ pub struct Scene {
     /// Dimension selection of the PCA basis (stage `pca`).
     #[serde(default)]
     pub pca: PcaConfig,
+    /// Optimized cubature of the reduced elastic forces (stage `cubature`).
+    #[serde(default)]
+    pub cubature: cubature::CubatureConfig,
     /// The autoencoder on the PCA coefficients (stage `train`).
     #[serde(default)]
     pub autoencoder: nn::AutoencoderConfig,
@@ -101,6 +104,19 @@ impl Scene {
         self.solver.check(&mut errors);
         self.training().check("training", &mut errors);
         self.test().check("test", &mut errors);
+        let mut cub_errors = Vec::new();
+        self.cubature.check(&mut cub_errors);
+        for e in cub_errors {
+            errors.push(match e {
+                cubature::CubatureError::InvalidConfig { field, reason } => {
+                    FemError::InvalidConfig { field, reason }
+                }
+                other => FemError::InvalidConfig {
+                    field: "cubature".into(),
+                    reason: other.to_string(),
+                },
+            });
+        }
         let mut nn_errors = Vec::new();
         self.autoencoder.check(&mut nn_errors);
         for e in nn_errors {

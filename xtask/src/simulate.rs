@@ -22,6 +22,8 @@ pub enum Method {
     Full,
     /// Linear model reduction with the PCA basis, every element evaluated.
     Pca,
+    /// The PCA basis with the elastic energy on the cubature elements only.
+    PcaCubature,
 }
 
 impl Method {
@@ -29,6 +31,7 @@ impl Method {
         match self {
             Method::Full => "full",
             Method::Pca => "pca",
+            Method::PcaCubature => "pca-cubature",
         }
     }
 }
@@ -123,13 +126,17 @@ impl Runner {
     ) -> Result<Self> {
         Ok(match method {
             Method::Full => Runner::Full(Simulator::new(model, time, solver)?),
-            Method::Pca => {
+            Method::Pca | Method::PcaCubature => {
                 let fit = pipeline.pca(progress)?;
                 let basis = &fit.basis;
-                let columns: Vec<f64> = (0..basis.k())
-                    .flat_map(|j| basis.column(j).iter().copied())
-                    .collect();
-                let space = ReducedSpace::new(&model, &columns, basis.k(), None)?;
+                let columns = crate::pipeline::basis_columns(basis);
+                let cubature = if method == Method::PcaCubature {
+                    let c = pipeline.cubature(progress)?;
+                    Some((c.rule.elements, c.rule.weights))
+                } else {
+                    None
+                };
+                let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
                 Runner::Pca(ReducedSimulator::new(
                     model,
                     space,
