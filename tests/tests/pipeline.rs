@@ -31,6 +31,11 @@ frames_per_schedule = 8
 frames_per_schedule = 12
 [pca]
 dimension = 6
+[autoencoder]
+latent_dim = 2
+hidden = [16, 16]
+epochs = 150
+batch_size = 16
 "#;
 
 fn scene(text: &str) -> Scene {
@@ -125,12 +130,23 @@ fn a_tiny_scene_runs_end_to_end() {
     let opts = RunOptions {
         out: out.clone(),
         every: 4,
-        methods: vec![Method::Full, Method::Pca, Method::PcaCubature],
+        methods: vec![
+            Method::Full,
+            Method::Pca,
+            Method::PcaCubature,
+            Method::Neural,
+            Method::NeuralCubature,
+        ],
         trajectory: 0,
     };
     let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
-    assert_eq!(rows.len(), 3);
+    assert_eq!(rows.len(), 5);
     let (full, pca, cub) = (&rows[0], &rows[1], &rows[2]);
+    for neural in &rows[3..] {
+        assert_eq!(neural.dim, 2, "{neural:?}");
+        assert!(neural.mean_rel_error.is_finite(), "{neural:?}");
+    }
+    assert!(rows[4].cubature_elements < full.cubature_elements);
     assert_eq!(cub.method, "pca-cubature");
     assert!(cub.cubature_elements < full.cubature_elements, "{cub:?}");
     assert!(
@@ -159,7 +175,7 @@ fn a_tiny_scene_runs_end_to_end() {
         assert!(report[1].get(key).is_some(), "report.json lacks {key}");
     }
     assert!(out.join("report.md").is_file());
-    for m in ["full", "pca", "pca-cubature"] {
+    for m in ["full", "pca", "pca-cubature", "neural", "neural-cubature"] {
         let pvd = std::fs::read_to_string(out.join(m).join("series.pvd")).unwrap();
         // Frames 0, 4, 8 and the last (12).
         assert_eq!(pvd.matches("<DataSet").count(), 4, "{m}: {pvd}");

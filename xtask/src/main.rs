@@ -42,7 +42,7 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         every: usize,
         /// Methods to compare.
-        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::Pca, MethodArg::PcaCubature])]
+        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
         methods: Vec<MethodArg>,
         /// Held-out test trajectory to simulate.
         #[arg(long, default_value_t = 0)]
@@ -112,6 +112,8 @@ enum MethodArg {
     Full,
     Pca,
     PcaCubature,
+    Neural,
+    NeuralCubature,
 }
 
 impl From<MethodArg> for Method {
@@ -120,6 +122,8 @@ impl From<MethodArg> for Method {
             MethodArg::Full => Method::Full,
             MethodArg::Pca => Method::Pca,
             MethodArg::PcaCubature => Method::PcaCubature,
+            MethodArg::Neural => Method::Neural,
+            MethodArg::NeuralCubature => Method::NeuralCubature,
         }
     }
 }

@@ -318,49 +318,81 @@ impl<'a> Pipeline<'a> {
     /// forces over the snapshots, with its error on the held-out test trajectory.
     pub fn cubature(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
         let key = self.cubature_key();
-        self.stage("cubature", key, |p| {
-            let snaps = p.snapshots(progress)?;
-            let fit = p.pca(progress)?;
-            let reference = p.reference(0, progress)?;
-            let basis = &fit.basis;
-            let k = basis.k();
-            let columns = basis_columns(basis);
-            let cfg = &p.scene.cubature;
-            let project = |frames: faer::MatRef<'_, f64>| basis.project_matrix(frames);
-            let s =
-                faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
-            let q_train = project(s);
-            let err = |e: cubature::CubatureError| {
-                anyhow::anyhow!("{}: stage cubature: {e}", p.scene.source)
+        self.stage("cubature", key, |p| p.fit_cubature(false, progress))
+    }
+
+    /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
+    /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
+    pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+        let key = KeyBuilder::new("cubature-neural")
+            .mix_key(self.cubature_key())
+            .mix_key(self.train_key())
+            .finish();
+        self.stage("cubature-neural", key, |p| p.fit_cubature(true, progress))
+    }
+
+    fn fit_cubature(&mut self, neural: bool, progress: Progress<'_>) -> Result<FittedCubature> {
+        let snaps = self.snapshots(progress)?;
+        let fit = self.pca(progress)?;
+        let reference = self.reference(0, progress)?;
+        let trained = if neural {
+            Some(self.train(progress)?)
+        } else {
+            None
+        };
+        let basis = &fit.basis;
+        let k = basis.k();
+        let columns = basis_columns(basis);
+        let cfg = &self.scene.cubature;
+        let err = |e: cubature::CubatureError| {
+            anyhow::anyhow!("{}: stage cubature: {e}", self.scene.source)
+        };
+        // Poses in the subspace: q itself, or decode(encode(q)) with the decoder Jacobian there.
+        let poses = |frames: faer::MatRef<'_, f64>| -> (faer::Mat<f64>, Vec<faer::Mat<f64>>) {
+            let q = basis.project_matrix(frames);
+            let Some(t) = &trained else {
+                return (q, Vec::new());
             };
-            let start = Instant::now();
-            let train = cubature::TrainingMatrix::build(
-                &p.model,
-                &columns,
-                k,
-                cubature::Poses::linear(q_train.as_ref()),
-                cfg,
-            )
-            .map_err(err)?;
-            let rule = cubature::fit(&train, cfg).map_err(err)?;
-            let fit_seconds = start.elapsed().as_secs_f64();
-            let held: Vec<f64> = reference.frames.iter().flatten().copied().collect();
-            let h = faer::MatRef::from_column_major_slice(&held, snaps.dim, reference.frames.len());
-            let q_test = project(h);
-            let test = cubature::TrainingMatrix::build(
-                &p.model,
-                &columns,
-                k,
-                cubature::Poses::linear(q_test.as_ref()),
-                cfg,
-            )
-            .map_err(err)?;
-            let held_out_error = rule.evaluate(&test).map_err(err)?;
-            Ok(FittedCubature {
-                rule,
-                held_out_error,
-                fit_seconds,
-            })
+            let ae = &t.model;
+            let d = ae.latent_dim();
+            let mut ws = ae.workspace();
+            let (mut z, mut qh, mut jac) = (vec![0.0; d], vec![0.0; k], vec![0.0; k * d]);
+            let mut decoded = faer::Mat::<f64>::zeros(k, q.ncols());
+            let mut jacobians = Vec::with_capacity(q.ncols());
+            for j in 0..q.ncols() {
+                let col: Vec<f64> = (0..k).map(|i| q[(i, j)]).collect();
+                ae.encode(&col, &mut z, &mut ws);
+                ae.decode(&z, &mut qh, &mut ws);
+                ae.decode_jacobian(&z, &mut jac, &mut ws);
+                for i in 0..k {
+                    decoded[(i, j)] = qh[i];
+                }
+                jacobians.push(faer::Mat::from_fn(k, d, |r, c| jac[c * k + r]));
+            }
+            (decoded, jacobians)
+        };
+        let build = |frames: faer::MatRef<'_, f64>| -> Result<cubature::TrainingMatrix> {
+            let (q, jac) = poses(frames);
+            let refs: Vec<faer::MatRef<'_, f64>> = jac.iter().map(|m| m.as_ref()).collect();
+            let p = if refs.is_empty() {
+                cubature::Poses::linear(q.as_ref())
+            } else {
+                cubature::Poses::nonlinear(q.as_ref(), &refs)
+            };
+            cubature::TrainingMatrix::build(&self.model, &columns, k, p, cfg).map_err(err)
+        };
+        let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+        let start = Instant::now();
+        let train = build(s)?;
+        let rule = cubature::fit(&train, cfg).map_err(err)?;
+        let fit_seconds = start.elapsed().as_secs_f64();
+        let held: Vec<f64> = reference.frames.iter().flatten().copied().collect();
+        let h = faer::MatRef::from_column_major_slice(&held, snaps.dim, reference.frames.len());
+        let held_out_error = rule.evaluate(&build(h)?).map_err(err)?;
+        Ok(FittedCubature {
+            rule,
+            held_out_error,
+            fit_seconds,
         })
     }
 

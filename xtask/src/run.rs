@@ -160,6 +160,7 @@ pub fn run(
                 let cubature_elements = match &runner {
                     Runner::Full(s) => s.model.elements.len(),
                     Runner::Pca(s) => s.space.elements.len(),
+                    Runner::Neural(s) => s.space.elements.len(),
                 };
                 MethodReport {
                     method: method.name().into(),

@@ -8,7 +8,9 @@ use anyhow::{Context, Result};
 use fem_core::integrator::{FullSpaceModel, Simulator, StepReport, TimeConfig};
 use fem_core::io::write_atomic;
 use fem_core::optim::{SolverConfig, SolverMethod};
-use latent_sim::{LinearSubspace, ReducedSimulator, ReducedSpace, ReducedStepReport};
+use latent_sim::{
+    LinearSubspace, NeuralSubspace, ReducedSimulator, ReducedSpace, ReducedStepReport, Subspace,
+};
 
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
@@ -24,6 +26,10 @@ pub enum Method {
     Pca,
     /// The PCA basis with the elastic energy on the cubature elements only.
     PcaCubature,
+    /// The autoencoder's latent space (decoder into the PCA basis), every element evaluated.
+    Neural,
+    /// The autoencoder's latent space with its own cubature rule: the paper's method.
+    NeuralCubature,
 }
 
 impl Method {
@@ -32,6 +38,8 @@ impl Method {
             Method::Full => "full",
             Method::Pca => "pca",
             Method::PcaCubature => "pca-cubature",
+            Method::Neural => "neural",
+            Method::NeuralCubature => "neural-cubature",
         }
     }
 }
@@ -96,6 +104,7 @@ pub struct SimulationResult {
 pub enum Runner {
     Full(Simulator),
     Pca(ReducedSimulator<LinearSubspace>),
+    Neural(ReducedSimulator<NeuralSubspace>),
 }
 
 impl std::fmt::Debug for Runner {
@@ -103,6 +112,7 @@ impl std::fmt::Debug for Runner {
         f.write_str(match self {
             Runner::Full(_) => "Runner::Full",
             Runner::Pca(_) => "Runner::Pca",
+            Runner::Neural(_) => "Runner::Neural",
         })
     }
 }
@@ -145,6 +155,26 @@ impl Runner {
                     solver,
                 )?)
             }
+            Method::Neural | Method::NeuralCubature => {
+                let fit = pipeline.pca(progress)?;
+                let trained = pipeline.train(progress)?;
+                let basis = &fit.basis;
+                let columns = crate::pipeline::basis_columns(basis);
+                let cubature = if method == Method::NeuralCubature {
+                    let c = pipeline.cubature_neural(progress)?;
+                    Some((c.rule.elements, c.rule.weights))
+                } else {
+                    None
+                };
+                let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
+                Runner::Neural(ReducedSimulator::new(
+                    model,
+                    space,
+                    NeuralSubspace::new(trained.model),
+                    time,
+                    solver,
+                )?)
+            }
         })
     }
 
@@ -164,6 +194,13 @@ impl Runner {
                     iterations: r.iterations,
                 }
             }
+            Runner::Neural(s) => {
+                let r = s.step()?;
+                StepInfo {
+                    seconds: r.wall_seconds,
+                    iterations: r.iterations,
+                }
+            }
         })
     }
 
@@ -172,6 +209,7 @@ impl Runner {
         match self {
             Runner::Full(s) => s.state.u.clone(),
             Runner::Pca(s) => s.full_displacement(),
+            Runner::Neural(s) => s.full_displacement(),
         }
     }
 
@@ -179,6 +217,7 @@ impl Runner {
         match self {
             Runner::Full(s) => s.state.time,
             Runner::Pca(s) => s.state.time,
+            Runner::Neural(s) => s.state.time,
         }
     }
 
@@ -186,6 +225,7 @@ impl Runner {
         match self {
             Runner::Full(s) => &s.model,
             Runner::Pca(s) => &s.model,
+            Runner::Neural(s) => &s.model,
         }
     }
 
@@ -194,6 +234,7 @@ impl Runner {
         match self {
             Runner::Full(s) => s.model.dofs.num_free(),
             Runner::Pca(s) => s.space.k,
+            Runner::Neural(s) => s.subspace.latent_dim(),
         }
     }
 }
@@ -268,6 +309,10 @@ pub fn simulate(
                 steps.push(r);
             }),
             Runner::Pca(s) => s.step().map_err(anyhow::Error::from).map(|r| {
+                times.push(r.wall_seconds);
+                reduced_steps.push(r);
+            }),
+            Runner::Neural(s) => s.step().map_err(anyhow::Error::from).map(|r| {
                 times.push(r.wall_seconds);
                 reduced_steps.push(r);
             }),

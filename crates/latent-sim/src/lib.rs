@@ -9,10 +9,12 @@
 //! of vertices that the element set S or a force touches are ever multiplied ("partial decode");
 //! the full displacement u = Uq is formed only when a frame is written out.
 
+mod neural;
 mod reduced;
 mod simulator;
 mod subspace;
 
+pub use neural::NeuralSubspace;
 pub use reduced::ReducedSpace;
 pub use simulator::{ReducedSimulator, ReducedState, ReducedStepReport};
 pub use subspace::{LinearSubspace, Subspace};

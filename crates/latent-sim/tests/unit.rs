@@ -7,7 +7,7 @@ use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use fem_core::optim::{SolverConfig, SolverMethod};
-use latent_sim::{LinearSubspace, ReducedSimulator, ReducedSpace};
+use latent_sim::{LinearSubspace, NeuralSubspace, ReducedSimulator, ReducedSpace, Subspace};
 
 fn model() -> FullSpaceModel {
     let mesh = box_mesh(&BoxSpec {
@@ -190,6 +190,59 @@ fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
                 diff <= 1e-7 * size,
                 "{method:?} frame {f}: {:.2e}",
                 diff / size
+            );
+        }
+    }
+}
+
+#[test]
+fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let ae =
+        nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    for cubature in [
+        None,
+        Some((vec![1usize, 4, 9, 15], vec![1.5, 0.5, 2.0, 1.0])),
+    ] {
+        let space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+        let mut sim = ReducedSimulator::new(
+            m.clone(),
+            space,
+            NeuralSubspace::new(ae.clone()),
+            time(10),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap();
+        for _ in 0..2 {
+            sim.step().unwrap();
+        }
+        let d = sim.subspace.latent_dim();
+        let z: Vec<f64> = sim
+            .state
+            .z
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
+            .collect();
+        let mut g = vec![0.0; d];
+        sim.objective(&z, &mut g);
+        let gnorm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+        assert!(gnorm > 0.0);
+        let mut scratch = vec![0.0; d];
+        for i in 0..d {
+            let h = 1e-6;
+            let (mut zp, mut zm) = (z.clone(), z.clone());
+            zp[i] += h;
+            zm[i] -= h;
+            let fd =
+                (sim.objective(&zp, &mut scratch) - sim.objective(&zm, &mut scratch)) / (2.0 * h);
+            assert!(
+                (fd - g[i]).abs() < 1e-6 * gnorm,
+                "cubature {}: component {i}: {fd} vs {}",
+                cubature.is_some(),
+                g[i]
             );
         }
     }
