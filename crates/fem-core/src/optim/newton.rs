@@ -65,6 +65,14 @@ pub fn newton<S: NewtonSystem + ?Sized>(
         }
         match armijo_backtracking(system, x, value, &g, &d, 1.0, &mut x_new, &mut g_new) {
             Some(ls) => {
+                tracing::debug!(
+                    step = params.step,
+                    iteration = it,
+                    relative_gradient = rel,
+                    alpha = ls.alpha,
+                    energy = ls.value,
+                    "Newton iteration"
+                );
                 x.copy_from_slice(&x_new);
                 std::mem::swap(&mut g, &mut g_new);
                 value = ls.value;
