@@ -44,6 +44,9 @@ impl Method {
     }
 }
 
+/// Smallest iteration cap of the reduced methods' L-BFGS (AutoDef used 500).
+pub const REDUCED_MIN_ITERATIONS: usize = 500;
+
 /// Which forces drive the simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Trajectory {
@@ -254,10 +257,12 @@ pub fn setup(
         ..scene.time.clone()
     };
     let mut solver = scene.solver.clone();
-    // Reduced methods default to preconditioned L-BFGS (the paper's solver): their Newton
-    // Hessian costs a k×k projection over every element per iteration.
+    // Reduced methods default to preconditioned L-BFGS (the paper's solver; their Newton
+    // Hessian costs a k×k projection over every element per iteration), with at least
+    // REDUCED_MIN_ITERATIONS iterations: quasi-Newton needs more, cheaper iterations than Newton.
     if opts.method != Method::Full {
         solver.method = SolverMethod::Lbfgs;
+        solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
     }
     if let Some(m) = opts.solver {
         solver.method = m;

@@ -82,8 +82,9 @@ pub struct ReducedSimulator<S: Subspace> {
     pub state: ReducedState,
     work: Work,
     lbfgs: Lbfgs,
-    /// For a linear subspace the preconditioner is constant and factorised once.
-    fixed_precond: Option<DenseFactor>,
+    /// For a linear subspace the preconditioner only changes when a force switches on or off:
+    /// it is factorised for the active set recorded beside it.
+    fixed_precond: Option<(Vec<bool>, DenseFactor)>,
 }
 
 /// Reusable buffers of one step.
@@ -125,7 +126,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let mut qz = vec![0.0; k];
         subspace.decode(&z, &mut qz);
         let n = model.num_full();
-        let mut sim = Self {
+        let sim = Self {
             state: ReducedState {
                 step: 0,
                 time: 0.0,
@@ -151,24 +152,38 @@ impl<S: Subspace> ReducedSimulator<S> {
             time,
             solver,
         };
-        if sim.subspace.is_linear() {
-            let p = sim.preconditioner_matrix();
-            sim.fixed_precond = Some(factor_dense(&p, d, "preconditioner")?);
-        }
         Ok(sim)
     }
 
-    /// Jᵀ (UᵀK₀U + UᵀMU/h²) J at the current z (d×d, column-major).
-    fn preconditioner_matrix(&mut self) -> Vec<f64> {
+    /// Jᵀ (UᵀK₀U + UᵀMU/h² + Σ k_s/n U_vᵀU_v) J at the current z (d×d, column-major): every
+    /// constant quadratic term of the step energy, including the springs active at time `t`
+    /// (a stiff spring left out of the preconditioner stalls L-BFGS along its direction).
+    fn preconditioner_matrix(&mut self, t: f64) -> Vec<f64> {
         let (k, d) = (self.space.k, self.subspace.latent_dim());
         let inv_h2 = self.inv_h2();
-        let a: Vec<f64> = self
+        let mut a: Vec<f64> = self
             .space
             .rest_stiffness
             .iter()
             .zip(&self.space.mass)
             .map(|(kk, m)| kk + inv_h2 * m)
             .collect();
+        for f in &self.model.forces {
+            if f.is_active(t) && f.stiffness > 0.0 {
+                let s = f.stiffness / f.vertices.len() as f64;
+                for &v in &f.vertices {
+                    let r = self.space.vertex_rows(v);
+                    for c in 0..3 {
+                        let row = &r[c * k..(c + 1) * k];
+                        for b in 0..k {
+                            for i in 0..k {
+                                a[b * k + i] += s * row[i] * row[b];
+                            }
+                        }
+                    }
+                }
+            }
+        }
         self.subspace.jacobian(&self.state.z, &mut self.work.jac);
         sandwich(&a, &self.work.jac, k, d)
     }
@@ -201,13 +216,22 @@ impl<S: Subspace> ReducedSimulator<S> {
         };
         let pstart = Instant::now();
         let mut varying = None;
-        if self.fixed_precond.is_none() && self.solver.method == SolverMethod::Lbfgs {
-            let p = self.preconditioner_matrix();
-            varying = Some(factor_dense(
-                &p,
-                self.subspace.latent_dim(),
-                "preconditioner",
-            )?);
+        if self.solver.method == SolverMethod::Lbfgs {
+            let d = self.subspace.latent_dim();
+            if self.subspace.is_linear() {
+                let active: Vec<bool> = self.model.forces.iter().map(|f| f.is_active(t)).collect();
+                if self
+                    .fixed_precond
+                    .as_ref()
+                    .is_none_or(|(a, _)| *a != active)
+                {
+                    let p = self.preconditioner_matrix(t);
+                    self.fixed_precond = Some((active, factor_dense(&p, d, "preconditioner")?));
+                }
+            } else {
+                let p = self.preconditioner_matrix(t);
+                varying = Some(factor_dense(&p, d, "preconditioner")?);
+            }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
         let mut z = self.state.z.clone();
@@ -227,10 +251,13 @@ impl<S: Subspace> ReducedSimulator<S> {
                 SolverMethod::Lbfgs => {
                     let pre = match varying.as_mut() {
                         Some(p) => p,
-                        None => self
-                            .fixed_precond
-                            .as_mut()
-                            .expect("linear subspaces factor once"),
+                        None => {
+                            &mut self
+                                .fixed_precond
+                                .as_mut()
+                                .expect("linear subspaces factor before the solve")
+                                .1
+                        }
                     };
                     self.lbfgs.minimize(&mut obj, pre, &mut z, params)?
                 }

@@ -10,6 +10,10 @@ use super::{
 };
 use crate::FemError;
 
+/// Iterations over which an energy decrease within round-off means the solve has stagnated at
+/// its attainable accuracy (LBFGSpp's "past" test): the gradient then only carries noise.
+const STAGNATION_WINDOW: usize = 10;
+
 /// Applies z = P⁻¹ r.
 pub trait Preconditioner {
     fn apply(&mut self, r: &[f64], z: &mut [f64]);
@@ -136,9 +140,14 @@ impl Lbfgs {
                 step: params.step,
             });
         }
+        // Energies of the last STAGNATION_WINDOW iterations, for the stagnation test.
+        let mut history = [f64::INFINITY; STAGNATION_WINDOW];
         for it in 0..=params.max_iterations {
             let rel = relative(norm(&self.g), objective.gradient_scale());
-            if rel <= params.tolerance {
+            let past = history[it % STAGNATION_WINDOW];
+            history[it % STAGNATION_WINDOW] = value;
+            let floor = objective.value_noise().max(1e-15 * value.abs());
+            if rel <= params.tolerance || (past - value <= floor && rel <= super::ROUNDOFF_SANITY) {
                 return Ok(SolveStats {
                     iterations: it,
                     relative_gradient: rel,
@@ -189,6 +198,15 @@ impl Lbfgs {
             }
             match ls {
                 Some(ls) => {
+                    tracing::debug!(
+                        step = params.step,
+                        iteration = it,
+                        relative_gradient = rel,
+                        alpha = ls.alpha,
+                        energy = ls.value,
+                        pairs = self.len,
+                        "L-BFGS iteration"
+                    );
                     self.push_pair(x);
                     x.copy_from_slice(&self.x_new);
                     std::mem::swap(&mut self.g, &mut self.g_new);

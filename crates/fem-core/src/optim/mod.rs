@@ -129,9 +129,12 @@ pub struct SolveParams {
 /// For stiff problems (condition number κ ≫ 1) the gradient, a sum of element forces of size
 /// ‖K‖‖x‖, carries round-off of about ε‖K‖‖x‖, so a relative gradient tolerance below ε·κ is
 /// unreachable; the step size still says when x is as accurate as it can be.
+/// A solve that stops at its round-off floor must still have a relative gradient below this.
+pub(crate) const ROUNDOFF_SANITY: f64 = 1e-3;
+
 pub(crate) fn at_roundoff_floor(x: &[f64], d: &[f64], relative_gradient: f64) -> bool {
     const STEP: f64 = 1e-12;
-    const SANITY: f64 = 1e-3;
+    const SANITY: f64 = ROUNDOFF_SANITY;
     let xmax = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let dmax = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     xmax > 0.0 && dmax <= STEP * xmax && relative_gradient <= SANITY
