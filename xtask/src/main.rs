@@ -335,6 +335,9 @@ fn dispatch(cli: Cli) -> Result<()> {
             let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
             let fit = p.pca(&stage_progress)?;
             print_pca(&fit);
+            let dir = root.join("out").join(&scene.name).join("pca");
+            write_pca_curves(&dir, &fit)?;
+            println!("spectrum and error curve: {}", dir.display());
             Ok(())
         }
         Command::Cubature { common } => {
@@ -402,6 +405,25 @@ fn print_pca(fit: &pca::PcaFit) {
         fit.tolerance_met,
         fit.basis.explained_energy(fit.chosen_k())
     );
+}
+
+/// `spectrum.csv` (index, singular value) and, for the vertex-error rule, `vertex_error.csv`
+/// (k, maximum vertex error over the snapshots).
+fn write_pca_curves(dir: &Path, fit: &pca::PcaFit) -> Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let mut csv = String::from("index,singular_value\n");
+    for (i, v) in fit.basis.singular_values().iter().enumerate() {
+        csv.push_str(&format!("{},{v}\n", i + 1));
+    }
+    fem_core::io::write_atomic(&dir.join("spectrum.csv"), csv.as_bytes())?;
+    if !fit.max_vertex_error_per_k.is_empty() {
+        let mut csv = String::from("k,max_vertex_error\n");
+        for (i, e) in fit.max_vertex_error_per_k.iter().enumerate() {
+            csv.push_str(&format!("{},{e}\n", i + 1));
+        }
+        fem_core::io::write_atomic(&dir.join("vertex_error.csv"), csv.as_bytes())?;
+    }
+    Ok(())
 }
 
 fn print_training(t: &xtask::pipeline::TrainedModel) {
