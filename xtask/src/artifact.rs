@@ -25,6 +25,8 @@ pub fn stage_version(stage: &str) -> u32 {
     match stage {
         // 2: inputs centred with one common scale instead of per-feature standardisation.
         "train" => 2,
+        // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
+        "snapshots" | "snapshots-shard" | "reference" => 2,
         _ => 1,
     }
 }

@@ -86,6 +86,9 @@ pub struct Pipeline<'a> {
     pub outcomes: Vec<StageOutcome>,
     /// Called after each stage (to print a line).
     pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
+    /// Artifacts already loaded or computed in this run, by path: a stage that several later
+    /// stages need is read (and announced) once.
+    memo: std::collections::HashMap<PathBuf, Box<dyn std::any::Any>>,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -123,6 +126,7 @@ impl<'a> Pipeline<'a> {
             cache: cache.to_path_buf(),
             outcomes: Vec::new(),
             on_stage: Box::new(|_| {}),
+            memo: std::collections::HashMap::new(),
         })
     }
 
@@ -178,13 +182,28 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Loads the artifact of `stage` under `key`, or computes and stores it.
-    fn stage<T: Serialize + DeserializeOwned>(
+    fn stage<T: Serialize + DeserializeOwned + Clone + 'static>(
         &mut self,
         stage: &str,
         key: u64,
         compute: impl FnOnce(&mut Self) -> Result<T>,
     ) -> Result<T> {
         let path = self.path(stage, key);
+        if let Some(v) = self.memo.get(&path).and_then(|b| b.downcast_ref::<T>()) {
+            return Ok(v.clone());
+        }
+        let value = self.load_or_compute(stage, key, path.clone(), compute)?;
+        self.memo.insert(path, Box::new(value.clone()));
+        Ok(value)
+    }
+
+    fn load_or_compute<T: Serialize + DeserializeOwned>(
+        &mut self,
+        stage: &str,
+        key: u64,
+        path: PathBuf,
+        compute: impl FnOnce(&mut Self) -> Result<T>,
+    ) -> Result<T> {
         let start = Instant::now();
         if path.exists() {
             let expect = Expect {
