@@ -99,9 +99,9 @@ impl ScheduleConfig {
             frames_per_schedule: 60,
             seed: 1,
             kinds: vec![ScheduleKind::Pull, ScheduleKind::Poke],
-            offset: [0.03, 0.2],
-            stiffness: [0.5, 3.0],
-            patch_radius: 0.06,
+            offset: [0.02, 0.1],
+            stiffness: [0.5, 2.0],
+            patch_radius: 0.08,
             gravity_scale: 1.0,
         }
     }
