@@ -259,7 +259,23 @@ impl<S: Subspace> ReducedSimulator<S> {
                                 .1
                         }
                     };
-                    self.lbfgs.minimize(&mut obj, pre, &mut z, params)?
+                    let start_z = z.clone();
+                    match self.lbfgs.minimize(&mut obj, pre, &mut z, params) {
+                        Ok(s) => s,
+                        // Where the energy curves far more than the rest-state preconditioner
+                        // says (a nearly degenerate element along the subspace), L-BFGS crawls:
+                        // redo the step with Newton on the reduced Hessian.
+                        Err(
+                            e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
+                        ) => {
+                            tracing::info!("{e}; retrying the step with reduced Newton");
+                            z.copy_from_slice(&start_z);
+                            let mut s = newton(&mut obj, &mut z, params)?;
+                            s.iterations += params.max_iterations;
+                            s
+                        }
+                        Err(e) => return Err(e.into()),
+                    }
                 }
                 SolverMethod::Newton => newton(&mut obj, &mut z, params)?,
             }
@@ -442,51 +458,64 @@ impl<S: Subspace> Objective for StepObjective<'_, S> {
 }
 
 impl<S: Subspace> NewtonSystem for StepObjective<'_, S> {
-    /// Gauss–Newton in z: (Jᵀ H_q J) d = −g with H_q the projected reduced Hessian (exact Newton
-    /// for a linear subspace).
+    /// Gauss–Newton in z: (Jᵀ H_q J) d = −g, exact Newton for a linear subspace. As in full
+    /// space, H_q is first the exact reduced Hessian (elastic + UᵀMU/h² + springs); only when
+    /// that is not positive definite are the element tangents projected.
     fn newton_direction(&mut self, z: &[f64], g: &[f64], d: &mut [f64]) -> Result<(), FemError> {
         let (model, space) = (self.model, self.space);
         let k = space.k;
+        let dim = self.subspace.latent_dim();
         let w = &mut *self.work;
         self.subspace.decode(z, &mut w.q);
         space.decode_touched(&w.q, &mut w.u);
+        self.subspace.jacobian(z, &mut w.jac);
         let mut hq = vec![0.0; k * k];
-        with_material!(&model.material, |m| {
-            space.project_hessian(
-                model,
-                m,
-                &space.elements,
-                &space.weights,
-                &w.u,
-                true,
-                &mut hq,
-            );
-        });
-        for i in 0..k * k {
-            hq[i] += self.inv_h2 * space.mass[i];
-        }
-        for f in &model.forces {
-            if f.is_active(self.t) {
-                let s = f.stiffness / f.vertices.len() as f64;
-                for &v in &f.vertices {
-                    let r = space.vertex_rows(v);
-                    for c in 0..3 {
-                        let row = &r[c * k..(c + 1) * k];
-                        for b in 0..k {
-                            for a in 0..k {
-                                hq[b * k + a] += s * row[a] * row[b];
+        let mut factor = None;
+        for projected in [false, true] {
+            with_material!(&model.material, |m| {
+                space.project_hessian(
+                    model,
+                    m,
+                    &space.elements,
+                    &space.weights,
+                    &w.u,
+                    projected,
+                    &mut hq,
+                );
+            });
+            for i in 0..k * k {
+                hq[i] += self.inv_h2 * space.mass[i];
+            }
+            for f in &model.forces {
+                if f.is_active(self.t) {
+                    let s = f.stiffness / f.vertices.len() as f64;
+                    for &v in &f.vertices {
+                        let r = space.vertex_rows(v);
+                        for c in 0..3 {
+                            let row = &r[c * k..(c + 1) * k];
+                            for b in 0..k {
+                                for a in 0..k {
+                                    hq[b * k + a] += s * row[a] * row[b];
+                                }
                             }
                         }
                     }
                 }
             }
+            let hz = sandwich(&hq, &w.jac, k, dim);
+            if projected {
+                factor = Some(factor_dense(&hz, dim, "Newton").map_err(|_| {
+                    FemError::Factorization("reduced Hessian is not positive definite".into())
+                })?);
+            } else {
+                let m = faer::Mat::<f64>::from_fn(dim, dim, |i, j| hz[j * dim + i]);
+                if let Ok(llt) = m.llt(Side::Lower) {
+                    factor = Some(DenseFactor(llt));
+                    break;
+                }
+            }
         }
-        let dim = self.subspace.latent_dim();
-        self.subspace.jacobian(z, &mut w.jac);
-        let hz = sandwich(&hq, &w.jac, k, dim);
-        let mut f = factor_dense(&hz, dim, "Newton").map_err(|_| {
-            FemError::Factorization("reduced Hessian is not positive definite".into())
-        })?;
+        let mut f = factor.expect("the projected attempt yields a factor or an error");
         for i in 0..dim {
             d[i] = -g[i];
         }
