@@ -107,6 +107,28 @@ fn solver(method: SolverMethod) -> SolverConfig {
     }
 }
 
+/// Checks `sim.objective`'s gradient at `z` against central differences, component by component.
+fn assert_gradient_matches_fd<S: Subspace>(sim: &mut ReducedSimulator<S>, z: &[f64], what: &str) {
+    let d = z.len();
+    let mut g = vec![0.0; d];
+    sim.objective(z, &mut g);
+    let gnorm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+    assert!(gnorm > 0.0, "{what}: zero gradient");
+    let mut scratch = vec![0.0; d];
+    for i in 0..d {
+        let h = 1e-6;
+        let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
+        zp[i] += h;
+        zm[i] -= h;
+        let fd = (sim.objective(&zp, &mut scratch) - sim.objective(&zm, &mut scratch)) / (2.0 * h);
+        assert!(
+            (fd - g[i]).abs() < 1e-6 * gnorm,
+            "{what}: component {i}: {fd} vs {}",
+            g[i]
+        );
+    }
+}
+
 #[test]
 fn reduced_gradient_matches_finite_differences_with_and_without_cubature() {
     let m = model();
@@ -137,24 +159,8 @@ fn reduced_gradient_matches_finite_differences_with_and_without_cubature() {
             .enumerate()
             .map(|(i, v)| v + 0.01 * (i as f64).cos())
             .collect();
-        let mut g = vec![0.0; k];
-        sim.objective(&z, &mut g);
-        let gnorm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let mut scratch = vec![0.0; k];
-        for i in 0..k {
-            let h = 1e-6;
-            let (mut zp, mut zm) = (z.clone(), z.clone());
-            zp[i] += h;
-            zm[i] -= h;
-            let fd =
-                (sim.objective(&zp, &mut scratch) - sim.objective(&zm, &mut scratch)) / (2.0 * h);
-            assert!(
-                (fd - g[i]).abs() < 1e-6 * gnorm,
-                "cubature {}: component {i}: {fd} vs {}",
-                cubature.is_some(),
-                g[i]
-            );
-        }
+        let what = format!("linear, cubature {}", cubature.is_some());
+        assert_gradient_matches_fd(&mut sim, &z, &what);
     }
 }
 
@@ -218,7 +224,7 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
         for _ in 0..2 {
             sim.step().unwrap();
         }
-        let d = sim.subspace.latent_dim();
+        assert_eq!(sim.subspace.latent_dim(), 3);
         let z: Vec<f64> = sim
             .state
             .z
@@ -226,24 +232,7 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
             .enumerate()
             .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
             .collect();
-        let mut g = vec![0.0; d];
-        sim.objective(&z, &mut g);
-        let gnorm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
-        assert!(gnorm > 0.0);
-        let mut scratch = vec![0.0; d];
-        for i in 0..d {
-            let h = 1e-6;
-            let (mut zp, mut zm) = (z.clone(), z.clone());
-            zp[i] += h;
-            zm[i] -= h;
-            let fd =
-                (sim.objective(&zp, &mut scratch) - sim.objective(&zm, &mut scratch)) / (2.0 * h);
-            assert!(
-                (fd - g[i]).abs() < 1e-6 * gnorm,
-                "cubature {}: component {i}: {fd} vs {}",
-                cubature.is_some(),
-                g[i]
-            );
-        }
+        let what = format!("neural, cubature {}", cubature.is_some());
+        assert_gradient_matches_fd(&mut sim, &z, &what);
     }
 }

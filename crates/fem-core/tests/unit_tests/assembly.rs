@@ -22,6 +22,22 @@ impl Rng {
     }
 }
 
+/// The symmetric sparse matrix with `values` on `pattern`, as a dense matrix.
+fn dense_matrix(pattern: &HessianPattern, values: &[f64]) -> faer::Mat<f64> {
+    let n = pattern.dim();
+    let mut out = faer::Mat::<f64>::zeros(n, n);
+    let (mut e, mut c) = (vec![0.0; n], vec![0.0; n]);
+    for j in 0..n {
+        e.fill(0.0);
+        e[j] = 1.0;
+        pattern.mul_vec(values, &e, &mut c);
+        for i in 0..n {
+            out[(i, j)] = c[i];
+        }
+    }
+    out
+}
+
 fn small_box() -> TetMesh {
     box_mesh(&BoxSpec {
         size: [1.0, 0.4, 0.3],
@@ -170,13 +186,7 @@ fn projected_hessian_is_positive_semidefinite() {
             &mut values,
             &mut buf
         ));
-        let dense = faer::Mat::<f64>::from_fn(n, n, |i, j| {
-            let mut e = vec![0.0; n];
-            e[j] = 1.0;
-            let mut c = vec![0.0; n];
-            pattern.mul_vec(&values, &e, &mut c);
-            c[i]
-        });
+        let dense = dense_matrix(&pattern, &values);
         let eig = dense.self_adjoint_eigenvalues(faer::Side::Lower).unwrap();
         let max = eig.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let min = eig.iter().fold(f64::INFINITY, |m, &v| m.min(v));
@@ -198,13 +208,7 @@ fn projected_hessian_is_positive_semidefinite() {
             &mut values,
             &mut buf
         ));
-        let raw = faer::Mat::<f64>::from_fn(n, n, |i, j| {
-            let mut e = vec![0.0; n];
-            e[j] = 1.0;
-            let mut c = vec![0.0; n];
-            pattern.mul_vec(&values, &e, &mut c);
-            c[i]
-        });
+        let raw = dense_matrix(&pattern, &values);
         let raw_min = raw
             .self_adjoint_eigenvalues(faer::Side::Lower)
             .unwrap()
