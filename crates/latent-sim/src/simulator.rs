@@ -202,13 +202,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let h = self.time.step;
         let t = (self.state.step + 1) as f64 * h;
         let k = self.space.k;
-        for i in 0..k {
-            self.work.predicted[i] = if self.time.quasi_static {
-                self.state.q[i]
-            } else {
-                self.state.q[i] + h * self.state.qdot[i]
-            };
-        }
+        self.predict();
         let params = SolveParams {
             tolerance: self.solver.tolerance,
             max_iterations: self.solver.max_iterations,
@@ -310,9 +304,8 @@ impl<S: Subspace> ReducedSimulator<S> {
         })
     }
 
-    /// The next step's objective E(z) and its gradient (into `g`), for the current state: what
-    /// [`step`](Self::step) minimises. For diagnostics and derivative checks.
-    pub fn objective(&mut self, z: &[f64], g: &mut [f64]) -> f64 {
+    /// The inertial prediction q̃ = q_n + h q̇_n of the next step (q_n when quasi-static).
+    fn predict(&mut self) {
         let h = self.time.step;
         for i in 0..self.space.k {
             self.work.predicted[i] = if self.time.quasi_static {
@@ -321,6 +314,13 @@ impl<S: Subspace> ReducedSimulator<S> {
                 self.state.q[i] + h * self.state.qdot[i]
             };
         }
+    }
+
+    /// The next step's objective E(z) and its gradient (into `g`), for the current state: what
+    /// [`step`](Self::step) minimises. For diagnostics and derivative checks.
+    pub fn objective(&mut self, z: &[f64], g: &mut [f64]) -> f64 {
+        let h = self.time.step;
+        self.predict();
         let inv_h2 = self.inv_h2();
         let mut obj = StepObjective {
             model: &self.model,

@@ -55,6 +55,15 @@ fn dynamic(frames: usize) -> TimeConfig {
     }
 }
 
+/// One quasi-static solve: static equilibrium under the loads at t = 1.
+fn static_frame() -> TimeConfig {
+    TimeConfig {
+        step: 1.0,
+        frames: 1,
+        quasi_static: true,
+    }
+}
+
 fn tip(mesh: &TetMesh) -> usize {
     (0..mesh.num_vertices())
         .min_by(|&a, &b| {
@@ -131,11 +140,7 @@ fn pinned_beam_under_gravity_settles_and_never_gains_energy() {
         [0.0, -9.81, 0.0],
         vec![],
     );
-    let time = TimeConfig {
-        step: 1.0,
-        frames: 1,
-        quasi_static: true,
-    };
+    let time = static_frame();
     let mut stat = Simulator::new(m, time, solver(SolverMethod::Newton, 1e-10)).unwrap();
     stat.step().unwrap();
     let static_tip = stat.state.u[3 * t + 1];
@@ -205,11 +210,7 @@ fn quasi_static_bends_a_beam_by_half_its_length() {
         [0.0, -9.81, 0.0],
         vec![],
     );
-    let time = TimeConfig {
-        step: 1.0,
-        frames: 1,
-        quasi_static: true,
-    };
+    let time = static_frame();
     let mut sim = Simulator::new(m, time, solver(SolverMethod::Newton, 1e-8)).unwrap();
     let r = sim.step().unwrap();
     let drop = -sim.state.u[3 * t + 1];
@@ -222,11 +223,7 @@ fn quasi_static_bends_a_beam_by_half_its_length() {
 fn quasi_static_newton_and_lbfgs_find_the_same_equilibrium() {
     let mesh = beam([12, 2, 2]);
     let t = tip(&mesh);
-    let time = TimeConfig {
-        step: 1.0,
-        frames: 1,
-        quasi_static: true,
-    };
+    let time = static_frame();
     let mut tips = Vec::new();
     for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
         let m = model(
@@ -281,11 +278,7 @@ fn springs_pull_their_patch_toward_the_target() {
         [0.0; 3],
         vec![spring],
     );
-    let time = TimeConfig {
-        step: 1.0,
-        frames: 1,
-        quasi_static: true,
-    };
+    let time = static_frame();
     let mut sim = Simulator::new(m, time, solver(SolverMethod::Newton, 1e-10)).unwrap();
     sim.step().unwrap();
     let up = sim.state.u[3 * t + 1];
@@ -298,11 +291,7 @@ fn quasi_static_without_support_is_a_clear_error() {
     let material = MaterialConfig::default();
     let m =
         FullSpaceModel::new(mesh, &material, vec![], Vec3::new(0.0, -9.81, 0.0), vec![]).unwrap();
-    let time = TimeConfig {
-        step: 1.0,
-        frames: 1,
-        quasi_static: true,
-    };
+    let time = static_frame();
     let err = Simulator::new(m, time, SolverConfig::default()).unwrap_err();
     assert!(err.to_string().contains("pin"), "{err}");
 }
