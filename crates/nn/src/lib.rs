@@ -68,6 +68,7 @@ mod linalg;
 pub mod mlp;
 pub mod rng;
 pub mod scaling;
+pub mod synthetic;
 pub mod train;
 
 pub use activation::Activation;
@@ -79,7 +80,9 @@ pub use error::NnError;
 pub use mlp::{Mlp, MlpWorkspace};
 pub use rng::SplitMix64;
 pub use scaling::InputScaling;
-pub use train::{EpochReport, LatentSearch, LatentTrial, TrainOutcome, train, train_search};
+pub use train::{
+    EpochReport, LatentSearch, LatentTrial, TrainOutcome, Trainer, train, train_search,
+};
 
 /// Compiles and runs the README's example as a doctest.
 #[cfg(doctest)]

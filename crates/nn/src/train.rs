@@ -56,96 +56,198 @@ pub fn train(
     config: &AutoencoderConfig,
     mut progress: impl FnMut(EpochReport),
 ) -> Result<TrainOutcome, NnError> {
-    config.validate()?;
-    if latent_dim == 0 {
-        return Err(NnError::InvalidConfig {
-            field: "autoencoder.latent_dim".into(),
-            reason: "must be at least 1, got 0".into(),
-        });
-    }
-    let (k, n) = (data.nrows(), data.ncols());
-    if k == 0 || n == 0 {
-        return Err(NnError::EmptyData {
-            features: k,
-            samples: n,
-        });
-    }
-    for j in 0..n {
-        for i in 0..k {
-            let value = data[(i, j)];
-            if !value.is_finite() {
-                return Err(NnError::NonFiniteData {
-                    feature: i,
-                    sample: j,
-                    value,
-                });
-            }
-        }
-    }
-    if !config.activation.is_smooth() {
-        tracing::warn!(
-            "activation `{}` is not smooth: latent simulation through this decoder sees a \
-             discontinuous energy gradient",
-            config.activation
-        );
-    }
-
-    let (train_indices, validation_indices) = split(n, config.validation_fraction, config.seed)?;
-    let columns = |idx: &[usize]| Mat::from_fn(k, idx.len(), |i, j| data[(i, idx[j])]);
-    let train_data = columns(&train_indices);
-    let val_data = columns(&validation_indices);
-    let scaling = config
-        .input_scaling
-        .then(|| InputScaling::centre_uniform(train_data.as_ref()));
-    let mut model = Autoencoder::with_architecture(
-        k,
-        latent_dim,
-        &config.hidden,
-        config.activation,
-        scaling,
-        config.seed,
-    )?;
-    let x_train = model.scaled_block(train_data.as_ref())?;
-    let x_val = model.scaled_block(val_data.as_ref())?;
-    let (n_train, n_val) = (train_indices.len(), validation_indices.len());
-
-    let batch = config.batch_size.min(n_train);
-    let mut engine = GradientEngine::new(&model, batch);
-    let lengths: Vec<usize> = model
-        .encoder()
-        .parameter_lengths()
-        .chain(model.decoder().parameter_lengths())
-        .collect();
-    let mut adam = Adam::new(config.adam(), lengths);
-    let mut rng = SplitMix64::for_item(config.seed, 3);
-    let mut order: Vec<usize> = (0..n_train).collect();
-    let mut buffer = vec![0.0; k * batch];
-
-    tracing::info!(
-        k,
-        latent_dim,
-        n_train,
-        n_val,
-        parameters = model.encoder().num_parameters() + model.decoder().num_parameters(),
-        "training autoencoder"
-    );
+    let mut trainer = Trainer::new(data, latent_dim, config)?;
     let mut history = Vec::with_capacity(config.epochs);
-    let mut best = (f64::INFINITY, 0, model.clone());
     let mut stopped_early = false;
     for epoch in 1..=config.epochs {
-        rng.shuffle(&mut order);
-        let mut sum = 0.0;
-        for ids in order.chunks(batch) {
-            let b = ids.len();
-            for (dst, &j) in buffer.chunks_exact_mut(k).zip(ids) {
-                dst.copy_from_slice(&x_train[j * k..(j + 1) * k]);
+        let report = trainer.run_epoch()?;
+        progress(report);
+        history.push(report);
+        if config.patience > 0 && epoch - trainer.best_epoch() >= config.patience {
+            stopped_early = epoch < config.epochs;
+            break;
+        }
+    }
+    let Trainer {
+        best,
+        train_indices,
+        validation_indices,
+        ..
+    } = trainer;
+    let Best {
+        loss: best_loss,
+        epoch: best_epoch,
+        model,
+    } = best;
+    tracing::info!(best_epoch, best_loss, stopped_early, "training finished");
+    Ok(TrainOutcome {
+        model,
+        history,
+        best_epoch,
+        best_loss,
+        stopped_early,
+        train_indices,
+        validation_indices,
+    })
+}
+
+/// The best weights seen so far by the monitored loss.
+#[derive(Debug, Clone)]
+struct Best {
+    loss: f64,
+    epoch: usize,
+    model: Autoencoder,
+}
+
+/// Adam training of one autoencoder, one epoch at a time: what [`train`] runs, exposed so that a
+/// caller (e.g. a benchmark) can step epochs itself.
+///
+/// [`Trainer::new`] validates the data and configuration, splits off the validation samples,
+/// fits the input scaling and initialises the weights; [`Trainer::run_epoch`] makes one shuffled
+/// pass of mini-batch Adam steps and evaluates the validation loss. Early stopping is the
+/// caller's (see [`train`]); the trainer keeps the best weights by the monitored loss.
+#[derive(Debug, Clone)]
+pub struct Trainer {
+    model: Autoencoder,
+    epochs: usize,
+    epoch: usize,
+    engine: GradientEngine,
+    adam: Adam,
+    rng: SplitMix64,
+    order: Vec<usize>,
+    buffer: Vec<f64>,
+    x_train: Vec<f64>,
+    x_val: Vec<f64>,
+    batch: usize,
+    best: Best,
+    train_indices: Vec<usize>,
+    validation_indices: Vec<usize>,
+}
+
+impl Trainer {
+    /// Checks `config` and `data` (k × N, finite), splits, scales and initialises as [`train`]
+    /// does.
+    pub fn new(
+        data: MatRef<'_, f64>,
+        latent_dim: usize,
+        config: &AutoencoderConfig,
+    ) -> Result<Self, NnError> {
+        config.validate()?;
+        if latent_dim == 0 {
+            return Err(NnError::InvalidConfig {
+                field: "autoencoder.latent_dim".into(),
+                reason: "must be at least 1, got 0".into(),
+            });
+        }
+        let (k, n) = (data.nrows(), data.ncols());
+        if k == 0 || n == 0 {
+            return Err(NnError::EmptyData {
+                features: k,
+                samples: n,
+            });
+        }
+        for j in 0..n {
+            for i in 0..k {
+                let value = data[(i, j)];
+                if !value.is_finite() {
+                    return Err(NnError::NonFiniteData {
+                        feature: i,
+                        sample: j,
+                        value,
+                    });
+                }
             }
-            sum += engine.run(&model, &buffer[..k * b], b);
-            adam.step(model.parameters_mut(), engine.grads[0].slices());
+        }
+        if !config.activation.is_smooth() {
+            tracing::warn!(
+                "activation `{}` is not smooth: latent simulation through this decoder sees a \
+                 discontinuous energy gradient",
+                config.activation
+            );
+        }
+
+        let (train_indices, validation_indices) =
+            split(n, config.validation_fraction, config.seed)?;
+        let columns = |idx: &[usize]| Mat::from_fn(k, idx.len(), |i, j| data[(i, idx[j])]);
+        let train_data = columns(&train_indices);
+        let val_data = columns(&validation_indices);
+        let scaling = config
+            .input_scaling
+            .then(|| InputScaling::centre_uniform(train_data.as_ref()));
+        let model = Autoencoder::with_architecture(
+            k,
+            latent_dim,
+            &config.hidden,
+            config.activation,
+            scaling,
+            config.seed,
+        )?;
+        let x_train = model.scaled_block(train_data.as_ref())?;
+        let x_val = model.scaled_block(val_data.as_ref())?;
+        let (n_train, n_val) = (train_indices.len(), validation_indices.len());
+
+        let batch = config.batch_size.min(n_train);
+        let engine = GradientEngine::new(&model, batch);
+        let lengths: Vec<usize> = model
+            .encoder()
+            .parameter_lengths()
+            .chain(model.decoder().parameter_lengths())
+            .collect();
+        let adam = Adam::new(config.adam(), lengths);
+        tracing::info!(
+            k,
+            latent_dim,
+            n_train,
+            n_val,
+            parameters = model.encoder().num_parameters() + model.decoder().num_parameters(),
+            "training autoencoder"
+        );
+        Ok(Self {
+            best: Best {
+                loss: f64::INFINITY,
+                epoch: 0,
+                model: model.clone(),
+            },
+            model,
+            epochs: config.epochs,
+            epoch: 0,
+            engine,
+            adam,
+            rng: SplitMix64::for_item(config.seed, 3),
+            order: (0..n_train).collect(),
+            buffer: vec![0.0; k * batch],
+            x_train,
+            x_val,
+            batch,
+            train_indices,
+            validation_indices,
+        })
+    }
+
+    /// One epoch: a shuffled pass of Adam steps over the training samples, then the validation
+    /// loss. Updates the best weights when the monitored loss improved.
+    ///
+    /// # Errors
+    /// [`NnError::Diverged`] when a loss is not finite.
+    pub fn run_epoch(&mut self) -> Result<EpochReport, NnError> {
+        self.epoch += 1;
+        let epoch = self.epoch;
+        let k = self.model.input_dim();
+        let n_train = self.order.len();
+        self.rng.shuffle(&mut self.order);
+        let mut sum = 0.0;
+        for ids in self.order.chunks(self.batch) {
+            let b = ids.len();
+            for (dst, &j) in self.buffer.chunks_exact_mut(k).zip(ids) {
+                dst.copy_from_slice(&self.x_train[j * k..(j + 1) * k]);
+            }
+            sum += self.engine.run(&self.model, &self.buffer[..k * b], b);
+            self.adam
+                .step(self.model.parameters_mut(), self.engine.grads[0].slices());
         }
         let train_loss = sum / (n_train * k) as f64;
-        let validation_loss =
-            (n_val > 0).then(|| model.sum_squared_error(&x_val) / x_val.len() as f64);
+        let validation_loss = (!self.x_val.is_empty())
+            .then(|| self.model.sum_squared_error(&self.x_val) / self.x_val.len() as f64);
         let monitored = validation_loss.unwrap_or(train_loss);
         if !monitored.is_finite() || !train_loss.is_finite() {
             return Err(NnError::Diverged {
@@ -157,36 +259,51 @@ pub fn train(
                 },
             });
         }
-        let improved = monitored < best.0;
+        let improved = monitored < self.best.loss;
         if improved {
-            best = (monitored, epoch, model.clone());
+            self.best.loss = monitored;
+            self.best.epoch = epoch;
+            self.best.model.clone_from(&self.model);
         }
-        let report = EpochReport {
+        tracing::debug!(epoch, train_loss, ?validation_loss, "epoch");
+        Ok(EpochReport {
             epoch,
-            epochs: config.epochs,
+            epochs: self.epochs,
             train_loss,
             validation_loss,
             improved,
-        };
-        tracing::debug!(epoch, train_loss, ?validation_loss, "epoch");
-        progress(report);
-        history.push(report);
-        if config.patience > 0 && epoch - best.1 >= config.patience {
-            stopped_early = epoch < config.epochs;
-            break;
-        }
+        })
     }
-    let (best_loss, best_epoch, model) = best;
-    tracing::info!(best_epoch, best_loss, stopped_early, "training finished");
-    Ok(TrainOutcome {
-        model,
-        history,
-        best_epoch,
-        best_loss,
-        stopped_early,
-        train_indices,
-        validation_indices,
-    })
+
+    /// The current weights (after the last epoch, not necessarily the best).
+    pub fn model(&self) -> &Autoencoder {
+        &self.model
+    }
+
+    /// The weights of the best epoch so far and its monitored loss.
+    pub fn best(&self) -> (&Autoencoder, f64) {
+        (&self.best.model, self.best.loss)
+    }
+
+    /// The 1-based epoch of [`Trainer::best`] (0 before the first epoch).
+    pub fn best_epoch(&self) -> usize {
+        self.best.epoch
+    }
+
+    /// Epochs run so far.
+    pub fn epochs_run(&self) -> usize {
+        self.epoch
+    }
+
+    /// Columns of the data used for training, ascending.
+    pub fn train_indices(&self) -> &[usize] {
+        &self.train_indices
+    }
+
+    /// Columns held out for validation, ascending.
+    pub fn validation_indices(&self) -> &[usize] {
+        &self.validation_indices
+    }
 }
 
 /// Seeded split of 0..n into (training, validation) index lists, both ascending.

@@ -1,0 +1,329 @@
+//! nn throughput on the AutoDef "X" shapes: the single-vector decoder operations latent dynamics
+//! call every iteration, and autoencoder training.
+//!
+//! * `nn_decoder`: the decoder 6 → 200 → 200 → 49 (ELU, f64) at one latent point: forward,
+//!   VJP Jᵀv (with its own forward pass, and `vjp_cached` after a forward), JVP Jw and the full
+//!   49 × 6 Jacobian, in ns per call.
+//! * `nn_train`: one epoch of the 49 → 200 → 200 → 6 → 200 → 200 → 49 autoencoder (Adam lr 10⁻³,
+//!   batch 256, no validation split) on 2,000 samples of
+//!   [`nn::synthetic::TanhManifold::autodef_x`] (seed 7) per iteration, inside rayon pools of 1 and
+//!   2 threads; the throughput is in samples per second.
+//!
+//! After the criterion groups a summary measures the same operations side by side (median of
+//! short rounds, robust on a shared machine) and prints them beside the PyTorch and hand-written
+//! numpy figures of `benches/peers/torch_autoencoder.py`, read from `target/peers/torch.json`
+//! (or `$NN_PEERS_JSON`) when that file exists.
+//!
+//! ```sh
+//! python3 benches/peers/torch_autoencoder.py     # optional: needs torch and numpy
+//! cargo bench -p benches --bench nn
+//! ```
+
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use criterion::{Criterion, SamplingMode, Throughput};
+use nn::synthetic::TanhManifold;
+use nn::{Activation, AutoencoderConfig, Mlp, Trainer};
+use rayon::{ThreadPool, ThreadPoolBuilder};
+
+/// Thread counts of the training benchmarks.
+const THREADS: [usize; 2] = [1, 2];
+/// Training samples (one epoch per iteration).
+const SAMPLES: usize = 2_000;
+/// Seed of the synthetic data (the peer script's default).
+const DATA_SEED: u64 = 7;
+/// Latent dimension of the X autoencoder.
+const LATENT: usize = 6;
+
+fn pool(threads: usize) -> ThreadPool {
+    ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("can start a rayon thread pool")
+}
+
+/// A named single-vector operation with its own buffers and workspace.
+type Operation<'a> = (&'static str, Box<dyn FnMut() + 'a>);
+
+/// The X decoder and fixed arguments for its single-vector operations.
+struct Decoder {
+    mlp: Mlp,
+    z: [f64; LATENT],
+    w: [f64; LATENT],
+    v: Vec<f64>,
+}
+
+impl Decoder {
+    fn new() -> Self {
+        Self {
+            mlp: Mlp::new(&[LATENT, 200, 200, 49], Activation::Elu, 1)
+                .expect("the X decoder shape is valid"),
+            z: [0.3, -0.2, 0.5, -0.7, 0.1, 0.9],
+            w: [1.0, 0.5, -0.25, 0.125, -1.0, 2.0],
+            v: (0..49).map(|i| (i as f64 * 0.37).sin()).collect(),
+        }
+    }
+
+    /// The operations, by name, as closures over their own output buffers and workspace.
+    fn operations(&self) -> Vec<Operation<'_>> {
+        let mlp = &self.mlp;
+        let (z, w, v) = (&self.z, &self.w, &self.v);
+        let mut y = vec![0.0; 49];
+        let mut ws = mlp.workspace();
+        let forward = Box::new(move || {
+            mlp.forward(black_box(z), &mut y, &mut ws);
+            black_box(&y);
+        });
+        let mut g = vec![0.0; LATENT];
+        let mut ws = mlp.workspace();
+        let vjp = Box::new(move || {
+            mlp.vjp(black_box(z), black_box(v), &mut g, &mut ws);
+            black_box(&g);
+        });
+        // vjp_cached reuses the forward state of one earlier forward pass.
+        let mut g = vec![0.0; LATENT];
+        let mut ws = mlp.workspace();
+        mlp.forward(z, &mut vec![0.0; 49], &mut ws);
+        let vjp_cached = Box::new(move || {
+            mlp.vjp_cached(black_box(v), &mut g, &mut ws);
+            black_box(&g);
+        });
+        let (mut y, mut g) = (vec![0.0; 49], vec![0.0; LATENT]);
+        let mut ws = mlp.workspace();
+        let forward_vjp_cached = Box::new(move || {
+            mlp.forward(black_box(z), &mut y, &mut ws);
+            mlp.vjp_cached(black_box(v), &mut g, &mut ws);
+            black_box(&g);
+        });
+        let mut y = vec![0.0; 49];
+        let mut ws = mlp.workspace();
+        let jvp = Box::new(move || {
+            mlp.jvp(black_box(z), black_box(w), &mut y, &mut ws);
+            black_box(&y);
+        });
+        let mut jac = vec![0.0; 49 * LATENT];
+        let mut ws = mlp.workspace();
+        let jacobian = Box::new(move || {
+            mlp.jacobian(black_box(z), &mut jac, &mut ws);
+            black_box(&jac);
+        });
+        vec![
+            ("forward", forward),
+            ("vjp", vjp),
+            ("vjp_cached", vjp_cached),
+            ("forward+vjp_cached", forward_vjp_cached),
+            ("jvp", jvp),
+            ("jacobian", jacobian),
+        ]
+    }
+}
+
+fn bench_decoder(c: &mut Criterion, decoder: &Decoder) {
+    let mut group = c.benchmark_group("nn_decoder");
+    group
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2));
+    for (name, mut op) in decoder.operations() {
+        group.bench_function(name, |b| b.iter(&mut op));
+    }
+    group.finish();
+}
+
+/// The X autoencoder's training configuration (all samples train; no early stopping).
+fn train_config() -> AutoencoderConfig {
+    AutoencoderConfig {
+        latent_dim: Some(LATENT),
+        hidden: vec![200, 200],
+        activation: Activation::Elu,
+        epochs: 1000,
+        batch_size: 256,
+        learning_rate: 1e-3,
+        validation_fraction: 0.0,
+        patience: 0,
+        seed: 0,
+        ..AutoencoderConfig::default()
+    }
+}
+
+fn new_trainer() -> Trainer {
+    let data = TanhManifold::autodef_x().sample(SAMPLES, DATA_SEED);
+    Trainer::new(data.as_ref(), LATENT, &train_config()).expect("the X autoencoder trains")
+}
+
+fn bench_train(c: &mut Criterion, pools: &[(usize, ThreadPool)]) {
+    let mut group = c.benchmark_group("nn_train");
+    group
+        .sampling_mode(SamplingMode::Flat)
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5))
+        .throughput(Throughput::Elements(SAMPLES as u64));
+    for (threads, pool) in pools {
+        let mut trainer = new_trainer();
+        group.bench_function(format!("x_autoencoder_epoch/{threads}t"), |b| {
+            pool.install(|| b.iter(|| trainer.run_epoch().expect("training stays finite")))
+        });
+    }
+    group.finish();
+}
+
+/// Median nanoseconds per call of `f` over `rounds` rounds of `reps` calls.
+fn median_ns(rounds: usize, reps: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut times: Vec<f64> = (0..rounds)
+        .map(|_| {
+            let start = Instant::now();
+            for _ in 0..reps {
+                f();
+            }
+            start.elapsed().as_nanos() as f64 / reps as f64
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[rounds / 2]
+}
+
+/// The PyTorch / numpy figures written by `benches/peers/torch_autoencoder.py`.
+struct Peers {
+    path: PathBuf,
+    text: String,
+}
+
+impl Peers {
+    fn load() -> Option<Self> {
+        let path = std::env::var_os("NN_PEERS_JSON")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| {
+                PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/peers/torch.json")
+            });
+        match std::fs::read_to_string(&path) {
+            Ok(text) => Some(Self { path, text }),
+            Err(e) => {
+                eprintln!(
+                    "no peer figures: cannot read {} ({e}); run benches/peers/torch_autoencoder.py \
+                     (needs torch and numpy) or set NN_PEERS_JSON",
+                    path.display()
+                );
+                None
+            }
+        }
+    }
+
+    /// The raw text after `"key":` in the flat JSON object the script writes (numbers and
+    /// strings only, so no JSON library is needed).
+    fn raw(&self, key: &str) -> Option<&str> {
+        let pattern = format!("\"{key}\"");
+        let rest = &self.text[self.text.find(&pattern)? + pattern.len()..];
+        let rest = rest.trim_start().strip_prefix(':')?.trim_start();
+        let end = rest.find([',', '\n', '}']).unwrap_or(rest.len());
+        Some(rest[..end].trim())
+    }
+
+    fn number(&self, key: &str) -> Option<f64> {
+        self.raw(key)?.parse().ok()
+    }
+
+    fn string(&self, key: &str) -> String {
+        self.raw(key)
+            .map(|s| s.trim_matches('"').to_string())
+            .unwrap_or_else(|| "?".into())
+    }
+}
+
+fn cell(value: Option<f64>, scale: f64, unit: &str) -> String {
+    value.map_or_else(|| "—".into(), |v| format!("{:.1} {unit}", v / scale))
+}
+
+/// Side-by-side figures of this build and the peers.
+fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
+    let peers = Peers::load();
+    let peer = |key: &str| peers.as_ref().and_then(|p| p.number(key));
+    println!("\nsummary (median of short rounds; this machine, this run)");
+    if let Some(p) = &peers {
+        println!(
+            "peers from {}: torch {} ({}), numpy {}, {}",
+            p.path.display(),
+            p.string("torch_version"),
+            p.string("dtype"),
+            p.string("numpy_version"),
+            p.string("cpu"),
+        );
+    }
+    println!(
+        "{:<22} {:>12} {:>12} {:>12}",
+        "decoder 6→200→200→49", "nn", "torch", "numpy"
+    );
+    let peer_keys = [
+        (
+            "forward",
+            "decoder_forward_ns_torch",
+            "decoder_forward_ns_numpy",
+        ),
+        ("vjp", "decoder_vjp_ns_torch", "decoder_vjp_ns_numpy"),
+        (
+            "jacobian",
+            "decoder_jacrev_ns_torch",
+            "decoder_jacobian_ns_numpy",
+        ),
+    ];
+    for (name, mut op) in decoder.operations() {
+        let ns = median_ns(501, 20, &mut op);
+        let (torch, numpy) = peer_keys
+            .iter()
+            .find(|(n, _, _)| *n == name)
+            .map_or((None, None), |(_, t, n)| (peer(t), peer(n)));
+        println!(
+            "{name:<22} {:>12} {:>12} {:>12}",
+            cell(Some(ns), 1e3, "µs"),
+            cell(torch, 1e3, "µs"),
+            cell(numpy, 1e3, "µs"),
+        );
+    }
+    println!("(torch jacobian: torch.func.jacrev; numpy: hand-written forward mode)");
+
+    println!(
+        "{:<22} {:>12} {:>12} {:>14}",
+        "training (2000 samples)", "nn", "torch", "nn 1000 epochs"
+    );
+    for (threads, pool) in pools {
+        let mut trainer = new_trainer();
+        let epoch_ns = pool.install(|| {
+            median_ns(7, 1, || {
+                trainer.run_epoch().expect("training stays finite");
+            })
+        });
+        let rate = SAMPLES as f64 / (epoch_ns * 1e-9);
+        println!(
+            "{:<22} {:>12} {:>12} {:>12.1} s",
+            format!("{threads} thread(s)"),
+            cell(Some(rate), 1e3, "k/s"),
+            cell(peer(&format!("train_{threads}t_samples_per_s")), 1e3, "k/s"),
+            1e3 * epoch_ns * 1e-9,
+        );
+    }
+    if let Some(p) = &peers {
+        for threads in THREADS {
+            if let (Some(s), Some(mse)) = (
+                p.number(&format!("train_{threads}t_seconds")),
+                p.number(&format!("train_{threads}t_final_mse")),
+            ) {
+                println!(
+                    "torch {threads} thread(s): {} epochs in {s:.1} s, final MSE {mse:.3e}",
+                    p.string("epochs")
+                );
+            }
+        }
+    }
+}
+
+fn main() {
+    let decoder = Decoder::new();
+    let pools: Vec<(usize, ThreadPool)> = THREADS.iter().map(|&t| (t, pool(t))).collect();
+    let mut c = Criterion::default().configure_from_args();
+    bench_decoder(&mut c, &decoder);
+    bench_train(&mut c, &pools);
+    c.final_summary();
+    summary(&decoder, &pools);
+}
