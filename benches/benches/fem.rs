@@ -13,13 +13,12 @@
 use std::hint::black_box;
 use std::time::Duration;
 
-use benches::{beam_10k, det_f_range, shared_mesh, smooth_displacement};
+use benches::{beam_10k, det_f_range, read_shared_mesh, smooth_displacement};
 use criterion::{BatchSize, Criterion, SamplingMode, Throughput};
 use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::{Axis, DofMap, Side, VertexSelection};
 use fem_core::element::Elements;
 use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
-use fem_core::io::read_mesh;
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::box_mesh;
 use fem_core::optim::{SolverConfig, SolverMethod};
@@ -54,9 +53,7 @@ impl Case {
 
 fn cases() -> Vec<Case> {
     let mut cases = Vec::new();
-    if let Some(path) = shared_mesh("catapult_low.mesh") {
-        let (mesh, _) =
-            read_mesh(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    if let Some(mesh) = read_shared_mesh("catapult_low.mesh") {
         // Only one vertex lies exactly on the catapult's x-min plane; a slab of 10 % of its
         // x-extent pins its flat side (about 135 vertices) instead of hanging it from a point.
         let (lo, hi) = mesh.bounding_box();

@@ -7,6 +7,9 @@ use fem_core::TetMesh;
 use fem_core::element::Elements;
 use fem_core::mesh::generate::{BoxSpec, GeneratedShape};
 
+#[cfg(feature = "peers")]
+pub mod peers;
+
 /// The `shared/` folder beside the repository (or `$LATENT_SHARED_DIR`), if present; prints a
 /// skip reason otherwise.
 pub fn shared_dir() -> Option<PathBuf> {
@@ -33,6 +36,18 @@ pub fn shared_mesh(name: &str) -> Option<PathBuf> {
         eprintln!("skipping: {} not found", path.display());
         None
     }
+}
+
+/// `shared/meshes/<name>` read and validated, if present; prints a skip reason otherwise.
+///
+/// # Panics
+///
+/// When the file exists but cannot be read: a benchmark should not silently skip a broken mesh.
+pub fn read_shared_mesh(name: &str) -> Option<TetMesh> {
+    let path = shared_mesh(name)?;
+    let (mesh, _) = fem_core::io::read_mesh(&path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    Some(mesh)
 }
 
 /// A 1 m × 0.1 m × 0.1 m beam of 100 × 10 × 10 = 10,000 vertices (48,114 tets).
