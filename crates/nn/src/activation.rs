@@ -54,15 +54,23 @@ impl Activation {
         }
     }
 
-    /// σ'(a), given also h = σ(a) so ELU and tanh need no second transcendental call.
+    /// σ'(a), given also h = σ(a). Every activation's derivative is a function of its output
+    /// alone (ELU: min(h, 0) + 1, tanh: 1 − h², softplus: 1 − e⁻ʰ, ReLU: [h > 0]), which is what
+    /// this evaluates, so backpropagation need not keep the pre-activations; `a` is not read.
     #[inline]
-    pub fn derivative(self, a: f64, h: f64) -> f64 {
+    pub fn derivative(self, _a: f64, h: f64) -> f64 {
+        self.derivative_from_output(h)
+    }
+
+    /// σ'(a) from h = σ(a) alone (see [`Activation::derivative`]).
+    #[inline]
+    pub fn derivative_from_output(self, h: f64) -> f64 {
         match self {
-            Activation::Elu => elu_derivative(a, h),
+            Activation::Elu => elu_derivative(h),
             Activation::Tanh => 1.0 - h * h,
-            Activation::Softplus => sigmoid(a),
+            Activation::Softplus => softplus_derivative(h),
             Activation::Identity => 1.0,
-            Activation::Relu => relu_derivative(a),
+            Activation::Relu => relu_derivative(h),
         }
     }
 
@@ -74,66 +82,66 @@ impl Activation {
     /// h = σ(a) elementwise. The match is outside the loop so each arm is a tight loop.
     pub(crate) fn apply(self, a: &[f64], h: &mut [f64]) {
         let h = &mut h[..a.len()];
+        h.copy_from_slice(a);
+        self.apply_in_place(h);
+    }
+
+    /// x ← σ(x) elementwise (pre-activations in, activations out).
+    pub(crate) fn apply_in_place(self, x: &mut [f64]) {
         match self {
-            Activation::Elu => h.iter_mut().zip(a).for_each(|(h, &a)| *h = elu(a)),
-            Activation::Tanh => h.iter_mut().zip(a).for_each(|(h, &a)| *h = a.tanh()),
-            Activation::Softplus => h.iter_mut().zip(a).for_each(|(h, &a)| *h = softplus(a)),
-            Activation::Identity => h.copy_from_slice(a),
-            Activation::Relu => h.iter_mut().zip(a).for_each(|(h, &a)| *h = a.max(0.0)),
+            Activation::Elu => x.iter_mut().for_each(|x| *x = elu(*x)),
+            Activation::Tanh => x.iter_mut().for_each(|x| *x = x.tanh()),
+            Activation::Softplus => x.iter_mut().for_each(|x| *x = softplus(*x)),
+            Activation::Identity => {}
+            Activation::Relu => x.iter_mut().for_each(|x| *x = x.max(0.0)),
         }
     }
 
     /// h = σ(a) and d = σ'(a) elementwise.
     pub(crate) fn apply_with_derivative(self, a: &[f64], h: &mut [f64], d: &mut [f64]) {
         self.apply(a, h);
-        self.derivative_into(a, h, d);
+        self.derivative_into(&h[..a.len()], d);
     }
 
     /// d = σ'(a) elementwise, given h = σ(a).
-    pub(crate) fn derivative_into(self, a: &[f64], h: &[f64], d: &mut [f64]) {
-        let n = a.len();
-        let (h, d) = (&h[..n], &mut d[..n]);
+    pub(crate) fn derivative_into(self, h: &[f64], d: &mut [f64]) {
+        let d = &mut d[..h.len()];
         match self {
-            Activation::Elu => {
-                for i in 0..n {
-                    d[i] = elu_derivative(a[i], h[i]);
-                }
-            }
-            Activation::Tanh => {
-                for i in 0..n {
-                    d[i] = 1.0 - h[i] * h[i];
-                }
-            }
-            Activation::Softplus => d.iter_mut().zip(a).for_each(|(d, &a)| *d = sigmoid(a)),
+            Activation::Elu => d
+                .iter_mut()
+                .zip(h)
+                .for_each(|(d, &h)| *d = elu_derivative(h)),
+            Activation::Tanh => d.iter_mut().zip(h).for_each(|(d, &h)| *d = 1.0 - h * h),
+            Activation::Softplus => d
+                .iter_mut()
+                .zip(h)
+                .for_each(|(d, &h)| *d = softplus_derivative(h)),
             Activation::Identity => d.fill(1.0),
             Activation::Relu => d
                 .iter_mut()
-                .zip(a)
-                .for_each(|(d, &a)| *d = relu_derivative(a)),
+                .zip(h)
+                .for_each(|(d, &h)| *d = relu_derivative(h)),
         }
     }
 
     /// g ← σ'(a) ⊙ g elementwise, given h = σ(a) (the backward step through the activation).
-    pub(crate) fn scale_by_derivative(self, a: &[f64], h: &[f64], g: &mut [f64]) {
-        let n = a.len();
-        let (h, g) = (&h[..n], &mut g[..n]);
+    pub(crate) fn scale_by_derivative(self, h: &[f64], g: &mut [f64]) {
+        let g = &mut g[..h.len()];
         match self {
-            Activation::Elu => {
-                for i in 0..n {
-                    g[i] *= elu_derivative(a[i], h[i]);
-                }
-            }
-            Activation::Tanh => {
-                for i in 0..n {
-                    g[i] *= 1.0 - h[i] * h[i];
-                }
-            }
-            Activation::Softplus => g.iter_mut().zip(a).for_each(|(g, &a)| *g *= sigmoid(a)),
+            Activation::Elu => g
+                .iter_mut()
+                .zip(h)
+                .for_each(|(g, &h)| *g *= elu_derivative(h)),
+            Activation::Tanh => g.iter_mut().zip(h).for_each(|(g, &h)| *g *= 1.0 - h * h),
+            Activation::Softplus => g
+                .iter_mut()
+                .zip(h)
+                .for_each(|(g, &h)| *g *= softplus_derivative(h)),
             Activation::Identity => {}
             Activation::Relu => g
                 .iter_mut()
-                .zip(a)
-                .for_each(|(g, &a)| *g *= relu_derivative(a)),
+                .zip(h)
+                .for_each(|(g, &h)| *g *= relu_derivative(h)),
         }
     }
 }
@@ -214,7 +222,7 @@ fn expm1_nonpositive(x: f64) -> f64 {
 }
 
 #[inline]
-fn elu_derivative(_a: f64, h: f64) -> f64 {
+fn elu_derivative(h: f64) -> f64 {
     // σ'(a) = eᵃ = σ(a) + 1 for a ≤ 0 (where σ ≤ 0) and 1 for a > 0 (where σ > 0): min(h, 0) + 1
     // selects without a branch, so the loops vectorise.
     h.min(0.0) + 1.0
@@ -226,19 +234,17 @@ fn softplus(a: f64) -> f64 {
     a.max(0.0) + (-a.abs()).exp().ln_1p()
 }
 
+/// The logistic function 1/(1 + e⁻ᵃ) from h = ln(1 + eᵃ): eʰ = 1 + eᵃ, so σ' = 1 − e⁻ʰ, computed
+/// as −expm1(−h) to stay accurate when h is tiny (a ≪ 0).
 #[inline]
-fn sigmoid(a: f64) -> f64 {
-    if a >= 0.0 {
-        1.0 / (1.0 + (-a).exp())
-    } else {
-        let e = a.exp();
-        e / (1.0 + e)
-    }
+fn softplus_derivative(h: f64) -> f64 {
+    -(-h).exp_m1()
 }
 
 #[inline]
-fn relu_derivative(a: f64) -> f64 {
-    if a > 0.0 { 1.0 } else { 0.0 }
+fn relu_derivative(h: f64) -> f64 {
+    // h = max(a, 0) > 0 exactly when a > 0.
+    if h > 0.0 { 1.0 } else { 0.0 }
 }
 
 #[cfg(test)]
@@ -259,5 +265,27 @@ mod tests {
         assert_eq!(expm1_nonpositive(-800.0), -1.0);
         assert_eq!(expm1_nonpositive(f64::NEG_INFINITY), -1.0);
         assert_eq!(elu(2.5), 2.5);
+    }
+
+    #[test]
+    fn derivatives_from_the_output_match_the_textbook_formulas() {
+        for i in 0..=800 {
+            let a = -40.0 + 0.1 * i as f64;
+            let textbook = [
+                (Activation::Elu, if a > 0.0 { 1.0 } else { a.exp() }),
+                (Activation::Tanh, 1.0 / a.cosh().powi(2)),
+                (Activation::Softplus, 1.0 / (1.0 + (-a).exp())),
+                (Activation::Identity, 1.0),
+                (Activation::Relu, if a > 0.0 { 1.0 } else { 0.0 }),
+            ];
+            for (act, want) in textbook {
+                let got = act.derivative_from_output(act.value(a));
+                // Absolute error at the rounding level of σ near ±1 (ELU, tanh saturate there).
+                assert!(
+                    (got - want).abs() <= 1e-13 * want.abs() + 4.0 * f64::EPSILON,
+                    "{act} at {a}: {got} vs {want}"
+                );
+            }
+        }
     }
 }

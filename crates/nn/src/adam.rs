@@ -62,16 +62,7 @@ impl Adam {
         params: impl Iterator<Item = &'p mut [f64]>,
         grads: impl Iterator<Item = &'g [f64]>,
     ) {
-        self.step += 1;
-        let AdamParams {
-            learning_rate,
-            beta1,
-            beta2,
-            epsilon,
-        } = self.params;
-        let t = self.step.min(i32::MAX as u64) as i32;
-        let c1 = 1.0 / (1.0 - beta1.powi(t));
-        let c2 = 1.0 / (1.0 - beta2.powi(t));
+        let update = self.begin_step();
         let mut count = 0;
         for (((p, g), m), v) in params
             .zip(grads)
@@ -82,16 +73,78 @@ impl Adam {
                 p.len() == g.len() && p.len() == m.len(),
                 "parameter array {count} does not match the optimiser state"
             );
-            let n = p.len();
-            let (g, m, v) = (&g[..n], &mut m[..n], &mut v[..n]);
-            for i in 0..n {
-                let gi = g[i];
-                m[i] = beta1 * m[i] + (1.0 - beta1) * gi;
-                v[i] = beta2 * v[i] + (1.0 - beta2) * gi * gi;
-                p[i] -= learning_rate * (m[i] * c1) / ((v[i] * c2).sqrt() + epsilon);
-            }
+            update.apply(p, g, m, v);
             count += 1;
         }
         assert_eq!(count, self.m.len(), "fewer parameter arrays than the state");
+    }
+
+    /// Counts a step and returns its update rule, for callers that update the arrays (or parts
+    /// of them, in parallel) themselves with [`Adam::moments_mut`].
+    pub(crate) fn begin_step(&mut self) -> AdamUpdate {
+        self.step += 1;
+        let AdamParams {
+            learning_rate,
+            beta1,
+            beta2,
+            epsilon,
+        } = self.params;
+        let t = self.step.min(i32::MAX as u64) as i32;
+        AdamUpdate {
+            learning_rate,
+            beta1,
+            beta2,
+            epsilon,
+            c1: 1.0 / (1.0 - beta1.powi(t)),
+            c2: 1.0 / (1.0 - beta2.powi(t)),
+        }
+    }
+
+    /// The first and second moments of every parameter array, in the order of [`Adam::step`].
+    pub(crate) fn moments_mut(
+        &mut self,
+    ) -> (
+        impl Iterator<Item = &mut [f64]>,
+        impl Iterator<Item = &mut [f64]>,
+    ) {
+        (
+            self.m.iter_mut().map(Vec::as_mut_slice),
+            self.v.iter_mut().map(Vec::as_mut_slice),
+        )
+    }
+}
+
+/// The update of one Adam step (hyper-parameters and bias corrections), elementwise, so any
+/// part of a parameter array can be updated independently of the rest.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AdamUpdate {
+    learning_rate: f64,
+    beta1: f64,
+    beta2: f64,
+    epsilon: f64,
+    /// 1/(1 − β₁ᵗ) and 1/(1 − β₂ᵗ).
+    c1: f64,
+    c2: f64,
+}
+
+impl AdamUpdate {
+    /// p ← p − lr · m̂/(√v̂ + ε) after m ← β₁m + (1 − β₁)g, v ← β₂v + (1 − β₂)g², elementwise.
+    pub(crate) fn apply(&self, p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64]) {
+        let Self {
+            learning_rate,
+            beta1,
+            beta2,
+            epsilon,
+            c1,
+            c2,
+        } = *self;
+        let n = p.len();
+        let (g, m, v) = (&g[..n], &mut m[..n], &mut v[..n]);
+        for i in 0..n {
+            let gi = g[i];
+            m[i] = beta1 * m[i] + (1.0 - beta1) * gi;
+            v[i] = beta2 * v[i] + (1.0 - beta2) * gi * gi;
+            p[i] -= learning_rate * (m[i] * c1) / ((v[i] * c2).sqrt() + epsilon);
+        }
     }
 }

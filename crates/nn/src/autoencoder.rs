@@ -12,7 +12,8 @@
 use faer::{Mat, MatRef};
 use rayon::prelude::*;
 
-use crate::{Activation, InputScaling, Mlp, MlpBatchWorkspace, MlpGradient, MlpWorkspace, NnError};
+use crate::gradient::{ChunkWorkspace, GradientEngine};
+use crate::{Activation, InputScaling, Mlp, MlpGradient, MlpWorkspace, NnError};
 
 /// Samples per parallel work item in batched evaluation and training. Fixed (not derived from the
 /// thread count) so that sums over chunks, taken in chunk order, are bit-identical on any number
@@ -242,7 +243,7 @@ impl Autoencoder {
         let k = self.input_dim();
         let mut x = self.scaled_block(data)?;
         x.par_chunks_mut(k * CHUNK).for_each_init(
-            || self.chunk_workspace(CHUNK),
+            || ChunkWorkspace::new(self),
             |ws, block| {
                 let c = block.len() / k;
                 let z = self.encoder.forward_batch(block, c, &mut ws.encoder);
@@ -268,8 +269,7 @@ impl Autoencoder {
         let n = data.ncols();
         let mut engine = GradientEngine::new(self, n);
         let sum = engine.run(self, &x, n);
-        let grad = engine.grads.swap_remove(0);
-        Ok((sum / x.len() as f64, grad))
+        Ok((sum / x.len() as f64, engine.grad))
     }
 
     /// The scaled data as one contiguous k × N column-major block, checking shape and finiteness.
@@ -306,62 +306,8 @@ impl Autoencoder {
 
     /// Σ‖dec(enc(s)) − s‖² over the scaled block `x`, summed chunk by chunk in order.
     pub(crate) fn sum_squared_error(&self, x: &[f64]) -> f64 {
-        let k = self.input_dim();
-        let per_chunk: Vec<f64> = x
-            .par_chunks(k * CHUNK)
-            .map_init(
-                || self.chunk_workspace(CHUNK),
-                |ws, block| {
-                    let c = block.len() / k;
-                    let z = self.encoder.forward_batch(block, c, &mut ws.encoder);
-                    let y = self.decoder.forward_batch(z, c, &mut ws.decoder);
-                    y.iter().zip(block).map(|(y, s)| (y - s) * (y - s)).sum()
-                },
-            )
-            .collect();
-        per_chunk.iter().sum()
-    }
-
-    fn chunk_workspace(&self, capacity: usize) -> ChunkWorkspace {
-        ChunkWorkspace {
-            encoder: self.encoder.batch_workspace(capacity),
-            decoder: self.decoder.batch_workspace(capacity),
-            resid: vec![0.0; self.input_dim() * capacity],
-            gz: vec![0.0; self.latent_dim() * capacity],
-        }
-    }
-
-    /// Σ‖r‖² of one chunk and the gradient of Σ‖r‖² · `weight` into `grad` (overwritten).
-    fn chunk_loss_gradient(
-        &self,
-        x: &[f64],
-        weight: f64,
-        ws: &mut ChunkWorkspace,
-        grad: &mut AutoencoderGradient,
-    ) -> f64 {
-        let k = self.input_dim();
-        let c = x.len() / k;
-        let ChunkWorkspace {
-            encoder,
-            decoder,
-            resid,
-            gz,
-        } = ws;
-        let z = self.encoder.forward_batch(x, c, encoder);
-        let y = self.decoder.forward_batch(z, c, decoder);
-        let r = &mut resid[..k * c];
-        let mut sum = 0.0;
-        for ((r, y), s) in r.iter_mut().zip(y).zip(x) {
-            let e = y - s;
-            sum += e * e;
-            *r = 2.0 * weight * e;
-        }
-        let gz = &mut gz[..self.latent_dim() * c];
-        self.decoder
-            .backward_batch(z, r, c, &mut grad.decoder, Some(gz), decoder);
-        self.encoder
-            .backward_batch(x, gz, c, &mut grad.encoder, None, encoder);
-        sum
+        let n = x.len() / self.input_dim();
+        GradientEngine::new(self, n.min(8 * CHUNK)).sum_squared_error(self, x)
     }
 }
 
@@ -402,57 +348,8 @@ impl AutoencoderGradient {
         self.encoder.slices().chain(self.decoder.slices())
     }
 
-    fn add_assign(&mut self, other: &Self) {
-        self.encoder.add_assign(&other.encoder);
-        self.decoder.add_assign(&other.decoder);
-    }
-}
-
-/// Per-chunk batch workspaces and gradients of the encoder and decoder.
-#[derive(Debug, Clone)]
-struct ChunkWorkspace {
-    encoder: MlpBatchWorkspace,
-    decoder: MlpBatchWorkspace,
-    resid: Vec<f64>,
-    gz: Vec<f64>,
-}
-
-/// Reusable state for the gradient of Σ‖r‖²/(n k) over a batch of up to `capacity` samples,
-/// computed chunk by chunk in parallel and summed in chunk order (bit-reproducible).
-#[derive(Debug, Clone)]
-pub(crate) struct GradientEngine {
-    workspaces: Vec<ChunkWorkspace>,
-    /// One gradient per chunk; after [`GradientEngine::run`], `grads[0]` holds the total.
-    pub(crate) grads: Vec<AutoencoderGradient>,
-}
-
-impl GradientEngine {
-    pub(crate) fn new(ae: &Autoencoder, capacity: usize) -> Self {
-        let chunks = capacity.div_ceil(CHUNK).max(1);
-        Self {
-            workspaces: (0..chunks).map(|_| ae.chunk_workspace(CHUNK)).collect(),
-            grads: (0..chunks)
-                .map(|_| AutoencoderGradient::zeros(ae))
-                .collect(),
-        }
-    }
-
-    /// Σ‖r‖² over the `n` samples of the scaled block `x`; `grads[0]` = ∇ of Σ‖r‖²/(n k).
-    pub(crate) fn run(&mut self, ae: &Autoencoder, x: &[f64], n: usize) -> f64 {
-        let k = ae.input_dim();
-        let weight = 1.0 / (n * k) as f64;
-        let chunks = n.div_ceil(CHUNK);
-        assert!(chunks <= self.workspaces.len(), "batch exceeds the engine");
-        let sums: Vec<f64> = x[..n * k]
-            .par_chunks(k * CHUNK)
-            .zip(self.workspaces.par_iter_mut())
-            .zip(self.grads.par_iter_mut())
-            .map(|((block, ws), grad)| ae.chunk_loss_gradient(block, weight, ws, grad))
-            .collect();
-        let (first, rest) = self.grads.split_at_mut(1);
-        for g in &rest[..chunks - 1] {
-            first[0].add_assign(g);
-        }
-        sums.iter().sum()
+    /// Every array, mutable, in the order of [`Autoencoder::parameters_mut`].
+    pub(crate) fn slices_mut(&mut self) -> impl Iterator<Item = &mut [f64]> {
+        self.encoder.slices_mut().chain(self.decoder.slices_mut())
     }
 }

@@ -42,6 +42,14 @@ impl MlpGradient {
             .flat_map(|(w, b)| [w.as_slice(), b.as_slice()])
     }
 
+    /// Every array, mutable, in the order of [`Mlp::parameters_mut`].
+    pub(crate) fn slices_mut(&mut self) -> impl Iterator<Item = &mut [f64]> {
+        self.weights
+            .iter_mut()
+            .zip(self.biases.iter_mut())
+            .flat_map(|(w, b)| [w.as_mut_slice(), b.as_mut_slice()])
+    }
+
     /// self += other, elementwise.
     pub fn add_assign(&mut self, other: &MlpGradient) {
         for (a, b) in self
@@ -56,23 +64,54 @@ impl MlpGradient {
 }
 
 /// Scratch memory for batches of up to `capacity` samples, made by [`Mlp::batch_workspace`].
+///
+/// Keeps what backpropagation needs and nothing more: every layer's activations (the
+/// pre-activations are overwritten by σ in place, since every σ' is a function of σ's output,
+/// see [`crate::Activation::derivative`]) and every layer's gradient G_l = ∂ℒ/∂A_l, so that the
+/// weight gradients G_l H_{l−1}ᵀ can be formed after the backward sweep, over several chunks.
 #[derive(Debug, Clone)]
 pub struct MlpBatchWorkspace {
     sizes: Vec<usize>,
     capacity: usize,
-    /// A_l, n_l × capacity, for every dense layer.
-    pre: Vec<Vec<f64>>,
-    /// H_l, n_l × capacity, for every hidden layer.
-    post: Vec<Vec<f64>>,
-    /// Backward buffers, widest × capacity.
-    ga: Vec<f64>,
-    gh: Vec<f64>,
+    /// H_l = σ(A_l) for hidden layers, Y = A_L for the output layer; n_{l+1} × capacity each.
+    act: Vec<Vec<f64>>,
+    /// G_l = ∂ℒ/∂A_l, n_{l+1} × capacity, for every layer.
+    grad: Vec<Vec<f64>>,
 }
 
 impl MlpBatchWorkspace {
     /// The largest batch this workspace holds.
     pub fn capacity(&self) -> usize {
         self.capacity
+    }
+
+    /// The output block Y (`n_L × c`) of the last forward pass.
+    pub(crate) fn output(&self, c: usize) -> &[f64] {
+        let last = self.act.len() - 1;
+        &self.act[last][..self.sizes[last + 1] * c]
+    }
+
+    /// The output Y and the buffer for G_L = ∂ℒ/∂Y (both `n_L × c`), for the caller to fill.
+    pub(crate) fn output_and_gradient_mut(&mut self, c: usize) -> (&[f64], &mut [f64]) {
+        let last = self.act.len() - 1;
+        let len = self.sizes[last + 1] * c;
+        (&self.act[last][..len], &mut self.grad[last][..len])
+    }
+
+    /// The buffer for G_L = ∂ℒ/∂Y (`n_L × c`).
+    pub(crate) fn output_gradient_mut(&mut self, c: usize) -> &mut [f64] {
+        let last = self.grad.len() - 1;
+        &mut self.grad[last][..self.sizes[last + 1] * c]
+    }
+
+    /// G_l (`n_{l+1} × c`) of the last backward sweep.
+    pub(crate) fn gradient(&self, layer: usize, c: usize) -> &[f64] {
+        &self.grad[layer][..self.sizes[layer + 1] * c]
+    }
+
+    /// The input of layer `l ≥ 1`, H_{l−1} (`n_l × c`).
+    pub(crate) fn hidden(&self, layer: usize, c: usize) -> &[f64] {
+        &self.act[layer - 1][..self.sizes[layer] * c]
     }
 }
 
@@ -81,21 +120,17 @@ impl Mlp {
     /// samples.
     pub fn batch_workspace(&self, capacity: usize) -> MlpBatchWorkspace {
         let sizes = self.sizes();
-        let widest = sizes.iter().copied().max().unwrap_or(0);
-        let layers = sizes.len() - 1;
+        let blocks = || -> Vec<Vec<f64>> {
+            sizes[1..]
+                .iter()
+                .map(|&n| vec![0.0; n * capacity])
+                .collect()
+        };
         MlpBatchWorkspace {
             sizes: sizes.to_vec(),
             capacity,
-            pre: sizes[1..]
-                .iter()
-                .map(|&n| vec![0.0; n * capacity])
-                .collect(),
-            post: sizes[1..layers]
-                .iter()
-                .map(|&n| vec![0.0; n * capacity])
-                .collect(),
-            ga: vec![0.0; widest * capacity],
-            gh: vec![0.0; widest * capacity],
+            act: blocks(),
+            grad: blocks(),
         }
     }
 
@@ -126,18 +161,19 @@ impl Mlp {
         let last = self.num_layers() - 1;
         for l in 0..=last {
             let (n_in, n_out) = (sizes[l], sizes[l + 1]);
-            let input: &[f64] = if l == 0 { x } else { &ws.post[l - 1] };
-            let a = &mut ws.pre[l][..n_out * c];
+            let (done, rest) = ws.act.split_at_mut(l);
+            let input: &[f64] = if l == 0 { x } else { &done[l - 1][..n_in * c] };
+            let a = &mut rest[0][..n_out * c];
             linalg::mul_w(a, self.weights(l), input, n_out, n_in, c);
             let b = self.bias(l);
             for col in a.chunks_exact_mut(n_out) {
                 col.iter_mut().zip(b).for_each(|(a, b)| *a += b);
             }
             if l < last {
-                self.activations()[l].apply(&ws.pre[l][..n_out * c], &mut ws.post[l]);
+                self.activations()[l].apply_in_place(a);
             }
         }
-        &ws.pre[last][..sizes[last + 1] * c]
+        ws.output(c)
     }
 
     /// Backpropagates G = ∂ℒ/∂Y (`n_L × c`) through the batch of the last
@@ -153,35 +189,83 @@ impl Mlp {
         ws: &mut MlpBatchWorkspace,
     ) {
         self.check_batch(ws, c);
+        assert_eq!(x.len(), self.input_dim() * c, "input block length");
+        let out = ws.output_gradient_mut(c);
+        assert_eq!(g_out.len(), out.len(), "output gradient length");
+        out.copy_from_slice(g_out);
+        self.backward_data(c, g_in, ws);
         let sizes = self.sizes();
-        let last = self.num_layers() - 1;
-        assert_eq!(x.len(), sizes[0] * c, "input block length");
-        assert_eq!(g_out.len(), sizes[last + 1] * c, "output gradient length");
-        ws.ga[..g_out.len()].copy_from_slice(g_out);
-        for l in (0..=last).rev() {
+        for l in 0..self.num_layers() {
+            let input = if l == 0 { x } else { ws.hidden(l, c) };
+            weight_gradient_rows(
+                sizes[l + 1],
+                sizes[l],
+                0,
+                ws.gradient(l, c),
+                input,
+                c,
+                false,
+                &mut grad.weights[l],
+                &mut grad.biases[l],
+            );
+        }
+    }
+
+    /// The backward sweep without weight gradients: from G_L (already in `ws`, see
+    /// [`MlpBatchWorkspace::output_gradient_mut`]) every G_{l−1} = σ'(A_{l−1}) ⊙ (W_lᵀ G_l), and
+    /// ∂ℒ/∂X = W₁ᵀ G₁ into `g_in` when given (skipped otherwise: nothing upstream needs it).
+    pub(crate) fn backward_data(
+        &self,
+        c: usize,
+        g_in: Option<&mut [f64]>,
+        ws: &mut MlpBatchWorkspace,
+    ) {
+        self.check_batch(ws, c);
+        let sizes = self.sizes();
+        for l in (1..self.num_layers()).rev() {
             let (n_in, n_out) = (sizes[l], sizes[l + 1]);
-            let input: &[f64] = if l == 0 { x } else { &ws.post[l - 1] };
-            let g = &ws.ga[..n_out * c];
-            linalg::mul_outer(&mut grad.weights[l], g, input, n_out, n_in, c);
-            let db = &mut grad.biases[l];
-            db.fill(0.0);
-            for col in g.chunks_exact(n_out) {
-                db.iter_mut().zip(col).for_each(|(d, g)| *d += g);
-            }
-            if l > 0 {
-                let gh = &mut ws.gh[..n_in * c];
-                linalg::mul_wt(gh, self.weights(l), g, n_out, n_in, c);
-                self.activations()[l - 1].scale_by_derivative(
-                    &ws.pre[l - 1][..n_in * c],
-                    &ws.post[l - 1],
-                    gh,
-                );
-                std::mem::swap(&mut ws.ga, &mut ws.gh);
-            }
+            let (below, above) = ws.grad.split_at_mut(l);
+            let gh = &mut below[l - 1][..n_in * c];
+            linalg::mul_wt(gh, self.weights(l), &above[0][..n_out * c], n_out, n_in, c);
+            self.activations()[l - 1].scale_by_derivative(&ws.act[l - 1][..n_in * c], gh);
         }
         if let Some(g_in) = g_in {
             let (n_in, n_out) = (sizes[0], sizes[1]);
-            linalg::mul_wt(g_in, self.weights(0), &ws.ga, n_out, n_in, c);
+            assert_eq!(g_in.len(), n_in * c, "input gradient length");
+            linalg::mul_wt(
+                g_in,
+                self.weights(0),
+                &ws.grad[0][..n_out * c],
+                n_out,
+                n_in,
+                c,
+            );
         }
+    }
+}
+
+/// Rows `row0..row0 + db.len()` of an `n_out × n_in` layer's gradients from one chunk of `c`
+/// samples: dW ← G[rows] Hᵀ and db ← G[rows] 1, or added to them with `accumulate`. `g` is G
+/// (`n_out × c`), `input` is H (`n_in × c`); `dw` is the `rows × n_in` row-major block.
+pub(crate) fn weight_gradient_rows(
+    n_out: usize,
+    n_in: usize,
+    row0: usize,
+    g: &[f64],
+    input: &[f64],
+    c: usize,
+    accumulate: bool,
+    dw: &mut [f64],
+    db: &mut [f64],
+) {
+    let rows = db.len();
+    linalg::mul_outer_rows(dw, g, input, n_out, row0, rows, n_in, c, accumulate);
+    if !accumulate {
+        db.fill(0.0);
+    }
+    for col in g[..n_out * c].chunks_exact(n_out) {
+        db.iter_mut()
+            .zip(&col[row0..row0 + rows])
+            .for_each(|(d, g)| *d += g);
     }
 }

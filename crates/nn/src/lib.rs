@@ -64,6 +64,7 @@ pub mod autoencoder;
 pub mod batch;
 pub mod config;
 pub mod error;
+mod gradient;
 mod linalg;
 pub mod mlp;
 pub mod rng;

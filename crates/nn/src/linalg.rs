@@ -30,10 +30,26 @@ pub(crate) fn mul_wt(dst: &mut [f64], w: &[f64], g: &[f64], m: usize, n: usize, 
     matmul(dst, Accum::Replace, wt, g, 1.0, Par::Seq);
 }
 
-/// dW (m × n, row-major) = G (m × c) · Xᵀ (c × n): the weight gradient of a batch.
-pub(crate) fn mul_outer(dw: &mut [f64], g: &[f64], x: &[f64], m: usize, n: usize, c: usize) {
-    let g = MatRef::from_column_major_slice(&g[..m * c], m, c);
+/// dW (rows × n, row-major) = G[row0..row0 + rows] (rows × c) · Xᵀ (c × n), or `+=` with
+/// `accumulate`: rows of the weight gradient of a batch, G being m × c.
+pub(crate) fn mul_outer_rows(
+    dw: &mut [f64],
+    g: &[f64],
+    x: &[f64],
+    m: usize,
+    row0: usize,
+    rows: usize,
+    n: usize,
+    c: usize,
+    accumulate: bool,
+) {
+    let g = MatRef::from_column_major_slice(&g[..m * c], m, c).subrows(row0, rows);
     let xt = MatRef::from_column_major_slice(&x[..n * c], n, c).transpose();
-    let dw = MatMut::from_row_major_slice_mut(&mut dw[..m * n], m, n);
-    matmul(dw, Accum::Replace, g, xt, 1.0, Par::Seq);
+    let dw = MatMut::from_row_major_slice_mut(&mut dw[..rows * n], rows, n);
+    let accum = if accumulate {
+        Accum::Add
+    } else {
+        Accum::Replace
+    };
+    matmul(dw, accum, g, xt, 1.0, Par::Seq);
 }

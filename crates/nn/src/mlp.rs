@@ -318,7 +318,7 @@ impl Mlp {
             let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
             linalg::mul_wt(&mut ws.gh, &self.weights[l], &ws.ga, n_out, n_in, 1);
             self.activation(l - 1)
-                .scale_by_derivative(&ws.pre[l - 1], &ws.post[l - 1], &mut ws.gh);
+                .scale_by_derivative(&ws.post[l - 1], &mut ws.gh);
             std::mem::swap(&mut ws.ga, &mut ws.gh);
         }
         let (n_in, n_out) = (self.sizes[0], self.sizes[1]);

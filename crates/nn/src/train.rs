@@ -9,7 +9,7 @@
 
 use faer::{Mat, MatRef};
 
-use crate::autoencoder::GradientEngine;
+use crate::gradient::GradientEngine;
 use crate::{Adam, Autoencoder, AutoencoderConfig, InputScaling, LatentRule, NnError, SplitMix64};
 
 /// One line of the loss history, passed to the progress callback after every epoch.
@@ -241,13 +241,14 @@ impl Trainer {
             for (dst, &j) in self.buffer.chunks_exact_mut(k).zip(ids) {
                 dst.copy_from_slice(&self.x_train[j * k..(j + 1) * k]);
             }
-            sum += self.engine.run(&self.model, &self.buffer[..k * b], b);
-            self.adam
-                .step(self.model.parameters_mut(), self.engine.grads[0].slices());
+            sum += self
+                .engine
+                .run_adam_step(&mut self.model, &mut self.adam, &self.buffer, b);
         }
         let train_loss = sum / (n_train * k) as f64;
-        let validation_loss = (!self.x_val.is_empty())
-            .then(|| self.model.sum_squared_error(&self.x_val) / self.x_val.len() as f64);
+        let validation_loss = (!self.x_val.is_empty()).then(|| {
+            self.engine.sum_squared_error(&self.model, &self.x_val) / self.x_val.len() as f64
+        });
         let monitored = validation_loss.unwrap_or(train_loss);
         if !monitored.is_finite() || !train_loss.is_finite() {
             return Err(NnError::Diverged {

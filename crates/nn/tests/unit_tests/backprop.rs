@@ -28,7 +28,8 @@ fn check_gradient(ae: &Autoencoder, data: &Mat<f64>, label: &str) {
                 );
                 let argmax = gl.iter().position(|x| x.abs() == gmax).unwrap();
                 let mut entries: Vec<usize> = (0..4).map(|_| rng.below(gl.len())).collect();
-                entries.push(argmax);
+                // The last entry lies in the last row block of a layer split for parallelism.
+                entries.extend([argmax, gl.len() - 1]);
                 for i in entries {
                     let eval = |delta: f64| {
                         let mut p = ae.clone();
@@ -76,6 +77,16 @@ fn loss_gradient_matches_finite_differences() {
         .unwrap();
         check_gradient(&ae, &data, &format!("{act}"));
     }
+    // Layers of 130 × 100 weights are split into row blocks for the parallel weight gradient.
+    let mut rng = Rng::new(45);
+    let data = Mat::from_fn(k, 70, |i, _| (i as f64 + 1.0) * rng.range(-1.0, 1.0));
+    let ae = Autoencoder::new(
+        random_mlp(&[k, 130, 100, d], Activation::Elu, 46),
+        random_mlp(&[d, 100, 130, k], Activation::Elu, 47),
+        Some(InputScaling::standardize(data.as_ref())),
+    )
+    .unwrap();
+    check_gradient(&ae, &data, "row blocks");
     // Without scaling and with a network without hidden layers in the encoder.
     let mut rng = Rng::new(3);
     let data = Mat::from_fn(3, 9, |_, _| rng.range(-2.0, 2.0));

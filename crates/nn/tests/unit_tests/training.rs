@@ -1,8 +1,9 @@
 //! Training: it learns a nonlinear manifold far better than linear PCA, is bit-reproducible,
-//! stops early with the best weights restored, and searches the latent dimension.
+//! stops early with the best weights restored, and searches the latent dimension. A training
+//! step is exactly Adam on the loss gradient.
 
 use faer::Mat;
-use nn::{AutoencoderConfig, NnError, train, train_search};
+use nn::{Adam, AutoencoderConfig, NnError, Trainer, train, train_search};
 
 use super::{Rng, manifold_data};
 
@@ -229,4 +230,63 @@ fn bad_data_is_an_error() {
         train(manifold_data(40, 3).as_ref(), 2, &diverge, |_| {}),
         Err(NnError::Diverged { .. })
     ));
+}
+
+#[test]
+fn a_training_step_is_adam_on_the_loss_gradient() {
+    // 130 × 100 layers (13,000 weights) are split into row blocks for the parallel weight
+    // gradient and the fused Adam update; every row must get its own gradient and update.
+    let data = manifold_data(150, 4);
+    let config = AutoencoderConfig {
+        hidden: vec![130, 100],
+        epochs: 1,
+        batch_size: 150,
+        learning_rate: 1e-2,
+        validation_fraction: 0.0,
+        patience: 0,
+        seed: 3,
+        ..AutoencoderConfig::default()
+    };
+    let step = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut trainer = Trainer::new(data.as_ref(), 2, &config).unwrap();
+            let before = trainer.model().clone();
+            trainer.run_epoch().unwrap();
+            (before, trainer.model().clone())
+        })
+    };
+    let (before, after) = step(2);
+    assert_eq!(after, step(1).1, "one and two threads differ");
+
+    // The same step by hand: the gradient of the loss over all samples (one batch), then Adam.
+    let (_, grad) = before.loss_gradient(data.as_ref()).unwrap();
+    let mut expected = before.clone();
+    let lengths: Vec<usize> = grad.slices().map(<[f64]>::len).collect();
+    Adam::new(config.adam(), lengths).step(expected.parameters_mut(), grad.slices());
+    let mut after = after;
+    let arrays = after.parameters_mut().zip(expected.parameters_mut());
+    for (i, (got, want)) in arrays.enumerate() {
+        for (j, (g, w)) in got.iter().zip(want.iter()).enumerate() {
+            // The batch is shuffled, so its sums are taken in another order: equal to rounding.
+            assert!((g - w).abs() <= 1e-12, "array {i} entry {j}: {g} vs {w}");
+        }
+    }
+    // Adam's first step moves every parameter with a nonzero gradient by about the rate.
+    let moved = before
+        .clone()
+        .parameters_mut()
+        .zip(after.parameters_mut())
+        .flat_map(|(b, a)| {
+            b.iter()
+                .zip(a.iter())
+                .map(|(b, a)| (a - b).abs())
+                .collect::<Vec<_>>()
+        })
+        .filter(|d| *d > 0.5e-2)
+        .count();
+    assert!(moved > 20_000, "only {moved} parameters moved");
 }
