@@ -145,11 +145,12 @@ fn mesh_format(bytes: &[u8], path: &Path) -> Result<MeshFormat, MeshError> {
         _ => return Err(bad()),
     };
     let data_size: usize = data_size.parse().map_err(|_| bad())?;
-    if binary && data_size != 4 && data_size != 8 {
+    // mshio also reads the size in ASCII 4.1 files (and panics on one above 255).
+    if (binary || version_text == "4.1") && data_size != 4 && data_size != 8 {
         return Err(parse_error(
             path,
             line,
-            format!("unsupported size_t size {data_size} in a binary file (expected 4 or 8)"),
+            format!("unsupported size_t size {data_size} (expected 4 or 8)"),
         ));
     }
     Ok(MeshFormat {
@@ -406,6 +407,11 @@ fn read_elements_v2(
         if element_type != TET4 {
             *ignored.entry(element_type).or_default() += 1;
             continue;
+        }
+        if num_tags < 0 {
+            return Err(err(format!(
+                "element {number}: the number of tags is {num_tags}, which is negative"
+            )));
         }
         for t in 0..num_tags {
             next_int(&format!("tag {} of {num_tags}", t + 1))?;
@@ -763,6 +769,82 @@ fn scan_nodes(mut c: Cursor<'_>) -> Result<NodeTags, MeshError> {
     Ok(NodeTags { index, block_sizes })
 }
 
+/// Nodes per element of the Gmsh element types (`None` for types this table does not know;
+/// mshio then reports them).
+fn nodes_per_element(element_type: i64) -> Option<usize> {
+    Some(match element_type {
+        15 => 1,
+        1 => 2,
+        2 | 8 => 3,
+        3 | 4 | 26 => 4,
+        7 | 27 => 5,
+        6 | 9 | 28 => 6,
+        5 | 16 => 8,
+        10 | 20 => 9,
+        11 | 21 => 10,
+        22 => 12,
+        19 => 13,
+        14 => 14,
+        18 | 23 | 24 => 15,
+        17 | 29 => 20,
+        25 => 21,
+        12 => 27,
+        30 => 35,
+        31 => 56,
+        92 => 64,
+        93 => 125,
+        _ => return None,
+    })
+}
+
+/// Our pass over `$Elements`: checks each block's count against the section header before mshio
+/// walks the blocks, so a huge or inconsistent count is refused at its line.
+fn scan_elements(mut c: Cursor<'_>) -> Result<(), MeshError> {
+    let num_blocks = c.usize_count(&|| "the number of element blocks in $Elements".into())?;
+    let header = c.pos;
+    let total = c.usize_count(&|| "the number of elements in $Elements".into())?;
+    if total == 0 {
+        return Err(c.error(header, "$Elements declares no elements"));
+    }
+    c.size_t(&|| "the smallest element tag".into())?;
+    c.size_t(&|| "the largest element tag".into())?;
+    let mut seen = 0usize;
+    for b in 1..=num_blocks {
+        c.int(&|| format!("the entity dimension of element block {b}"))?;
+        c.int(&|| format!("the entity tag of element block {b}"))?;
+        let element_type = c.int(&|| format!("the element type of element block {b}"))?;
+        let count_at = c.pos;
+        let n = c.usize_count(&|| format!("the number of elements in element block {b}"))?;
+        if n > total - seen {
+            let mut at = Cursor { pos: count_at, ..c };
+            at.skip_whitespace();
+            return Err(at.error(
+                at.pos,
+                format!(
+                    "element block {b} holds {n} elements, more than the {} left of the {total} that $Elements declares",
+                    total - seen
+                ),
+            ));
+        }
+        seen += n;
+        let Some(nodes) = nodes_per_element(element_type) else {
+            return Ok(());
+        };
+        for k in 1..=n {
+            for _ in 0..=nodes {
+                c.size_t(&|| format!("element {k} of {n} in element block {b}"))?;
+            }
+        }
+    }
+    if seen != total {
+        return Err(c.error(
+            header,
+            format!("$Elements declares {total} elements, but its blocks hold {seen}"),
+        ));
+    }
+    c.end_tag("$EndElements")
+}
+
 /// Line (0 if binary or not found) of element `element` of element block `block`, for errors
 /// found after mshio has parsed the file.
 fn locate_element(
@@ -875,15 +957,7 @@ fn parse_v41(bytes: &[u8], path: &Path, format: &MeshFormat) -> Result<TetMesh, 
     let tags = scan_nodes(cursor(nodes_at))?;
     let elements_at = find_section(bytes, format.body, b"$Elements")
         .ok_or_else(|| parse_error(path, end_line, "no $Elements section"))?;
-    {
-        let mut c = cursor(elements_at);
-        c.usize_count(&|| "the number of element blocks in $Elements".into())?;
-        let header = c.pos;
-        let n = c.usize_count(&|| "the number of elements in $Elements".into())?;
-        if n == 0 {
-            return Err(c.error(header, "$Elements declares no elements"));
-        }
-    }
+    scan_elements(cursor(elements_at))?;
 
     // mshio has panicking paths on malformed input (e.g. `unimplemented!`): contain them.
     let parsed = std::panic::catch_unwind(|| mshio::parse_msh_bytes(bytes));
@@ -1176,6 +1250,31 @@ mod tests {
         assert!(parse_error(text.as_bytes()).1.contains("no elements"));
         let text = V41.replace("2 5 1 5\n", "0 0 1 5\n");
         assert!(parse_error(text.as_bytes()).1.contains("no nodes"));
+    }
+
+    #[test]
+    fn malformed_headers_and_counts_found_by_fuzzing_are_typed_errors() {
+        // mshio panics on a size above 255 (contained, but with no line): refused up front.
+        let (line, reason) = parse_error(V41.replace("4.1 0 8", "4.1 0 999").as_bytes());
+        assert_eq!(line, 2);
+        assert!(reason.contains("size_t"), "{reason}");
+        // A negative number of tags used to shift the node list silently.
+        let text = V22.replace("3 4 2 1 1 10 20 30 40", "3 4 -2 10 20 30 40");
+        let (line, reason) = parse_error(text.as_bytes());
+        assert_eq!(line, 20);
+        assert!(reason.contains("negative"), "{reason}");
+        // An element block larger than the section: refused at its line before mshio walks it.
+        let text = V41.replace("3 1 4 1\n", "3 1 4 1000000000000\n");
+        let (line, reason) = parse_error(text.as_bytes());
+        assert_eq!(line, 23);
+        assert!(reason.contains("limit"), "{reason}");
+        let text = V41.replace("3 1 4 1\n", "3 1 4 2\n");
+        let (line, reason) = parse_error(text.as_bytes());
+        assert_eq!(line, 23);
+        assert!(reason.contains("more than the 1 left"), "{reason}");
+        let text = V41.replace("2 2 1 2\n", "2 3 1 3\n");
+        let (_, reason) = parse_error(text.as_bytes());
+        assert!(reason.contains("blocks hold 2"), "{reason}");
     }
 
     #[test]

@@ -10,6 +10,9 @@ pub use validate::{ValidationReport, validate};
 
 use crate::Vec3;
 
+/// Component label of a vertex that no tet uses, in [`TetMesh::vertex_components`].
+pub const NO_COMPONENT: usize = usize::MAX;
+
 /// A linear tetrahedral mesh: rest positions and 0-based vertex indices of each tet.
 ///
 /// Tets are positively oriented after [`validate`]: det[X1−X0, X2−X0, X3−X0] > 0.
@@ -82,6 +85,47 @@ impl TetMesh {
             i = j;
         }
         out
+    }
+
+    /// The connected piece of each vertex (tets sharing a vertex are connected), numbered from 0
+    /// in order of first vertex, and the number of pieces. Vertices no tet uses get
+    /// [`NO_COMPONENT`] and count as no piece.
+    pub fn vertex_components(&self) -> (Vec<usize>, usize) {
+        let n = self.vertices.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(parent: &mut [usize], mut v: usize) -> usize {
+            while parent[v] != v {
+                parent[v] = parent[parent[v]];
+                v = parent[v];
+            }
+            v
+        }
+        let mut used = vec![false; n];
+        for tet in &self.tets {
+            let a = root(&mut parent, tet[0]);
+            used[tet[0]] = true;
+            for &v in &tet[1..] {
+                used[v] = true;
+                let b = root(&mut parent, v);
+                if a != b {
+                    parent[b] = a;
+                }
+            }
+        }
+        let mut label = vec![NO_COMPONENT; n];
+        let mut count = 0;
+        for v in 0..n {
+            if !used[v] {
+                continue;
+            }
+            let r = root(&mut parent, v);
+            if label[r] == NO_COMPONENT {
+                label[r] = count;
+                count += 1;
+            }
+            label[v] = label[r];
+        }
+        (label, count)
     }
 
     /// Vertices on the boundary surface, sorted and unique.

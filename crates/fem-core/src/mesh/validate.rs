@@ -14,13 +14,17 @@ pub struct ValidationReport {
     pub unreferenced_vertices: usize,
     /// Smallest |volume| divided by the mean |volume|.
     pub min_relative_volume: f64,
+    /// Connected pieces (tets sharing a vertex are connected). More than one is allowed, but
+    /// every piece needs its own support in a scene.
+    pub components: usize,
 }
 
 /// Relative volume below which a tet counts as degenerate: |V_e| < EPS · mean |V|.
 pub const DEGENERATE_RELATIVE_VOLUME: f64 = 1e-10;
 
-/// Validates `mesh` in place: indices in range, finite coordinates, no degenerate tets, positive
-/// orientation (inverted rest tets are flipped and counted). `path` names the source in errors.
+/// Validates `mesh` in place: indices in range, finite coordinates, no degenerate or duplicate
+/// tets, positive orientation (inverted rest tets are flipped and counted); counts unreferenced
+/// vertices and connected pieces. `path` names the source in errors.
 pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, MeshError> {
     let invalid = |reason: String| MeshError::Invalid {
         path: path.to_path_buf(),
@@ -65,8 +69,20 @@ pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, Mes
     let volumes: Vec<f64> = (0..mesh.tets.len())
         .map(|t| mesh.signed_volume(t))
         .collect();
+    // Finite coordinates can still overflow a volume (|x| near 1e100 and beyond).
+    if let Some(t) = volumes.iter().position(|v| !v.is_finite()) {
+        return Err(invalid(format!(
+            "tet {t} {:?} has a non-finite volume: its coordinates are too large",
+            mesh.tets[t]
+        )));
+    }
     let mean = volumes.iter().map(|v| v.abs()).sum::<f64>() / volumes.len() as f64;
-    if !(mean > 0.0 && mean.is_finite()) {
+    if !mean.is_finite() {
+        return Err(invalid(
+            "the total volume overflows: the coordinates are too large".into(),
+        ));
+    }
+    if mean <= 0.0 {
         return Err(invalid("all tetrahedra have zero volume".into()));
     }
     let mut report = ValidationReport {
@@ -87,12 +103,38 @@ pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, Mes
             report.flipped_tets += 1;
         }
     }
+    // Two tets on the same four vertices overlap: their mass and stiffness would count twice.
+    let mut sorted: Vec<([usize; 4], usize)> = mesh
+        .tets
+        .iter()
+        .enumerate()
+        .map(|(t, tet)| {
+            let mut key = *tet;
+            key.sort_unstable();
+            (key, t)
+        })
+        .collect();
+    sorted.sort_unstable();
+    if let Some(w) = sorted.windows(2).find(|w| w[0].0 == w[1].0) {
+        return Err(invalid(format!(
+            "tets {} and {} use the same four vertices {:?} (a duplicate element)",
+            w[0].1, w[1].1, w[0].0
+        )));
+    }
     report.unreferenced_vertices = referenced.iter().filter(|r| !**r).count();
+    report.components = mesh.vertex_components().1;
     if report.flipped_tets > 0 {
         tracing::warn!(
             "{}: flipped {} inverted rest tets",
             path.display(),
             report.flipped_tets
+        );
+    }
+    if report.components > 1 {
+        tracing::warn!(
+            "{}: the mesh has {} disconnected pieces",
+            path.display(),
+            report.components
         );
     }
     if report.unreferenced_vertices > 0 {

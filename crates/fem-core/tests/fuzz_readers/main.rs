@@ -1,0 +1,507 @@
+//! Mesh readers on malformed input: every input ends in a valid mesh or in a typed error that
+//! names the file, the line (text formats) and the reason — never a panic, never an allocation
+//! sized by a count the file cannot back.
+//!
+//! - `campaign_*`: seeded structured mutations (truncation, bit flips, numbers replaced by huge,
+//!   negative, non-finite or malformed ones, lines deleted, repeated or swapped) of small meshes
+//!   written here in every format and of the real meshes in `shared/` when present; each prints
+//!   how many malformed inputs it tried and how they ended.
+//! - `props`: the same property under proptest (with shrinking to a minimal failing edit list).
+//! - `defects`: degenerate, duplicate, inverted, repeated-vertex and disconnected tets,
+//!   unreferenced vertices, NaN/inf/overflowing coordinates, out-of-range indices and huge counts,
+//!   written in every format and read through `read_mesh` from real files.
+//!
+//! The whole binary runs under an allocator capped at [`HEAP_LIMIT`]: a reader that reserves
+//! memory for a declared count (up to `MAX_ENTITIES` = 5·10⁷ entries, gigabytes) before checking
+//! it against the file aborts the run instead of passing unnoticed.
+//!
+//! Longer runs: `cargo test -p fem-core --release --test fuzz_readers -- --ignored --nocapture`
+//! (`FUZZ_SECONDS` per reader, default 60); coverage-guided fuzzing: `scripts/fuzz.sh`.
+
+mod check;
+mod mutate;
+mod writers;
+
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use check::{Outcome, Reader, check};
+use fem_core::rng::SplitMix64;
+use mutate::{Mutation, random_mutation};
+use writers::Format;
+
+#[global_allocator]
+static ALLOC: cap::Cap<std::alloc::System> = cap::Cap::new(std::alloc::System, usize::MAX);
+
+/// Live heap the whole test binary may use. The largest input here is under 1 MB; a reader that
+/// trusted a count of `MAX_ENTITIES` vertices would ask for 1.2 GB at once.
+const HEAP_LIMIT: usize = 768 << 20;
+
+/// Panics inside mshio that the Gmsh reader contained (counted, not printed).
+static CONTAINED: AtomicUsize = AtomicUsize::new(0);
+
+/// Caps the heap and keeps the panics the Gmsh reader contains from flooding the output (any
+/// other panic is printed as usual).
+fn setup() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        ALLOC
+            .set_limit(HEAP_LIMIT)
+            .expect("the tests start below the heap limit");
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let in_mshio = info.location().is_some_and(|l| l.file().contains("mshio"));
+            if in_mshio {
+                CONTAINED.fetch_add(1, Ordering::Relaxed);
+            } else {
+                default(info);
+            }
+        }));
+    });
+}
+
+fn shared_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("LATENT_SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"));
+    dir.is_dir().then_some(dir)
+}
+
+/// Which reader takes each format.
+fn reader_of(format: Format) -> Reader {
+    match format {
+        Format::Medit => Reader::Medit,
+        Format::Gmsh22 | Format::Gmsh41Ascii | Format::Gmsh41Binary => Reader::Gmsh,
+        Format::Vtk42 | Format::Vtk51 => Reader::Vtk,
+    }
+}
+
+/// A named valid input of one reader.
+#[derive(Debug, Clone)]
+struct Base {
+    name: String,
+    bytes: Vec<u8>,
+    binary: bool,
+}
+
+/// Valid inputs of `reader` generated here: two box meshes in each of its formats, and a CRLF
+/// copy of the text ones.
+fn generated_bases(reader: Reader) -> Vec<Base> {
+    let mut out = Vec::new();
+    for format in Format::ALL.into_iter().filter(|&f| reader_of(f) == reader) {
+        for cells in [[2, 1, 1], [3, 2, 1]] {
+            let bytes = format.write(&writers::box_of(cells));
+            let binary = format == Format::Gmsh41Binary;
+            let name = format!("{}-{}x{}x{}", format.name(), cells[0], cells[1], cells[2]);
+            if !binary && cells[0] == 2 {
+                let crlf = String::from_utf8(bytes.clone())
+                    .unwrap()
+                    .replace('\n', "\r\n");
+                out.push(Base {
+                    name: format!("{name}-crlf"),
+                    bytes: crlf.into_bytes(),
+                    binary,
+                });
+            }
+            out.push(Base {
+                name,
+                bytes,
+                binary,
+            });
+        }
+    }
+    out
+}
+
+/// The real meshes of `shared/` that `reader` takes (empty, with a printed reason, without it).
+fn shared_bases(reader: Reader) -> Vec<Base> {
+    let Some(shared) = shared_dir() else {
+        eprintln!(
+            "{}: skipping the shared meshes: shared/ not found (set LATENT_SHARED_DIR)",
+            reader.name()
+        );
+        return Vec::new();
+    };
+    let ext = match reader {
+        Reader::Medit => "mesh",
+        Reader::Gmsh => "msh",
+        Reader::Vtk => "vtk",
+    };
+    let mut files = Vec::new();
+    for dir in ["meshes", "validation/readers", "validation/beams"] {
+        if let Ok(entries) = std::fs::read_dir(shared.join(dir)) {
+            files.extend(
+                entries
+                    .filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|e| e == ext)),
+            );
+        }
+    }
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            let bytes = std::fs::read(&p).unwrap();
+            Base {
+                name: p.file_name().unwrap().to_string_lossy().into_owned(),
+                binary: p.to_string_lossy().contains("binary"),
+                bytes,
+            }
+        })
+        .collect()
+}
+
+/// How a campaign's inputs ended.
+#[derive(Debug, Default)]
+struct Tally {
+    tried: usize,
+    valid: usize,
+    parse_errors: usize,
+    invalid_meshes: usize,
+    contained_panics: usize,
+    /// Panics and malformed errors, with how to reproduce them.
+    violations: Vec<String>,
+    slowest: Duration,
+}
+
+impl Tally {
+    fn typed_errors(&self) -> usize {
+        self.parse_errors + self.invalid_meshes + self.contained_panics
+    }
+
+    fn record(&mut self, reader: Reader, bytes: &[u8], describe: &dyn Fn() -> String) {
+        self.tried += 1;
+        let start = Instant::now();
+        let result = std::panic::catch_unwind(|| check(reader, bytes));
+        self.slowest = self.slowest.max(start.elapsed());
+        match result {
+            Ok(Ok(Outcome::Valid)) => self.valid += 1,
+            Ok(Ok(Outcome::ParseError)) => self.parse_errors += 1,
+            Ok(Ok(Outcome::InvalidMesh)) => self.invalid_meshes += 1,
+            Ok(Ok(Outcome::ContainedPanic)) => self.contained_panics += 1,
+            Ok(Err(violation)) => self.violation(reader, bytes, &violation, describe),
+            Err(_) => self.violation(reader, bytes, "panicked", describe),
+        }
+    }
+
+    fn violation(
+        &mut self,
+        reader: Reader,
+        bytes: &[u8],
+        what: &str,
+        describe: &dyn Fn() -> String,
+    ) {
+        let dir = std::env::temp_dir().join("fem-core-fuzz-failures");
+        let _ = std::fs::create_dir_all(&dir);
+        let file = dir.join(format!(
+            "{}-{:016x}.{}",
+            reader.name(),
+            fnv1a(bytes),
+            reader.path().extension().unwrap().to_string_lossy()
+        ));
+        let _ = std::fs::write(&file, bytes);
+        self.violations.push(format!(
+            "{what} ({}); input saved to {}",
+            describe(),
+            file.display()
+        ));
+    }
+
+    fn report(&self, label: &str) {
+        println!(
+            "{label}: {} malformed inputs tried: {} ended in a typed error ({} parse errors, {} refused by validation, {} contained mshio panics), {} still read as a valid mesh, {} panics or malformed errors; slowest {:.1} ms",
+            self.tried,
+            self.typed_errors(),
+            self.parse_errors,
+            self.invalid_meshes,
+            self.contained_panics,
+            self.valid,
+            self.violations.len(),
+            self.slowest.as_secs_f64() * 1e3
+        );
+        assert!(
+            self.violations.is_empty(),
+            "{label}: {} inputs did not end in Ok or a typed error:\n{}",
+            self.violations.len(),
+            self.violations
+                .iter()
+                .take(10)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join("\n")
+        );
+        assert_eq!(
+            self.typed_errors() + self.valid,
+            self.tried,
+            "{label}: every input ends in Ok or a typed error"
+        );
+    }
+}
+
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// Applies 1–3 random mutations to random bases until `count` inputs differ from their base
+/// or `budget` runs out.
+fn campaign(
+    reader: Reader,
+    bases: &[Base],
+    count: usize,
+    budget: Duration,
+    seed: u64,
+    tally: &mut Tally,
+) {
+    if bases.is_empty() {
+        return;
+    }
+    let start = Instant::now();
+    let mut rng = SplitMix64::new(seed);
+    let mut case = 0u64;
+    while tally.tried < count && start.elapsed() < budget {
+        case += 1;
+        let base = &bases[rng.below(bases.len())];
+        let edits: Vec<Mutation> = (0..1 + rng.below(3))
+            .map(|_| random_mutation(&mut rng, base.binary))
+            .collect();
+        let bytes = edits.iter().fold(base.bytes.clone(), |b, m| m.apply(&b));
+        if bytes == base.bytes {
+            continue;
+        }
+        tally.record(reader, &bytes, &|| {
+            format!(
+                "base {}, seed {seed}, case {case}, edits {edits:?}",
+                base.name
+            )
+        });
+    }
+}
+
+/// The default campaign of one reader: a few thousand inputs from the generated meshes, a few
+/// dozen from each shared mesh (they are 20–800 kB, so each takes milliseconds).
+fn default_campaign(reader: Reader, seed: u64) {
+    setup();
+    let mut tally = Tally::default();
+    let generated = generated_bases(reader);
+    for base in &generated {
+        assert_eq!(
+            check(reader, &base.bytes),
+            Ok(Outcome::Valid),
+            "{}",
+            base.name
+        );
+    }
+    campaign(
+        reader,
+        &generated,
+        2000,
+        Duration::from_secs(20),
+        seed,
+        &mut tally,
+    );
+    for (i, base) in shared_bases(reader).iter().enumerate() {
+        let target = tally.tried + 25;
+        campaign(
+            reader,
+            std::slice::from_ref(base),
+            target,
+            Duration::from_secs(5),
+            seed + 1 + i as u64,
+            &mut tally,
+        );
+    }
+    tally.report(reader.name());
+}
+
+/// The cap is live: without it the huge-count tests could not fail.
+#[test]
+fn the_heap_cap_refuses_a_huge_reservation() {
+    setup();
+    assert!(Vec::<u8>::new().try_reserve(HEAP_LIMIT + 1).is_err());
+    assert!(Vec::<u8>::new().try_reserve(1 << 20).is_ok());
+}
+
+#[test]
+fn campaign_medit() {
+    default_campaign(Reader::Medit, 1);
+}
+
+#[test]
+fn campaign_gmsh() {
+    default_campaign(Reader::Gmsh, 2);
+}
+
+#[test]
+fn campaign_vtk() {
+    default_campaign(Reader::Vtk, 3);
+}
+
+/// `FUZZ_SECONDS` (default 60) of mutations per reader, over the generated and shared meshes.
+#[test]
+#[ignore = "long: run with --ignored --nocapture"]
+fn long_campaign() {
+    setup();
+    let seconds: u64 = std::env::var("FUZZ_SECONDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(60);
+    let seed = std::env::var("FUZZ_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(7, |d| d.as_secs())
+        });
+    println!("long campaign: {seconds} s per reader, FUZZ_SEED={seed}");
+    for reader in [Reader::Medit, Reader::Gmsh, Reader::Vtk] {
+        let mut bases = generated_bases(reader);
+        bases.extend(shared_bases(reader));
+        let mut tally = Tally::default();
+        campaign(
+            reader,
+            &bases,
+            usize::MAX,
+            Duration::from_secs(seconds),
+            seed,
+            &mut tally,
+        );
+        tally.report(reader.name());
+    }
+    println!(
+        "mshio panics contained by the Gmsh reader: {}",
+        CONTAINED.load(Ordering::Relaxed)
+    );
+}
+
+mod props {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn mutation() -> impl Strategy<Value = Mutation> {
+        let tokens = mutate::replacement_tokens();
+        let words = mutate::replacement_words();
+        prop_oneof![
+            any::<u64>().prop_map(|per_mille| Mutation::Truncate { per_mille }),
+            (any::<u64>(), 0u8..8).prop_map(|(at, bit)| Mutation::FlipBit { at, bit }),
+            (any::<u64>(), any::<u8>()).prop_map(|(at, byte)| Mutation::SetByte { at, byte }),
+            (any::<u64>(), prop::sample::select(tokens.clone()))
+                .prop_map(|(token, with)| Mutation::ReplaceToken { token, with }),
+            (any::<u64>(), prop::sample::select(tokens))
+                .prop_map(|(token, with)| Mutation::ReplaceToken { token, with }),
+            any::<u64>().prop_map(|line| Mutation::DeleteLine { line }),
+            any::<u64>().prop_map(|line| Mutation::DuplicateLine { line }),
+            (any::<u64>(), any::<u64>()).prop_map(|(a, b)| Mutation::SwapLines { a, b }),
+            (any::<u64>(), any::<u64>()).prop_map(|(at, len)| Mutation::DeleteRange { at, len }),
+            (any::<u64>(), "[ -~]{1,12}").prop_map(|(at, text)| Mutation::Insert { at, text }),
+            (any::<u64>(), prop::sample::select(words))
+                .prop_map(|(at, word)| Mutation::OverwriteWord { at, word }),
+        ]
+    }
+
+    fn holds(reader: Reader, base: usize, edits: &[Mutation]) -> Result<(), TestCaseError> {
+        setup();
+        let bases = generated_bases(reader);
+        let base = &bases[base % bases.len()];
+        let bytes = edits.iter().fold(base.bytes.clone(), |b, m| m.apply(&b));
+        let result = std::panic::catch_unwind(|| check(reader, &bytes));
+        match result {
+            Ok(Ok(_)) => Ok(()),
+            Ok(Err(violation)) => Err(TestCaseError::fail(format!("{}: {violation}", base.name))),
+            Err(_) => Err(TestCaseError::fail(format!("{}: panicked", base.name))),
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        #[test]
+        fn mutated_medit_ends_in_a_mesh_or_a_typed_error(
+            base in any::<usize>(), edits in prop::collection::vec(mutation(), 1..4)
+        ) {
+            holds(Reader::Medit, base, &edits)?;
+        }
+
+        #[test]
+        fn mutated_gmsh_ends_in_a_mesh_or_a_typed_error(
+            base in any::<usize>(), edits in prop::collection::vec(mutation(), 1..4)
+        ) {
+            holds(Reader::Gmsh, base, &edits)?;
+        }
+
+        #[test]
+        fn mutated_vtk_ends_in_a_mesh_or_a_typed_error(
+            base in any::<usize>(), edits in prop::collection::vec(mutation(), 1..4)
+        ) {
+            holds(Reader::Vtk, base, &edits)?;
+        }
+    }
+}
+
+mod defects;
+
+/// Writes the seed corpus of the cargo-fuzz targets (`fuzz/seeds/<target>/`).
+#[test]
+#[ignore = "writes files into fuzz/seeds"]
+fn write_fuzz_seeds() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds");
+    for (target, formats) in fuzz_targets() {
+        let dir = root.join(target);
+        std::fs::create_dir_all(&dir).unwrap();
+        for format in formats {
+            for cells in [[1, 1, 1], [2, 1, 1]] {
+                let name = format!(
+                    "{}-{}x{}x{}.{}",
+                    format.name(),
+                    cells[0],
+                    cells[1],
+                    cells[2],
+                    format.extension()
+                );
+                std::fs::write(dir.join(name), format.write(&writers::box_of(cells))).unwrap();
+            }
+        }
+    }
+}
+
+/// The cargo-fuzz targets and the formats their seeds are written in.
+fn fuzz_targets() -> [(&'static str, Vec<Format>); 4] {
+    [
+        ("medit", vec![Format::Medit]),
+        ("gmsh_v22", vec![Format::Gmsh22]),
+        ("gmsh_v41", vec![Format::Gmsh41Ascii, Format::Gmsh41Binary]),
+        ("vtk", vec![Format::Vtk42, Format::Vtk51]),
+    ]
+}
+
+/// The committed seeds are valid inputs of their target's reader, so fuzzing starts from files
+/// that get all the way through it.
+#[test]
+fn fuzz_seeds_are_valid_meshes() {
+    setup();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds");
+    if !root.is_dir() {
+        eprintln!("skipping: {} not found", root.display());
+        return;
+    }
+    for (target, formats) in fuzz_targets() {
+        let reader = reader_of(formats[0]);
+        let mut seeds = 0;
+        for entry in std::fs::read_dir(root.join(target)).unwrap() {
+            let path = entry.unwrap().path();
+            let bytes = std::fs::read(&path).unwrap();
+            assert_eq!(
+                check(reader, &bytes),
+                Ok(Outcome::Valid),
+                "{}",
+                path.display()
+            );
+            seeds += 1;
+        }
+        assert!(seeds >= 2, "{target}: {seeds} seeds");
+    }
+}
