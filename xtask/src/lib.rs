@@ -4,12 +4,14 @@
 //! the code a user runs.
 
 pub mod artifact;
+pub mod bench;
 pub mod output;
 pub mod pipeline;
 pub mod plot;
 pub mod run;
 pub mod scene;
 pub mod simulate;
+pub mod stress;
 
 use std::path::PathBuf;
 

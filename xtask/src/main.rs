@@ -5,10 +5,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
+use xtask::bench::{BenchOptions, bench};
 use xtask::pipeline::{Pipeline, StageOutcome};
 use xtask::run::{RunOptions, markdown, run};
 use xtask::scene::Scene;
 use xtask::simulate::{Method, SimulateOptions, Trajectory, simulate};
+use xtask::stress::{Condition, Outcome, stress};
 
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
@@ -42,7 +44,7 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         every: usize,
         /// Methods to compare.
-        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
+        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
         methods: Vec<MethodArg>,
         /// Held-out test trajectory to simulate.
         #[arg(long, default_value_t = 0)]
@@ -97,6 +99,48 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Time every method at several sizes on the held-out trajectory (warm-up, repeated runs)
+    /// and write bench.json, bench.md and bench.svg (error against ms/step, Pareto front).
+    Bench {
+        #[command(flatten)]
+        common: Common,
+        /// Output folder (default: out/<scene name>/bench).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Timed runs of the trajectory per variant (after one warm-up run).
+        #[arg(long, default_value_t = 3)]
+        repeats: usize,
+        /// PCA dimensions (default: the latent dimensions, half and all of the scene's basis).
+        #[arg(long, value_delimiter = ',')]
+        pca_dims: Vec<usize>,
+        /// Latent dimensions (default: half, once and twice the scene's).
+        #[arg(long, value_delimiter = ',')]
+        latent_dims: Vec<usize>,
+        /// Cubature tolerances (default: 0.1, 0.05, 0.02).
+        #[arg(long, value_delimiter = ',')]
+        tolerances: Vec<f64>,
+        /// Held-out test trajectory to simulate.
+        #[arg(long, default_value_t = 0)]
+        trajectory: usize,
+    },
+    /// Every method under extreme conditions (time steps, stiffness, Poisson ratio, forces beyond
+    /// training, a long free run): a table of ok / error / diverged with the error measured.
+    Stress {
+        #[command(flatten)]
+        common: Common,
+        /// Output folder for stress.json and stress.md (default: out/<scene name>/stress).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Methods to stress.
+        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
+        methods: Vec<MethodArg>,
+        /// Steps of the free-run condition (test trajectory, then no external force).
+        #[arg(long, default_value_t = 2000)]
+        free_steps: usize,
+        /// Held-out test trajectory to simulate.
+        #[arg(long, default_value_t = 0)]
+        trajectory: usize,
+    },
     /// Run the stages in order, skipping cached ones.
     Pipeline {
         #[command(flatten)]
@@ -109,7 +153,10 @@ enum Command {
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 enum MethodArg {
+    /// Full space with the scene's solver (the reference).
     Full,
+    /// Full space with preconditioned L-BFGS.
+    FullLbfgs,
     Pca,
     PcaCubature,
     Neural,
@@ -120,6 +167,7 @@ impl From<MethodArg> for Method {
     fn from(m: MethodArg) -> Self {
         match m {
             MethodArg::Full => Method::Full,
+            MethodArg::FullLbfgs => Method::FullLbfgs,
             MethodArg::Pca => Method::Pca,
             MethodArg::PcaCubature => Method::PcaCubature,
             MethodArg::Neural => Method::Neural,
@@ -246,10 +294,123 @@ fn dispatch(cli: Cli) -> Result<()> {
                 scene.test().frames_per_schedule
             );
             print!("{}", markdown(&rows));
+            let reduced: Vec<_> = rows
+                .iter()
+                .filter(|r| !r.method.starts_with("full"))
+                .collect();
+            if !reduced.is_empty() {
+                println!("\nwhere a reduced step's time goes (mean ms per step):\n");
+                println!(
+                    "| method | decode | elastic | VJP | preconditioner |\n|---|---:|---:|---:|---:|"
+                );
+                for r in reduced {
+                    println!(
+                        "| {} | {:.3} | {:.3} | {:.3} | {:.3} |",
+                        r.method, r.decode_ms, r.elastic_ms, r.vjp_ms, r.precond_ms
+                    );
+                }
+            }
             println!(
-                "\nreport: {} and report.md; frames: {}/<method>/series.pvd",
+                "\nreport: {} (also report.md, report.svg); frames: {}/<method>/series.pvd",
                 out.join("report.json").display(),
                 out.display()
+            );
+            Ok(())
+        }
+        Command::Bench {
+            common,
+            out,
+            repeats,
+            pca_dims,
+            latent_dims,
+            tolerances,
+            trajectory,
+        } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let cache = common
+                .cache
+                .unwrap_or_else(|| root.join("out").join(&scene.name).join("cache"));
+            let out = out.unwrap_or_else(|| root.join("out").join(&scene.name).join("bench"));
+            let opts = BenchOptions {
+                out: out.clone(),
+                cache,
+                trajectory,
+                repeats,
+                pca_dims,
+                latent_dims,
+                tolerances,
+            };
+            let method_bar = bar(0, "");
+            let rows = bench(
+                &scene,
+                &opts,
+                &mut print_stage,
+                &mut |label| method_bar.println(format!("     bench: {label}")),
+                &stage_progress,
+                &mut |m, done, total| {
+                    method_bar.set_message(m.to_string());
+                    method_bar.set_length(total as u64);
+                    method_bar.set_position(done as u64);
+                },
+            )?;
+            method_bar.finish_and_clear();
+            println!(
+                "\n{} — held-out test trajectory {trajectory}, {repeats} timed runs per variant\n",
+                scene.name
+            );
+            print!("{}", xtask::bench::markdown(&rows));
+            println!(
+                "\nbench: {} (also bench.md, bench.svg)",
+                out.join("bench.json").display()
+            );
+            Ok(())
+        }
+        Command::Stress {
+            common,
+            out,
+            methods,
+            free_steps,
+            trajectory,
+        } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            let methods: Vec<Method> = methods.into_iter().map(Method::from).collect();
+            // Every stage first, so the table's progress is not interleaved with training.
+            for &m in &methods {
+                match m {
+                    Method::PcaCubature => drop(p.cubature(&stage_progress)?),
+                    Method::Neural => drop(p.train(&stage_progress)?),
+                    Method::NeuralCubature => drop(p.cubature_neural(&stage_progress)?),
+                    _ => drop(p.pca(&stage_progress)?),
+                }
+            }
+            let out = out.unwrap_or_else(|| root.join("out").join(&scene.name).join("stress"));
+            let conditions = Condition::defaults(free_steps);
+            let results = stress(
+                &mut p,
+                &methods,
+                &conditions,
+                trajectory,
+                &stage_progress,
+                &mut |r| {
+                    let detail = match &r.outcome {
+                        Outcome::Error { message, .. } => format!(": {message}"),
+                        Outcome::Diverged { reason, .. } => format!(": {reason}"),
+                        Outcome::Ok { .. } => String::new(),
+                    };
+                    println!(
+                        "{:>16} | {:<20} | {}{detail}",
+                        r.method,
+                        r.condition,
+                        r.outcome.cell()
+                    );
+                },
+            )?;
+            xtask::stress::write(&out, &results)?;
+            println!("\n{}", xtask::stress::markdown(&results));
+            println!(
+                "stress: {} (also stress.md)",
+                out.join("stress.json").display()
             );
             Ok(())
         }

@@ -8,7 +8,10 @@ use fem_core::integrator::FullSpaceModel;
 
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
-use crate::simulate::{Method, Runner, SimulateOptions, Trajectory, median, setup, write_json};
+use crate::plot::{Plot, Scale, Series};
+use crate::simulate::{
+    Method, Runner, SimulateOptions, StepParts, Trajectory, median, setup, write_json,
+};
 
 /// What `run` does.
 #[derive(Debug, Clone)]
@@ -31,8 +34,11 @@ pub struct MethodReport {
     pub cubature_elements: usize,
     /// Median wall time per step.
     pub ms_per_step: f64,
+    /// Smallest and largest per-run median over repeated runs (equal to `ms_per_step` after one).
+    pub ms_min: f64,
+    pub ms_max: f64,
     pub hz: f64,
-    /// Full-space ms/step divided by this method's.
+    /// The faster full-space solver's ms/step divided by this method's.
     pub speedup: f64,
     /// Mean and max over frames of ‖u − u_full‖_M / ‖u_full‖_M.
     pub mean_rel_error: f64,
@@ -41,6 +47,18 @@ pub struct MethodReport {
     pub max_vertex_error: f64,
     /// Mean solver iterations per step.
     pub iterations: f64,
+    /// Mean over frames of the relative error of the reference's best representation in this
+    /// method's subspace (u_full projected and, for neural methods, encoded and decoded): the part
+    /// of the error the subspace itself causes, whatever the dynamics do.
+    pub subspace_error: f64,
+    /// Where a reduced step's time goes, mean ms per step (zero for full space).
+    pub decode_ms: f64,
+    pub elastic_ms: f64,
+    pub vjp_ms: f64,
+    pub precond_ms: f64,
+    /// Why the method stopped before the last frame (its figures cover the frames before).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure: Option<String>,
 }
 
 /// Errors of a trajectory against the reference, frame by frame.
@@ -54,10 +72,14 @@ impl ErrorAccumulator {
     fn add(&mut self, model: &FullSpaceModel, u: &[f64], reference_free: &[f64]) {
         let mut r = vec![0.0; u.len()];
         model.dofs.scatter(reference_free, &mut r);
-        let diff: Vec<f64> = u.iter().zip(&r).map(|(a, b)| a - b).collect();
+        self.add_full(model, u, &r);
+    }
+
+    fn add_full(&mut self, model: &FullSpaceModel, u: &[f64], r: &[f64]) {
+        let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
         let mut scratch = vec![0.0; u.len()];
         let num = model.mass.half_norm_squared(&diff, &mut scratch);
-        let den = model.mass.half_norm_squared(&r, &mut scratch);
+        let den = model.mass.half_norm_squared(r, &mut scratch);
         if den > 0.0 {
             self.rel.push((num / den).sqrt());
         }
@@ -76,126 +98,302 @@ pub fn run(
     stage_progress: Progress<'_>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<MethodReport>> {
-    let reference = pipeline.reference(opts.trajectory, stage_progress)?;
-    let frames = reference.frames.len();
-    let full_ms = median(&reference.step_seconds) * 1e3;
     let mut rows = Vec::new();
     for &method in &opts.methods {
-        let sim_opts = SimulateOptions {
+        let m = Measure {
             method,
-            trajectory: Trajectory::Test(opts.trajectory),
+            trajectory: opts.trajectory,
             out: opts.out.join(method.name()),
-            frames: Some(frames),
             every: opts.every,
-            solver: None,
+            repeats: 1,
+            time_full: false,
         };
-        let writer = if opts.every > 0 {
-            Some(FrameWriter::new(&sim_opts.out)?)
-        } else {
-            None
-        };
-        let row = match method {
-            Method::Full => {
-                let model = pipeline.test_model(opts.trajectory)?;
-                if let Some(mut w) = writer {
-                    w.write(&model.mesh, 0, 0.0, &vec![0.0; model.num_full()])?;
-                    let mut u = vec![0.0; model.num_full()];
-                    for (k, f) in reference.frames.iter().enumerate() {
-                        if (k + 1) % opts.every == 0 || k + 1 == frames {
-                            model.dofs.scatter(f, &mut u);
-                            w.write(
-                                &model.mesh,
-                                k + 1,
-                                (k + 1) as f64 * pipeline.scene.time.step,
-                                &u,
-                            )?;
-                        }
-                    }
-                    w.finish()?;
-                }
-                MethodReport {
-                    method: method.name().into(),
-                    dim: model.dofs.num_free(),
-                    cubature_elements: model.elements.len(),
-                    ms_per_step: full_ms,
-                    hz: 1e3 / full_ms,
-                    speedup: 1.0,
-                    mean_rel_error: 0.0,
-                    max_rel_error: 0.0,
-                    max_vertex_error: 0.0,
-                    iterations: mean_usize(&reference.iterations),
-                }
-            }
-            _ => {
-                let (model, time, solver) = setup(pipeline, &sim_opts)?;
-                let mut runner =
-                    Runner::new(pipeline, method, model, time, solver, stage_progress)?;
-                let mut writer = writer;
-                if let Some(w) = writer.as_mut() {
-                    w.write(&runner.model().mesh, 0, 0.0, &runner.displacement())?;
-                }
-                let mut errors = ErrorAccumulator::default();
-                let mut times = Vec::with_capacity(frames);
-                let mut iterations = Vec::with_capacity(frames);
-                for k in 0..frames {
-                    let info = runner.step().map_err(|e| {
-                        anyhow::anyhow!("method {} failed at frame {}: {e}", method.name(), k + 1)
-                    })?;
-                    times.push(info.seconds);
-                    iterations.push(info.iterations);
-                    // Reconstruction for the error is outside the timed step.
-                    let u = runner.displacement();
-                    errors.add(runner.model(), &u, &reference.frames[k]);
-                    if let Some(w) = writer.as_mut()
-                        && ((k + 1) % opts.every == 0 || k + 1 == frames)
-                    {
-                        w.write(&runner.model().mesh, k + 1, runner.time(), &u)?;
-                    }
-                    progress(method.name(), k + 1, frames);
-                }
-                if let Some(w) = writer {
-                    w.finish()?;
-                }
-                let ms = median(&times) * 1e3;
-                let cubature_elements = match &runner {
-                    Runner::Full(s) => s.model.elements.len(),
-                    Runner::Pca(s) => s.space.elements.len(),
-                    Runner::Neural(s) => s.space.elements.len(),
-                };
-                MethodReport {
-                    method: method.name().into(),
-                    dim: runner.dim(),
-                    cubature_elements,
-                    ms_per_step: ms,
-                    hz: 1e3 / ms,
-                    speedup: full_ms / ms,
-                    mean_rel_error: errors.rel.iter().sum::<f64>() / errors.rel.len().max(1) as f64,
-                    max_rel_error: errors.rel.iter().fold(0.0, |a, &b| a.max(b)),
-                    max_vertex_error: errors.max_vertex,
-                    iterations: mean_usize(&iterations),
-                }
-            }
-        };
-        rows.push(row);
+        rows.push(measure(pipeline, &m, stage_progress, progress)?);
     }
+    set_speedups(&mut rows);
     write_json(&opts.out.join("report.json"), &rows)?;
     fem_core::io::write_atomic(&opts.out.join("report.md"), markdown(&rows).as_bytes())?;
+    fem_core::io::write_atomic(
+        &opts.out.join("report.svg"),
+        error_plot(&pipeline.scene.name, &rows).as_bytes(),
+    )?;
     Ok(rows)
+}
+
+/// Speed-ups over the faster full-space solver among `rows` (unchanged when none ran).
+pub fn set_speedups(rows: &mut [MethodReport]) {
+    let fastest_full = rows
+        .iter()
+        .filter(|r| r.method == Method::Full.name() || r.method == Method::FullLbfgs.name())
+        .map(|r| r.ms_per_step)
+        .fold(f64::INFINITY, f64::min);
+    if fastest_full.is_finite() {
+        for r in rows {
+            r.speedup = fastest_full / r.ms_per_step;
+        }
+    }
+}
+
+/// One method measured on a test trajectory.
+#[derive(Debug, Clone)]
+pub struct Measure {
+    pub method: Method,
+    pub trajectory: usize,
+    /// Frames go to this folder (when `every > 0`).
+    pub out: PathBuf,
+    pub every: usize,
+    /// Timed runs of the whole trajectory; errors come from the first, the reported time is
+    /// the median over runs of each run's median step, the spread their minimum and maximum.
+    pub repeats: usize,
+    /// Time the scene's full-space solver in this process instead of taking the reference
+    /// stage's recorded step times.
+    pub time_full: bool,
+}
+
+/// Simulates `m.method` on the test trajectory and compares it with the full-space reference.
+pub fn measure(
+    pipeline: &mut Pipeline<'_>,
+    m: &Measure,
+    stage_progress: Progress<'_>,
+    progress: &mut dyn FnMut(&str, usize, usize),
+) -> Result<MethodReport> {
+    let reference = pipeline.reference(m.trajectory, stage_progress)?;
+    let frames = reference.frames.len();
+    let method = m.method;
+    let sim_opts = SimulateOptions {
+        method,
+        trajectory: Trajectory::Test(m.trajectory),
+        out: m.out.clone(),
+        frames: Some(frames),
+        every: m.every,
+        solver: None,
+    };
+    let mut writer = if m.every > 0 {
+        Some(FrameWriter::new(&sim_opts.out)?)
+    } else {
+        None
+    };
+    if method == Method::Full && !m.time_full {
+        let full_ms = median(&reference.step_seconds) * 1e3;
+        let model = pipeline.test_model(m.trajectory)?;
+        if let Some(mut w) = writer {
+            w.write(&model.mesh, 0, 0.0, &vec![0.0; model.num_full()])?;
+            let mut u = vec![0.0; model.num_full()];
+            for (k, f) in reference.frames.iter().enumerate() {
+                if (k + 1) % m.every == 0 || k + 1 == frames {
+                    model.dofs.scatter(f, &mut u);
+                    w.write(
+                        &model.mesh,
+                        k + 1,
+                        (k + 1) as f64 * pipeline.scene.time.step,
+                        &u,
+                    )?;
+                }
+            }
+            w.finish()?;
+        }
+        return Ok(MethodReport {
+            method: method.name().into(),
+            dim: model.dofs.num_free(),
+            cubature_elements: model.elements.len(),
+            ms_per_step: full_ms,
+            ms_min: full_ms,
+            ms_max: full_ms,
+            hz: 1e3 / full_ms,
+            speedup: 1.0,
+            mean_rel_error: 0.0,
+            max_rel_error: 0.0,
+            max_vertex_error: 0.0,
+            iterations: mean_usize(&reference.iterations),
+            subspace_error: 0.0,
+            decode_ms: 0.0,
+            elastic_ms: 0.0,
+            vjp_ms: 0.0,
+            precond_ms: 0.0,
+            failure: None,
+        });
+    }
+    let mut errors = ErrorAccumulator::default();
+    let mut medians = Vec::with_capacity(m.repeats.max(1));
+    let mut iterations = Vec::with_capacity(frames);
+    let mut parts = StepParts::default();
+    let mut cubature_elements = 0;
+    let mut dim = 0;
+    let mut failure = None;
+    for repeat in 0..m.repeats.max(1) {
+        let (model, time, solver) = setup(pipeline, &sim_opts)?;
+        let mut runner = Runner::new(pipeline, method, model, time, solver, stage_progress)?;
+        let first = repeat == 0;
+        if first && let Some(w) = writer.as_mut() {
+            w.write(&runner.model().mesh, 0, 0.0, &runner.displacement())?;
+        }
+        let mut times = Vec::with_capacity(frames);
+        for k in 0..frames {
+            let info = match runner.step() {
+                Ok(info) => info,
+                Err(e) => {
+                    // Keep the last good state on disk (never the failed one) and report the
+                    // failure in the row instead of aborting the other methods.
+                    if first
+                        && let Some(w) = writer.as_mut()
+                        && k % m.every.max(1) != 0
+                    {
+                        w.write(
+                            &runner.model().mesh,
+                            k,
+                            runner.time(),
+                            &runner.displacement(),
+                        )?;
+                    }
+                    failure = Some(format!("frame {}: {e:#}", k + 1));
+                    break;
+                }
+            };
+            times.push(info.seconds);
+            progress(method.name(), k + 1, frames);
+            if !first {
+                continue;
+            }
+            iterations.push(info.iterations);
+            parts.decode += info.parts.decode;
+            parts.elastic += info.parts.elastic;
+            parts.vjp += info.parts.vjp;
+            parts.precond += info.parts.precond;
+            // Reconstruction for the error is outside the timed step.
+            let u = runner.displacement();
+            errors.add(runner.model(), &u, &reference.frames[k]);
+            if let Some(w) = writer.as_mut()
+                && ((k + 1) % m.every == 0 || k + 1 == frames)
+            {
+                w.write(&runner.model().mesh, k + 1, runner.time(), &u)?;
+            }
+        }
+        medians.push(median(&times) * 1e3);
+        cubature_elements = match &runner {
+            Runner::Full(s) => s.model.elements.len(),
+            Runner::Pca(s) => s.space.elements.len(),
+            Runner::Neural(s) => s.space.elements.len(),
+        };
+        dim = runner.dim();
+        if failure.is_some() {
+            break;
+        }
+    }
+    if let Some(w) = writer {
+        w.finish()?;
+    }
+    let model = pipeline.test_model(m.trajectory)?;
+    let ms = median(&medians);
+    let done = iterations.len().max(1);
+    let per_step_ms = |seconds: f64| seconds * 1e3 / done as f64;
+    Ok(MethodReport {
+        method: method.name().into(),
+        dim,
+        cubature_elements,
+        ms_per_step: ms,
+        ms_min: medians.iter().copied().fold(f64::INFINITY, f64::min),
+        ms_max: medians.iter().copied().fold(0.0, f64::max),
+        hz: 1e3 / ms,
+        speedup: 1.0,
+        mean_rel_error: errors.rel.iter().sum::<f64>() / errors.rel.len().max(1) as f64,
+        max_rel_error: errors.rel.iter().fold(0.0, |a, &b| a.max(b)),
+        max_vertex_error: errors.max_vertex,
+        iterations: mean_usize(&iterations),
+        subspace_error: subspace_error(
+            pipeline,
+            method,
+            &model,
+            &reference.frames,
+            stage_progress,
+        )?,
+        decode_ms: per_step_ms(parts.decode),
+        elastic_ms: per_step_ms(parts.elastic),
+        vjp_ms: per_step_ms(parts.vjp),
+        precond_ms: per_step_ms(parts.precond),
+        failure,
+    })
+}
+
+/// Mean relative error of the reference frames' best representation in `method`'s subspace:
+/// u ↦ U UᵀM u for PCA, u ↦ U decode(encode(UᵀM u)) for the autoencoder.
+fn subspace_error(
+    pipeline: &mut Pipeline<'_>,
+    method: Method,
+    model: &FullSpaceModel,
+    frames: &[Vec<f64>],
+    progress: Progress<'_>,
+) -> Result<f64> {
+    if matches!(method, Method::Full | Method::FullLbfgs) {
+        return Ok(0.0);
+    }
+    let fit = pipeline.pca(progress)?;
+    let basis = &fit.basis;
+    let trained = match method {
+        Method::Neural | Method::NeuralCubature => Some(pipeline.train(progress)?),
+        _ => None,
+    };
+    let mut ws = trained.as_ref().map(|t| t.model.workspace());
+    let (mut q, mut qh) = (vec![0.0; basis.k()], vec![0.0; basis.k()]);
+    let mut free = vec![0.0; basis.n()];
+    let (mut u, mut r) = (vec![0.0; model.num_full()], vec![0.0; model.num_full()]);
+    let mut errors = ErrorAccumulator::default();
+    for f in frames {
+        basis.project(f, &mut q);
+        match (&trained, ws.as_mut()) {
+            (Some(t), Some(ws)) => t.model.reconstruct(&q, &mut qh, ws),
+            _ => qh.copy_from_slice(&q),
+        }
+        basis.reconstruct(&qh, &mut free);
+        model.dofs.scatter(&free, &mut u);
+        model.dofs.scatter(f, &mut r);
+        errors.add_full(model, &u, &r);
+    }
+    Ok(errors.rel.iter().sum::<f64>() / errors.rel.len().max(1) as f64)
 }
 
 fn mean_usize(v: &[usize]) -> f64 {
     v.iter().sum::<usize>() as f64 / v.len().max(1) as f64
 }
 
+/// Mean relative error against median ms/step, one marker per method, both axes logarithmic.
+/// Full space has no error against itself: it is named in the title instead of plotted.
+pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
+    let full = rows
+        .iter()
+        .find(|r| r.method == Method::Full.name())
+        .map(|r| format!(" (full: {:.1} ms/step)", r.ms_per_step))
+        .unwrap_or_default();
+    let series: Vec<Series> = rows
+        .iter()
+        .filter(|r| r.method != Method::Full.name())
+        .map(|r| Series {
+            name: format!("{} (dim {}, {} el.)", r.method, r.dim, r.cubature_elements),
+            points: vec![(r.ms_per_step, r.mean_rel_error)],
+            line: false,
+        })
+        .collect();
+    let plot = Plot {
+        title: format!("{scene}: error against cost{full}"),
+        x_label: "median ms per step".into(),
+        y_label: "mean relative error".into(),
+        x_scale: Scale::Log,
+        y_scale: Scale::Log,
+    };
+    crate::plot::svg(&plot, &series)
+}
+
 /// The report as a markdown table.
 pub fn markdown(rows: &[MethodReport]) -> String {
     let mut s = String::from(
-        "| method | dim | elements | ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | iterations |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| method | dim | elements | ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | iterations |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.1} |\n",
-            r.method,
+            "| {} | {} | {} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} |\n",
+            match &r.failure {
+                Some(_) => format!("{} (failed)", r.method),
+                None => r.method.clone(),
+            },
             r.dim,
             r.cubature_elements,
             r.ms_per_step,
@@ -204,8 +402,14 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             r.mean_rel_error,
             r.max_rel_error,
             r.max_vertex_error,
+            r.subspace_error,
             r.iterations
         ));
+    }
+    for r in rows {
+        if let Some(f) = &r.failure {
+            s.push_str(&format!("\n{} failed at {f}\n", r.method));
+        }
     }
     s
 }

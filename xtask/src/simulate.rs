@@ -14,6 +14,7 @@ use latent_sim::{
 
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
+use crate::scene::Scene;
 
 /// Simulation methods.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -22,6 +23,9 @@ pub enum Method {
     /// Full-space finite elements.
     #[default]
     Full,
+    /// Full space with preconditioned L-BFGS whatever the scene's solver (the reference uses the
+    /// scene's): the other full-space solver, so speed-ups are measured against the faster one.
+    FullLbfgs,
     /// Linear model reduction with the PCA basis, every element evaluated.
     Pca,
     /// The PCA basis with the elastic energy on the cubature elements only.
@@ -36,6 +40,7 @@ impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::Full => "full",
+            Method::FullLbfgs => "full-lbfgs",
             Method::Pca => "pca",
             Method::PcaCubature => "pca-cubature",
             Method::Neural => "neural",
@@ -125,6 +130,32 @@ impl std::fmt::Debug for Runner {
 pub struct StepInfo {
     pub seconds: f64,
     pub iterations: usize,
+    /// Where a reduced step's time went (zero for full space).
+    pub parts: StepParts,
+}
+
+/// Seconds of one reduced step spent in each part of the solve.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct StepParts {
+    /// Network forward pass and partial decode Uq.
+    pub decode: f64,
+    /// Elastic energy and reduced gradient over the (cubature) elements.
+    pub elastic: f64,
+    /// Decoder vector–Jacobian products.
+    pub vjp: f64,
+    /// Building and factorising the preconditioner.
+    pub precond: f64,
+}
+
+impl StepParts {
+    fn of(r: &latent_sim::ReducedStepReport) -> Self {
+        Self {
+            decode: r.decode_seconds,
+            elastic: r.elastic_seconds,
+            vjp: r.vjp_seconds,
+            precond: r.precond_seconds,
+        }
+    }
 }
 
 impl Runner {
@@ -138,7 +169,7 @@ impl Runner {
         progress: Progress<'_>,
     ) -> Result<Self> {
         Ok(match method {
-            Method::Full => Runner::Full(Simulator::new(model, time, solver)?),
+            Method::Full | Method::FullLbfgs => Runner::Full(Simulator::new(model, time, solver)?),
             Method::Pca | Method::PcaCubature => {
                 let fit = pipeline.pca(progress)?;
                 let basis = &fit.basis;
@@ -188,6 +219,7 @@ impl Runner {
                 StepInfo {
                     seconds: r.wall_seconds,
                     iterations: r.iterations,
+                    parts: StepParts::default(),
                 }
             }
             Runner::Pca(s) => {
@@ -195,6 +227,7 @@ impl Runner {
                 StepInfo {
                     seconds: r.wall_seconds,
                     iterations: r.iterations,
+                    parts: StepParts::of(&r),
                 }
             }
             Runner::Neural(s) => {
@@ -202,6 +235,7 @@ impl Runner {
                 StepInfo {
                     seconds: r.wall_seconds,
                     iterations: r.iterations,
+                    parts: StepParts::of(&r),
                 }
             }
         })
@@ -232,6 +266,16 @@ impl Runner {
         }
     }
 
+    /// Total energy (elastic + kinetic + external potential) of the current state; for reduced
+    /// methods the elastic part is over their element set (the energy their solver sees).
+    pub fn total_energy(&mut self) -> f64 {
+        match self {
+            Runner::Full(s) => s.report().total_energy,
+            Runner::Pca(s) => s.energy().total,
+            Runner::Neural(s) => s.energy().total,
+        }
+    }
+
     /// Simulated dimension.
     pub fn dim(&self) -> usize {
         match self {
@@ -256,18 +300,24 @@ pub fn setup(
         frames: opts.frames.unwrap_or(frames),
         ..scene.time.clone()
     };
-    let mut solver = scene.solver.clone();
-    // Reduced methods default to preconditioned L-BFGS (the paper's solver; their Newton
-    // Hessian costs a k×k projection over every element per iteration), with at least
-    // REDUCED_MIN_ITERATIONS iterations: quasi-Newton needs more, cheaper iterations than Newton.
-    if opts.method != Method::Full {
-        solver.method = SolverMethod::Lbfgs;
-        solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
-    }
+    let mut solver = solver_for(scene, opts.method);
     if let Some(m) = opts.solver {
         solver.method = m;
     }
     Ok((model, time, solver))
+}
+
+/// The solver settings of `method` on `scene`.
+pub fn solver_for(scene: &Scene, method: Method) -> SolverConfig {
+    let mut solver = scene.solver.clone();
+    // Reduced methods (and full-lbfgs) default to preconditioned L-BFGS (the paper's solver; their Newton
+    // Hessian costs a k×k projection over every element per iteration), with at least
+    // REDUCED_MIN_ITERATIONS iterations: quasi-Newton needs more, cheaper iterations than Newton.
+    if method != Method::Full {
+        solver.method = SolverMethod::Lbfgs;
+        solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
+    }
+    solver
 }
 
 /// Runs one method with `opts`; `progress(done, total)` is called after every step.

@@ -16,7 +16,7 @@ mod subspace;
 
 pub use neural::NeuralSubspace;
 pub use reduced::ReducedSpace;
-pub use simulator::{ReducedSimulator, ReducedState, ReducedStepReport};
+pub use simulator::{ReducedEnergy, ReducedSimulator, ReducedState, ReducedStepReport};
 pub use subspace::{LinearSubspace, Subspace};
 
 /// Errors of the reduced integrators.

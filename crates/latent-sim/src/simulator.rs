@@ -34,8 +34,33 @@ pub struct ReducedStepReport {
     pub iterations: usize,
     pub relative_gradient: f64,
     pub wall_seconds: f64,
-    /// Time building and factorising the preconditioner (or Newton matrices).
+    /// Time building and factorising the preconditioner.
     pub precond_seconds: f64,
+    /// Time decoding: the network's forward pass (q = decode(z)) and the partial decode Uq over
+    /// the vertices the elastic energy touches.
+    pub decode_seconds: f64,
+    /// Time in the elastic energy and its reduced gradient over the (cubature) elements.
+    pub elastic_seconds: f64,
+    /// Time in the decoder's vector–Jacobian product Jᵀ ∂E/∂q.
+    pub vjp_seconds: f64,
+}
+
+/// Energies of a reduced state (see [`ReducedSimulator::energy`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct ReducedEnergy {
+    pub elastic: f64,
+    pub kinetic: f64,
+    /// Potential of gravity and of the active external forces.
+    pub external: f64,
+    pub total: f64,
+}
+
+/// Time spent in each part of the objective, accumulated over one step.
+#[derive(Debug, Clone, Copy, Default)]
+struct Timers {
+    decode: f64,
+    elastic: f64,
+    vjp: f64,
 }
 
 /// Dense SPD factor used as a preconditioner (z = P⁻¹ r).
@@ -98,6 +123,7 @@ struct Work {
     predicted: Vec<f64>,
     jac: Vec<f64>,
     buffers: AssemblyBuffers,
+    timers: Timers,
 }
 
 impl<S: Subspace> ReducedSimulator<S> {
@@ -143,6 +169,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                 predicted: vec![0.0; k],
                 jac: vec![0.0; k * d],
                 buffers: AssemblyBuffers::default(),
+                timers: Timers::default(),
             },
             lbfgs: Lbfgs::new(d, solver.lbfgs_memory),
             fixed_precond: None,
@@ -203,6 +230,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let t = (self.state.step + 1) as f64 * h;
         let k = self.space.k;
         self.predict();
+        self.work.timers = Timers::default();
         let params = SolveParams {
             tolerance: self.solver.tolerance,
             max_iterations: self.solver.max_iterations,
@@ -301,6 +329,9 @@ impl<S: Subspace> ReducedSimulator<S> {
             relative_gradient: stats.relative_gradient,
             wall_seconds: start.elapsed().as_secs_f64(),
             precond_seconds,
+            decode_seconds: self.work.timers.decode,
+            elastic_seconds: self.work.timers.elastic,
+            vjp_seconds: self.work.timers.vjp,
         })
     }
 
@@ -333,6 +364,42 @@ impl<S: Subspace> ReducedSimulator<S> {
             noise: 0.0,
         };
         obj.value_gradient(z, g)
+    }
+
+    /// The energies of the current state: elastic over the subspace's element set (the cubature
+    /// rule when there is one, the energy the solver minimises), kinetic ½ q̇ᵀ(UᵀMU)q̇, and the
+    /// potential of gravity and of the forces active now.
+    pub fn energy(&mut self) -> ReducedEnergy {
+        let (model, space, w) = (&self.model, &self.space, &mut self.work);
+        space.decode_touched(&self.state.q, &mut w.u);
+        let elastic = space.elastic_energy_gradient(
+            model,
+            &w.u,
+            &mut w.grad_full,
+            &mut w.grad_q,
+            &mut w.buffers,
+        );
+        let k = space.k;
+        let mut kinetic = 0.0;
+        for i in 0..k {
+            let mut m = 0.0;
+            for j in 0..k {
+                m += space.mass[j * k + i] * self.state.qdot[j];
+            }
+            kinetic += 0.5 * self.state.qdot[i] * m;
+        }
+        let mut external = -dot(&space.gravity, &self.state.q);
+        for f in &model.forces {
+            if f.is_active(self.state.time) {
+                external += f.accumulate(self.state.time, &w.u, None, None);
+            }
+        }
+        ReducedEnergy {
+            elastic,
+            kinetic,
+            external,
+            total: elastic + kinetic + external,
+        }
     }
 
     /// The full displacement u = Uq of the current state (3 per vertex).
@@ -381,8 +448,10 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// E and ∂E/∂q at q = decode(z) (into work.grad_q).
     fn energy_q(&mut self, z: &[f64]) -> f64 {
         let (model, space, w) = (self.model, self.space, &mut *self.work);
+        let t0 = Instant::now();
         self.subspace.decode(z, &mut w.q);
         space.decode_touched(&w.q, &mut w.u);
+        let t1 = Instant::now();
         let elastic = space.elastic_energy_gradient(
             model,
             &w.u,
@@ -390,6 +459,8 @@ impl<S: Subspace> StepObjective<'_, S> {
             &mut w.grad_q,
             &mut w.buffers,
         );
+        w.timers.decode += (t1 - t0).as_secs_f64();
+        w.timers.elastic += t1.elapsed().as_secs_f64();
         let mut scale = norm(&w.grad_q);
         // Gravity (linear in q) and the active springs / point loads, through their rows only.
         let mut external = -dot(&space.gravity, &w.q);
@@ -444,7 +515,9 @@ impl<S: Subspace> Objective for StepObjective<'_, S> {
 
     fn value_gradient(&mut self, z: &[f64], g: &mut [f64]) -> f64 {
         let e = self.energy_q(z);
+        let t0 = Instant::now();
         self.subspace.vjp(z, &self.work.grad_q, g);
+        self.work.timers.vjp += t0.elapsed().as_secs_f64();
         e
     }
 

@@ -1,0 +1,335 @@
+//! `cargo xtask bench`: every method at several sizes on one held-out trajectory, timed in one
+//! process with a warm-up and repeated runs, so users can choose a method by its cost and its
+//! error (`bench.json`, `bench.md`, `bench.svg` with the Pareto front).
+//!
+//! Each size is a variant of the scene (the PCA dimension, the autoencoder's latent dimension,
+//! the cubature tolerance), so every variant's stages are ordinary cached stages: a second bench
+//! of the same scene only re-times.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use crate::pipeline::{Pipeline, Progress};
+use crate::plot::{Plot, Scale, Series};
+use crate::run::{Measure, MethodReport, measure, set_speedups};
+use crate::scene::Scene;
+use crate::simulate::{Method, write_json};
+
+/// What `bench` sweeps.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    pub out: PathBuf,
+    /// Artifact cache shared by every variant.
+    pub cache: PathBuf,
+    pub trajectory: usize,
+    /// Timed runs per variant, after one untimed warm-up run.
+    pub repeats: usize,
+    /// PCA dimensions for `pca` (empty: the latent dimensions, half and all of the scene's basis).
+    pub pca_dims: Vec<usize>,
+    /// Latent dimensions for `neural` (empty: the scene's, half and double it).
+    pub latent_dims: Vec<usize>,
+    /// Cubature tolerances for both cubature methods.
+    pub tolerances: Vec<f64>,
+}
+
+/// Default cubature tolerances swept.
+pub const DEFAULT_TOLERANCES: [f64; 3] = [0.1, 0.05, 0.02];
+
+/// One benchmarked variant.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BenchRow {
+    /// Method and size, e.g. `pca k=16` or `neural-cubature tol=0.05`.
+    pub variant: String,
+    #[serde(flatten)]
+    pub report: MethodReport,
+    /// Offline cost of the variant's own stages as recorded when they were computed (s):
+    /// autoencoder training and/or cubature fit. Snapshots and PCA are shared by all.
+    pub offline_seconds: f64,
+    /// Not dominated in (ms/step, mean relative error) by another variant.
+    pub pareto: bool,
+}
+
+/// A scene variant: which method, its label, and how the scene changes.
+struct Variant {
+    method: Method,
+    label: String,
+    scene: Scene,
+}
+
+fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant> {
+    let mut v = Vec::new();
+    let base = |method: Method, label: String| Variant {
+        method,
+        label,
+        scene: scene.clone(),
+    };
+    v.push(base(
+        Method::Full,
+        format!("full ({:?})", scene.solver.method).to_lowercase(),
+    ));
+    v.push(base(Method::FullLbfgs, "full-lbfgs".into()));
+    let mut latent_dims = opts.latent_dims.clone();
+    if latent_dims.is_empty() {
+        let d = scene
+            .autoencoder
+            .latent_dim
+            .or(scene.autoencoder.latent_dims.map(|r| r[0]))
+            .unwrap_or(nn::DEFAULT_LATENT_DIM);
+        latent_dims = vec![d.div_ceil(2), d, 2 * d];
+    }
+    latent_dims.sort_unstable();
+    latent_dims.dedup();
+    let mut pca_dims = if opts.pca_dims.is_empty() {
+        // The latent dimensions too: PCA and the autoencoder compared at equal dimension.
+        let mut dims = latent_dims.clone();
+        dims.extend([chosen_k.div_ceil(2), chosen_k]);
+        dims
+    } else {
+        opts.pca_dims.clone()
+    };
+    pca_dims.retain(|&k| k <= chosen_k);
+    pca_dims.sort_unstable();
+    pca_dims.dedup();
+    for k in pca_dims {
+        let mut s = scene.clone();
+        s.pca = pca::PcaConfig {
+            dimension: Some(k),
+            explained_energy: None,
+            max_vertex_error: None,
+            ..scene.pca.clone()
+        };
+        v.push(Variant {
+            method: Method::Pca,
+            label: format!("pca k={k}"),
+            scene: s,
+        });
+    }
+    let tolerances = if opts.tolerances.is_empty() {
+        DEFAULT_TOLERANCES.to_vec()
+    } else {
+        opts.tolerances.clone()
+    };
+    for &method in &[Method::PcaCubature, Method::NeuralCubature] {
+        for &tol in &tolerances {
+            let mut s = scene.clone();
+            s.cubature.tolerance = tol;
+            v.push(Variant {
+                method,
+                label: format!("{} tol={tol}", method.name()),
+                scene: s,
+            });
+        }
+    }
+    for d in latent_dims.into_iter().filter(|&d| d <= chosen_k) {
+        let mut s = scene.clone();
+        s.autoencoder.latent_dim = Some(d);
+        s.autoencoder.latent_dims = None;
+        s.autoencoder.max_vertex_error = None;
+        v.push(Variant {
+            method: Method::Neural,
+            label: format!("neural d={d}"),
+            scene: s,
+        });
+    }
+    v
+}
+
+/// Marks the rows no other row beats on both time and error.
+fn mark_pareto(rows: &mut [BenchRow]) {
+    let points: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.report.ms_per_step, r.report.mean_rel_error))
+        .collect();
+    let failed: Vec<Option<String>> = rows.iter().map(|r| r.report.failure.clone()).collect();
+    for (i, r) in rows.iter_mut().enumerate() {
+        let (t, e) = points[i];
+        r.pareto = r.report.failure.is_none()
+            && !points.iter().enumerate().any(|(j, &(t2, e2))| {
+                j != i && failed[j].is_none() && t2 <= t && e2 <= e && (t2 < t || e2 < e)
+            });
+    }
+}
+
+/// Runs the sweep. `on_variant(label)` is called before each variant.
+pub fn bench(
+    scene: &Scene,
+    opts: &BenchOptions,
+    on_stage: &mut dyn FnMut(&crate::pipeline::StageOutcome),
+    on_variant: &mut dyn FnMut(&str),
+    stage_progress: Progress<'_>,
+    progress: &mut dyn FnMut(&str, usize, usize),
+) -> Result<Vec<BenchRow>> {
+    let chosen_k = {
+        let mut p = Pipeline::new(scene, &opts.cache)?;
+        p.on_stage = Box::new(&mut *on_stage);
+        p.reference(opts.trajectory, stage_progress)?;
+        p.pca(stage_progress)?.basis.k()
+    };
+    let mut rows = Vec::new();
+    for v in variants(scene, chosen_k, opts) {
+        on_variant(&v.label);
+        let mut p = Pipeline::new(&v.scene, &opts.cache)?;
+        p.on_stage = Box::new(&mut *on_stage);
+        let offline_seconds = match v.method {
+            Method::PcaCubature => p.cubature(stage_progress)?.fit_seconds,
+            Method::Neural => p.train(stage_progress)?.train_seconds,
+            Method::NeuralCubature => {
+                p.train(stage_progress)?.train_seconds
+                    + p.cubature_neural(stage_progress)?.fit_seconds
+            }
+            _ => 0.0,
+        };
+        let m = Measure {
+            method: v.method,
+            trajectory: opts.trajectory,
+            out: opts.out.join("frames"),
+            every: 0,
+            repeats: opts.repeats.max(1),
+            time_full: true,
+        };
+        // Warm-up: caches, page faults, the allocator; its time is discarded.
+        let warm = Measure {
+            repeats: 1,
+            ..m.clone()
+        };
+        measure(&mut p, &warm, stage_progress, progress)?;
+        let report = measure(&mut p, &m, stage_progress, progress)?;
+        rows.push(BenchRow {
+            variant: v.label,
+            report,
+            offline_seconds,
+            pareto: false,
+        });
+    }
+    let mut reports: Vec<MethodReport> = rows.iter().map(|r| r.report.clone()).collect();
+    set_speedups(&mut reports);
+    for (row, r) in rows.iter_mut().zip(reports) {
+        row.report = r;
+    }
+    mark_pareto(&mut rows);
+    write(&opts.out, &scene.name, &rows)?;
+    Ok(rows)
+}
+
+fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
+    write_json(&out.join("bench.json"), &rows)?;
+    fem_core::io::write_atomic(&out.join("bench.md"), markdown(rows).as_bytes())?;
+    fem_core::io::write_atomic(&out.join("bench.svg"), plot(scene, rows).as_bytes())?;
+    Ok(())
+}
+
+/// The sweep as a markdown table (Pareto-optimal variants marked with ★).
+pub fn markdown(rows: &[BenchRow]) -> String {
+    let mut s = String::from(
+        "| variant | dim | elements | ms/step (median) | spread | Hz | speed-up | mean rel. error | max rel. error | subspace error | iterations | offline s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
+    );
+    for r in rows {
+        let m = &r.report;
+        s.push_str(&format!(
+            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} |\n",
+            match &m.failure {
+                Some(f) => format!("{} (failed at {f})", r.variant),
+                None => r.variant.clone(),
+            },
+            m.dim,
+            m.cubature_elements,
+            m.ms_per_step,
+            m.ms_min,
+            m.ms_max,
+            m.hz,
+            m.speedup,
+            m.mean_rel_error,
+            m.max_rel_error,
+            m.subspace_error,
+            m.iterations,
+            r.offline_seconds,
+            if r.pareto { "★" } else { "" }
+        ));
+    }
+    s
+}
+
+/// Error (log) against ms/step (log), one series per method, the Pareto front as a line.
+/// Variants with zero error (the full-space reference itself) cannot sit on a log axis and are
+/// left out.
+pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
+    let mut series: Vec<Series> = Vec::new();
+    for r in rows {
+        let point = (r.report.ms_per_step, r.report.mean_rel_error);
+        match series.iter_mut().find(|s| s.name == r.report.method) {
+            Some(s) => s.points.push(point),
+            None => series.push(Series {
+                name: r.report.method.clone(),
+                points: vec![point],
+                line: false,
+            }),
+        }
+    }
+    let mut front: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.pareto && r.report.mean_rel_error > 0.0)
+        .map(|r| (r.report.ms_per_step, r.report.mean_rel_error))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    series.push(Series {
+        name: "Pareto front".into(),
+        points: front,
+        line: true,
+    });
+    let p = Plot {
+        title: format!("{scene}: error against cost, every method and size"),
+        x_label: "median ms per step".into(),
+        y_label: "mean relative error".into(),
+        x_scale: Scale::Log,
+        y_scale: Scale::Log,
+    };
+    crate::plot::svg(&p, &series)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(ms: f64, err: f64) -> BenchRow {
+        BenchRow {
+            variant: String::new(),
+            report: MethodReport {
+                method: "pca".into(),
+                dim: 1,
+                cubature_elements: 1,
+                ms_per_step: ms,
+                ms_min: ms,
+                ms_max: ms,
+                hz: 1e3 / ms,
+                speedup: 1.0,
+                mean_rel_error: err,
+                max_rel_error: err,
+                max_vertex_error: err,
+                iterations: 1.0,
+                subspace_error: 0.0,
+                decode_ms: 0.0,
+                elastic_ms: 0.0,
+                vjp_ms: 0.0,
+                precond_ms: 0.0,
+                failure: None,
+            },
+            offline_seconds: 0.0,
+            pareto: false,
+        }
+    }
+
+    #[test]
+    fn pareto_front_keeps_only_undominated_rows() {
+        let mut rows = vec![
+            row(10.0, 0.0),
+            row(1.0, 0.1),
+            row(2.0, 0.2), // dominated by (1.0, 0.1)
+            row(0.5, 0.3),
+            row(0.5, 0.4), // dominated by (0.5, 0.3)
+        ];
+        mark_pareto(&mut rows);
+        let marks: Vec<bool> = rows.iter().map(|r| r.pareto).collect();
+        assert_eq!(marks, [true, true, false, true, false]);
+    }
+}
