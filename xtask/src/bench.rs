@@ -9,6 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
+use fem_core::optim::SolverMethod;
 
 use crate::pipeline::{Pipeline, Progress};
 use crate::plot::{Plot, Scale, Series};
@@ -55,6 +56,7 @@ struct Variant {
     method: Method,
     label: String,
     scene: Scene,
+    solver: Option<SolverMethod>,
 }
 
 fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant> {
@@ -63,6 +65,7 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         method,
         label,
         scene: scene.clone(),
+        solver: None,
     };
     v.push(base(
         Method::Full,
@@ -103,6 +106,7 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             method: Method::Pca,
             label: format!("pca k={k}"),
             scene: s,
+            solver: None,
         });
     }
     let tolerances = if opts.tolerances.is_empty() {
@@ -118,8 +122,17 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
                 method,
                 label: format!("{} tol={tol}", method.name()),
                 scene: s,
+                solver: None,
             });
         }
+        // Newton in the latent space (d×d Gauss–Newton) against the default L-BFGS, at the
+        // scene's own tolerance.
+        v.push(Variant {
+            method,
+            label: format!("{} tol={} newton", method.name(), scene.cubature.tolerance),
+            scene: scene.clone(),
+            solver: Some(SolverMethod::Newton),
+        });
     }
     for d in latent_dims.into_iter().filter(|&d| d <= chosen_k) {
         let mut s = scene.clone();
@@ -130,6 +143,7 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             method: Method::Neural,
             label: format!("neural d={d}"),
             scene: s,
+            solver: None,
         });
     }
     v
@@ -187,6 +201,7 @@ pub fn bench(
             every: 0,
             repeats: opts.repeats.max(1),
             time_full: true,
+            solver: v.solver,
         };
         // Warm-up: caches, page faults, the allocator; its time is discarded.
         let warm = Measure {

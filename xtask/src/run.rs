@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use fem_core::integrator::FullSpaceModel;
+use fem_core::optim::SolverMethod;
 
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
@@ -107,6 +108,7 @@ pub fn run(
             every: opts.every,
             repeats: 1,
             time_full: false,
+            solver: None,
         };
         rows.push(measure(pipeline, &m, stage_progress, progress)?);
     }
@@ -148,6 +150,8 @@ pub struct Measure {
     /// Time the scene's full-space solver in this process instead of taking the reference
     /// stage's recorded step times.
     pub time_full: bool,
+    /// Overrides the method's solver (reduced methods default to L-BFGS).
+    pub solver: Option<SolverMethod>,
 }
 
 /// Simulates `m.method` on the test trajectory and compares it with the full-space reference.
@@ -166,7 +170,7 @@ pub fn measure(
         out: m.out.clone(),
         frames: Some(frames),
         every: m.every,
-        solver: None,
+        solver: m.solver,
     };
     let mut writer = if m.every > 0 {
         Some(FrameWriter::new(&sim_opts.out)?)
