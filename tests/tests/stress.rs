@@ -247,3 +247,66 @@ fn classic_neo_hookean_never_produces_garbage_under_inverting_forces() {
         }
     }
 }
+
+/// A run that fails part-way (an iteration cap too small for the inverting drag) stops with an
+/// error naming the method and step, keeps its last good state on disk as the last frame, and
+/// never writes the failed one.
+#[test]
+fn a_failed_run_keeps_its_last_good_frame_and_nothing_after() {
+    // No gravity, and a spring that only starts pulling at t = 0.1 s (step 6): the steps before
+    // are at rest and converge at once.
+    let text = TINY.replace(
+        "tolerance = 1.0e-8",
+        "tolerance = 1.0e-8\nmax_iterations = 2",
+    ) + r#"
+[gravity]
+acceleration = [0.0, 0.0, 0.0]
+[[force]]
+kind = "spring"
+select = { plane = { axis = "x", side = "max" } }
+stiffness = 1.0e4
+keyframes = [[0.1, 0.0, 0.0, 0.0], [0.2, 0.0, 0.3, 0.0]]
+start = 0.1
+end = 1.0
+"#;
+    let s = scene(&text);
+    let cache = scratch_dir("stress-failed-run-cache");
+    let out = scratch_dir("stress-failed-run-out");
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let opts = xtask::simulate::SimulateOptions {
+        method: Method::Full,
+        trajectory: xtask::simulate::Trajectory::Scene,
+        out: out.clone(),
+        frames: Some(10),
+        every: 4,
+        solver: None,
+    };
+    let e = xtask::simulate::simulate(&mut p, &opts, &no_progress, &mut |_, _| {})
+        .expect_err("two Newton iterations cannot reach 1e-8");
+    let message = format!("{e:#}");
+    println!("{message}");
+    assert!(message.contains("full"), "{message}");
+    let done: usize = message
+        .split("frames up to step ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no step in {message}"));
+    let mut written: Vec<usize> = std::fs::read_dir(out.join("frames"))
+        .unwrap()
+        .filter_map(|e| {
+            let name = e.ok()?.file_name().into_string().ok()?;
+            name.strip_prefix("frame_")?
+                .strip_suffix(".vtu")?
+                .parse()
+                .ok()
+        })
+        .collect();
+    written.sort_unstable();
+    assert!(
+        done >= 5,
+        "the run should fail once the spring starts, not at step {done}"
+    );
+    assert_eq!(written.last(), Some(&done), "frames on disk: {written:?}");
+    assert!(out.join("series.pvd").exists() && out.join("summary.json").exists());
+}

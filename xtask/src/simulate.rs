@@ -373,6 +373,15 @@ pub fn simulate(
             }),
         };
         if let Err(e) = step {
+            // The last good state goes to disk (unless it already did); the failed one never.
+            if opts.every > 0 && done % opts.every != 0 && done > 0 {
+                writer.write(
+                    &runner.model().mesh,
+                    done,
+                    runner.time(),
+                    &runner.displacement(),
+                )?;
+            }
             failure = Some(e);
             break;
         }
@@ -409,7 +418,7 @@ pub fn simulate(
     write_json(&opts.out.join("summary.json"), &summary)?;
     if let Some(e) = failure {
         anyhow::bail!(
-            "{}: simulation with method {} stopped: {e}; frames up to step {done} are in {}",
+            "{}: simulation with method {} stopped: {e}; frames up to step {done} (the last good state) are in {}",
             scene.source,
             opts.method.name(),
             opts.out.display()
