@@ -79,14 +79,8 @@ impl Activation {
         self != Activation::Relu
     }
 
-    /// h = σ(a) elementwise. The match is outside the loop so each arm is a tight loop.
-    pub(crate) fn apply(self, a: &[f64], h: &mut [f64]) {
-        let h = &mut h[..a.len()];
-        h.copy_from_slice(a);
-        self.apply_in_place(h);
-    }
-
-    /// x ← σ(x) elementwise (pre-activations in, activations out).
+    /// x ← σ(x) elementwise (pre-activations in, activations out). The match is outside the
+    /// loop so each arm is a tight loop.
     pub(crate) fn apply_in_place(self, x: &mut [f64]) {
         match self {
             Activation::Elu => x.iter_mut().for_each(|x| *x = elu(*x)),
@@ -97,30 +91,18 @@ impl Activation {
         }
     }
 
-    /// h = σ(a) and d = σ'(a) elementwise.
-    pub(crate) fn apply_with_derivative(self, a: &[f64], h: &mut [f64], d: &mut [f64]) {
-        self.apply(a, h);
-        self.derivative_into(&h[..a.len()], d);
-    }
-
-    /// d = σ'(a) elementwise, given h = σ(a).
-    pub(crate) fn derivative_into(self, h: &[f64], d: &mut [f64]) {
-        let d = &mut d[..h.len()];
-        match self {
-            Activation::Elu => d
-                .iter_mut()
-                .zip(h)
-                .for_each(|(d, &h)| *d = elu_derivative(h)),
-            Activation::Tanh => d.iter_mut().zip(h).for_each(|(d, &h)| *d = 1.0 - h * h),
-            Activation::Softplus => d
-                .iter_mut()
-                .zip(h)
-                .for_each(|(d, &h)| *d = softplus_derivative(h)),
-            Activation::Identity => d.fill(1.0),
-            Activation::Relu => d
-                .iter_mut()
-                .zip(h)
-                .for_each(|(d, &h)| *d = relu_derivative(h)),
+    /// x ← σ(x + b) for every column x of a block (`x.len()` a multiple of `b.len()`): the bias
+    /// and the activation in one pass over the block.
+    pub(crate) fn apply_biased(self, x: &mut [f64], b: &[f64]) {
+        for col in x.chunks_exact_mut(b.len()) {
+            let pairs = col.iter_mut().zip(b);
+            match self {
+                Activation::Elu => pairs.for_each(|(x, b)| *x = elu(*x + b)),
+                Activation::Tanh => pairs.for_each(|(x, b)| *x = (*x + b).tanh()),
+                Activation::Softplus => pairs.for_each(|(x, b)| *x = softplus(*x + b)),
+                Activation::Identity => pairs.for_each(|(x, b)| *x += b),
+                Activation::Relu => pairs.for_each(|(x, b)| *x = (*x + b).max(0.0)),
+            }
         }
     }
 

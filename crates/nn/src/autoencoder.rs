@@ -24,13 +24,32 @@ pub const CHUNK: usize = 64;
 ///
 /// Deserialisation checks [`Autoencoder::FORMAT_VERSION`], that the encoder maps k → d and the
 /// decoder d → k, that the scaling has k features, and that every weight is finite.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "AutoencoderData")]
 pub struct Autoencoder {
     format_version: u32,
     encoder: Mlp,
     decoder: Mlp,
     scaling: Option<InputScaling>,
+}
+
+impl Clone for Autoencoder {
+    fn clone(&self) -> Self {
+        Self {
+            format_version: self.format_version,
+            encoder: self.encoder.clone(),
+            decoder: self.decoder.clone(),
+            scaling: self.scaling.clone(),
+        }
+    }
+
+    /// Reuses the weight arrays of `self`.
+    fn clone_from(&mut self, source: &Self) {
+        self.format_version = source.format_version;
+        self.encoder.clone_from(&source.encoder);
+        self.decoder.clone_from(&source.decoder);
+        self.scaling.clone_from(&source.scaling);
+    }
 }
 
 #[derive(serde::Deserialize)]

@@ -166,11 +166,12 @@ impl Mlp {
             let a = &mut rest[0][..n_out * c];
             linalg::mul_w(a, self.weights(l), input, n_out, n_in, c);
             let b = self.bias(l);
-            for col in a.chunks_exact_mut(n_out) {
-                col.iter_mut().zip(b).for_each(|(a, b)| *a += b);
-            }
             if l < last {
-                self.activations()[l].apply_in_place(a);
+                self.activations()[l].apply_biased(a, b);
+            } else {
+                for col in a.chunks_exact_mut(n_out) {
+                    col.iter_mut().zip(b).for_each(|(a, b)| *a += b);
+                }
             }
         }
         ws.output(c)

@@ -20,7 +20,7 @@ use crate::{Activation, NnError, SplitMix64, linalg};
 ///
 /// Weights are stored row-major (`n_out × n_in`, one output neuron per contiguous row) so every
 /// product runs on contiguous memory. Deserialisation validates sizes and finiteness.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "MlpData")]
 pub struct Mlp {
     /// Layer widths n₀, …, n_L (at least two).
@@ -31,6 +31,25 @@ pub struct Mlp {
     weights: Vec<Vec<f64>>,
     /// b_l, length `sizes[l+1]`.
     biases: Vec<Vec<f64>>,
+}
+
+impl Clone for Mlp {
+    fn clone(&self) -> Self {
+        Self {
+            sizes: self.sizes.clone(),
+            activations: self.activations.clone(),
+            weights: self.weights.clone(),
+            biases: self.biases.clone(),
+        }
+    }
+
+    /// Reuses the arrays of `self` (training keeps a copy of the best weights every epoch).
+    fn clone_from(&mut self, source: &Self) {
+        self.sizes.clone_from(&source.sizes);
+        self.activations.clone_from(&source.activations);
+        self.weights.clone_from(&source.weights);
+        self.biases.clone_from(&source.biases);
+    }
 }
 
 /// The serialised form, validated into an [`Mlp`] on deserialisation.
@@ -256,40 +275,45 @@ impl Mlp {
         );
     }
 
+    /// h_l = σ(W_l x + b_l) for the hidden layers l = 0..L−1 into `ws.hidden`, from x = `z`.
+    fn forward_hidden(&self, z: &[f64], ws: &mut MlpWorkspace) {
+        for l in 0..self.num_layers() - 1 {
+            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+            let (done, rest) = ws.hidden.split_at_mut(l);
+            let x: &[f64] = if l == 0 { z } else { &done[l - 1] };
+            let a = &mut rest[0][..n_out];
+            linalg::mat_vec(a, &self.weights[l], x, n_out, n_in);
+            self.activation(l).apply_biased(a, &self.biases[l]);
+        }
+    }
+
     /// out = f(z). Also leaves the forward state in `ws` for [`Mlp::vjp_cached`].
     pub fn forward(&self, z: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
         assert_eq!(z.len(), self.input_dim(), "input length");
         assert_eq!(out.len(), self.output_dim(), "output length");
+        self.forward_hidden(z, ws);
         let last = self.num_layers() - 1;
-        for l in 0..=last {
-            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
-            let x: &[f64] = if l == 0 { z } else { &ws.post[l - 1] };
-            let a = &mut ws.pre[l];
-            linalg::mul_w(a, &self.weights[l], x, n_out, n_in, 1);
-            a.iter_mut().zip(&self.biases[l]).for_each(|(a, b)| *a += b);
-            if l < last {
-                self.activation(l).apply(&ws.pre[l], &mut ws.post[l]);
-            }
-        }
-        out.copy_from_slice(&ws.pre[last]);
+        let x: &[f64] = if last == 0 { z } else { &ws.hidden[last - 1] };
+        linalg::mat_vec(
+            out,
+            &self.weights[last],
+            x,
+            self.sizes[last + 1],
+            self.sizes[last],
+        );
+        out.iter_mut()
+            .zip(&self.biases[last])
+            .for_each(|(y, b)| *y += b);
         ws.cached = true;
     }
 
-    /// out = J(z)ᵀ v, the vector–Jacobian product (one forward and one backward pass).
+    /// out = J(z)ᵀ v, the vector–Jacobian product (one forward and one backward pass; the
+    /// output layer's value is not needed).
     pub fn vjp(&self, z: &[f64], v: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
         assert_eq!(z.len(), self.input_dim(), "input length");
-        let last = self.num_layers() - 1;
-        for l in 0..last {
-            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
-            let x: &[f64] = if l == 0 { z } else { &ws.post[l - 1] };
-            let a = &mut ws.pre[l];
-            linalg::mul_w(a, &self.weights[l], x, n_out, n_in, 1);
-            a.iter_mut().zip(&self.biases[l]).for_each(|(a, b)| *a += b);
-            self.activation(l).apply(&ws.pre[l], &mut ws.post[l]);
-        }
-        // The output layer's value is not needed for Jᵀv; mark the cache partial.
+        self.forward_hidden(z, ws);
         ws.cached = false;
         self.backward(v, out, ws);
     }
@@ -308,99 +332,121 @@ impl Mlp {
         self.backward(v, out, ws);
     }
 
-    /// Reverse sweep from v = ∂/∂y using the hidden pre-activations and activations in `ws`.
+    /// Reverse sweep from v = ∂/∂y using the hidden activations in `ws`: g ← W_lᵀ g, then
+    /// g ← σ'(a_{l−1}) ⊙ g with σ' taken from h_{l−1}, down to the input.
     fn backward(&self, v: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         assert_eq!(v.len(), self.output_dim(), "cotangent length");
         assert_eq!(out.len(), self.input_dim(), "output length");
         let last = self.num_layers() - 1;
-        ws.ga[..v.len()].copy_from_slice(v);
         for l in (1..=last).rev() {
             let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
-            linalg::mul_wt(&mut ws.gh, &self.weights[l], &ws.ga, n_out, n_in, 1);
+            let (below, above) = ws.grad.split_at_mut(l);
+            let g: &[f64] = if l == last { v } else { &above[0] };
+            let dst = &mut below[l - 1][..n_in];
+            linalg::mat_t_vec(dst, &self.weights[l], g, n_out, n_in);
             self.activation(l - 1)
-                .scale_by_derivative(&ws.post[l - 1], &mut ws.gh);
-            std::mem::swap(&mut ws.ga, &mut ws.gh);
+                .scale_by_derivative(&ws.hidden[l - 1][..n_in], dst);
         }
-        let (n_in, n_out) = (self.sizes[0], self.sizes[1]);
-        linalg::mul_wt(out, &self.weights[0], &ws.ga, n_out, n_in, 1);
+        let g: &[f64] = if last == 0 { v } else { &ws.grad[0] };
+        linalg::mat_t_vec(out, &self.weights[0], g, self.sizes[1], self.sizes[0]);
     }
 
-    /// out = J(z) w, the Jacobian–vector product (forward mode; the value and the tangent share
-    /// one two-column product per layer, so W is read once).
+    /// out = J(z) w, the Jacobian–vector product (forward mode: the value and the tangent are
+    /// pushed through each layer side by side, t ← σ'(a) ⊙ (W t)).
     pub fn jvp(&self, z: &[f64], w: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
+        assert_eq!(z.len(), self.input_dim(), "input length");
         assert_eq!(w.len(), self.input_dim(), "tangent length");
         assert_eq!(out.len(), self.output_dim(), "output length");
-        self.tangent_forward(z, w, 1, out, ws);
+        let last = self.num_layers() - 1;
+        for l in 0..last {
+            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+            let (done, rest) = ws.hidden.split_at_mut(l);
+            let (done_t, rest_t) = ws.grad.split_at_mut(l);
+            let (x, t): (&[f64], &[f64]) = if l == 0 {
+                (z, w)
+            } else {
+                (&done[l - 1], &done_t[l - 1])
+            };
+            let (h, s) = (&mut rest[0][..n_out], &mut rest_t[0][..n_out]);
+            // Two matrix–vector products: faer's kernel for a row-major matrix and two columns
+            // measured slower than two matrix–vector products (200 × 200).
+            linalg::mat_vec(h, &self.weights[l], x, n_out, n_in);
+            linalg::mat_vec(s, &self.weights[l], t, n_out, n_in);
+            let act = self.activation(l);
+            act.apply_biased(h, &self.biases[l]);
+            s.iter_mut()
+                .zip(h.iter())
+                .for_each(|(s, &h)| *s *= act.derivative_from_output(h));
+        }
+        let t: &[f64] = if last == 0 { w } else { &ws.grad[last - 1] };
+        linalg::mat_vec(
+            out,
+            &self.weights[last],
+            t,
+            self.sizes[last + 1],
+            self.sizes[last],
+        );
+        ws.cached = false;
     }
 
     /// out = J(z), the full `n_L × n₀` Jacobian, column-major (column j = ∂f/∂z_j).
+    ///
+    /// Forward mode with all n₀ tangents at once: X_l = [h_l | T_l] (n_l × (1 + n₀), row-major,
+    /// so each layer is one matrix product W X with contiguous rows), T₁ = σ'(a₁) ⊙ W₁ (the seed
+    /// is the identity, so the first product is only the value's), T_{l+1} = σ'(a_{l+1}) ⊙
+    /// (W T_l), and J = W_L T_{L−1}.
     pub fn jacobian(&self, z: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
         let n0 = self.input_dim();
+        assert_eq!(z.len(), n0, "input length");
         assert_eq!(
             out.len(),
             self.output_dim() * n0,
             "Jacobian length (n_out × n_in)"
         );
-        // Seed the tangents with the identity: column 1 + j of X₀ is e_j.
-        let x0 = &mut ws.tan[0];
-        x0[n0..n0 * (1 + n0)].fill(0.0);
-        for j in 0..n0 {
-            x0[n0 * (1 + j) + j] = 1.0;
+        let (m, last) = (1 + n0, self.num_layers() - 1);
+        if last == 0 {
+            // Affine: J = W.
+            let w = &self.weights[0];
+            for (j, col) in out.chunks_exact_mut(self.output_dim()).enumerate() {
+                for (i, o) in col.iter_mut().enumerate() {
+                    *o = w[i * n0 + j];
+                }
+            }
+            ws.cached = false;
+            return;
         }
-        self.tangent_forward_seeded(z, n0, out, ws);
-    }
-
-    /// Forward mode with `m` tangent columns `t` (n₀ × m, column-major): out = J t.
-    fn tangent_forward(
-        &self,
-        z: &[f64],
-        t: &[f64],
-        m: usize,
-        out: &mut [f64],
-        ws: &mut MlpWorkspace,
-    ) {
-        let n0 = self.input_dim();
-        ws.tan[0][n0..n0 * (1 + m)].copy_from_slice(&t[..n0 * m]);
-        self.tangent_forward_seeded(z, m, out, ws);
-    }
-
-    /// Forward mode when `ws.tan[0]` already holds the tangents in columns 1..=m.
-    ///
-    /// X_l = [h_l | T_l] (n_l × (1 + m)); Y = W_{l+1} X_l; h_{l+1} = σ(Y₀ + b);
-    /// T_{l+1} = σ'(Y₀ + b) ⊙ Y_{1..}. The output layer only needs W_L T_{L−1}.
-    fn tangent_forward_seeded(&self, z: &[f64], m: usize, out: &mut [f64], ws: &mut MlpWorkspace) {
-        assert_eq!(z.len(), self.input_dim(), "input length");
-        let n0 = self.input_dim();
-        ws.tan[0][..n0].copy_from_slice(z);
-        let last = self.num_layers() - 1;
         for l in 0..last {
             let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
-            let y = &mut ws.y;
-            linalg::mul_w(y, &self.weights[l], &ws.tan[l], n_out, n_in, 1 + m);
-            let a = &mut ws.pre[l];
-            a.iter_mut()
-                .zip(&y[..n_out])
-                .zip(&self.biases[l])
-                .for_each(|((a, y), b)| *a = y + b);
-            let (h, d) = (&mut ws.post[l], &mut ws.dsig);
-            self.activation(l).apply_with_derivative(&ws.pre[l], h, d);
-            let next = &mut ws.tan[l + 1];
-            next[..n_out].copy_from_slice(&h[..n_out]);
-            for j in 1..=m {
-                let (dst, src) = (
-                    &mut next[j * n_out..(j + 1) * n_out],
-                    &y[j * n_out..(j + 1) * n_out],
-                );
-                for i in 0..n_out {
-                    dst[i] = d[i] * src[i];
+            let (done, rest) = ws.tan.split_at_mut(l);
+            let y = &mut rest[0][..n_out * m];
+            if l == 0 {
+                // W₁ [z | I] = [W₁z | W₁]: only the value column is a product.
+                let w = &self.weights[0];
+                linalg::mat_vec(&mut ws.y[..n_out], w, z, n_out, n_in);
+                for (i, row) in y.chunks_exact_mut(m).enumerate() {
+                    row[0] = ws.y[i];
+                    row[1..].copy_from_slice(&w[i * n0..(i + 1) * n0]);
                 }
+            } else {
+                linalg::mat_mat_rows(y, &self.weights[l], &done[l - 1], n_out, n_in, m);
+            }
+            // The value column, gathered so that σ runs as one vectorised loop.
+            let act = self.activation(l);
+            let h = &mut ws.y[..n_out];
+            for ((h, row), b) in h.iter_mut().zip(y.chunks_exact(m)).zip(&self.biases[l]) {
+                *h = row[0] + b;
+            }
+            act.apply_in_place(h);
+            for (row, &h) in y.chunks_exact_mut(m).zip(h.iter()) {
+                let d = act.derivative_from_output(h);
+                row[0] = h;
+                row[1..].iter_mut().for_each(|t| *t *= d);
             }
         }
         let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
-        let tangents = &ws.tan[last][n_in..n_in * (1 + m)];
-        linalg::mul_w(out, &self.weights[last], tangents, n_out, n_in, m);
+        linalg::mat_tangents_col_major(out, &self.weights[last], &ws.tan[last - 1], n_out, n_in, m);
         ws.cached = false;
     }
 }
@@ -410,20 +456,15 @@ impl Mlp {
 #[derive(Debug, Clone)]
 pub struct MlpWorkspace {
     sizes: Vec<usize>,
-    /// a_l for every dense layer.
-    pre: Vec<Vec<f64>>,
-    /// h_l = σ(a_l) for every hidden layer.
-    post: Vec<Vec<f64>>,
-    /// X_l = [h_l | T_l], n_l × (1 + n₀) column-major, for l = 0..L−1.
+    /// h_l = σ(a_l) for every hidden layer (the forward state of `vjp_cached`).
+    hidden: Vec<Vec<f64>>,
+    /// Backward gradients (VJP) or tangents (JVP) per hidden layer.
+    grad: Vec<Vec<f64>>,
+    /// X_l = [h_l | T_l], n_l × (1 + n₀) row-major, for every hidden layer (Jacobian).
     tan: Vec<Vec<f64>>,
-    /// The product W X of the current layer, max n_l × (1 + n₀).
+    /// One layer's W₁z (Jacobian).
     y: Vec<f64>,
-    /// σ'(a_l) of the current layer.
-    dsig: Vec<f64>,
-    /// Backward sweep buffers (gradient w.r.t. a_l and h_l).
-    ga: Vec<f64>,
-    gh: Vec<f64>,
-    /// Whether `pre`/`post` hold a complete forward pass (for `vjp_cached`).
+    /// Whether `hidden` holds the state of the last [`Mlp::forward`] (for `vjp_cached`).
     cached: bool,
 }
 
@@ -431,19 +472,13 @@ impl MlpWorkspace {
     fn new(sizes: &[usize]) -> Self {
         let n0 = sizes[0];
         let widest = sizes.iter().copied().max().unwrap_or(0);
-        let layers = sizes.len() - 1;
+        let hidden = &sizes[1..sizes.len() - 1];
         Self {
             sizes: sizes.to_vec(),
-            pre: sizes[1..].iter().map(|&n| vec![0.0; n]).collect(),
-            post: sizes[1..layers].iter().map(|&n| vec![0.0; n]).collect(),
-            tan: sizes[..layers]
-                .iter()
-                .map(|&n| vec![0.0; n * (1 + n0)])
-                .collect(),
-            y: vec![0.0; widest * (1 + n0)],
-            dsig: vec![0.0; widest],
-            ga: vec![0.0; widest],
-            gh: vec![0.0; widest],
+            hidden: hidden.iter().map(|&n| vec![0.0; n]).collect(),
+            grad: hidden.iter().map(|&n| vec![0.0; n]).collect(),
+            tan: hidden.iter().map(|&n| vec![0.0; n * (1 + n0)]).collect(),
+            y: vec![0.0; widest],
             cached: false,
         }
     }
