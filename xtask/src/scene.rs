@@ -5,8 +5,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use fem_core::FemError;
+use fem_core::TetMesh;
 use fem_core::constraints::VertexSelection;
-use fem_core::forces::ForceConfig;
+use fem_core::forces::{ForceConfig, ForceKind};
 use fem_core::integrator::{FullSpaceModel, GravityConfig, TimeConfig};
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::{MeshConfig, ValidationReport};
@@ -82,8 +83,12 @@ impl Scene {
 
     /// Parses scene text; `source` names it in errors and `base_dir` anchors relative paths.
     pub fn from_str(text: &str, base_dir: &Path, source: &str) -> Result<Self> {
-        let mut scene: Scene =
-            toml::from_str(text).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
+        let mut scene: Scene = toml::from_str(text).map_err(|e| {
+            match e.span().and_then(|span| field_at(text, span.start)) {
+                Some(field) => anyhow::anyhow!("{source}: `{field}`: {e}"),
+                None => anyhow::anyhow!("{source}: {e}"),
+            }
+        })?;
         scene.base_dir = base_dir.to_path_buf();
         scene.source = source.to_string();
         scene.check()?;
@@ -146,20 +151,95 @@ impl Scene {
         if self.gravity.acceleration.iter().any(|g| !g.is_finite()) {
             errors.push(FemError::InvalidConfig {
                 field: "gravity.acceleration".into(),
-                reason: "must be finite".into(),
+                reason: format!("must be finite, got {:?}", self.gravity.acceleration),
             });
         }
-        match (&self.mesh.path, &self.mesh.generate) {
-            (Some(_), None) | (None, Some(_)) => {}
-            _ => errors.push(FemError::InvalidConfig {
-                field: "mesh".into(),
-                reason: "give exactly one of `path` and `generate`".into(),
-            }),
+        self.mesh.check(&self.base_dir, &mut errors);
+        for (i, p) in self.pin.iter().enumerate() {
+            check_selection(p, &format!("pin[{i}]"), &mut errors);
+        }
+        for (i, f) in self.force.iter().enumerate() {
+            check_force(f, &format!("force[{i}]"), &mut errors);
+        }
+        if self.pin.is_empty()
+            && let Some(why) = self.unsupported_because()
+        {
+            errors.push(FemError::InvalidConfig {
+                field: "pin".into(),
+                reason: format!(
+                    "the scene pins no vertex and no spring holds the body for the whole run, so {why}: add a [[pin]] section"
+                ),
+            });
         }
         if let Err(e) = FemError::collect(errors) {
             bail!("{}: invalid scene:\n{}", self.source, indent(&e));
         }
         Ok(())
+    }
+
+    /// Why the body needs support (pins, or a spring acting for the whole run), if it does:
+    /// `None` for a dynamic scene without gravity (a free-floating body) or one held by a spring.
+    fn unsupported_because(&self) -> Option<String> {
+        let held = self.force.iter().any(|f| {
+            f.kind == ForceKind::Spring && f.start <= 0.0 && f.end.is_none_or(|e| e.is_infinite())
+        });
+        if held {
+            None
+        } else if self.time.quasi_static {
+            Some("a quasi-static solve has no equilibrium".into())
+        } else if self.gravity.acceleration.iter().any(|&g| g != 0.0) {
+            Some(format!(
+                "it falls freely under gravity {:?}",
+                self.gravity.acceleration
+            ))
+        } else {
+            None
+        }
+    }
+
+    /// With a loaded mesh: every connected piece needs a pinned vertex when the body needs
+    /// support (a pin that only selects vertices no tet uses holds nothing).
+    fn check_pieces(&self, mesh: &TetMesh, pinned: &[usize], errors: &mut Vec<FemError>) {
+        if pinned.is_empty() {
+            return; // reported by `check` (or selection errors), not again per piece
+        }
+        let Some(why) = self.unsupported_because() else {
+            return;
+        };
+        let (piece, count) = mesh.vertex_components();
+        let mut held = vec![false; count];
+        for &v in pinned {
+            if let Some(h) = held.get_mut(piece[v]) {
+                *h = true;
+            }
+        }
+        for (c, _) in held.iter().enumerate().filter(|(_, h)| !**h) {
+            let members: Vec<usize> = (0..mesh.num_vertices())
+                .filter(|&v| piece[v] == c)
+                .collect();
+            let centre = members
+                .iter()
+                .fold(fem_core::Vec3::zeros(), |s, &v| s + mesh.vertices[v])
+                / members.len() as f64;
+            let what = if count == 1 {
+                "the mesh".to_string()
+            } else {
+                format!(
+                    "piece {} of the {count} disconnected pieces of the mesh ({} vertices around ({:.3}, {:.3}, {:.3}))",
+                    c + 1,
+                    members.len(),
+                    centre.x,
+                    centre.y,
+                    centre.z
+                )
+            };
+            errors.push(FemError::InvalidConfig {
+                field: "pin".into(),
+                reason: format!(
+                    "no pinned vertex holds {what} (pins on vertices no tet uses hold nothing), so {why}"
+                ),
+            });
+        }
     }
 
     /// The training schedule family, defaults filled in.
@@ -188,6 +268,9 @@ impl Scene {
         }
         pinned.sort_unstable();
         pinned.dedup();
+        if errors.is_empty() {
+            self.check_pieces(&mesh, &pinned, &mut errors);
+        }
         let mut forces = Vec::new();
         for (i, f) in self.force.iter().enumerate() {
             match f.resolve(&mesh, &format!("force[{i}]")) {
@@ -207,6 +290,174 @@ impl Scene {
         )
         .map_err(|e| anyhow::anyhow!("{}: {e}", self.source))?;
         Ok((model, report))
+    }
+}
+
+/// The dotted name (`material.poisson_ratio`, `pin[1].sphere.radius`) of the key or table
+/// header at byte `offset` of a TOML text: TOML errors give a position, a user wants the field.
+fn field_at(text: &str, offset: usize) -> Option<String> {
+    let offset = (0..=offset.min(text.len()))
+        .rev()
+        .find(|&o| text.is_char_boundary(o))?;
+    let line_start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[offset..].find('\n').map_or(text.len(), |i| offset + i);
+    let line = &text[line_start..line_end];
+    // `[name]` or `[[name]]` (the `index`-th of its array of tables).
+    let header = |l: &str, counts: &mut std::collections::HashMap<String, usize>| {
+        let l = l.split('#').next().unwrap_or_default().trim();
+        if let Some(name) = l.strip_prefix("[[").and_then(|r| r.strip_suffix("]]")) {
+            let name = name.trim().to_string();
+            let n = counts.entry(name.clone()).or_default();
+            *n += 1;
+            Some(format!("{name}[{}]", *n - 1))
+        } else {
+            l.strip_prefix('[')
+                .and_then(|r| r.strip_suffix(']'))
+                .map(|name| name.trim().to_string())
+        }
+    };
+    let mut counts = std::collections::HashMap::new();
+    let mut section = None;
+    for l in text[..line_start].lines() {
+        if let Some(h) = header(l, &mut counts) {
+            section = Some(h);
+        }
+    }
+    if let Some(h) = header(line, &mut counts) {
+        return Some(h.split('[').next().unwrap_or_default().to_string());
+    }
+    // Keys on the line up to the error, through inline tables: `a = { b = { c = 1 } }`.
+    let col = offset - line_start;
+    let bytes = line.as_bytes();
+    let is_key = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c == b'-' || c == b'.';
+    let (mut stack, mut last): (Vec<String>, Option<String>) = (Vec::new(), None);
+    let (mut i, mut in_string) = (0, false);
+    while i < bytes.len() && i <= col {
+        let c = bytes[i];
+        if in_string {
+            in_string = c != b'"';
+        } else if c == b'"' {
+            in_string = true;
+        } else if c == b'#' {
+            break;
+        } else if c == b'{' {
+            stack.extend(last.take());
+        } else if c == b'}' {
+            last = stack.pop();
+        } else if is_key(c) {
+            let start = i;
+            while i < bytes.len() && is_key(bytes[i]) {
+                i += 1;
+            }
+            let rest = line[i..].trim_start();
+            if rest.starts_with('=') && !rest.starts_with("==") {
+                last = Some(line[start..i].to_string());
+            }
+            continue;
+        }
+        i += 1;
+    }
+    let parts: Vec<String> = section.into_iter().chain(stack).chain(last).collect();
+    (!parts.is_empty()).then(|| parts.join("."))
+}
+
+/// The checks of [`VertexSelection::select`] that need no mesh, so they are reported with the
+/// rest of the scene's errors.
+fn check_selection(sel: &VertexSelection, field: &str, errors: &mut Vec<FemError>) {
+    let mut bad = |sub: &str, reason: String| {
+        errors.push(FemError::InvalidConfig {
+            field: format!("{field}{sub}"),
+            reason,
+        })
+    };
+    let given = [
+        sel.plane.is_some(),
+        sel.aabb.is_some(),
+        sel.sphere.is_some(),
+        sel.indices.is_some(),
+    ]
+    .iter()
+    .filter(|b| **b)
+    .count();
+    if given != 1 {
+        bad(
+            "",
+            format!("give exactly one of `plane`, `box`, `sphere`, `indices` ({given} given)"),
+        );
+        return;
+    }
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if let Some(t) = sel.plane.as_ref().and_then(|p| p.tolerance)
+        && !(t.is_finite() && t >= 0.0)
+    {
+        bad(
+            ".plane.tolerance",
+            format!("must be a non-negative number, got {t}"),
+        );
+    }
+    if let Some(b) = &sel.aabb
+        && (!finite(&b.min) || !finite(&b.max) || (0..3).any(|i| b.min[i] > b.max[i]))
+    {
+        bad(
+            ".box",
+            format!(
+                "needs finite min ≤ max on every axis, got min {:?} and max {:?}",
+                b.min, b.max
+            ),
+        );
+    }
+    if let Some(s) = &sel.sphere
+        && !(finite(&s.center) && s.radius.is_finite() && s.radius > 0.0)
+    {
+        bad(
+            ".sphere",
+            format!(
+                "needs a finite center and a positive radius, got center {:?} and radius {}",
+                s.center, s.radius
+            ),
+        );
+    }
+    if sel.indices.as_ref().is_some_and(Vec::is_empty) {
+        bad(".indices", "is empty: it selects no vertex".into());
+    }
+}
+
+/// The checks of [`ForceConfig::resolve`] that need no mesh.
+fn check_force(f: &ForceConfig, field: &str, errors: &mut Vec<FemError>) {
+    check_selection(&f.select, &format!("{field}.select"), errors);
+    let mut bad = |sub: &str, reason: String| {
+        errors.push(FemError::InvalidConfig {
+            field: format!("{field}.{sub}"),
+            reason,
+        })
+    };
+    match (f.kind, f.stiffness) {
+        (ForceKind::Spring, Some(k)) if !(k.is_finite() && k > 0.0) => {
+            bad("stiffness", format!("must be positive, got {k}"));
+        }
+        (ForceKind::Spring, None) => bad("stiffness", "a spring needs a stiffness".into()),
+        (ForceKind::Point, Some(_)) => bad("stiffness", "only springs have a stiffness".into()),
+        _ => {}
+    }
+    if f.keyframes.is_empty() {
+        bad("keyframes", "needs at least one [t, x, y, z]".into());
+    }
+    if f.keyframes.iter().flatten().any(|v| !v.is_finite()) {
+        bad("keyframes", "values must be finite".into());
+    }
+    if f.keyframes.windows(2).any(|w| w[1][0] < w[0][0]) {
+        bad("keyframes", "times must not decrease".into());
+    }
+    if !f.start.is_finite() {
+        bad("start", format!("must be finite, got {}", f.start));
+    }
+    if let Some(end) = f.end
+        && (end.is_nan() || end < f.start)
+    {
+        bad(
+            "end",
+            format!("needs start ≤ end, got {} and {end}", f.start),
+        );
     }
 }
 

@@ -22,6 +22,27 @@ impl MeshConfig {
         self.path.as_ref().map(|p| base_dir.join(p))
     }
 
+    /// Appends one error per problem that shows without reading or building the mesh: not
+    /// exactly one of `path` and `generate`, a file that does not exist, an invalid box.
+    pub fn check(&self, base_dir: &Path, errors: &mut Vec<FemError>) {
+        match (&self.path, &self.generate) {
+            (Some(_), None) => {
+                let path = self.resolved_path(base_dir).expect("path is set");
+                if !path.is_file() {
+                    errors.push(FemError::InvalidConfig {
+                        field: "mesh.path".into(),
+                        reason: format!("no mesh file at {}", path.display()),
+                    });
+                }
+            }
+            (None, Some(spec)) => spec.check(errors),
+            _ => errors.push(FemError::InvalidConfig {
+                field: "mesh".into(),
+                reason: "give exactly one of `path` and `generate`".into(),
+            }),
+        }
+    }
+
     /// Reads or generates the mesh and validates it.
     pub fn load(&self, base_dir: &Path) -> Result<(TetMesh, ValidationReport), FemError> {
         match (&self.path, &self.generate) {

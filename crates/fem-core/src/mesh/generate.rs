@@ -45,37 +45,56 @@ impl Default for BoxSpec {
 /// Largest mesh the generator builds, to refuse typos like `cells = [1000000, 1000, 1000]`.
 pub const MAX_GENERATED_VERTICES: usize = 20_000_000;
 
-/// Builds a box mesh with 6 tets per cell, positively oriented.
-pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
-    for a in 0..3 {
-        if !(spec.size[a].is_finite() && spec.size[a] > 0.0) {
-            return Err(FemError::InvalidConfig {
-                field: format!("mesh.generate.size[{a}]"),
-                reason: format!("must be a positive finite length, got {}", spec.size[a]),
-            });
+impl BoxSpec {
+    /// Appends one error per invalid field (named as in a scene: `mesh.generate.…`).
+    pub fn check(&self, errors: &mut Vec<FemError>) {
+        let mut bad =
+            |field: String, reason: String| errors.push(FemError::InvalidConfig { field, reason });
+        for a in 0..3 {
+            if !(self.size[a].is_finite() && self.size[a] > 0.0) {
+                bad(
+                    format!("mesh.generate.size[{a}]"),
+                    format!("must be a positive finite length, got {}", self.size[a]),
+                );
+            }
+            if !self.origin[a].is_finite() {
+                bad(
+                    format!("mesh.generate.origin[{a}]"),
+                    format!("must be finite, got {}", self.origin[a]),
+                );
+            }
+            if self.cells[a] == 0 {
+                bad(
+                    format!("mesh.generate.cells[{a}]"),
+                    "must be at least 1".into(),
+                );
+            }
         }
-        if !spec.origin[a].is_finite() {
-            return Err(FemError::InvalidConfig {
-                field: format!("mesh.generate.origin[{a}]"),
-                reason: "must be finite".into(),
-            });
-        }
-        if spec.cells[a] == 0 {
-            return Err(FemError::InvalidConfig {
-                field: format!("mesh.generate.cells[{a}]"),
-                reason: "must be at least 1".into(),
-            });
+        if self.num_vertices().is_none() {
+            bad(
+                "mesh.generate.cells".into(),
+                format!("more than {MAX_GENERATED_VERTICES} vertices"),
+            );
         }
     }
+
+    /// (nx+1)(ny+1)(nz+1), when at most [`MAX_GENERATED_VERTICES`].
+    fn num_vertices(&self) -> Option<usize> {
+        let [nx, ny, nz] = self.cells;
+        nx.checked_add(1)
+            .and_then(|c| c.checked_mul(ny.checked_add(1)?))
+            .and_then(|c| c.checked_mul(nz.checked_add(1)?))
+            .filter(|&c| c <= MAX_GENERATED_VERTICES)
+    }
+}
+
+/// Builds a box mesh with 6 tets per cell, positively oriented.
+pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
+    let mut errors = Vec::new();
+    spec.check(&mut errors);
+    FemError::collect(errors)?;
+    let count = spec.num_vertices().expect("checked above");
     let [nx, ny, nz] = spec.cells;
-    let count = (nx + 1)
-        .checked_mul(ny + 1)
-        .and_then(|c| c.checked_mul(nz + 1))
-        .filter(|&c| c <= MAX_GENERATED_VERTICES)
-        .ok_or_else(|| FemError::InvalidConfig {
-            field: "mesh.generate.cells".into(),
-            reason: format!("more than {MAX_GENERATED_VERTICES} vertices"),
-        })?;
     let idx = |i: usize, j: usize, k: usize| i + (nx + 1) * (j + (ny + 1) * k);
     let mut vertices = Vec::with_capacity(count);
     for k in 0..=nz {

@@ -1,0 +1,481 @@
+//! Scene validation: every bad key or value is a clear error naming the file and the field
+//! (`material.poisson_ratio`, `pin[1].sphere`), and the problems of one scene are reported
+//! together: the value checks when the scene is read, the checks that need the mesh (pins that
+//! select nothing, pieces of the mesh nothing holds) when the model is built.
+
+use std::path::{Path, PathBuf};
+
+use fem_core::TetMesh;
+use fem_core::mesh::generate::{BoxSpec, box_mesh};
+use xtask::scene::Scene;
+
+/// A small valid scene; each test edits one part of it.
+const BASE: &str = r#"name = "beam"
+
+[mesh]
+generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }
+
+[material]
+model = "stable-neo-hookean"
+youngs_modulus = 1.0e5
+poisson_ratio = 0.4
+density = 1000.0
+
+[[pin]]
+plane = { axis = "x", side = "min", tolerance = 1.0e-6 }
+
+[gravity]
+acceleration = [0.0, -9.81, 0.0]
+
+[time]
+step = 0.01
+frames = 10
+
+[solver]
+method = "newton"
+tolerance = 1.0e-6
+
+[[force]]
+kind = "spring"
+select = { sphere = { center = [1.0, 0.1, 0.1], radius = 0.15 } }
+stiffness = 200.0
+keyframes = [[0.0, 0.0, 0.0, 0.0], [0.3, 0.0, 0.1, 0.0]]
+start = 0.0
+end = 0.5
+"#;
+
+/// `BASE` with `from` (which must occur) replaced by `to`.
+fn edit(from: &str, to: &str) -> String {
+    assert!(BASE.contains(from), "BASE has no '{from}'");
+    BASE.replacen(from, to, 1)
+}
+
+/// The error of reading `text` as `bad.toml`, failing the test if it is accepted.
+fn read_error(text: &str) -> String {
+    match Scene::from_str(text, Path::new("."), "bad.toml") {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+/// The error of building the model of the valid scene `text` read from `base`.
+fn build_error(text: &str, base: &Path) -> String {
+    let scene = Scene::from_str(text, base, "bad.toml")
+        .unwrap_or_else(|e| panic!("the scene should read: {e:#}"));
+    match scene.build_model() {
+        Ok(_) => panic!("expected a model error for:\n{text}"),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+fn builds(text: &str, base: &Path) {
+    let scene = Scene::from_str(text, base, "ok.toml").unwrap_or_else(|e| panic!("{e:#}"));
+    scene.build_model().unwrap_or_else(|e| panic!("{e:#}"));
+}
+
+/// `err` names the file and each of `needles`.
+fn assert_names(err: &str, needles: &[&str]) {
+    assert!(err.contains("bad.toml"), "no file name in: {err}");
+    for n in needles {
+        assert!(err.contains(n), "'{n}' missing from: {err}");
+    }
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir()
+        .join(format!("xtask-scene-validation-{}", std::process::id()))
+        .join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn write_medit(path: &Path, mesh: &TetMesh) {
+    let mut s = format!(
+        "MeshVersionFormatted 2\nDimension 3\nVertices\n{}\n",
+        mesh.num_vertices()
+    );
+    for v in &mesh.vertices {
+        s += &format!("{} {} {} 0\n", v.x, v.y, v.z);
+    }
+    s += &format!("Tetrahedra\n{}\n", mesh.num_tets());
+    for t in &mesh.tets {
+        s += &format!("{} {} {} {} 1\n", t[0] + 1, t[1] + 1, t[2] + 1, t[3] + 1);
+    }
+    std::fs::write(path, s + "End\n").unwrap();
+}
+
+fn beam(cells: [usize; 3], origin: [f64; 3]) -> TetMesh {
+    box_mesh(&BoxSpec {
+        size: [1.0, 0.2, 0.2],
+        cells,
+        origin,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+#[test]
+fn the_base_scene_is_valid() {
+    builds(BASE, Path::new("."));
+}
+
+#[test]
+fn unknown_keys_are_errors_naming_the_key_and_its_section() {
+    let cases = [
+        (
+            edit("poisson_ratio = 0.4", "poisson_ratio = 0.4\npoison = 1"),
+            "`material.poison`",
+        ),
+        (edit("[time]", "[tiem]"), "`tiem`"),
+        (edit("frames = 10", "frames = 10\nfps = 30"), "`time.fps`"),
+        (edit("[[pin]]", "[[pins]]"), "`pins`"),
+        (
+            edit(
+                "tolerance = 1.0e-6 }",
+                "tolerance = 1.0e-6, sid = \"max\" }",
+            ),
+            "`pin[0].plane.sid`",
+        ),
+        (
+            edit("stiffness = 200.0", "stiffness = 200.0\nstifness = 1.0"),
+            "`force[0].stifness`",
+        ),
+        (format!("nmae = \"x\"\n{BASE}"), "`nmae`"),
+        (
+            edit("cells = [4, 1, 1] }", "cells = [4, 1, 1], cell = 3 }"),
+            "`mesh.generate.cell`",
+        ),
+    ];
+    for (text, field) in cases {
+        let err = read_error(&text);
+        assert_names(&err, &[field, "unknown field"]);
+    }
+}
+
+#[test]
+fn wrong_types_are_errors_naming_the_field_and_line() {
+    let cases = [
+        (
+            edit("poisson_ratio = 0.4", "poisson_ratio = \"abc\""),
+            "`material.poisson_ratio`",
+            "line 9",
+        ),
+        (
+            edit("frames = 10", "frames = -3"),
+            "`time.frames`",
+            "line 20",
+        ),
+        (
+            edit("frames = 10", "frames = 1.5"),
+            "`time.frames`",
+            "line 20",
+        ),
+        (
+            edit("step = 0.01", "step = \"0.01\""),
+            "`time.step`",
+            "line 19",
+        ),
+        (
+            edit("[0.0, -9.81, 0.0]", "[0.0, -9.81]"),
+            "`gravity.acceleration`",
+            "line 16",
+        ),
+        (
+            edit("\"stable-neo-hookean\"", "\"rubber\""),
+            "`material.model`",
+            "line 7",
+        ),
+        (
+            edit("axis = \"x\"", "axis = \"w\""),
+            "`pin[0].plane.axis`",
+            "line 13",
+        ),
+        (
+            edit("radius = 0.15", "radius = \"big\""),
+            "`force[0].select.sphere.radius`",
+            "line 28",
+        ),
+        (edit("name = \"beam\"", "name = 5"), "`name`", "line 1"),
+        (
+            format!(
+                "pin = 3\n{}",
+                edit(
+                    "[[pin]]\nplane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }\n",
+                    ""
+                )
+            ),
+            "`pin`",
+            "line 1",
+        ),
+    ];
+    for (text, field, line) in cases {
+        let err = read_error(&text);
+        assert_names(&err, &[field, line]);
+    }
+}
+
+#[test]
+fn out_of_range_values_are_reported_together() {
+    let text = BASE
+        .replace("youngs_modulus = 1.0e5", "youngs_modulus = -1.0")
+        .replace("poisson_ratio = 0.4", "poisson_ratio = 0.5")
+        .replace("density = 1000.0", "density = nan")
+        .replace("step = 0.01", "step = 0.0")
+        .replace("frames = 10", "frames = 0")
+        .replace("tolerance = 1.0e-6\n", "tolerance = 2.0\n")
+        .replace("[0.0, -9.81, 0.0]", "[0.0, nan, 0.0]");
+    let err = read_error(&text);
+    assert_names(
+        &err,
+        &[
+            "material.youngs_modulus",
+            "material.poisson_ratio",
+            "material.density",
+            "time.step",
+            "time.frames",
+            "solver.tolerance",
+            "gravity.acceleration",
+        ],
+    );
+    assert_eq!(
+        err.matches("\n  - ").count(),
+        7,
+        "one line per problem: {err}"
+    );
+}
+
+#[test]
+fn poisson_ratio_time_step_and_material_bounds() {
+    for bad in ["0.5", "0.7", "-0.1", "nan", "inf"] {
+        let err = read_error(&edit(
+            "poisson_ratio = 0.4",
+            &format!("poisson_ratio = {bad}"),
+        ));
+        assert_names(&err, &["material.poisson_ratio", "[0, 0.5)"]);
+    }
+    for bad in ["0.0", "-0.01", "nan", "inf", "-inf"] {
+        let err = read_error(&edit("step = 0.01", &format!("step = {bad}")));
+        assert_names(&err, &["time.step", "positive"]);
+    }
+    for bad in ["0.0", "-1.0", "nan", "inf"] {
+        let err = read_error(&edit(
+            "youngs_modulus = 1.0e5",
+            &format!("youngs_modulus = {bad}"),
+        ));
+        assert_names(&err, &["material.youngs_modulus"]);
+        let err = read_error(&edit("density = 1000.0", &format!("density = {bad}")));
+        assert_names(&err, &["material.density"]);
+    }
+}
+
+#[test]
+fn a_scene_without_support_needs_pins() {
+    let pin = "[[pin]]\nplane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }\n";
+    let unpinned = edit(pin, "");
+    let err = read_error(&unpinned);
+    assert_names(&err, &["`pin`", "pins no vertex", "falls freely"]);
+
+    // Nothing pulls it down: a free-floating body is a valid scene.
+    let floating = unpinned.replace("[0.0, -9.81, 0.0]", "[0.0, 0.0, 0.0]");
+    builds(&floating, Path::new("."));
+    // ... but a quasi-static one has no equilibrium.
+    let err = read_error(&floating.replace("frames = 10", "frames = 10\nquasi_static = true"));
+    assert_names(&err, &["`pin`", "quasi-static"]);
+    // A spring acting for the whole run holds it.
+    builds(&unpinned.replace("end = 0.5\n", ""), Path::new("."));
+}
+
+#[test]
+fn pins_that_select_nothing_are_errors_reported_together() {
+    let far = edit(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "sphere = { center = [9.0, 9.0, 9.0], radius = 0.1 }\n\n[[pin]]\nindices = [3, 99999]",
+    );
+    let err = build_error(&far, Path::new("."));
+    assert_names(
+        &err,
+        &["pin[0]", "selects no vertex", "pin[1].indices", "99999"],
+    );
+
+    let force = edit("center = [1.0, 0.1, 0.1]", "center = [5.0, 0.1, 0.1]");
+    let err = build_error(&force, Path::new("."));
+    assert_names(&err, &["force[0].select", "selects no vertex"]);
+}
+
+#[test]
+fn selection_and_force_values_are_checked_when_read() {
+    let plane = "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }";
+    let cases = [
+        (
+            edit("tolerance = 1.0e-6 }", "tolerance = -1.0 }"),
+            vec!["pin[0].plane.tolerance"],
+        ),
+        (
+            edit(
+                plane,
+                "box = { min = [0.0, 0.0, 0.0], max = [-1.0, 1.0, 1.0] }",
+            ),
+            vec!["pin[0].box", "min ≤ max"],
+        ),
+        (
+            edit(plane, "sphere = { center = [0.0, 0.0, 0.0], radius = 0.0 }"),
+            vec!["pin[0].sphere", "positive radius"],
+        ),
+        (edit(plane, "indices = []"), vec!["pin[0].indices", "empty"]),
+        (
+            edit(plane, &format!("{plane}\nindices = [0]")),
+            vec!["pin[0]", "exactly one", "2 given"],
+        ),
+        (
+            edit("[[pin]]\n", "[[pin]]\n\n[[pin]]\n"),
+            vec!["pin[0]", "0 given"],
+        ),
+        (
+            edit("stiffness = 200.0\n", ""),
+            vec!["force[0].stiffness", "needs a stiffness"],
+        ),
+        (
+            edit("stiffness = 200.0", "stiffness = -5.0"),
+            vec!["force[0].stiffness", "positive"],
+        ),
+        (
+            edit("kind = \"spring\"", "kind = \"point\""),
+            vec!["force[0].stiffness", "only springs"],
+        ),
+        (
+            edit("[0.3, 0.0, 0.1, 0.0]", "[-0.3, 0.0, 0.1, 0.0]"),
+            vec!["force[0].keyframes", "must not decrease"],
+        ),
+        (
+            edit(
+                "keyframes = [[0.0, 0.0, 0.0, 0.0], [0.3, 0.0, 0.1, 0.0]]",
+                "keyframes = []",
+            ),
+            vec!["force[0].keyframes", "at least one"],
+        ),
+        (
+            edit("end = 0.5", "end = -1.0"),
+            vec!["force[0].end", "start ≤ end"],
+        ),
+        (
+            edit("radius = 0.15", "radius = -0.15"),
+            vec!["force[0].select.sphere"],
+        ),
+    ];
+    for (text, needles) in cases {
+        let err = read_error(&text);
+        assert_names(&err, &needles);
+    }
+    // All of a force's problems at once.
+    let text = BASE
+        .replace("stiffness = 200.0\n", "")
+        .replace("end = 0.5", "end = -1.0")
+        .replace("radius = 0.15", "radius = 0.0");
+    let err = read_error(&text);
+    assert_names(
+        &err,
+        &[
+            "force[0].stiffness",
+            "force[0].end",
+            "force[0].select.sphere",
+        ],
+    );
+}
+
+#[test]
+fn mesh_sections_are_checked_when_read() {
+    let generate = "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }";
+    let err = read_error(&edit(
+        generate,
+        &format!("{generate}\npath = \"beam.mesh\""),
+    ));
+    assert_names(&err, &["`mesh`", "exactly one"]);
+    let err = read_error(&edit(generate, ""));
+    assert_names(&err, &["`mesh`", "exactly one"]);
+    let err = read_error(&edit(generate, "path = \"no/such/file.mesh\""));
+    assert_names(&err, &["mesh.path", "no mesh file", "file.mesh"]);
+    let err = read_error(&edit(
+        "size = [1.0, 0.2, 0.2], cells = [4, 1, 1]",
+        "size = [1.0, -0.2, 0.2], cells = [0, 1, 1]",
+    ));
+    assert_names(&err, &["mesh.generate.size[1]", "mesh.generate.cells[0]"]);
+    let err = read_error(&edit(
+        "cells = [4, 1, 1]",
+        "cells = [100000, 100000, 100000]",
+    ));
+    assert_names(&err, &["mesh.generate.cells", "more than"]);
+}
+
+#[test]
+fn every_piece_of_a_disconnected_mesh_needs_a_pin() {
+    let dir = scratch("pieces");
+    let mut mesh = beam([4, 1, 1], [0.0, 0.0, 0.0]);
+    let other = beam([2, 1, 1], [0.0, 1.0, 0.0]);
+    let offset = mesh.num_vertices();
+    mesh.vertices.extend(other.vertices);
+    mesh.tets
+        .extend(other.tets.iter().map(|t| t.map(|i| i + offset)));
+    write_medit(&dir.join("two.mesh"), &mesh);
+    let generate = "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }";
+    let text = edit(generate, "path = \"two.mesh\"");
+    // Both pieces touch x = 0: pinned.
+    builds(&text, &dir);
+    // Only the first touches the pin box.
+    let one = text.replace(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "box = { min = [-0.1, -0.1, -0.1], max = [0.1, 0.3, 0.3] }",
+    );
+    let err = build_error(&one, &dir);
+    assert_names(&err, &["`pin`", "piece 2 of the 2", "falls freely"]);
+    // Without gravity the loose piece may float.
+    builds(&one.replace("[0.0, -9.81, 0.0]", "[0.0, 0.0, 0.0]"), &dir);
+}
+
+#[test]
+fn pins_on_vertices_no_tet_uses_hold_nothing() {
+    let dir = scratch("unreferenced");
+    let mut mesh = beam([4, 1, 1], [0.0, 0.0, 0.0]);
+    mesh.vertices.push(fem_core::Vec3::new(-1.0, 0.0, 0.0));
+    let loose = mesh.num_vertices() - 1;
+    write_medit(&dir.join("loose.mesh"), &mesh);
+    let text = edit(
+        "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }",
+        "path = \"loose.mesh\"",
+    )
+    .replace(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        &format!("indices = [{loose}]"),
+    );
+    let err = build_error(&text, &dir);
+    assert_names(&err, &["`pin`", "no pinned vertex holds the mesh"]);
+}
+
+#[test]
+fn errors_from_files_name_the_file() {
+    let dir = scratch("files");
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, edit("poisson_ratio = 0.4", "poisson_ratio = 0.5")).unwrap();
+    let err = format!("{:#}", Scene::from_file(&path).unwrap_err());
+    assert!(err.contains(&path.display().to_string()), "{err}");
+    assert!(err.contains("material.poisson_ratio"), "{err}");
+    let missing = dir.join("missing.toml");
+    let err = format!("{:#}", Scene::from_file(&missing).unwrap_err());
+    assert!(err.contains("missing.toml"), "{err}");
+    // A mesh path is relative to the scene file.
+    std::fs::write(
+        &path,
+        edit(
+            "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }",
+            "path = \"beam.mesh\"",
+        ),
+    )
+    .unwrap();
+    let err = format!("{:#}", Scene::from_file(&path).unwrap_err());
+    assert!(
+        err.contains(&dir.join("beam.mesh").display().to_string()),
+        "{err}"
+    );
+    write_medit(&dir.join("beam.mesh"), &beam([4, 1, 1], [0.0; 3]));
+    Scene::from_file(&path).unwrap().build_model().unwrap();
+}
