@@ -3,6 +3,11 @@
 //! The pattern stores both triangles (column-compressed, rows sorted), so it serves matrix–vector
 //! products as well as the sparse Cholesky factorisation (which reads the lower triangle). It is
 //! built once per mesh and pin set; every Newton iteration only refills the values.
+//!
+//! For parallel assembly the columns are split into [`ColumnPart`]s: contiguous column ranges,
+//! hence contiguous, disjoint ranges of the values array that threads can fill independently.
+
+use std::ops::Range;
 
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use rayon::prelude::*;
@@ -21,6 +26,19 @@ pub struct HessianPattern {
     pub element_slots: Vec<[u32; 144]>,
     /// Value index of each free DOF's diagonal entry.
     pub diag: Vec<usize>,
+    /// The columns split into one part per thread of the rayon pool the pattern was built in,
+    /// balanced by number of entries.
+    pub parts: Vec<ColumnPart>,
+}
+
+/// A contiguous range of columns of a [`HessianPattern`], hence a contiguous range of its
+/// values, and the elements with an entry in those columns.
+#[derive(Debug, Clone)]
+pub struct ColumnPart {
+    /// The value indices of the part's columns.
+    pub values: Range<usize>,
+    /// The elements with at least one entry in the part, ascending.
+    pub elements: Vec<u32>,
 }
 
 impl HessianPattern {
@@ -89,10 +107,12 @@ impl HessianPattern {
             })
             .collect();
         let diag = (0..n).map(|j| find(j, j) as usize).collect();
+        let parts = column_parts(&symbolic, tets, dofs, rayon::current_num_threads());
         Self {
             symbolic,
             element_slots,
             diag,
+            parts,
         }
     }
 
@@ -144,4 +164,52 @@ impl HessianPattern {
             }
         }
     }
+}
+
+/// Splits the columns into `count` contiguous parts of about equal numbers of entries, and lists
+/// for each part the elements that have an entry in it (an element with free DOFs in several
+/// parts is listed in each of them).
+fn column_parts(
+    symbolic: &SymbolicSparseColMat<usize>,
+    tets: &[[usize; 4]],
+    dofs: &DofMap,
+    count: usize,
+) -> Vec<ColumnPart> {
+    let cp = symbolic.col_ptr();
+    let (n, nnz) = (cp.len() - 1, cp[cp.len() - 1]);
+    let count = count.clamp(1, n.max(1));
+    // bounds[p]..bounds[p + 1] are the columns of part p.
+    let mut bounds = vec![0usize; count + 1];
+    for p in 1..count {
+        let target = nnz * p / count;
+        bounds[p] = cp.partition_point(|&x| x < target).clamp(bounds[p - 1], n);
+    }
+    bounds[count] = n;
+    assert!(tets.len() <= u32::MAX as usize, "more than 2^32 elements");
+    let mut elements = vec![Vec::new(); count];
+    let mut touched = Vec::with_capacity(12);
+    for (e, t) in tets.iter().enumerate() {
+        touched.clear();
+        for &v in t {
+            for c in 0..3 {
+                let col = dofs.index[3 * v + c];
+                if col != FIXED {
+                    touched.push(bounds.partition_point(|&b| b <= col) - 1);
+                }
+            }
+        }
+        touched.sort_unstable();
+        touched.dedup();
+        for &p in &touched {
+            elements[p].push(e as u32);
+        }
+    }
+    elements
+        .into_iter()
+        .enumerate()
+        .map(|(p, elements)| ColumnPart {
+            values: cp[bounds[p]]..cp[bounds[p + 1]],
+            elements,
+        })
+        .collect()
 }

@@ -7,6 +7,7 @@
 //! Parameters are given as Young's modulus E and Poisson ratio ν and converted to Lamé
 //! parameters μ = E / (2(1+ν)), λ = Eν / ((1+ν)(1−2ν)).
 
+mod cofactor_tangent;
 mod corotated;
 mod linear;
 mod neo_hookean;

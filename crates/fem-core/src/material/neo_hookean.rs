@@ -1,7 +1,7 @@
 //! Classic compressible Neo-Hookean.
 
 use super::stable_neo_hookean::{cofactor, det, det_from_cofactor, mirror_upper};
-use super::{Lame, Mat9, Material, project_psd};
+use super::{Lame, Mat9, Material, cofactor_tangent};
 use crate::Mat3;
 
 /// Compressible Neo-Hookean (e.g. Bonet & Wood, "Nonlinear Continuum Mechanics for Finite
@@ -119,15 +119,22 @@ impl Material for NeoHookean {
         m
     }
 
-    /// [`super::project_psd`] of the tangent; NaN-filled for J ≤ 0 (never handed to the
-    /// eigen-solver).
+    /// The analytic projection of [`super::cofactor_tangent`] (ψ = μ/2 I₁ + h(J) with
+    /// h = −μ ln J + λ/2 (ln J)², so a = h'' = (μ + λ − λ ln J)/J², c = h' = (λ ln J − μ)/J);
+    /// NaN-filled for J ≤ 0.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
         let m = self.dpdf(F);
-        if m[(0, 0)].is_finite() {
-            project_psd(&m)
-        } else {
-            m
+        if !m[(0, 0)].is_finite() {
+            return m;
         }
+        let (mu, lambda) = (self.mu, self.lambda);
+        cofactor_tangent::project(m, F, mu, |J| {
+            let lnJ = J.ln();
+            (
+                (mu + lambda - lambda * lnJ) / (J * J),
+                (lambda * lnJ - mu) / J,
+            )
+        })
     }
 }
 

@@ -1,8 +1,7 @@
 //! Stable Neo-Hookean (Smith, de Goes, Kim 2018), and the cofactor helpers shared by the
 //! materials of this module.
 
-use super::corotated::{SignedSvd, signed_svd};
-use super::{Lame, Mat9, Material};
+use super::{Lame, Mat9, Material, cofactor_tangent};
 use crate::Mat3;
 
 /// Stable Neo-Hookean (Smith, de Goes & Kim, "Stable Neo-Hookean Flesh Simulation", 2018),
@@ -33,19 +32,12 @@ use crate::Mat3;
 ///
 /// # Projection
 ///
-/// [`Material::dpdf_projected`] uses the analytic eigensystem (Smith et al. 2018 §4; Kim &
-/// Eberle, "Dynamic Deformables", 2022, ch. 7). With the rotation-variant SVD F = UΣVᵀ
-/// (U, V rotations, σ₀ ≥ σ₁ ≥ |σ₂|, J = σ₀σ₁σ₂) and c = λ'(J − 1) − μ', for each pair (i, j)
-/// with third index k:
-///
-/// * twist  (u_i v_jᵀ − u_j v_iᵀ)/√2 has eigenvalue μ' + c σ_k,
-/// * flip   (u_i v_jᵀ + u_j v_iᵀ)/√2 has eigenvalue μ' − c σ_k,
-///
-/// and the three scaling modes Σ_i e_i u_i v_iᵀ come from the eigenvectors e of the 3×3 matrix
-/// μ' I + λ' g gᵀ + c [[0, σ₂, σ₁], [σ₂, 0, σ₀], [σ₁, σ₀, 0]] with g = (σ₁σ₂, σ₀σ₂, σ₀σ₁).
-/// The projection subtracts λ q qᵀ for every negative eigenpair from the exact tangent, so it
-/// equals the clamped eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD
-/// (and a 3×3 eigenproblem only when the scaling block is indefinite).
+/// [`Material::dpdf_projected`] uses the analytic eigensystem of tangents of the form
+/// μ I₉ + a vec(cof)vec(cof)ᵀ + c ∂cof/∂F (here a = λ', c = λ'(J − 1) − μ'; see
+/// [`super::cofactor_tangent`]): a positive definite tangent is returned as it is, otherwise the
+/// negative eigenpairs are subtracted, which equals the clamped eigen-decomposition of
+/// [`super::project_psd`] at the cost of one 3×3 SVD (and a 3×3 eigenproblem only when the
+/// scaling block is indefinite).
 ///
 /// # Derivation
 ///
@@ -83,37 +75,6 @@ impl StableNeoHookean {
     /// The rest-stability offset α = 1 + μ'/λ'.
     pub fn alpha(&self) -> f64 {
         1.0 + self.mu_snh / self.lambda_snh
-    }
-
-    /// The twist and flip eigenpairs of ∂P/∂F: `(eigenvalue, w)` with unit eigenvector
-    /// vec(w)/√2.
-    fn twist_flip(&self, svd: &SignedSvd, c: f64) -> [(f64, Mat3); 6] {
-        let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
-        let mu = self.mu_snh;
-        let pair = |i: usize, j: usize, k: usize| {
-            let a = u.column(i) * v.column(j).transpose();
-            let b = u.column(j) * v.column(i).transpose();
-            [(mu + c * s[k], a - b), (mu - c * s[k], a + b)]
-        };
-        let [t0, f0] = pair(1, 2, 0);
-        let [t1, f1] = pair(0, 2, 1);
-        let [t2, f2] = pair(0, 1, 2);
-        [t0, t1, t2, f0, f1, f2]
-    }
-
-    /// The 3×3 matrix whose eigenpairs (λ, e) give the scaling eigenpairs (λ, Σ_i e_i u_i v_iᵀ).
-    fn scaling_block(&self, s: &crate::Vec3, c: f64) -> Mat3 {
-        let g = crate::Vec3::new(s[1] * s[2], s[0] * s[2], s[0] * s[1]);
-        let mut a = g * g.transpose() * self.lambda_snh;
-        for i in 0..3 {
-            a[(i, i)] += self.mu_snh;
-        }
-        let off = [(1, 2, 0), (0, 2, 1), (0, 1, 2)];
-        for (i, j, k) in off {
-            a[(i, j)] += c * s[k];
-            a[(j, i)] += c * s[k];
-        }
-        a
     }
 }
 
@@ -159,50 +120,11 @@ impl Material for StableNeoHookean {
         m
     }
 
-    /// Analytic projection (see the type's documentation): the exact tangent minus its negative
-    /// eigenpairs. Non-finite F yields the (non-finite) tangent unchanged.
+    /// Analytic projection (see the type's documentation). Non-finite F yields the
+    /// (non-finite) tangent unchanged.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
-        let mut m = self.dpdf(F);
-        if !F.iter().all(|x| x.is_finite()) {
-            return m;
-        }
-        let svd = signed_svd(F);
-        let s = &svd.sigma;
-        let c = self.lambda_snh * (s[0] * s[1] * s[2] - 1.0) - self.mu_snh;
-        let mut changed = false;
-        for (val, w) in self.twist_flip(&svd, c) {
-            if val < 0.0 {
-                // q = w/√2, so λ q qᵀ = (λ/2) w wᵀ.
-                add_outer_upper(&mut m, &w, &w, -0.5 * val);
-                changed = true;
-            }
-        }
-        let a = self.scaling_block(s, c);
-        // Sylvester's criterion; on failure (indefinite or borderline) decompose.
-        let pd = a[(0, 0)] > 0.0
-            && a[(0, 0)] * a[(1, 1)] - a[(0, 1)] * a[(0, 1)] > 0.0
-            && a.determinant() > 0.0;
-        if !pd {
-            let Some(eig) = a.try_symmetric_eigen(f64::EPSILON, 1000) else {
-                return super::project_psd(&self.dpdf(F));
-            };
-            for i in 0..3 {
-                let val = eig.eigenvalues[i];
-                if val < 0.0 {
-                    let e = eig.eigenvectors.column(i);
-                    let mut q = Mat3::zeros();
-                    for j in 0..3 {
-                        q += svd.u.column(j) * svd.v.column(j).transpose() * e[j];
-                    }
-                    add_outer_upper(&mut m, &q, &q, -val);
-                    changed = true;
-                }
-            }
-        }
-        if changed {
-            mirror_upper(&mut m);
-        }
-        m
+        let (mu, la) = (self.mu_snh, self.lambda_snh);
+        cofactor_tangent::project(self.dpdf(F), F, mu, |J| (la, la * (J - 1.0) - mu))
     }
 }
 
@@ -282,6 +204,8 @@ pub(super) fn mirror_upper(m: &mut Mat9) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::corotated::signed_svd;
+    use super::cofactor_tangent::{scaling_block, twist_flip};
     use super::*;
 
     fn material() -> StableNeoHookean {
@@ -312,12 +236,12 @@ mod tests {
             let c = m.lambda_snh * (s[0] * s[1] * s[2] - 1.0) - m.mu_snh;
             let mut rec = Mat9::zeros();
             let mut vecs: Vec<Mat3> = Vec::new();
-            for (val, w) in m.twist_flip(&svd, c) {
+            for (val, w) in twist_flip(&svd, m.mu_snh, c) {
                 let q = w / 2f64.sqrt();
                 add_outer_upper(&mut rec, &q, &q, val);
                 vecs.push(q);
             }
-            let eig = m.scaling_block(s, c).symmetric_eigen();
+            let eig = scaling_block(s, m.mu_snh, m.lambda_snh, c).symmetric_eigen();
             for i in 0..3 {
                 let e = eig.eigenvectors.column(i);
                 let mut q = Mat3::zeros();

@@ -1,0 +1,168 @@
+//! Analytic eigensystem and PSD projection of the tangents of energies ψ(F) = μ/2 I₁ + h(J).
+//!
+//! Both Neo-Hookean models of this module have this form, so their tangents are
+//! ∂P/∂F = μ I₉ + a vec(cof) vec(cof)ᵀ + c ∂cof/∂F with a = h''(J), c = h'(J) and
+//! cof(F) = ∂J/∂F (Smith, de Goes & Kim 2018 §4 for stable Neo-Hookean; Kim & Eberle, "Dynamic
+//! Deformables", 2022, ch. 7). With the rotation-variant SVD F = UΣVᵀ (U, V rotations,
+//! σ₀ ≥ σ₁ ≥ |σ₂|, J = σ₀σ₁σ₂), for each pair (i, j) with third index k:
+//!
+//! * twist  (u_i v_jᵀ − u_j v_iᵀ)/√2 has eigenvalue μ + c σ_k,
+//! * flip   (u_i v_jᵀ + u_j v_iᵀ)/√2 has eigenvalue μ − c σ_k,
+//!
+//! and the three scaling modes Σ_i e_i u_i v_iᵀ come from the eigenpairs (λ, e) of the 3×3 matrix
+//! μ I + a g gᵀ + c [[0, σ₂, σ₁], [σ₂, 0, σ₀], [σ₁, σ₀, 0]] with g = (σ₁σ₂, σ₀σ₂, σ₀σ₁).
+//!
+//! In the SVD frame the Hessian of J is block diagonal: it couples only the diagonal entries
+//! (entry (i, j) = σ_k) and each off-diagonal pair (F̂_ij, F̂_ji) through the minor
+//! −σ_k F̂_ij F̂_ji, which gives ±σ_k on the flip/twist modes; vec(cof) is U diag(g) Vᵀ.
+
+use super::corotated::{SignedSvd, signed_svd};
+use super::stable_neo_hookean::{add_outer_upper, mirror_upper};
+use super::{Mat9, project_psd};
+use crate::Mat3;
+
+/// The twist and flip eigenpairs: `(eigenvalue, w)` with unit eigenvector vec(w)/√2.
+pub(super) fn twist_flip(svd: &SignedSvd, mu: f64, c: f64) -> [(f64, Mat3); 6] {
+    let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
+    let pair = |i: usize, j: usize, k: usize| {
+        let a = u.column(i) * v.column(j).transpose();
+        let b = u.column(j) * v.column(i).transpose();
+        [(mu + c * s[k], a - b), (mu - c * s[k], a + b)]
+    };
+    let [t0, f0] = pair(1, 2, 0);
+    let [t1, f1] = pair(0, 2, 1);
+    let [t2, f2] = pair(0, 1, 2);
+    [t0, t1, t2, f0, f1, f2]
+}
+
+/// The 3×3 matrix whose eigenpairs (λ, e) give the scaling eigenpairs (λ, Σ_i e_i u_i v_iᵀ).
+pub(super) fn scaling_block(s: &crate::Vec3, mu: f64, a: f64, c: f64) -> Mat3 {
+    let g = crate::Vec3::new(s[1] * s[2], s[0] * s[2], s[0] * s[1]);
+    let mut m = g * g.transpose() * a;
+    for i in 0..3 {
+        m[(i, i)] += mu;
+    }
+    let off = [(1, 2, 0), (0, 2, 1), (0, 1, 2)];
+    for (i, j, k) in off {
+        m[(i, j)] += c * s[k];
+        m[(j, i)] += c * s[k];
+    }
+    m
+}
+
+/// The projection onto the PSD cone of the exact tangent `m` = μ I₉ + a ggᵀ + c ∂cof/∂F of F:
+/// `m` minus its negative eigenpairs. `coefficients(J)` gives (a, c) at J = σ₀σ₁σ₂.
+///
+/// A positive definite `m` (the common case: most elements are not near a buckling mode) is
+/// recognised by a Cholesky-type factorisation and returned unchanged, without the SVD.
+/// Non-finite F yields `m` unchanged; if the 3×3 eigenproblem fails, the generic
+/// [`project_psd`] is used.
+#[allow(non_snake_case)]
+pub(super) fn project(
+    mut m: Mat9,
+    F: &Mat3,
+    mu: f64,
+    coefficients: impl Fn(f64) -> (f64, f64),
+) -> Mat9 {
+    if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
+        return m;
+    }
+    let svd = signed_svd(F);
+    let s = &svd.sigma;
+    let (a, c) = coefficients(s[0] * s[1] * s[2]);
+    // Negative eigenpairs (λ, q) as (−λ, q); all found before m changes, so the fallback sees
+    // the exact tangent. q = w/√2 for twist and flip, so λ q qᵀ = (λ/2) w wᵀ.
+    let mut negative: [(f64, Mat3); 9] = [(0.0, Mat3::zeros()); 9];
+    let mut count = 0;
+    for (val, w) in twist_flip(&svd, mu, c) {
+        if val < 0.0 {
+            negative[count] = (-0.5 * val, w);
+            count += 1;
+        }
+    }
+    let block = scaling_block(s, mu, a, c);
+    // Sylvester's criterion; on failure (indefinite or borderline) decompose.
+    let pd = block[(0, 0)] > 0.0
+        && block[(0, 0)] * block[(1, 1)] - block[(0, 1)] * block[(0, 1)] > 0.0
+        && block.determinant() > 0.0;
+    if !pd {
+        let Some(eig) = block.try_symmetric_eigen(f64::EPSILON, 1000) else {
+            return project_psd(&m);
+        };
+        for i in 0..3 {
+            let val = eig.eigenvalues[i];
+            if val < 0.0 {
+                let e = eig.eigenvectors.column(i);
+                let mut q = Mat3::zeros();
+                for j in 0..3 {
+                    q += svd.u.column(j) * svd.v.column(j).transpose() * e[j];
+                }
+                negative[count] = (-val, q);
+                count += 1;
+            }
+        }
+    }
+    if count > 0 {
+        for (scale, q) in &negative[..count] {
+            add_outer_upper(&mut m, q, q, *scale);
+        }
+        mirror_upper(&mut m);
+    }
+    m
+}
+
+/// Whether the symmetric matrix `m` is positive definite (in floating point): a right-looking
+/// LDLᵀ elimination on the lower triangle that stops at the first pivot that is not positive.
+pub(super) fn is_positive_definite(m: &Mat9) -> bool {
+    let mut c: [f64; 81] = m.as_slice().try_into().expect("9×9");
+    // One const-generic step per column, so that every loop has a constant trip count and is
+    // unrolled (runtime-length triangular loops cost several times more here).
+    ldl_step::<0>(&mut c)
+        && ldl_step::<1>(&mut c)
+        && ldl_step::<2>(&mut c)
+        && ldl_step::<3>(&mut c)
+        && ldl_step::<4>(&mut c)
+        && ldl_step::<5>(&mut c)
+        && ldl_step::<6>(&mut c)
+        && ldl_step::<7>(&mut c)
+        && c[80] > 0.0
+}
+
+/// Eliminates column J of the column-major 9×9 `c` (lower triangle); false if its pivot is not
+/// positive (or NaN).
+#[inline(always)]
+fn ldl_step<const J: usize>(c: &mut [f64; 81]) -> bool {
+    let d = c[J * 10];
+    if d.is_nan() || d <= 0.0 {
+        return false;
+    }
+    let inv = 1.0 / d;
+    // Trailing columns k > J, rows i ≥ k: c_ik −= c_iJ c_kJ / d.
+    for k in J + 1..9 {
+        let f = c[9 * J + k] * inv;
+        for i in k..9 {
+            c[9 * k + i] -= f * c[9 * J + i];
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn positive_definite_test_agrees_with_eigenvalues() {
+        let q = Mat9::from_fn(|i, j| ((i * 7 + j * 3) as f64).sin())
+            .qr()
+            .q();
+        for shift in [-3.0, -0.5, 0.5, 1.0, 4.0] {
+            let d = nalgebra::SVector::<f64, 9>::from_fn(|i, _| i as f64 + shift);
+            let a = q * Mat9::from_diagonal(&d) * q.transpose();
+            let a = (a + a.transpose()) * 0.5;
+            assert_eq!(is_positive_definite(&a), d.min() > 0.0, "shift {shift}");
+        }
+        assert!(!is_positive_definite(&Mat9::repeat(f64::NAN)));
+        assert!(!is_positive_definite(&Mat9::zeros()));
+    }
+}
