@@ -1,8 +1,11 @@
 //! Stage artifacts on disk: serde + postcard behind a header, written atomically.
 //!
 //! Layout: magic `LATDYN\0a` · format version (u32) · stage name (u16 length + UTF-8) · cache
-//! key (u64) · mesh hash (u64) · payload length (u64) · payload checksum (u64, FNV-1a) ·
-//! payload. Loading checks each in turn and says which stage to re-run when one is off, so a
+//! key (u64) · mesh hash (u64) · payload length (u64) · payload checksum (u64, FNV-1a) · header
+//! checksum (u64, FNV-1a of every byte before it) · payload. Loading checks the magic and
+//! version, then the header checksum (so a damaged header reads as corruption, not as another
+//! stage or mesh), then that stage, mesh and key are the expected ones, then the payload length,
+//! checksum and decoding, and says which command rebuilds the artifact when any is off: a
 //! truncated, corrupted, outdated or foreign file is never used. Writes go to a temporary file
 //! that is renamed into place, so an interrupted stage leaves the previous artifact intact.
 
@@ -15,8 +18,8 @@ use serde::de::DeserializeOwned;
 const MAGIC: &[u8; 8] = b"LATDYN\0a";
 
 /// Version of every artifact's layout and meaning; bump it when either changes so old caches
-/// are recomputed instead of misread.
-pub const FORMAT_VERSION: u32 = 1;
+/// are recomputed instead of misread. 2: header checksum.
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Version of what each stage computes. Bump a stage's number when its numerical method changes
 /// so that its cached artifacts (and everything downstream, whose keys include its key) are
@@ -31,16 +34,34 @@ pub fn stage_version(stage: &str) -> u32 {
     }
 }
 
+/// The command that (re)builds the artifact of `stage`. Every command recomputes an unusable
+/// artifact of a stage it needs, so re-running it repairs the cache.
+pub fn rebuild_command(stage: &str) -> &'static str {
+    match stage {
+        "snapshots" => "cargo xtask snapshots",
+        "snapshots-shard" => {
+            "cargo xtask snapshots --shard I/N` (for that shard) or `cargo xtask snapshots"
+        }
+        "pca" => "cargo xtask pca",
+        "cubature" => "cargo xtask cubature",
+        "cubature-neural" => "cargo xtask run --methods neural-cubature",
+        "train" => "cargo xtask train",
+        // The full-space simulation of a held-out trajectory, computed by `run`.
+        "reference" => "cargo xtask run",
+        _ => "cargo xtask run",
+    }
+}
+
 /// Why an artifact could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ArtifactError {
-    #[error("{path}: cannot read: {source}; re-run `cargo xtask {stage}`")]
+    #[error("{path}: cannot read: {source}; re-run `{}` to rebuild it", rebuild_command(.stage))]
     Io {
         path: String,
         stage: String,
         source: std::io::Error,
     },
-    #[error("{path}: {reason}; re-run `cargo xtask {stage}` to rebuild it")]
+    #[error("{path}: {reason}; re-run `{}` to rebuild it", rebuild_command(.stage))]
     Invalid {
         path: String,
         stage: String,
@@ -103,15 +124,18 @@ pub fn save<T: Serialize>(
     value: &T,
 ) -> std::io::Result<()> {
     let payload = postcard::to_allocvec(value).map_err(std::io::Error::other)?;
-    let mut bytes = Vec::with_capacity(payload.len() + 64);
+    let stage_len = u16::try_from(stage.len()).map_err(std::io::Error::other)?;
+    let mut bytes = Vec::with_capacity(payload.len() + 72 + stage.len());
     bytes.extend_from_slice(MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-    bytes.extend_from_slice(&(stage.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(&stage_len.to_le_bytes());
     bytes.extend_from_slice(stage.as_bytes());
     bytes.extend_from_slice(&key.to_le_bytes());
     bytes.extend_from_slice(&mesh.to_le_bytes());
     bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     bytes.extend_from_slice(&fnv1a(&payload).to_le_bytes());
+    let header_sum = fnv1a(&bytes);
+    bytes.extend_from_slice(&header_sum.to_le_bytes());
     bytes.extend_from_slice(&payload);
     write_atomic(path, &bytes)
 }
@@ -144,18 +168,34 @@ pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect<'_>) -> Result<T, A
         bytes: &bytes,
         at: 0,
     };
-    let truncated = || invalid("the file is truncated".into());
+    let truncated = || {
+        invalid(format!(
+            "the file is truncated ({} bytes, shorter than its header)",
+            bytes.len()
+        ))
+    };
     if r.take(8).ok_or_else(truncated)? != MAGIC {
         return Err(invalid("not an artifact of this tool (bad magic)".into()));
     }
     let version = u32::from_le_bytes(r.array().ok_or_else(truncated)?);
     if version != FORMAT_VERSION {
         return Err(invalid(format!(
-            "written by format version {version}, this build reads version {FORMAT_VERSION}"
+            "written by artifact format version {version}, this build reads version {FORMAT_VERSION}"
         )));
     }
     let len = u16::from_le_bytes(r.array().ok_or_else(truncated)?) as usize;
     let name = r.take(len).ok_or_else(truncated)?;
+    let key = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let mesh = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let len = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let sum = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    let header_end = r.at;
+    let header_sum = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
+    if fnv1a(&bytes[..header_end]) != header_sum {
+        return Err(invalid(
+            "header checksum mismatch (the file is corrupted)".into(),
+        ));
+    }
     if name != expect.stage.as_bytes() {
         return Err(invalid(format!(
             "holds stage `{}`, expected `{}`",
@@ -163,15 +203,11 @@ pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect<'_>) -> Result<T, A
             expect.stage
         )));
     }
-    let key = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
-    let mesh = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
-    let len = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
-    let sum = u64::from_le_bytes(r.array().ok_or_else(truncated)?);
     if let Some(m) = expect.mesh
         && m != mesh
     {
         return Err(invalid(format!(
-            "built for another mesh (mesh hash {mesh:016x}, the scene's is {m:016x})"
+            "built for another mesh (mesh hash {mesh:016x}, the scene's is {m:016x}: the mesh file, its vertex count or the generated box changed)"
         )));
     }
     if let Some(k) = expect.key
@@ -184,14 +220,30 @@ pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect<'_>) -> Result<T, A
     let payload = &bytes[r.at..];
     if payload.len() as u64 != len {
         return Err(invalid(format!(
-            "payload is {} bytes, the header says {len} (truncated or padded)",
-            payload.len()
+            "payload is {} bytes, the header says {len} ({})",
+            payload.len(),
+            if (payload.len() as u64) < len {
+                "truncated: was the writer interrupted?"
+            } else {
+                "padded or appended to"
+            }
         )));
     }
     if fnv1a(payload) != sum {
-        return Err(invalid("checksum mismatch (the file is corrupted)".into()));
+        return Err(invalid(
+            "payload checksum mismatch (the file is corrupted)".into(),
+        ));
     }
-    postcard::from_bytes(payload).map_err(|e| invalid(format!("cannot decode: {e}")))
+    match postcard::take_from_bytes::<T>(payload) {
+        Ok((value, [])) => Ok(value),
+        Ok((_, rest)) => Err(invalid(format!(
+            "the payload decodes with {} bytes left over (written by another build?)",
+            rest.len()
+        ))),
+        Err(e) => Err(invalid(format!(
+            "cannot decode the payload: {e} (written by another build?)"
+        ))),
+    }
 }
 
 struct Reader<'a> {
