@@ -30,6 +30,8 @@ pub fn stage_version(stage: &str) -> u32 {
         "train" => 2,
         // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
         "snapshots" | "snapshots-shard" | "reference" => 2,
+        // 2: the held-out error along the greedy path is stored with the rule.
+        "cubature" | "cubature-neural" => 2,
         _ => 1,
     }
 }

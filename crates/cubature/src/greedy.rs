@@ -35,7 +35,7 @@ const ROW_BLOCK: usize = 256;
 
 /// Progress of [`fit_with_progress`], reported after each greedy step.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FitProgress {
+pub struct FitProgress<'a> {
     /// Greedy steps so far.
     pub step: usize,
     /// Elements currently selected (|S|).
@@ -44,6 +44,9 @@ pub struct FitProgress {
     pub relative_error: f64,
     /// The element budget (`max_elements`, capped by the mesh).
     pub budget: usize,
+    /// The current rule: selected elements (in selection order) and their weights.
+    pub selected: &'a [usize],
+    pub weights: &'a [f64],
 }
 
 /// Fits a cubature rule to `data` (see the module docs).
@@ -55,7 +58,7 @@ pub fn fit(data: &TrainingMatrix, config: &CubatureConfig) -> Result<CubatureRul
 pub fn fit_with_progress(
     data: &TrainingMatrix,
     config: &CubatureConfig,
-    progress: &mut dyn FnMut(&FitProgress),
+    progress: &mut dyn FnMut(&FitProgress<'_>),
 ) -> Result<CubatureRule, CubatureError> {
     config.validate()?;
     let m = data.num_elements();
@@ -159,6 +162,8 @@ pub fn fit_with_progress(
             elements: selected.len(),
             relative_error: error,
             budget,
+            selected: &selected,
+            weights: &w,
         });
         if stalls >= MAX_STALLS {
             tracing::debug!(step, "cubature error stopped decreasing");

@@ -89,14 +89,19 @@ fn element_budget_stops_the_fit() {
         max_elements: 5,
         ..Default::default()
     };
-    let mut reports: Vec<FitProgress> = Vec::new();
-    let rule = fit_with_progress(&p.train, &config, &mut |r| reports.push(*r)).unwrap();
+    let mut reports: Vec<(usize, f64, usize)> = Vec::new();
+    let rule = fit_with_progress(&p.train, &config, &mut |r: &FitProgress<'_>| {
+        assert_eq!(r.selected.len(), r.elements);
+        assert_eq!(r.weights.len(), r.elements);
+        reports.push((r.elements, r.relative_error, r.budget));
+    })
+    .unwrap();
     assert_eq!(rule.len(), 5);
     assert!(!rule.tolerance_met && rule.training_error > 1e-6);
     assert_rule_consistent(&rule, &p.train);
     assert_eq!(reports.len(), rule.error_curve.len());
-    for (r, &(n, e)) in reports.iter().zip(&rule.error_curve) {
-        assert_eq!((r.elements, r.relative_error, r.budget), (n, e, 5));
+    for (&r, &(n, e)) in reports.iter().zip(&rule.error_curve) {
+        assert_eq!(r, (n, e, 5));
     }
 }
 
