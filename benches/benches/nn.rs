@@ -169,8 +169,9 @@ fn bench_train(c: &mut Criterion, pools: &[(usize, ThreadPool)]) {
     group.finish();
 }
 
-/// Median nanoseconds per call of `f` over `rounds` rounds of `reps` calls.
-fn median_ns(rounds: usize, reps: usize, mut f: impl FnMut()) -> f64 {
+/// (median, best) nanoseconds per call of `f` over `rounds` rounds of `reps` calls. On a shared
+/// machine the best round is the robust figure for short operations.
+fn timings_ns(rounds: usize, reps: usize, mut f: impl FnMut()) -> (f64, f64) {
     f();
     let mut times: Vec<f64> = (0..rounds)
         .map(|_| {
@@ -182,7 +183,7 @@ fn median_ns(rounds: usize, reps: usize, mut f: impl FnMut()) -> f64 {
         })
         .collect();
     times.sort_by(f64::total_cmp);
-    times[rounds / 2]
+    (times[rounds / 2], times[0])
 }
 
 /// The PyTorch / numpy figures written by `benches/peers/torch_autoencoder.py`.
@@ -236,11 +237,20 @@ fn cell(value: Option<f64>, scale: f64, unit: &str) -> String {
     value.map_or_else(|| "—".into(), |v| format!("{:.1} {unit}", v / scale))
 }
 
+/// "median / best" in µs, or a dash.
+fn micros(median: Option<f64>, best: Option<f64>) -> String {
+    match (median, best) {
+        (Some(m), Some(b)) => format!("{:.1} / {:.1}", m / 1e3, b / 1e3),
+        (Some(m), None) => format!("{:.1}", m / 1e3),
+        _ => "—".into(),
+    }
+}
+
 /// Side-by-side figures of this build and the peers.
 fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
     let peers = Peers::load();
     let peer = |key: &str| peers.as_ref().and_then(|p| p.number(key));
-    println!("\nsummary (median of short rounds; this machine, this run)");
+    println!("\nsummary (short rounds, median and best; this machine, this run)");
     if let Some(p) = &peers {
         println!(
             "peers from {}: torch {} ({}), numpy {}, {}",
@@ -252,8 +262,12 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
         );
     }
     println!(
-        "{:<22} {:>12} {:>12} {:>12}",
-        "decoder 6→200→200→49", "nn", "torch", "numpy"
+        "{:<22} {:>15} {:>17} {:>15}",
+        "decoder 6→200→200→49", "nn µs", "torch µs", "numpy µs"
+    );
+    println!(
+        "{:<22} {:>15} {:>17} {:>15}",
+        "", "median / best", "median / best", "median / best"
     );
     let peer_keys = [
         (
@@ -269,49 +283,60 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
         ),
     ];
     for (name, mut op) in decoder.operations() {
-        let ns = median_ns(501, 20, &mut op);
-        let (torch, numpy) = peer_keys
+        let (median, best) = timings_ns(501, 20, &mut op);
+        let peer_pair = |key: &str| (peer(key), peer(&format!("{key}_best")));
+        let ((torch, torch_best), (numpy, numpy_best)) = peer_keys
             .iter()
             .find(|(n, _, _)| *n == name)
-            .map_or((None, None), |(_, t, n)| (peer(t), peer(n)));
+            .map_or(((None, None), (None, None)), |(_, t, n)| {
+                (peer_pair(t), peer_pair(n))
+            });
         println!(
-            "{name:<22} {:>12} {:>12} {:>12}",
-            cell(Some(ns), 1e3, "µs"),
-            cell(torch, 1e3, "µs"),
-            cell(numpy, 1e3, "µs"),
+            "{name:<22} {:>15} {:>17} {:>15}",
+            micros(Some(median), Some(best)),
+            micros(torch, torch_best),
+            micros(numpy, numpy_best),
         );
     }
     println!("(torch jacobian: torch.func.jacrev; numpy: hand-written forward mode)");
 
     println!(
-        "{:<22} {:>12} {:>12} {:>14}",
-        "training (2000 samples)", "nn", "torch", "nn 1000 epochs"
+        "{:<22} {:>12} {:>12} {:>8} {:>14}",
+        "training (2000 samples)", "nn", "torch", "nn/torch", "nn 1000 epochs"
     );
     for (threads, pool) in pools {
         let mut trainer = new_trainer();
         let epoch_ns = pool.install(|| {
-            median_ns(7, 1, || {
+            timings_ns(7, 1, || {
                 trainer.run_epoch().expect("training stays finite");
             })
+            .0
         });
         let rate = SAMPLES as f64 / (epoch_ns * 1e-9);
+        let torch = peer(&format!("train_{threads}t_samples_per_s"));
         println!(
-            "{:<22} {:>12} {:>12} {:>12.1} s",
+            "{:<22} {:>12} {:>12} {:>8} {:>12.1} s",
             format!("{threads} thread(s)"),
             cell(Some(rate), 1e3, "k/s"),
-            cell(peer(&format!("train_{threads}t_samples_per_s")), 1e3, "k/s"),
+            cell(torch, 1e3, "k/s"),
+            torch.map_or_else(|| "—".into(), |t| format!("{:.2}×", rate / t)),
             1e3 * epoch_ns * 1e-9,
         );
     }
     if let Some(p) = &peers {
+        println!(
+            "(torch: figures of the peer file, measured when the script ran; on a shared machine \
+             compare runs made under the same load)"
+        );
         for threads in THREADS {
-            if let (Some(s), Some(mse)) = (
-                p.number(&format!("train_{threads}t_seconds")),
-                p.number(&format!("train_{threads}t_final_mse")),
-            ) {
+            let key = |what: &str| p.number(&format!("train_{threads}t_{what}"));
+            if let (Some(s), Some(mse)) = (key("seconds"), key("final_mse")) {
+                let epochs = key("epochs").or_else(|| p.number("epochs")).unwrap_or(0.0);
+                let cpu = key("cpu_seconds").map_or(String::new(), |c| format!(" ({c:.1} s CPU)"));
                 println!(
-                    "torch {threads} thread(s): {} epochs in {s:.1} s, final MSE {mse:.3e}",
-                    p.string("epochs")
+                    "torch {threads} thread(s): {epochs} epochs in {s:.1} s{cpu}, final MSE \
+                     {mse:.3e} (nn: cargo run -p nn --release --example train_x -- {epochs} \
+                     {threads})"
                 );
             }
         }

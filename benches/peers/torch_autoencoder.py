@@ -15,6 +15,9 @@ Writes one flat JSON object (default <repo>/target/peers/torch.json, or torch_f3
     pip install torch numpy     # CPU wheels: --index-url https://download.pytorch.org/whl/cpu
     python3 benches/peers/torch_autoencoder.py                # 1000 epochs at 1 and 2 threads
     python3 benches/peers/torch_autoencoder.py --epochs 50    # quicker, same per-epoch figures
+
+Figures of thread counts not rerun are kept from the existing file (--fresh starts over); every
+training figure records its own epoch count (train_<t>t_epochs).
 """
 
 import argparse
@@ -111,7 +114,7 @@ def train(x, epochs, batch, threads, seed):
     opt = torch.optim.Adam(list(enc.parameters()) + list(dec.parameters()), lr=1e-3)
     gen = torch.Generator().manual_seed(seed)
     n = x.shape[0]
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     for _ in range(epochs):
         perm = torch.randperm(n, generator=gen)
         for i in range(0, n, batch):
@@ -120,13 +123,15 @@ def train(x, epochs, batch, threads, seed):
             loss = torch.nn.functional.mse_loss(dec(enc(xb)), xb)
             loss.backward()
             opt.step()
-    seconds = time.perf_counter() - start
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu_start
     with torch.no_grad():
         mse = torch.nn.functional.mse_loss(dec(enc(x)), x).item()
-    return seconds, mse
+    return seconds, cpu, mse
 
 
-def median_ns(f, rounds=301, reps=20):
+def timings_ns(f, rounds=301, reps=20):
+    """(median, best) nanoseconds per call over `rounds` rounds of `reps` calls; the best round
+    is the robust figure on a shared machine."""
     for _ in range(reps):
         f()
     times = []
@@ -135,7 +140,7 @@ def median_ns(f, rounds=301, reps=20):
         for _ in range(reps):
             f()
         times.append((time.perf_counter_ns() - t0) / reps)
-    return statistics.median(times)
+    return statistics.median(times), min(times)
 
 
 def time_decoder(dtype, seed):
@@ -159,10 +164,14 @@ def time_decoder(dtype, seed):
 
     jacrev = torch.func.jacrev(dec)
     jacfwd = torch.func.jacfwd(dec)
-    out["decoder_forward_ns_torch"] = median_ns(fwd)
-    out["decoder_vjp_ns_torch"] = median_ns(vjp)
-    out["decoder_jacrev_ns_torch"] = median_ns(lambda: jacrev(z0), rounds=101)
-    out["decoder_jacfwd_ns_torch"] = median_ns(lambda: jacfwd(z0), rounds=101)
+
+    def record(key, f, rounds=301):
+        out[key], out[key + "_best"] = timings_ns(f, rounds=rounds)
+
+    record("decoder_forward_ns_torch", fwd)
+    record("decoder_vjp_ns_torch", vjp)
+    record("decoder_jacrev_ns_torch", lambda: jacrev(z0), rounds=101)
+    record("decoder_jacfwd_ns_torch", lambda: jacfwd(z0), rounds=101)
 
     # Hand-written numpy, always float64, row-major W (n_out x n_in) as in the Rust crate.
     lin = [m for m in dec if isinstance(m, torch.nn.Linear)]
@@ -202,9 +211,9 @@ def time_decoder(dtype, seed):
     jt = jacrev(z0).double().numpy()
     assert np.allclose(np_jac(), jt, rtol=1e-5, atol=1e-8)
     assert np.allclose(np_vjp(), jt.T @ vn, rtol=1e-5, atol=1e-8)
-    out["decoder_forward_ns_numpy"] = median_ns(np_fwd)
-    out["decoder_vjp_ns_numpy"] = median_ns(np_vjp)
-    out["decoder_jacobian_ns_numpy"] = median_ns(np_jac)
+    record("decoder_forward_ns_numpy", np_fwd)
+    record("decoder_vjp_ns_numpy", np_vjp)
+    record("decoder_jacobian_ns_numpy", np_jac)
     return out
 
 
@@ -218,7 +227,9 @@ def main():
     ap.add_argument("--seed", type=int, default=7, help="data seed (the Rust bench uses 7)")
     ap.add_argument("--dtype", choices=["float64", "float32"], default="float64")
     ap.add_argument("--skip-train", action="store_true")
+    ap.add_argument("--skip-decoder", action="store_true")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--fresh", action="store_true", help="overwrite instead of merging into --out")
     args = ap.parse_args()
     dtype = getattr(torch, args.dtype)
     torch.set_default_dtype(dtype)
@@ -242,23 +253,31 @@ def main():
         "batch": args.batch,
         "load_average_at_start": os.getloadavg()[0],
     }
-    result.update(time_decoder(dtype, args.seed))
-    for key in sorted(k for k in result if k.startswith("decoder_")):
-        print(f"{key:30} {result[key]:>10.0f} ns")
+    if not args.skip_decoder:
+        result.update(time_decoder(dtype, args.seed))
+        for key in sorted(k for k in result if k.startswith("decoder_") and "best" not in k):
+            print(f"{key:30} {result[key]:>10.0f} ns median, {result[key + '_best']:>10.0f} best")
 
     if not args.skip_train:
         x = torch.tensor(centre_uniform(tanh_manifold(args.samples, args.seed)), dtype=dtype)
         for threads in args.threads:
-            seconds, mse = train(x, args.epochs, args.batch, threads, args.seed)
+            seconds, cpu, mse = train(x, args.epochs, args.batch, threads, args.seed)
             rate = args.samples * args.epochs / seconds
+            result[f"train_{threads}t_epochs"] = args.epochs
             result[f"train_{threads}t_seconds"] = seconds
+            result[f"train_{threads}t_cpu_seconds"] = cpu
             result[f"train_{threads}t_samples_per_s"] = rate
             result[f"train_{threads}t_final_mse"] = mse
             print(
-                f"train {threads} thread(s): {args.epochs} epochs in {seconds:.2f} s, "
-                f"{rate:.0f} samples/s, final MSE {mse:.3e}"
+                f"train {threads} thread(s): {args.epochs} epochs in {seconds:.2f} s "
+                f"({cpu:.2f} s CPU), {rate:.0f} samples/s, final MSE {mse:.3e}"
             )
 
+    # Keep the figures of earlier runs that this one did not redo (e.g. --threads 2 alone).
+    if out_path.exists() and not args.fresh:
+        merged = json.loads(out_path.read_text())
+        merged.update(result)
+        result = merged
     out_path.parent.mkdir(parents=True, exist_ok=True)
     out_path.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {out_path}")
