@@ -27,7 +27,8 @@ pub const FORMAT_VERSION: u32 = 2;
 pub fn stage_version(stage: &str) -> u32 {
     match stage {
         // 2: inputs centred with one common scale instead of per-feature standardisation.
-        "train" => 2,
+        // 3: the training gradient sums in a different (still fixed) order.
+        "train" => 3,
         // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
         "snapshots" | "snapshots-shard" | "reference" => 2,
         // 2: the held-out error along the greedy path is stored with the rule.
