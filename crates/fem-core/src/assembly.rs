@@ -9,9 +9,9 @@
 
 use rayon::prelude::*;
 
-use crate::element::{Elements, LocalVector};
+use crate::element::{Elements, LocalMatrix, LocalVector};
 use crate::material::{Mat9, Material};
-use crate::sparse::{ColumnPart, HessianPattern, NO_SLOT};
+use crate::sparse::{ColumnPart, ElementSlots, HessianPattern, NO_SLOT};
 
 /// Elements below this count per task are not worth splitting further.
 const MIN_CHUNK: usize = 256;
@@ -155,10 +155,9 @@ pub fn hessian<M: Material>(
             let (e, w) = set.get(k);
             elements.local_hessian_columns(e, &tangent(e), w, [true; 4], &mut h);
             let slots = &pattern.element_slots[e];
-            for r in 0..144 {
-                let s = slots[r];
-                if s != NO_SLOT {
-                    values[s as usize] += h[r];
+            for b in 0..4 {
+                for k in 0..3 {
+                    add_column(values, 0, &h, slots, b, k);
                 }
             }
         }
@@ -189,26 +188,48 @@ pub fn hessian<M: Material>(
         for &e in &part.elements {
             let e = e as usize;
             let slots = &pattern.element_slots[e];
-            // A column is in this part iff its (free) diagonal entry is.
-            let owned = |c: usize| local(slots[13 * c]) < len;
-            let blocks: [bool; 4] =
-                std::array::from_fn(|b| owned(3 * b) || owned(3 * b + 1) || owned(3 * b + 2));
+            // Column (b, k) is in this part iff its (free) diagonal entry is.
+            let owned = |b: usize, k: usize| {
+                let base = slots.base[5 * b];
+                base != NO_SLOT && local(base + k as u32 * (slots.stride[b] + 1)) < len
+            };
+            let own: [[bool; 3]; 4] = std::array::from_fn(|b| std::array::from_fn(|k| owned(b, k)));
+            let blocks = own.map(|o| o.contains(&true));
             elements.local_hessian_columns(e, &tangents[e], 1.0, blocks, &mut h);
             for b in 0..4 {
-                if !blocks[b] {
-                    continue;
-                }
-                for c in 3 * b..3 * b + 3 {
-                    for r in 0..12 {
-                        let s = local(slots[12 * r + c]);
-                        if s < len {
-                            vals[s] += h[12 * r + c];
-                        }
+                for k in 0..3 {
+                    if own[b][k] {
+                        add_column(vals, lo, &h, slots, b, k);
                     }
                 }
             }
         }
     });
+}
+
+/// Adds column 3b+k of the local Hessian `h` (row-major) to `values`, which starts at value
+/// index `offset`: one run of three per free vertex a (see [`ElementSlots`]).
+#[inline]
+fn add_column(
+    values: &mut [f64],
+    offset: usize,
+    h: &LocalMatrix,
+    slots: &ElementSlots,
+    b: usize,
+    k: usize,
+) {
+    let c = 3 * b + k;
+    let shift = k * slots.stride[b] as usize;
+    for a in 0..4 {
+        let base = slots.base[4 * a + b];
+        if base != NO_SLOT {
+            let p = base as usize + shift - offset;
+            let run = &mut values[p..p + 3];
+            for i in 0..3 {
+                run[i] += h[(3 * a + i) * 12 + c];
+            }
+        }
+    }
 }
 
 /// The first element of the set with det F ≤ 0, with its determinant.
@@ -265,9 +286,12 @@ mod tests {
                 m.dpdf(&f)
             };
             let h = elements.local_hessian(e, &a, w);
-            for (r, &s) in pattern.element_slots[e].iter().enumerate() {
-                if s != NO_SLOT {
-                    values[s as usize] += h[r];
+            for r in 0..12 {
+                for c in 0..12 {
+                    let s = pattern.element_slots[e].slot(r, c);
+                    if s != NO_SLOT {
+                        values[s as usize] += h[12 * r + c];
+                    }
                 }
             }
         }

@@ -98,11 +98,12 @@ impl Elements {
     }
 
     /// The column blocks `blocks[b]` (columns 3b..3b+3, vertex b) of [`Self::local_hessian`],
-    /// written into `out`; other entries of `out` are left as they are. Every entry is computed
-    /// with exactly the operations of the full evaluation, so it is bit-identical to it.
+    /// written into `out`; other entries of `out` are left as they are. Each block is computed
+    /// on its own, with the same operations whichever other blocks are requested, so a subset is
+    /// bit-identical to the full matrix and costs about a quarter of it per block.
     ///
-    /// Blocks of vertices 1..3 cost about a third of the full matrix each; vertex 0's block is
-    /// minus the sum of the other three, so it costs as much as the whole matrix.
+    /// Column block b is H_ab = W Σ_j g_a[j] Σ_l g_b[l] A_jl for rows of vertices a = 1..3, with
+    /// A_jl the 3×3 block of A at rows 3j.., columns 3l.., and minus their sum for a = 0.
     #[inline]
     pub fn local_hessian_columns(
         &self,
@@ -114,24 +115,25 @@ impl Elements {
     ) {
         let bm = &self.bm[e];
         let w = self.volume[e] * scale;
-        // Column blocks of vertices 1..3 that are needed, directly or for vertex 0's block.
-        let need = [
-            blocks[0] || blocks[1],
-            blocks[0] || blocks[2],
-            blocks[0] || blocks[3],
-        ];
-        let g = |b: usize| [bm[(b, 0)], bm[(b, 1)], bm[(b, 2)]];
+        let mut g = [[0.0f64; 3]; 4];
+        for b in 1..4 {
+            for l in 0..3 {
+                g[b][l] = bm[(b - 1, l)];
+            }
+        }
+        for l in 0..3 {
+            g[0][l] = -(g[1][l] + g[2][l] + g[3][l]);
+        }
         let a = a.as_slice();
-        // y[b][j] = Σ_l g_b[l] A_jl for vertices b = 1..3, where A_jl is the 3×3 block of rows
-        // 3j.., columns 3l.. of A, stored column by column: y[b][j][3k + i] =
-        // Σ_l A[(i + 3j, k + 3l)] g_b[l]. Each block is 9 contiguous numbers, so the next stage
-        // is a 9-wide axpy.
-        let mut y = [[[0.0f64; 9]; 3]; 3];
-        for b in 0..3 {
-            if !need[b] {
+        for b in 0..4 {
+            if !blocks[b] {
                 continue;
             }
-            let gb = g(b);
+            let gb = g[b];
+            // y[j] = Σ_l g_b[l] A_jl, each 3×3 block column by column: y[j][3k + i] =
+            // Σ_l A[(i + 3j, k + 3l)] g_b[l]. Nine contiguous numbers, so the next stage is a
+            // 9-wide axpy.
+            let mut y = [[0.0f64; 9]; 3];
             for j in 0..3 {
                 for k in 0..3 {
                     for i in 0..3 {
@@ -139,49 +141,27 @@ impl Elements {
                         for l in 0..3 {
                             s += a[9 * (k + 3 * l) + i + 3 * j] * gb[l];
                         }
-                        y[b][j][3 * k + i] = s;
+                        y[j][3 * k + i] = s;
                     }
                 }
             }
-        }
-        for b in 0..3 {
-            if !need[b] {
-                continue;
-            }
-            // Rows of vertices 1..3: H_ab = W Σ_j g_a[j] y[b][j].
-            for av in 0..3 {
-                let ga = g(av);
+            // Rows of vertices 1..3: H_ab = W Σ_j g_a[j] y[j].
+            for av in 1..4 {
                 let mut h = [0.0f64; 9];
                 for j in 0..3 {
-                    for (h, y) in h.iter_mut().zip(&y[b][j]) {
-                        *h += ga[j] * y;
+                    for (h, y) in h.iter_mut().zip(&y[j]) {
+                        *h += g[av][j] * y;
                     }
                 }
                 for k in 0..3 {
                     for i in 0..3 {
-                        out[(3 * av + i + 3) * 12 + 3 * b + k + 3] = h[3 * k + i] * w;
+                        out[(3 * av + i) * 12 + 3 * b + k] = h[3 * k + i] * w;
                     }
                 }
             }
             // Rows of vertex 0 are minus the sums over vertices 1..3.
-            for c in 3 * b + 3..3 * b + 6 {
+            for c in 3 * b..3 * b + 3 {
                 for i in 0..3 {
-                    let s = out[(3 + i) * 12 + c] + out[(6 + i) * 12 + c] + out[(9 + i) * 12 + c];
-                    out[i * 12 + c] = -s;
-                }
-            }
-        }
-        if blocks[0] {
-            // Vertex 0's columns: minus the sums over the columns of vertices 1..3, rows of
-            // vertices 1..3 first, then the rows of vertex 0 from those.
-            for r in 3..12 {
-                for k in 0..3 {
-                    let s = out[r * 12 + 3 + k] + out[r * 12 + 6 + k] + out[r * 12 + 9 + k];
-                    out[r * 12 + k] = -s;
-                }
-            }
-            for i in 0..3 {
-                for c in 0..3 {
                     let s = out[(3 + i) * 12 + c] + out[(6 + i) * 12 + c] + out[(9 + i) * 12 + c];
                     out[i * 12 + c] = -s;
                 }

@@ -22,13 +22,42 @@ pub const NO_SLOT: u32 = u32::MAX;
 #[derive(Debug)]
 pub struct HessianPattern {
     pub symbolic: SymbolicSparseColMat<usize>,
-    /// For each element, the value index of its local entry (3a+i, 3b+k) (row-major 12×12).
-    pub element_slots: Vec<[u32; 144]>,
+    /// For each element, where its local entries go in the values array.
+    pub element_slots: Vec<ElementSlots>,
     /// Value index of each free DOF's diagonal entry.
     pub diag: Vec<usize>,
     /// The columns split into one part per thread of the rayon pool the pattern was built in,
     /// balanced by number of entries.
     pub parts: Vec<ColumnPart>,
+}
+
+/// Where the local Hessian of one element goes in the values array.
+///
+/// DOFs are freed or fixed by whole vertices, and a free vertex's three DOFs are consecutive, so
+/// the three columns of a vertex have the same rows and a vertex's three rows are adjacent in
+/// each of them: local entry (3a+i, 3b+k) of vertex pair (a, b) is at value index
+/// `base[4a + b] + k·stride[b] + i`. Six times smaller than a slot per entry, and a scatter adds
+/// runs of three.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ElementSlots {
+    /// Value index of local entry (3a, 3b), or [`NO_SLOT`] when vertex a or b is fixed.
+    pub base: [u32; 16],
+    /// Number of entries in each column of vertex b: the distance between its columns.
+    pub stride: [u32; 4],
+}
+
+impl ElementSlots {
+    /// Value index of local entry (r, c), or [`NO_SLOT`] when its row or column is fixed.
+    #[inline]
+    pub fn slot(&self, r: usize, c: usize) -> u32 {
+        let (a, i, b, k) = (r / 3, r % 3, c / 3, c % 3);
+        let base = self.base[4 * a + b];
+        if base == NO_SLOT {
+            NO_SLOT
+        } else {
+            base + k as u32 * self.stride[b] + i as u32
+        }
+    }
 }
 
 /// A contiguous range of columns of a [`HessianPattern`], hence a contiguous range of its
@@ -43,8 +72,21 @@ pub struct ColumnPart {
 
 impl HessianPattern {
     /// Builds the pattern of all vertex pairs that share a tet, restricted to free DOFs.
+    ///
+    /// # Panics
+    ///
+    /// If `dofs` frees only some DOFs of a vertex, or numbers a vertex's free DOFs apart
+    /// ([`DofMap::new`] never does).
     pub fn new(tets: &[[usize; 4]], dofs: &DofMap) -> Self {
         let nv = dofs.num_full() / 3;
+        for v in 0..nv {
+            let d = &dofs.index[3 * v..3 * v + 3];
+            assert!(
+                d.iter().all(|&x| x == FIXED)
+                    || (d[0] != FIXED && d[1] == d[0] + 1 && d[2] == d[0] + 2),
+                "vertex {v}: DOFs must be freed or fixed by whole vertices, consecutively"
+            );
+        }
         let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nv];
         for t in tets {
             for &a in t {
@@ -83,27 +125,27 @@ impl HessianPattern {
                 Err(_) => NO_SLOT,
             }
         };
+        let cp = symbolic.col_ptr();
         let element_slots = tets
             .par_iter()
             .map(|t| {
-                let mut s = [NO_SLOT; 144];
-                for a in 0..4 {
-                    for i in 0..3 {
-                        let r = dofs.index[3 * t[a] + i];
-                        if r == FIXED {
-                            continue;
-                        }
-                        for b in 0..4 {
-                            for k in 0..3 {
-                                let c = dofs.index[3 * t[b] + k];
-                                if c != FIXED {
-                                    s[(3 * a + i) * 12 + 3 * b + k] = find(r, c);
-                                }
-                            }
+                let first = t.map(|v| dofs.index[3 * v]);
+                let mut slots = ElementSlots {
+                    base: [NO_SLOT; 16],
+                    stride: [0; 4],
+                };
+                for b in 0..4 {
+                    if first[b] == FIXED {
+                        continue;
+                    }
+                    slots.stride[b] = (cp[first[b] + 1] - cp[first[b]]) as u32;
+                    for a in 0..4 {
+                        if first[a] != FIXED {
+                            slots.base[4 * a + b] = find(first[a], first[b]);
                         }
                     }
                 }
-                s
+                slots
             })
             .collect();
         let diag = (0..n).map(|j| find(j, j) as usize).collect();
@@ -212,4 +254,69 @@ fn column_parts(
             elements,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::generate::{BoxSpec, box_mesh};
+
+    /// Every local entry's slot is where the pattern stores (row, column), and the column parts
+    /// tile the values and list exactly the elements with an entry in them.
+    #[test]
+    fn element_slots_and_column_parts_match_the_pattern() {
+        let mesh = box_mesh(&BoxSpec {
+            size: [1.0, 0.3, 0.2],
+            cells: [5, 2, 2],
+            ..Default::default()
+        })
+        .unwrap();
+        let pinned: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].x == 0.0 || v % 7 == 3)
+            .collect();
+        let dofs = DofMap::new(&mesh, &pinned);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        let pattern = pool.install(|| HessianPattern::new(&mesh.tets, &dofs));
+        let (cp, ri) = (pattern.symbolic.col_ptr(), pattern.symbolic.row_idx());
+        let mut touches = vec![vec![false; mesh.num_tets()]; pattern.parts.len()];
+        for (e, t) in mesh.tets.iter().enumerate() {
+            for r in 0..12 {
+                for c in 0..12 {
+                    let row = dofs.index[3 * t[r / 3] + r % 3];
+                    let col = dofs.index[3 * t[c / 3] + c % 3];
+                    let slot = pattern.element_slots[e].slot(r, c);
+                    if row == FIXED || col == FIXED {
+                        assert_eq!(slot, NO_SLOT);
+                        continue;
+                    }
+                    let s = slot as usize;
+                    assert!(
+                        (cp[col]..cp[col + 1]).contains(&s) && ri[s] == row,
+                        "{e} ({r}, {c})"
+                    );
+                    let p = pattern
+                        .parts
+                        .iter()
+                        .position(|p| p.values.contains(&s))
+                        .unwrap();
+                    touches[p][e] = true;
+                }
+            }
+        }
+        assert_eq!(pattern.parts.len(), 3);
+        assert_eq!(pattern.parts[0].values.start, 0);
+        assert_eq!(pattern.parts[2].values.end, pattern.nnz());
+        for (p, part) in pattern.parts.iter().enumerate() {
+            if p > 0 {
+                assert_eq!(pattern.parts[p - 1].values.end, part.values.start);
+            }
+            let expect: Vec<u32> = (0..mesh.num_tets() as u32)
+                .filter(|&e| touches[p][e as usize])
+                .collect();
+            assert_eq!(part.elements, expect);
+        }
+    }
 }
