@@ -207,7 +207,7 @@ pub fn hessian<M: Material>(
     });
 }
 
-/// Adds column 3b+k of the local Hessian `h` (row-major) to `values`, which starts at value
+/// Adds column 3b+k of the local Hessian `h` (column-major) to `values`, which starts at value
 /// index `offset`: one run of three per free vertex a (see [`ElementSlots`]).
 #[inline]
 fn add_column(
@@ -226,7 +226,7 @@ fn add_column(
             let p = base as usize + shift - offset;
             let run = &mut values[p..p + 3];
             for i in 0..3 {
-                run[i] += h[(3 * a + i) * 12 + c];
+                run[i] += h[12 * c + 3 * a + i];
             }
         }
     }

@@ -92,20 +92,27 @@ impl Elements {
     /// third of a dense 9×12 sandwich.
     #[inline]
     pub fn local_hessian(&self, e: usize, a: &Mat9, scale: f64) -> LocalMatrix {
+        let mut columns = [0.0; 144];
+        self.local_hessian_columns(e, a, scale, [true; 4], &mut columns);
         let mut out = [0.0; 144];
-        self.local_hessian_columns(e, a, scale, [true; 4], &mut out);
+        for r in 0..12 {
+            for c in 0..12 {
+                out[12 * r + c] = columns[12 * c + r];
+            }
+        }
         out
     }
 
     /// The column blocks `blocks[b]` (columns 3b..3b+3, vertex b) of [`Self::local_hessian`],
-    /// written into `out`; other entries of `out` are left as they are. Each block is computed
-    /// on its own, with the same operations whichever other blocks are requested, so a subset is
-    /// bit-identical to the full matrix and costs about a quarter of it per block.
+    /// written **column-major** into `out` (entry (r, c) at `out[12c + r]`); other entries of
+    /// `out` are left as they are. Each block is computed on its own, with the same operations
+    /// whichever other blocks are requested, so a subset is bit-identical to the full matrix and
+    /// costs about a quarter of it per block.
     ///
-    /// Column block b is H_ab = W Σ_j g_a[j] Σ_l g_b[l] A_jl for rows of vertices a = 1..3, with
-    /// A_jl the 3×3 block of A at rows 3j.., columns 3l.., and minus their sum for a = 0.
+    /// Column block b is H_ab = W Σ_j g_a[j] Σ_l g_b[l] A_jl for the rows of vertices a = 1..3,
+    /// with A_jl the 3×3 block of A at rows 3j.., columns 3l.., and minus their sum for a = 0.
     #[inline]
-    pub fn local_hessian_columns(
+    pub(crate) fn local_hessian_columns(
         &self,
         e: usize,
         a: &Mat9,
@@ -114,7 +121,7 @@ impl Elements {
         out: &mut LocalMatrix,
     ) {
         let bm = &self.bm[e];
-        let w = self.volume[e] * scale;
+        // Shape gradients: g_1..g_3 are the rows of Bm, g_0 = −(g_1 + g_2 + g_3).
         let mut g = [[0.0f64; 3]; 4];
         for b in 1..4 {
             for l in 0..3 {
@@ -124,46 +131,34 @@ impl Elements {
         for l in 0..3 {
             g[0][l] = -(g[1][l] + g[2][l] + g[3][l]);
         }
-        let a = a.as_slice();
+        // W g_a for the rows of vertices a = 1..3.
+        let w = self.volume[e] * scale;
+        let wg: [[f64; 3]; 3] = std::array::from_fn(|av| g[av + 1].map(|x| x * w));
+        let a: &[f64; 81] = a.as_slice().try_into().expect("9×9");
+        let col = |c: usize| -> &[f64; 9] { a[9 * c..9 * c + 9].try_into().expect("9 rows") };
         for b in 0..4 {
             if !blocks[b] {
                 continue;
             }
             let gb = g[b];
-            // y[j] = Σ_l g_b[l] A_jl, each 3×3 block column by column: y[j][3k + i] =
-            // Σ_l A[(i + 3j, k + 3l)] g_b[l]. Nine contiguous numbers, so the next stage is a
-            // 9-wide axpy.
-            let mut y = [[0.0f64; 9]; 3];
-            for j in 0..3 {
-                for k in 0..3 {
+            for k in 0..3 {
+                // y[i + 3j] = Σ_l A[(i + 3j, k + 3l)] g_b[l]: three contiguous columns of A.
+                let (c0, c1, c2) = (col(k), col(k + 3), col(k + 6));
+                let mut y = [0.0f64; 9];
+                for r in 0..9 {
+                    y[r] = c0[r] * gb[0] + c1[r] * gb[1] + c2[r] * gb[2];
+                }
+                // Rows 3a + i of vertices a = 1..3: W Σ_j g_a[j] y[i + 3j].
+                let out = &mut out[12 * (3 * b + k)..12 * (3 * b + k) + 12];
+                for av in 0..3 {
                     for i in 0..3 {
-                        let mut s = 0.0;
-                        for l in 0..3 {
-                            s += a[9 * (k + 3 * l) + i + 3 * j] * gb[l];
-                        }
-                        y[j][3 * k + i] = s;
+                        let wga = &wg[av];
+                        out[3 * av + 3 + i] = y[i] * wga[0] + y[i + 3] * wga[1] + y[i + 6] * wga[2];
                     }
                 }
-            }
-            // Rows of vertices 1..3: H_ab = W Σ_j g_a[j] y[j].
-            for av in 1..4 {
-                let mut h = [0.0f64; 9];
-                for j in 0..3 {
-                    for (h, y) in h.iter_mut().zip(&y[j]) {
-                        *h += g[av][j] * y;
-                    }
-                }
-                for k in 0..3 {
-                    for i in 0..3 {
-                        out[(3 * av + i) * 12 + 3 * b + k] = h[3 * k + i] * w;
-                    }
-                }
-            }
-            // Rows of vertex 0 are minus the sums over vertices 1..3.
-            for c in 3 * b..3 * b + 3 {
+                // Rows of vertex 0 are minus the sums over vertices 1..3.
                 for i in 0..3 {
-                    let s = out[(3 + i) * 12 + c] + out[(6 + i) * 12 + c] + out[(9 + i) * 12 + c];
-                    out[i * 12 + c] = -s;
+                    out[i] = -(out[3 + i] + out[6 + i] + out[9 + i]);
                 }
             }
         }
@@ -214,7 +209,7 @@ mod tests {
                 for r in 0..12 {
                     for c in 0..12 {
                         if blocks[c / 3] {
-                            let (x, y) = (out[12 * r + c], full[12 * r + c]);
+                            let (x, y) = (out[12 * c + r], full[12 * r + c]);
                             assert_eq!(x.to_bits(), y.to_bits(), "{mask:b} ({r}, {c})");
                         }
                     }
