@@ -59,6 +59,70 @@ pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<TetMesh, MeshError> {
     }
 }
 
+/// 1-based line of the `t`-th 4-node tetrahedron (0-based, in file order) of a text file that
+/// [`parse_bytes`] read, for messages about a tet that validation refuses; `None` in binary
+/// files.
+pub(crate) fn tet_line(bytes: &[u8], t: usize) -> Option<usize> {
+    let format = mesh_format(bytes, Path::new("")).ok()?;
+    if format.binary {
+        return None;
+    }
+    let elements = find_section(bytes, format.body, b"$Elements")?;
+    let mut c = Cursor {
+        bytes,
+        pos: elements,
+        encoding: Encoding::Ascii,
+        path: Path::new(""),
+    };
+    let what = &String::new;
+    if format.version < 3.0 {
+        let total = c.size_t(what).ok()?;
+        let mut tets = 0;
+        for _ in 0..total {
+            c.skip_whitespace();
+            let rest = bytes.get(c.pos..)?;
+            let end = rest.iter().position(|&b| b == b'\n').unwrap_or(rest.len());
+            let text = std::str::from_utf8(&rest[..end]).ok()?;
+            if text.split_whitespace().nth(1) == Some("4") {
+                if tets == t {
+                    return Some(c.line(c.pos));
+                }
+                tets += 1;
+            }
+            c.pos += end;
+        }
+        return None;
+    }
+    let num_blocks = c.size_t(what).ok()?;
+    for _ in 0..3 {
+        c.size_t(what).ok()?;
+    }
+    let mut tets = 0usize;
+    for _ in 0..num_blocks {
+        c.int(what).ok()?;
+        c.int(what).ok()?;
+        let element_type = c.int(what).ok()?;
+        let n = usize::try_from(c.size_t(what).ok()?).ok()?;
+        let per = 1 + nodes_per_element(element_type)?;
+        let skip = if element_type == TET4 && t < tets + n {
+            t - tets
+        } else {
+            n
+        };
+        for _ in 0..skip.checked_mul(per)? {
+            c.size_t(what).ok()?;
+        }
+        if element_type == TET4 {
+            if t < tets + n {
+                c.skip_whitespace();
+                return Some(c.line(c.pos));
+            }
+            tets += n;
+        }
+    }
+    None
+}
+
 fn parse_error(path: &Path, line: usize, reason: impl Into<String>) -> MeshError {
     MeshError::Parse {
         path: path.to_path_buf(),

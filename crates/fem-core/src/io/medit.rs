@@ -39,6 +39,28 @@ pub fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
     .run()
 }
 
+/// 1-based line of tetrahedron `t` (0-based, counted over every `Tetrahedra` section) in a file
+/// that [`parse`] read, for messages about a tet that validation refuses.
+pub(crate) fn tet_line(text: &str, t: usize) -> Option<usize> {
+    let mut tokens = Tokens::new(text);
+    let mut seen = 0usize;
+    while let Some(tok) = tokens.next() {
+        if !tok.text.eq_ignore_ascii_case("tetrahedra") {
+            continue;
+        }
+        let n: usize = tokens.next()?.text.parse().ok()?;
+        let skip = if t < seen + n { t - seen } else { n };
+        for _ in 0..skip.checked_mul(5)? {
+            tokens.next()?;
+        }
+        if t < seen + n {
+            return tokens.next().map(|tok| tok.line);
+        }
+        seen += n;
+    }
+    None
+}
+
 /// A token and the 1-based line it came from.
 #[derive(Debug, Clone, Copy)]
 struct Token<'a> {

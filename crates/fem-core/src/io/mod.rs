@@ -9,29 +9,65 @@ pub mod vtu;
 use std::path::Path;
 
 use crate::MeshError;
-use crate::mesh::{TetMesh, ValidationReport, validate};
+use crate::mesh::{TetMesh, ValidationReport, validate_located};
 
 /// Largest vertex or element count a reader accepts before allocating.
 pub const MAX_ENTITIES: usize = 50_000_000;
 
-/// Reads a tetrahedral mesh, choosing the format by extension, and validates it.
+/// Reads a tetrahedral mesh, choosing the format by extension, and validates it. A tet that
+/// validation refuses is named with its line in the file (text formats).
 pub fn read_mesh(path: &Path) -> Result<(TetMesh, ValidationReport), MeshError> {
+    format_of(path)?;
+    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_mesh(&bytes, path)
+}
+
+/// [`read_mesh`] on the content of a file: `path` chooses the format by its extension and names
+/// the source in errors.
+pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<(TetMesh, ValidationReport), MeshError> {
+    let text = || String::from_utf8_lossy(bytes);
+    let (mut mesh, line_of_tet): (TetMesh, Box<dyn Fn(usize) -> Option<usize>>) =
+        match format_of(path)? {
+            Format::Medit => (
+                medit::parse(&text(), path)?,
+                Box::new(move |t| medit::tet_line(&text(), t)),
+            ),
+            Format::Gmsh => (
+                gmsh::parse_bytes(bytes, path)?,
+                Box::new(|t| gmsh::tet_line(bytes, t)),
+            ),
+            Format::Vtk => (
+                vtk::parse(&text(), path)?,
+                Box::new(move |t| vtk::tet_line(&text(), t)),
+            ),
+        };
+    let report = validate_located(&mut mesh, path, &line_of_tet)?;
+    Ok((mesh, report))
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Format {
+    Medit,
+    Gmsh,
+    Vtk,
+}
+
+fn format_of(path: &Path) -> Result<Format, MeshError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    let mut mesh = match ext.as_deref() {
-        Some("mesh") => medit::read(path)?,
-        Some("msh") => gmsh::read(path)?,
-        Some("vtk") => vtk::read(path)?,
-        _ => {
-            return Err(MeshError::UnsupportedFormat {
-                path: path.to_path_buf(),
-            });
-        }
-    };
-    let report = validate(&mut mesh, path)?;
-    Ok((mesh, report))
+    match ext.as_deref() {
+        Some("mesh") => Ok(Format::Medit),
+        Some("msh") => Ok(Format::Gmsh),
+        Some("vtk") => Ok(Format::Vtk),
+        _ => Err(MeshError::UnsupportedFormat {
+            path: path.to_path_buf(),
+        }),
+    }
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed to disk,

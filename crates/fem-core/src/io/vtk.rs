@@ -39,6 +39,72 @@ pub fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
     .run()
 }
 
+/// 1-based line of the `t`-th tetrahedron (0-based, among the cells of type 10) of a file that
+/// [`parse`] read: the line of its point count (classic layout) or of its first connectivity
+/// value (5.1 layout), for messages about a tet that validation refuses.
+pub(crate) fn tet_line(text: &str, t: usize) -> Option<usize> {
+    let keyword = |tokens: &mut Tokens<'_>, name: &str| {
+        while let Some(tok) = tokens.next() {
+            if tok.text.eq_ignore_ascii_case(name) {
+                return Some(());
+            }
+        }
+        None
+    };
+    let number = |tokens: &mut Tokens<'_>| tokens.next()?.text.parse::<usize>().ok();
+    let fresh = || {
+        let mut tokens = Tokens::new(text);
+        // The header and title lines are free text.
+        tokens.raw_line()?;
+        tokens.raw_line()?;
+        Some(tokens)
+    };
+    // Which cell is the t-th tetrahedron.
+    let mut tokens = fresh()?;
+    keyword(&mut tokens, "CELL_TYPES")?;
+    let n = number(&mut tokens)?;
+    let mut tets = 0;
+    let mut cell = None;
+    for c in 0..n {
+        if number(&mut tokens)? == 10 {
+            if tets == t {
+                cell = Some(c);
+                break;
+            }
+            tets += 1;
+        }
+    }
+    let cell = cell?;
+    let mut tokens = fresh()?;
+    keyword(&mut tokens, "CELLS")?;
+    number(&mut tokens)?;
+    number(&mut tokens)?;
+    if tokens
+        .peek()
+        .is_some_and(|tok| tok.text.eq_ignore_ascii_case("OFFSETS"))
+    {
+        tokens.next()?;
+        tokens.next()?; // data type
+        let mut start = 0;
+        for _ in 0..=cell {
+            start = number(&mut tokens)?;
+        }
+        keyword(&mut tokens, "CONNECTIVITY")?;
+        tokens.next()?; // data type
+        for _ in 0..start {
+            tokens.next()?;
+        }
+        return tokens.next().map(|tok| tok.line);
+    }
+    for _ in 0..cell {
+        let k = number(&mut tokens)?;
+        for _ in 0..k {
+            tokens.next()?;
+        }
+    }
+    tokens.next().map(|tok| tok.line)
+}
+
 #[derive(Debug, Clone, Copy)]
 struct Token<'a> {
     text: &'a str,

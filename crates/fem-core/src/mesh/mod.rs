@@ -6,7 +6,7 @@ mod validate;
 
 pub use config::MeshConfig;
 
-pub use validate::{ValidationReport, validate};
+pub use validate::{ValidationReport, validate, validate_located};
 
 use crate::Vec3;
 

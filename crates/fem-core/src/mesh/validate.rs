@@ -26,9 +26,24 @@ pub const DEGENERATE_RELATIVE_VOLUME: f64 = 1e-10;
 /// tets, positive orientation (inverted rest tets are flipped and counted); counts unreferenced
 /// vertices and connected pieces. `path` names the source in errors.
 pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, MeshError> {
+    validate_located(mesh, path, &|_| None)
+}
+
+/// [`validate`], naming the line of a refused tet: `line_of_tet(t)` is the 1-based line of tet
+/// `t` in the file it was read from, when known.
+pub fn validate_located(
+    mesh: &mut TetMesh,
+    path: &Path,
+    line_of_tet: &dyn Fn(usize) -> Option<usize>,
+) -> Result<ValidationReport, MeshError> {
     let invalid = |reason: String| MeshError::Invalid {
         path: path.to_path_buf(),
         reason,
+    };
+    // "tet 7 (line 42)"
+    let tet = |t: usize| match line_of_tet(t) {
+        Some(line) => format!("tet {t} (line {line})"),
+        None => format!("tet {t}"),
     };
     if mesh.tets.is_empty() {
         return Err(invalid("the mesh has no tetrahedra".into()));
@@ -46,21 +61,24 @@ pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, Mes
         )));
     }
     let mut referenced = vec![false; n];
-    for (t, tet) in mesh.tets.iter().enumerate() {
-        for &i in tet {
+    for (t, vertices) in mesh.tets.iter().enumerate() {
+        for &i in vertices {
             if i >= n {
                 return Err(invalid(format!(
-                    "tet {t} references vertex {i} but the mesh has {n} vertices"
+                    "{} references vertex {i} but the mesh has {n} vertices",
+                    tet(t)
                 )));
             }
             referenced[i] = true;
         }
         for a in 0..4 {
             for b in a + 1..4 {
-                if tet[a] == tet[b] {
+                if vertices[a] == vertices[b] {
                     return Err(invalid(format!(
-                        "tet {t} uses vertex {} twice ({:?})",
-                        tet[a], tet
+                        "{} uses vertex {} twice ({:?})",
+                        tet(t),
+                        vertices[a],
+                        vertices
                     )));
                 }
             }
@@ -72,7 +90,8 @@ pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, Mes
     // Finite coordinates can still overflow a volume (|x| near 1e100 and beyond).
     if let Some(t) = volumes.iter().position(|v| !v.is_finite()) {
         return Err(invalid(format!(
-            "tet {t} {:?} has a non-finite volume: its coordinates are too large",
+            "{} {:?} has a non-finite volume: its coordinates are too large",
+            tet(t),
             mesh.tets[t]
         )));
     }
@@ -93,7 +112,8 @@ pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, Mes
         let rel = v.abs() / mean;
         if rel < DEGENERATE_RELATIVE_VOLUME {
             return Err(invalid(format!(
-                "tet {t} {:?} is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
+                "{} {:?} is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
+                tet(t),
                 mesh.tets[t]
             )));
         }
@@ -117,8 +137,10 @@ pub fn validate(mesh: &mut TetMesh, path: &Path) -> Result<ValidationReport, Mes
     sorted.sort_unstable();
     if let Some(w) = sorted.windows(2).find(|w| w[0].0 == w[1].0) {
         return Err(invalid(format!(
-            "tets {} and {} use the same four vertices {:?} (a duplicate element)",
-            w[0].1, w[1].1, w[0].0
+            "{} and {} use the same four vertices {:?} (a duplicate element)",
+            tet(w[0].1),
+            tet(w[1].1),
+            w[0].0
         )));
     }
     report.unreferenced_vertices = referenced.iter().filter(|r| !**r).count();

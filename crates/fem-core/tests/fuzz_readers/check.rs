@@ -4,9 +4,8 @@
 
 use std::path::Path;
 
-use fem_core::io::{gmsh, medit, vtk};
-use fem_core::mesh::validate;
-use fem_core::{MeshError, TetMesh};
+use fem_core::MeshError;
+use fem_core::io::parse_mesh;
 
 /// One of the mesh readers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,16 +31,6 @@ impl Reader {
             Reader::Gmsh => "fuzz-input.msh",
             Reader::Vtk => "fuzz-input.vtk",
         })
-    }
-
-    /// Parses `bytes` exactly as the reader's `read` does after reading the file.
-    pub fn parse(self, bytes: &[u8]) -> Result<TetMesh, MeshError> {
-        let path = self.path();
-        match self {
-            Reader::Medit => medit::parse(&String::from_utf8_lossy(bytes), path),
-            Reader::Gmsh => gmsh::parse_bytes(bytes, path),
-            Reader::Vtk => vtk::parse(&String::from_utf8_lossy(bytes), path),
-        }
     }
 }
 
@@ -69,7 +58,8 @@ fn gmsh_binary(bytes: &[u8]) -> bool {
             .is_some_and(|l| l.split_whitespace().nth(1) == Some("1"))
 }
 
-/// Runs `reader` on `bytes`, then validation, and checks the result's shape. `Err` describes a
+/// Runs `reader` on `bytes`, then validation (exactly as `read_mesh` does), and checks the
+/// result's shape. `Err` describes a
 /// violation: anything but a valid mesh or a well-formed typed error.
 pub fn check(reader: Reader, bytes: &[u8]) -> Result<Outcome, String> {
     let path = reader.path();
@@ -82,33 +72,40 @@ pub fn check(reader: Reader, bytes: &[u8]) -> Result<Outcome, String> {
             Err(format!("the message does not name the file: {shown}"))
         }
     };
-    match reader.parse(bytes) {
-        Ok(mut mesh) => match validate(&mut mesh, path) {
-            Ok(_) => {
-                let n = mesh.num_vertices();
-                if !mesh.vertices.iter().flatten().all(|c| c.is_finite()) {
-                    return Err("a validated mesh has a non-finite coordinate".into());
-                }
-                if !mesh.tets.iter().flatten().all(|&i| i < n) {
-                    return Err("a validated mesh has an index out of range".into());
-                }
-                if !(0..mesh.num_tets()).all(|t| mesh.signed_volume(t) > 0.0) {
-                    return Err("a validated mesh has a tet without positive volume".into());
-                }
-                Ok(Outcome::Valid)
+    match parse_mesh(bytes, path) {
+        Ok((mesh, _)) => {
+            let n = mesh.num_vertices();
+            if !mesh.vertices.iter().flatten().all(|c| c.is_finite()) {
+                return Err("a validated mesh has a non-finite coordinate".into());
             }
-            Err(e @ MeshError::Invalid { .. }) => {
-                named(&e)?;
-                let MeshError::Invalid { path: p, reason } = &e else {
-                    unreachable!()
-                };
-                if p != path || reason.trim().is_empty() {
-                    return Err(format!("malformed validation error: {e:?}"));
-                }
-                Ok(Outcome::InvalidMesh)
+            if !mesh.tets.iter().flatten().all(|&i| i < n) {
+                return Err("a validated mesh has an index out of range".into());
             }
-            Err(e) => Err(format!("validation returned a non-validation error: {e:?}")),
-        },
+            if !(0..mesh.num_tets()).all(|t| mesh.signed_volume(t) > 0.0) {
+                return Err("a validated mesh has a tet without positive volume".into());
+            }
+            Ok(Outcome::Valid)
+        }
+        Err(e @ MeshError::Invalid { .. }) => {
+            named(&e)?;
+            let MeshError::Invalid { path: p, reason } = &e else {
+                unreachable!()
+            };
+            if p != path || reason.trim().is_empty() {
+                return Err(format!("malformed validation error: {e:?}"));
+            }
+            // A refused tet's line, when given, lies in the file.
+            for (at, _) in reason.match_indices("(line ") {
+                let line = reason[at + 6..]
+                    .split(')')
+                    .next()
+                    .and_then(|l| l.parse::<usize>().ok());
+                if !line.is_some_and(|l| (1..=lines).contains(&l)) {
+                    return Err(format!("validation error with a bad line: {e}"));
+                }
+            }
+            Ok(Outcome::InvalidMesh)
+        }
         Err(e @ MeshError::Parse { .. }) => {
             named(&e)?;
             let MeshError::Parse {

@@ -107,6 +107,53 @@ fn assert_line_holds(format: Format, bytes: &[u8], line: usize, token: &str, rea
     );
 }
 
+/// Every "tet T (line L)" in `reason` points at the line of `mesh`'s tet T in the text file
+/// `bytes` (the line holds its four vertices as the format writes them); binary files give no
+/// lines, text files at least one.
+fn assert_tet_lines(format: Format, bytes: &[u8], mesh: &TetMesh, reason: &str) {
+    let text = String::from_utf8_lossy(bytes);
+    let mut found = 0;
+    for (at, _) in reason.match_indices("tet ") {
+        let rest = &reason[at + 4..];
+        let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+        let Some(line) = rest[digits.len()..]
+            .strip_prefix(" (line ")
+            .and_then(|r| r.split(')').next())
+            .and_then(|l| l.parse::<usize>().ok())
+        else {
+            continue;
+        };
+        let t: usize = digits.parse().unwrap();
+        let held: Vec<&str> = text
+            .lines()
+            .nth(line - 1)
+            .unwrap_or_default()
+            .split_whitespace()
+            .collect();
+        for &i in &mesh.tets[t] {
+            let token = match format {
+                Format::Medit => (i + 1).to_string(),
+                Format::Gmsh22 | Format::Gmsh41Ascii | Format::Gmsh41Binary => {
+                    (10 + 3 * i).to_string()
+                }
+                Format::Vtk42 | Format::Vtk51 => i.to_string(),
+            };
+            assert!(
+                held.contains(&token.as_str()),
+                "{}: line {line} {held:?} is not tet {t} {:?} ({reason})",
+                format.name(),
+                mesh.tets[t]
+            );
+        }
+        found += 1;
+    }
+    if format == Format::Gmsh41Binary {
+        assert!(!reason.contains("(line"), "{reason}");
+    } else {
+        assert!(found > 0, "{}: no tet line in: {reason}", format.name());
+    }
+}
+
 #[test]
 fn the_generated_meshes_read_back_identically_in_every_format() {
     let mesh = box_of([3, 2, 1]);
@@ -179,13 +226,14 @@ fn degenerate_tets_are_refused() {
     // Vertex n − 1 is the box corner (0.3, 0.1, 0.1), on the same plane y = 0.1.
     mesh.tets.push([n - 1, n, n + 1, n + 2]);
     let flat = mesh.num_tets() - 1;
-    in_every_format("degenerate", &mesh, |format, path, _, result| {
+    in_every_format("degenerate", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(
             reason.contains(&format!("tet {flat} ")) && reason.contains("degenerate"),
             "{}: {reason}",
             format.name()
         );
+        assert_tet_lines(format, bytes, &mesh, &reason);
     });
 }
 
@@ -195,13 +243,16 @@ fn duplicate_tets_are_refused() {
     let [a, b, c, d] = mesh.tets[4];
     mesh.tets.push([b, a, c, d]);
     let copy = mesh.num_tets() - 1;
-    in_every_format("duplicate", &mesh, |format, path, _, result| {
+    in_every_format("duplicate", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(
-            reason.contains(&format!("tets 4 and {copy}")) && reason.contains("duplicate"),
+            reason.contains("tet 4 ")
+                && reason.contains(&format!("and tet {copy}"))
+                && reason.contains("duplicate"),
             "{}: {reason}",
             format.name()
         );
+        assert_tet_lines(format, bytes, &mesh, &reason);
     });
 }
 
@@ -209,13 +260,14 @@ fn duplicate_tets_are_refused() {
 fn a_tet_using_a_vertex_twice_is_refused() {
     let mut mesh = box_of([2, 1, 1]);
     mesh.tets[7][2] = mesh.tets[7][0];
-    in_every_format("repeated-vertex", &mesh, |format, path, _, result| {
+    in_every_format("repeated-vertex", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(
             reason.contains("tet 7 ") && reason.contains("twice"),
             "{}: {reason}",
             format.name()
         );
+        assert_tet_lines(format, bytes, &mesh, &reason);
     });
 }
 
@@ -239,9 +291,10 @@ fn coordinates_whose_volumes_overflow_are_refused() {
     for v in &mut mesh.vertices {
         *v *= 1e110;
     }
-    in_every_format("overflow", &mesh, |format, path, _, result| {
+    in_every_format("overflow", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(reason.contains("too large"), "{}: {reason}", format.name());
+        assert_tet_lines(format, bytes, &mesh, &reason);
     });
 }
 

@@ -252,7 +252,20 @@ impl Tally {
         self.tried += 1;
         let start = Instant::now();
         let result = std::panic::catch_unwind(|| check(reader, bytes));
-        self.slowest = self.slowest.max(start.elapsed());
+        let elapsed = start.elapsed();
+        self.slowest = self.slowest.max(elapsed);
+        // Reading is linear: tens of ms for the largest file here, so a pass that rescans the
+        // file per entry (seconds) stands out even on a busy machine.
+        let limit = Duration::from_millis(100) + Duration::from_micros(5) * bytes.len() as u32;
+        if elapsed > limit {
+            let what = format!(
+                "took {:.0} ms for {} bytes (limit {:.0} ms)",
+                elapsed.as_secs_f64() * 1e3,
+                bytes.len(),
+                limit.as_secs_f64() * 1e3
+            );
+            self.violation(reader, bytes, &what, describe);
+        }
         match result {
             Ok(Ok(Outcome::Valid)) => self.valid += 1,
             Ok(Ok(Outcome::ParseError)) => self.parse_errors += 1,
