@@ -106,13 +106,14 @@ impl Material for StableNeoHookean {
         (psi, F * mu + cof * (la * Jm1 - mu))
     }
 
+    #[inline]
     fn dpdf(&self, F: &Mat3) -> Mat9 {
         let (mu, la) = (self.mu_snh, self.lambda_snh);
         let cof = cofactor(F);
         let J = det_from_cofactor(F, &cof);
-        let mut m = Mat9::zeros();
-        add_outer_upper(&mut m, &cof, &cof, la);
-        mirror_upper(&mut m);
+        // (g_i g_j) λ' is exactly symmetric, and a plain 9×9 loop vectorises.
+        let g = cof.as_slice();
+        let mut m = Mat9::from_fn(|i, j| g[i] * g[j] * la);
         for a in 0..9 {
             m[(a, a)] += mu;
         }
@@ -122,6 +123,7 @@ impl Material for StableNeoHookean {
 
     /// Analytic projection (see the type's documentation). Non-finite F yields the
     /// (non-finite) tangent unchanged.
+    #[inline]
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
         let (mu, la) = (self.mu_snh, self.lambda_snh);
         cofactor_tangent::project(self.dpdf(F), F, mu, |J| (la, la * (J - 1.0) - mu))
@@ -162,21 +164,19 @@ pub(super) fn det_from_cofactor(F: &Mat3, cof: &Mat3) -> f64 {
 pub(super) fn add_cofactor_hessian(m: &mut Mat9, F: &Mat3, s: f64) {
     // Even permutations (j, l, m): ε_jlm = +1, block (j, l) = −s[f_m]×, block (l, j) = +s[f_m]×.
     for (j, l, c) in [(0, 1, 2), (1, 2, 0), (2, 0, 1)] {
-        let v = F.column(c) * s;
-        // −[v]× = [[0, v₂, −v₁], [−v₂, 0, v₀], [v₁, −v₀, 0]].
-        let neg_hat = [
-            (0, 1, v[2]),
-            (0, 2, -v[1]),
-            (1, 0, -v[2]),
-            (1, 2, v[0]),
-            (2, 0, v[1]),
-            (2, 1, -v[0]),
-        ];
-        for (r, k, x) in neg_hat {
+        let v = [F[(0, c)] * s, F[(1, c)] * s, F[(2, c)] * s];
+        // Entry (r, k) of −[v]× = [[0, v₂, −v₁], [−v₂, 0, v₀], [v₁, −v₀, 0]] goes to block (j, l);
+        // block (l, j) is its transpose.
+        let mut add = |r: usize, k: usize, x: f64| {
             m[(r + 3 * j, k + 3 * l)] += x;
-            // Block (l, j) is the transpose of block (j, l).
             m[(k + 3 * l, r + 3 * j)] += x;
-        }
+        };
+        add(0, 1, v[2]);
+        add(0, 2, -v[1]);
+        add(1, 0, -v[2]);
+        add(1, 2, v[0]);
+        add(2, 0, v[1]);
+        add(2, 1, -v[0]);
     }
 }
 
