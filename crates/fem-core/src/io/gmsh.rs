@@ -993,10 +993,14 @@ fn parse_v41(bytes: &[u8], path: &Path, format: &MeshFormat) -> Result<TetMesh, 
             Some([1, 0, 0, 0]) => false,
             Some([0, 0, 0, 1]) => true,
             _ => {
+                // The marker follows the header line, which may end the file: name that line.
                 return Err(parse_error(
                     path,
-                    format.line + 1,
-                    "binary MSH file without the integer 1 after the header: cannot tell the byte order",
+                    format.line,
+                    format!(
+                        "binary MSH file without the integer 1 after this header line (at byte {}): cannot tell the byte order",
+                        format.body
+                    ),
                 ));
             }
         };
@@ -1339,6 +1343,10 @@ mod tests {
         let text = V41.replace("2 2 1 2\n", "2 3 1 3\n");
         let (_, reason) = parse_error(text.as_bytes());
         assert!(reason.contains("blocks hold 2"), "{reason}");
+        // cargo fuzz (gmsh_v41): a binary header ending the file was reported at line 3 of 2.
+        let (line, reason) = parse_error(b"$MeshFormat\n4.1 1  8");
+        assert_eq!(line, 2);
+        assert!(reason.contains("byte order"), "{reason}");
     }
 
     #[test]
