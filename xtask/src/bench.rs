@@ -327,6 +327,7 @@ mod tests {
                 elastic_ms: 0.0,
                 vjp_ms: 0.0,
                 precond_ms: 0.0,
+                frame_errors: vec![err],
                 failure: None,
             },
             offline_seconds: 0.0,

@@ -57,6 +57,9 @@ pub struct MethodReport {
     pub elastic_ms: f64,
     pub vjp_ms: f64,
     pub precond_ms: f64,
+    /// ‖u − u_full‖_M / ‖u_full‖_M frame by frame (frames where the reference is at rest are
+    /// skipped), to see where the error grows.
+    pub frame_errors: Vec<f64>,
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
@@ -210,6 +213,7 @@ pub fn measure(
             max_vertex_error: 0.0,
             iterations: mean_usize(&reference.iterations),
             subspace_error: 0.0,
+            frame_errors: vec![0.0; reference.frames.len()],
             decode_ms: 0.0,
             elastic_ms: 0.0,
             vjp_ms: 0.0,
@@ -314,6 +318,7 @@ pub fn measure(
         elastic_ms: per_step_ms(parts.elastic),
         vjp_ms: per_step_ms(parts.vjp),
         precond_ms: per_step_ms(parts.precond),
+        frame_errors: errors.rel,
         failure,
     })
 }
