@@ -28,7 +28,7 @@ pub fn stage_version(stage: &str) -> u32 {
     match stage {
         // 2: inputs centred with one common scale instead of per-feature standardisation.
         // 3: the training gradient sums in a different (still fixed) order.
-        "train" => 3,
+        "train" => 4,
         // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
         "snapshots" | "snapshots-shard" | "reference" => 2,
         // 2: the held-out error along the greedy path is stored with the rule.

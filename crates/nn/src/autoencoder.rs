@@ -8,6 +8,11 @@
 //!
 //! The training loss is the mean squared reconstruction error of the *scaled* coefficients,
 //! ℒ = 1/(N k) Σ_j ‖dec(enc(s_j)) − s_j‖², which is what [`Autoencoder::loss`] returns.
+//!
+//! With the linear skip ([`Autoencoder::with_skip`]) both networks are residuals around the
+//! truncation to the leading d features: z = enc(s) + s₁..d and ŝ = dec(z) + (z, 0). For PCA
+//! coefficients (ordered by variance) the autoencoder then starts as PCA-d, exactly when the
+//! output layers start at zero, and training only learns the nonlinear correction.
 
 use faer::{Mat, MatRef};
 use rayon::prelude::*;
@@ -31,6 +36,9 @@ pub struct Autoencoder {
     encoder: Mlp,
     decoder: Mlp,
     scaling: Option<InputScaling>,
+    /// The linear skip: identity from the leading d inputs to z and from z to the leading d
+    /// outputs (see the module docs).
+    skip: bool,
 }
 
 impl Clone for Autoencoder {
@@ -40,6 +48,7 @@ impl Clone for Autoencoder {
             encoder: self.encoder.clone(),
             decoder: self.decoder.clone(),
             scaling: self.scaling.clone(),
+            skip: self.skip,
         }
     }
 
@@ -49,6 +58,7 @@ impl Clone for Autoencoder {
         self.encoder.clone_from(&source.encoder);
         self.decoder.clone_from(&source.decoder);
         self.scaling.clone_from(&source.scaling);
+        self.skip = source.skip;
     }
 }
 
@@ -59,26 +69,39 @@ struct AutoencoderData {
     encoder: Mlp,
     decoder: Mlp,
     scaling: Option<InputScaling>,
+    /// Absent in version 1 files, which had no skip.
+    #[serde(default)]
+    skip: bool,
 }
 
 impl TryFrom<AutoencoderData> for Autoencoder {
     type Error = NnError;
 
     fn try_from(d: AutoencoderData) -> Result<Self, NnError> {
-        if d.format_version != Autoencoder::FORMAT_VERSION {
+        if !(1..=Autoencoder::FORMAT_VERSION).contains(&d.format_version) {
             return Err(NnError::InvalidModel(format!(
-                "format version {} is not the supported version {}",
+                "format version {} is not a supported version (1 to {})",
                 d.format_version,
                 Autoencoder::FORMAT_VERSION
             )));
         }
-        Autoencoder::new(d.encoder, d.decoder, d.scaling)
+        if d.format_version < 2 && d.skip {
+            return Err(NnError::InvalidModel(
+                "format version 1 has no linear skip, but `skip` is set".into(),
+            ));
+        }
+        let mut ae = Autoencoder::new(d.encoder, d.decoder, d.scaling)?;
+        if d.skip {
+            ae.set_skip()?;
+        }
+        Ok(ae)
     }
 }
 
 impl Autoencoder {
-    /// The version of the serialised layout; bumped whenever it changes.
-    pub const FORMAT_VERSION: u32 = 1;
+    /// The version of the serialised layout; bumped whenever it changes. Version 2 added `skip`;
+    /// version 1 files still load (without a skip).
+    pub const FORMAT_VERSION: u32 = 2;
 
     /// An autoencoder from its parts, checking that they fit together.
     pub fn new(encoder: Mlp, decoder: Mlp, scaling: Option<InputScaling>) -> Result<Self, NnError> {
@@ -107,7 +130,52 @@ impl Autoencoder {
             encoder,
             decoder,
             scaling,
+            skip: false,
         })
+    }
+
+    /// Turns on the linear skip (see the module docs) and zeroes both output layers, so that the
+    /// autoencoder starts as the truncation to the leading d features: z = s₁..d, ŝ = (z, 0).
+    /// Needs d ≤ k.
+    pub fn with_skip(mut self) -> Result<Self, NnError> {
+        self.set_skip()?;
+        for net in [&mut self.encoder, &mut self.decoder] {
+            let last = net.num_layers() - 1;
+            net.weights_mut(last).fill(0.0);
+            net.bias_mut(last).fill(0.0);
+        }
+        Ok(self)
+    }
+
+    fn set_skip(&mut self) -> Result<(), NnError> {
+        if self.latent_dim() > self.input_dim() {
+            return Err(NnError::InvalidModel(format!(
+                "a linear skip needs latent dimension {} ≤ input dimension {}",
+                self.latent_dim(),
+                self.input_dim()
+            )));
+        }
+        self.skip = true;
+        Ok(())
+    }
+
+    /// Whether the linear skip is on.
+    pub fn has_skip(&self) -> bool {
+        self.skip
+    }
+
+    /// Shifts the decoder's output bias so that decode(encode(q)) = q exactly for this `q` (the
+    /// rest state, say), moving every reconstruction by the same constant.
+    pub fn anchor(&mut self, q: &[f64]) {
+        let mut ws = self.workspace();
+        let mut out = vec![0.0; q.len()];
+        self.reconstruct(q, &mut out, &mut ws);
+        let last = self.decoder.num_layers() - 1;
+        let scale = self.scaling.as_ref().map(|s| s.scale().to_vec());
+        for (i, b) in self.decoder.bias_mut(last).iter_mut().enumerate() {
+            let err = q[i] - out[i];
+            *b += scale.as_ref().map_or(err, |s| err / s[i]);
+        }
     }
 
     /// A freshly initialised autoencoder k → hidden… → d → reversed hidden… → k with `activation`
@@ -178,19 +246,26 @@ impl Autoencoder {
 
     /// z = encode(q).
     pub fn encode(&self, q: &[f64], z: &mut [f64], ws: &mut AutoencoderWorkspace) {
-        match &self.scaling {
+        let s: &[f64] = match &self.scaling {
             Some(sc) => {
                 assert_eq!(q.len(), sc.dim(), "input length");
                 sc.apply(q, &mut ws.s);
-                self.encoder.forward(&ws.s, z, &mut ws.encoder);
+                &ws.s
             }
-            None => self.encoder.forward(q, z, &mut ws.encoder),
+            None => q,
+        };
+        self.encoder.forward(s, z, &mut ws.encoder);
+        if self.skip {
+            add_leading(z, s);
         }
     }
 
     /// q = decode(z), in original units. Leaves the state for [`Autoencoder::decode_vjp_cached`].
     pub fn decode(&self, z: &[f64], q: &mut [f64], ws: &mut AutoencoderWorkspace) {
         self.decoder.forward(z, q, &mut ws.decoder);
+        if self.skip {
+            add_leading(q, z);
+        }
         if let Some(sc) = &self.scaling {
             ws.s.copy_from_slice(q);
             sc.invert(&ws.s, q);
@@ -208,12 +283,16 @@ impl Autoencoder {
 
     /// out = J(z)ᵀ v for q = decode(z) in original units.
     pub fn decode_vjp(&self, z: &[f64], v: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
-        match &self.scaling {
+        let v: &[f64] = match &self.scaling {
             Some(sc) => {
                 scale_into(sc.scale(), v, &mut ws.s);
-                self.decoder.vjp(z, &ws.s, out, &mut ws.decoder);
+                &ws.s
             }
-            None => self.decoder.vjp(z, v, out, &mut ws.decoder),
+            None => v,
+        };
+        self.decoder.vjp(z, v, out, &mut ws.decoder);
+        if self.skip {
+            add_leading(out, v);
         }
     }
 
@@ -223,18 +302,25 @@ impl Autoencoder {
     /// # Panics
     /// If `ws` holds no decode.
     pub fn decode_vjp_cached(&self, v: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
-        match &self.scaling {
+        let v: &[f64] = match &self.scaling {
             Some(sc) => {
                 scale_into(sc.scale(), v, &mut ws.s);
-                self.decoder.vjp_cached(&ws.s, out, &mut ws.decoder);
+                &ws.s
             }
-            None => self.decoder.vjp_cached(v, out, &mut ws.decoder),
+            None => v,
+        };
+        self.decoder.vjp_cached(v, out, &mut ws.decoder);
+        if self.skip {
+            add_leading(out, v);
         }
     }
 
     /// out = J(z) w for q = decode(z) in original units.
     pub fn decode_jvp(&self, z: &[f64], w: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
         self.decoder.jvp(z, w, out, &mut ws.decoder);
+        if self.skip {
+            add_leading(out, w);
+        }
         if let Some(sc) = &self.scaling {
             out.iter_mut().zip(sc.scale()).for_each(|(o, s)| *o *= s);
         }
@@ -243,6 +329,12 @@ impl Autoencoder {
     /// out = J(z), the `k × d` decoder Jacobian in original units, column-major.
     pub fn decode_jacobian(&self, z: &[f64], out: &mut [f64], ws: &mut AutoencoderWorkspace) {
         self.decoder.jacobian(z, out, &mut ws.decoder);
+        if self.skip {
+            let k = self.input_dim();
+            for j in 0..self.latent_dim() {
+                out[j * k + j] += 1.0;
+            }
+        }
         if let Some(sc) = &self.scaling {
             for col in out.chunks_exact_mut(sc.dim()) {
                 col.iter_mut().zip(sc.scale()).for_each(|(o, s)| *o *= s);
@@ -265,8 +357,7 @@ impl Autoencoder {
             || ChunkWorkspace::new(self),
             |ws, block| {
                 let c = block.len() / k;
-                let z = self.encoder.forward_batch(block, c, &mut ws.encoder);
-                let y = self.decoder.forward_batch(z, c, &mut ws.decoder);
+                let y = self.forward_chunk(block, c, ws);
                 block.copy_from_slice(y);
             },
         );
@@ -277,6 +368,32 @@ impl Autoencoder {
                 None => s,
             }
         }))
+    }
+
+    /// Both networks on a chunk of `c` scaled samples `x` (k × c), skips included; returns the
+    /// reconstruction ŝ (k × c), which lives in `ws.decoder` (z in `ws.encoder`).
+    pub(crate) fn forward_chunk<'w>(
+        &self,
+        x: &[f64],
+        c: usize,
+        ws: &'w mut ChunkWorkspace,
+    ) -> &'w [f64] {
+        let (k, d) = (self.input_dim(), self.latent_dim());
+        self.encoder.forward_batch(x, c, &mut ws.encoder);
+        let z = ws.encoder.output_mut(c);
+        if self.skip {
+            for (zc, xc) in z.chunks_exact_mut(d).zip(x.chunks_exact(k)) {
+                add_leading(zc, xc);
+            }
+        }
+        self.decoder.forward_batch(z, c, &mut ws.decoder);
+        let y = ws.decoder.output_mut(c);
+        if self.skip {
+            for (yc, zc) in y.chunks_exact_mut(k).zip(z.chunks_exact(d)) {
+                add_leading(yc, zc);
+            }
+        }
+        ws.decoder.output(c)
     }
 
     /// The loss on `data` and its gradient with respect to every weight and bias.
@@ -328,6 +445,11 @@ impl Autoencoder {
         let n = x.len() / self.input_dim();
         GradientEngine::new(self, n.min(8 * CHUNK)).sum_squared_error(self, x)
     }
+}
+
+/// a[i] += b[i] for the leading min(len) entries (the linear skip).
+fn add_leading(a: &mut [f64], b: &[f64]) {
+    a.iter_mut().zip(b).for_each(|(a, b)| *a += b);
 }
 
 fn scale_into(scale: &[f64], v: &[f64], out: &mut [f64]) {

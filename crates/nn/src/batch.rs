@@ -91,6 +91,13 @@ impl MlpBatchWorkspace {
         &self.act[last][..self.sizes[last + 1] * c]
     }
 
+    /// The output block Y (`n_L × c`), mutable (e.g. to add a skip connection; the output layer
+    /// is linear, so the backward sweep never reads Y).
+    pub(crate) fn output_mut(&mut self, c: usize) -> &mut [f64] {
+        let last = self.act.len() - 1;
+        &mut self.act[last][..self.sizes[last + 1] * c]
+    }
+
     /// The output Y and the buffer for G_L = ∂ℒ/∂Y (both `n_L × c`), for the caller to fill.
     pub(crate) fn output_and_gradient_mut(&mut self, c: usize) -> (&[f64], &mut [f64]) {
         let last = self.act.len() - 1;

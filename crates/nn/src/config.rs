@@ -13,6 +13,8 @@
 //! patience = 100                 # epochs without improvement before stopping; 0 = never stop early
 //! seed = 0
 //! input_scaling = true
+//! skip = true                    # linear skip: start as PCA-d, learn the nonlinear correction
+//! anchor_origin = true           # decode(encode(0)) = 0 exactly (the rest state)
 //! ```
 
 use crate::{Activation, AdamParams, NnError};
@@ -61,6 +63,16 @@ pub struct AutoencoderConfig {
     /// keeps the loss proportional to the mass-weighted displacement error for coefficients of a
     /// mass-orthonormal basis. Stored with the model.
     pub input_scaling: bool,
+    /// A linear skip around both networks: z = enc(s) + s₁..d and ŝ = dec(z) + (z, 0), with the
+    /// output layers starting at zero, so training starts from the truncation to the leading d
+    /// (highest-variance) PCA coefficients and only learns the nonlinear correction
+    /// ([`Autoencoder::with_skip`](crate::Autoencoder::with_skip)).
+    pub skip: bool,
+    /// After training, shift the decoder's output bias so that q = 0 (the rest state, for
+    /// displacement coefficients) round-trips exactly
+    /// ([`Autoencoder::anchor`](crate::Autoencoder::anchor)): without it a simulation at rest
+    /// starts, and small displacements are measured, against a constant offset.
+    pub anchor_origin: bool,
 }
 
 impl Default for AutoencoderConfig {
@@ -82,6 +94,8 @@ impl Default for AutoencoderConfig {
             patience: 100,
             seed: 0,
             input_scaling: true,
+            skip: true,
+            anchor_origin: true,
         }
     }
 }

@@ -223,8 +223,7 @@ impl GradientEngine {
                 .zip(self.sums.par_iter_mut())
                 .for_each(|((block, ws), sum)| {
                     let c = block.len() / k;
-                    let z = ae.encoder().forward_batch(block, c, &mut ws.encoder);
-                    let y = ae.decoder().forward_batch(z, c, &mut ws.decoder);
+                    let y = ae.forward_chunk(block, c, ws);
                     *sum = y.iter().zip(block).map(|(y, s)| (y - s) * (y - s)).sum();
                 });
             total = self.sums[..chunks].iter().fold(total, |t, s| t + s);
@@ -240,9 +239,9 @@ fn chunk_forward_backward(
     weight: f64,
     ws: &mut ChunkWorkspace,
 ) -> f64 {
-    let c = x.len() / ae.input_dim();
-    let z = ae.encoder().forward_batch(x, c, &mut ws.encoder);
-    ae.decoder().forward_batch(z, c, &mut ws.decoder);
+    let (k, d) = (ae.input_dim(), ae.latent_dim());
+    let c = x.len() / k;
+    ae.forward_chunk(x, c, ws);
     let (y, r) = ws.decoder.output_and_gradient_mut(c);
     let mut sum = 0.0;
     for ((r, y), s) in r.iter_mut().zip(y).zip(x) {
@@ -251,7 +250,15 @@ fn chunk_forward_backward(
         *r = 2.0 * weight * e;
     }
     let gz = ws.encoder.output_gradient_mut(c);
-    ae.decoder().backward_data(c, Some(gz), &mut ws.decoder);
+    ae.decoder()
+        .backward_data(c, Some(&mut *gz), &mut ws.decoder);
+    if ae.has_skip() {
+        // ŝ = dec(z) + (z, 0): the residual's leading d entries reach z directly.
+        let r = ws.decoder.output_gradient_mut(c);
+        for (gc, rc) in gz.chunks_exact_mut(d).zip(r.chunks_exact(k)) {
+            gc.iter_mut().zip(rc).for_each(|(g, r)| *g += r);
+        }
+    }
     // The encoder's input is data: its gradient is not needed.
     ae.encoder().backward_data(c, None, &mut ws.encoder);
     sum

@@ -37,7 +37,8 @@ pub struct TrainOutcome {
     pub history: Vec<EpochReport>,
     /// The 1-based epoch whose weights are in `model`.
     pub best_epoch: usize,
-    /// The monitored loss of `model` (validation loss if there is a split, else training loss).
+    /// The monitored loss of `model` (validation loss if there is a split, else training loss),
+    /// before the origin is anchored.
     pub best_loss: f64,
     /// True when early stopping ended training before `epochs`.
     pub stopped_early: bool,
@@ -77,8 +78,11 @@ pub fn train(
     let Best {
         loss: best_loss,
         epoch: best_epoch,
-        model,
+        mut model,
     } = best;
+    if config.anchor_origin {
+        model.anchor(&vec![0.0; model.input_dim()]);
+    }
     tracing::info!(best_epoch, best_loss, stopped_early, "training finished");
     Ok(TrainOutcome {
         model,
@@ -182,6 +186,11 @@ impl Trainer {
             scaling,
             config.seed,
         )?;
+        let model = if config.skip {
+            model.with_skip()?
+        } else {
+            model
+        };
         let x_train = model.scaled_block(train_data.as_ref())?;
         let x_val = model.scaled_block(val_data.as_ref())?;
         let (n_train, n_val) = (train_indices.len(), validation_indices.len());

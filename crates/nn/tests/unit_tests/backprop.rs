@@ -97,6 +97,24 @@ fn loss_gradient_matches_finite_differences() {
     )
     .unwrap();
     check_gradient(&ae, &data, "unscaled");
+    // With the linear skip (random output layers, so every path carries gradient).
+    for (case, scaled) in [true, false].into_iter().enumerate() {
+        let mut rng = Rng::new(70 + case as u64);
+        let data = Mat::from_fn(k, 70, |i, _| (i as f64 + 1.0) * rng.range(-1.0, 1.0));
+        let scaling = scaled.then(|| InputScaling::centre_uniform(data.as_ref()));
+        let mut ae = Autoencoder::new(
+            random_mlp(&[k, 6, d], Activation::Elu, 71),
+            random_mlp(&[d, 6, k], Activation::Elu, 72),
+            scaling,
+        )
+        .unwrap()
+        .with_skip()
+        .unwrap();
+        let (enc, dec) = ae.networks_mut();
+        *enc = random_mlp(&[k, 6, d], Activation::Elu, 73);
+        *dec = random_mlp(&[d, 6, k], Activation::Elu, 74);
+        check_gradient(&ae, &data, &format!("skip, scaled {scaled}"));
+    }
 }
 
 #[test]

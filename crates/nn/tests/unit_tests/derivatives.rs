@@ -150,6 +150,105 @@ fn cached_vjp_without_forward_panics() {
     mlp.vjp_cached(&[1.0; 6], &mut [0.0; 4], &mut ws);
 }
 
+/// The decoder with the linear skip (ŝ = dec(z) + (z, 0), in scaled units) against finite
+/// differences, with and without scaling; the skip changes every derivative by an identity block.
+#[test]
+fn decoder_derivatives_with_the_linear_skip_match_finite_differences() {
+    let (k, d) = (6, 3);
+    let scaling = InputScaling::new(
+        vec![0.5, -1.0, 0.0, 2.0, 1e-3, -1e-4],
+        vec![10.0, 1.0, 0.1, 1e-2, 1e-3, 1e-4],
+    )
+    .unwrap();
+    for (case, scaling) in [Some(scaling), None].into_iter().enumerate() {
+        let mut ae = Autoencoder::new(
+            random_mlp(&[k, 5, d], Activation::Elu, 40),
+            random_mlp(&[d, 5, 4, k], Activation::Elu, 41),
+            scaling,
+        )
+        .unwrap()
+        .with_skip()
+        .unwrap();
+        // with_skip zeroes the output layers: put random ones back.
+        let (enc, dec) = ae.networks_mut();
+        *enc = random_mlp(&[k, 5, d], Activation::Elu, 42);
+        *dec = random_mlp(&[d, 5, 4, k], Activation::Elu, 43);
+        let mut ws = ae.workspace();
+        let mut rng = Rng::new(44);
+        let z = rng.vec(d);
+        let (v, w) = (rng.vec(k), rng.vec(d));
+        let mut fd_ws = ae.workspace();
+        let fd = fd_jacobian(&mut |x, y| ae.decode(x, y, &mut fd_ws), &z, k);
+        let mut jac = vec![0.0; k * d];
+        ae.decode_jacobian(&z, &mut jac, &mut ws);
+        assert!(rel_err(&jac, &fd) <= 1e-7, "case {case}: Jacobian");
+        let mut jtv = vec![0.0; d];
+        ae.decode_vjp(&z, &v, &mut jtv, &mut ws);
+        assert!(rel_err(&jtv, &jt_v(&fd, &v, d)) <= 1e-7, "case {case}: VJP");
+        let mut jw = vec![0.0; k];
+        ae.decode_jvp(&z, &w, &mut jw, &mut ws);
+        assert!(rel_err(&jw, &j_w(&fd, &w, k)) <= 1e-7, "case {case}: JVP");
+        let mut q = vec![0.0; k];
+        let mut cached = vec![0.0; d];
+        ae.decode(&z, &mut q, &mut ws);
+        ae.decode_vjp_cached(&v, &mut cached, &mut ws);
+        assert_eq!(cached, jtv, "case {case}: cached VJP");
+        // Without the skip the same networks give a different Jacobian (the skip is not a no-op).
+        let plain = Autoencoder::new(
+            ae.encoder().clone(),
+            ae.decoder().clone(),
+            ae.scaling().cloned(),
+        )
+        .unwrap();
+        let mut jp = vec![0.0; k * d];
+        plain.decode_jacobian(&z, &mut jp, &mut plain.workspace());
+        assert!(rel_err(&jp, &jac) > 1e-3, "case {case}");
+    }
+}
+
+/// A fresh skip autoencoder is the truncation to the leading d (scaled) features, and `anchor`
+/// makes a chosen point round-trip exactly.
+#[test]
+fn skip_starts_as_truncation_and_anchor_is_exact() {
+    let (k, d) = (5, 2);
+    let ae = Autoencoder::with_architecture(k, d, &[8, 8], Activation::Elu, None, 7)
+        .unwrap()
+        .with_skip()
+        .unwrap();
+    let mut ws = ae.workspace();
+    let q = [0.3, -1.2, 0.7, 2.0, -0.1];
+    let mut out = [0.0; 5];
+    ae.reconstruct(&q, &mut out, &mut ws);
+    assert_eq!(out, [0.3, -1.2, 0.0, 0.0, 0.0]);
+
+    let scaling = InputScaling::new(
+        vec![0.1, 0.2, -0.3, 0.0, 0.5],
+        vec![2.0, 1.0, 0.5, 0.1, 3.0],
+    );
+    let mut ae = Autoencoder::new(
+        random_mlp(&[k, 6, d], Activation::Elu, 8),
+        random_mlp(&[d, 6, k], Activation::Elu, 9),
+        Some(scaling.unwrap()),
+    )
+    .unwrap();
+    let rest = [0.0; 5];
+    ae.reconstruct(&rest, &mut out, &mut ae.workspace());
+    assert!(out.iter().any(|v| v.abs() > 1e-3), "{out:?}");
+    let mut other = [0.0; 5];
+    let p = [0.4, 0.1, -0.2, 0.3, 0.0];
+    ae.reconstruct(&p, &mut other, &mut ae.workspace());
+    ae.anchor(&rest);
+    let mut anchored = [0.0; 5];
+    ae.reconstruct(&rest, &mut anchored, &mut ae.workspace());
+    assert!(anchored.iter().all(|v| v.abs() <= 1e-14), "{anchored:?}");
+    // Every other point moves by the same constant −out.
+    let mut moved = [0.0; 5];
+    ae.reconstruct(&p, &mut moved, &mut ae.workspace());
+    for i in 0..k {
+        assert!((moved[i] - (other[i] - out[i])).abs() <= 1e-13);
+    }
+}
+
 #[test]
 fn decoder_derivatives_are_in_original_units() {
     let (k, d) = (6, 3);

@@ -51,6 +51,31 @@ fn expect_error(corrupt: impl FnOnce(&mut Value), needle: &str) {
 }
 
 #[test]
+fn skip_round_trips_and_version_1_loads_without_it() {
+    let mut ae = model().with_skip().unwrap();
+    let (enc, dec) = ae.networks_mut();
+    *enc = random_mlp(&[5, 8, 2], Activation::Elu, 4);
+    *dec = random_mlp(&[2, 8, 5], Activation::Elu, 5);
+    let json = serde_json::to_string(&ae).unwrap();
+    let back: Autoencoder = serde_json::from_str(&json).unwrap();
+    assert!(back.has_skip());
+    assert_eq!(back, ae);
+
+    // A version 1 artifact has no `skip` field: it loads as a plain autoencoder.
+    let mut v1 = serde_json::to_value(model()).unwrap();
+    v1["format_version"] = json!(1);
+    v1.as_object_mut().unwrap().remove("skip");
+    let old: Autoencoder = serde_json::from_value(v1.clone()).unwrap();
+    assert!(!old.has_skip());
+    v1["skip"] = json!(true);
+    let err = serde_json::from_value::<Autoencoder>(v1).unwrap_err();
+    assert!(
+        err.to_string().contains("version 1 has no linear skip"),
+        "{err}"
+    );
+}
+
+#[test]
 fn corrupted_artifacts_are_errors() {
     expect_error(|v| v["format_version"] = json!(99), "format version 99");
     expect_error(

@@ -91,6 +91,8 @@ fn early_stopping_restores_the_best_weights() {
         learning_rate: 1e-2,
         patience: 20,
         seed: 5,
+        // The returned model must be exactly the best epoch's (anchoring would move it).
+        anchor_origin: false,
         ..AutoencoderConfig::default()
     };
     let mut seen = 0;
@@ -245,6 +247,9 @@ fn a_training_step_is_adam_on_the_loss_gradient() {
         validation_fraction: 0.0,
         patience: 0,
         seed: 3,
+        // Zero-initialised output layers (the skip) give gradients at rounding level, which
+        // Adam's normalisation amplifies: this test is about the update rule on real gradients.
+        skip: false,
         ..AutoencoderConfig::default()
     };
     let step = |threads: usize| {
@@ -289,4 +294,47 @@ fn a_training_step_is_adam_on_the_loss_gradient() {
         .filter(|d| *d > 0.5e-2)
         .count();
     assert!(moved > 20_000, "only {moved} parameters moved");
+}
+
+/// With the linear skip on PCA coefficients, training starts exactly at the truncation to the
+/// leading d coefficients and ends far below it; with `anchor_origin` the origin round-trips.
+#[test]
+fn the_skip_starts_at_pca_and_the_origin_is_anchored() {
+    let x = manifold_data(600, 8);
+    // PCA coefficients: q = Vᵀx for the left singular vectors V (uncentred, as for snapshots).
+    let v = x.svd().unwrap().U().to_owned();
+    let q = v.transpose() * &x;
+    let config = AutoencoderConfig {
+        hidden: vec![32, 32],
+        epochs: 1000,
+        batch_size: 32,
+        learning_rate: 3e-3,
+        patience: 0,
+        seed: 2,
+        input_scaling: false,
+        ..AutoencoderConfig::default()
+    };
+    let start = Trainer::new(q.as_ref(), 2, &config)
+        .unwrap()
+        .model()
+        .clone();
+    let rec = start.reconstruct_batch(q.as_ref()).unwrap();
+    let truncated = Mat::from_fn(10, 600, |i, j| if i < 2 { q[(i, j)] } else { 0.0 });
+    assert_eq!(
+        rec, truncated,
+        "the skip autoencoder starts as the truncation"
+    );
+    let pca2 = mse(&truncated, &q);
+
+    let outcome = train(q.as_ref(), 2, &config, |_| {}).unwrap();
+    assert!(outcome.model.has_skip());
+    let trained = mse(&outcome.model.reconstruct_batch(q.as_ref()).unwrap(), &q);
+    assert!(
+        trained <= 0.2 * pca2,
+        "trained MSE {trained:e} is not ≤ 1/5 of the truncation's {pca2:e}"
+    );
+    let mut origin = [1.0; 10];
+    let mut ws = outcome.model.workspace();
+    outcome.model.reconstruct(&[0.0; 10], &mut origin, &mut ws);
+    assert!(origin.iter().all(|o| o.abs() <= 1e-13), "{origin:?}");
 }
