@@ -44,7 +44,7 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         every: usize,
         /// Methods to compare.
-        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
+        #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
         methods: Vec<MethodArg>,
         /// Held-out test trajectory to simulate.
         #[arg(long, default_value_t = 0)]
@@ -132,7 +132,7 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Methods to stress.
-        #[arg(long, value_enum, value_delimiter = ',', default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
+        #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
         methods: Vec<MethodArg>,
         /// Steps of the free-run condition (test trajectory, then no external force).
         #[arg(long, default_value_t = 2000)]

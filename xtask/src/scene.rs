@@ -11,7 +11,7 @@ use fem_core::forces::{ForceConfig, ForceKind};
 use fem_core::integrator::{FullSpaceModel, GravityConfig, TimeConfig};
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::{MeshConfig, ValidationReport};
-use fem_core::optim::SolverConfig;
+use fem_core::optim::{SolverConfig, SolverMethod};
 use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
 use pca::PcaConfig;
 
@@ -34,6 +34,9 @@ pub struct Scene {
     pub time: TimeConfig,
     #[serde(default)]
     pub solver: SolverConfig,
+    /// The solver of the reduced methods (pca, pca-cubature, neural, neural-cubature).
+    #[serde(default)]
+    pub reduced: ReducedSolverConfig,
     #[serde(default)]
     pub force: Vec<ForceConfig>,
     /// Generated training schedules (stage `snapshots`).
@@ -57,6 +60,41 @@ pub struct Scene {
     /// Where the scene came from, for messages.
     #[serde(skip)]
     pub source: String,
+}
+
+/// The `[reduced]` section: how the reduced methods solve each step. `[solver]` is the full-space
+/// solver's (the reference's); the reduced iteration cap is `[solver] max_iterations`, at least
+/// 100.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReducedSolverConfig {
+    /// `lbfgs` (preconditioned L-BFGS, the paper's solver) or `newton` (Gauss–Newton in z).
+    pub method: SolverMethod,
+    /// Relative gradient tolerance of each step's solve. A reduced trajectory is already a few
+    /// tenths of a percent to a few percent away from the full one, so solving each step to 1e-4
+    /// changes it far less than that while taking fewer iterations than the full solver's 1e-6.
+    pub tolerance: f64,
+}
+
+impl Default for ReducedSolverConfig {
+    fn default() -> Self {
+        Self {
+            method: SolverMethod::Lbfgs,
+            tolerance: 1e-4,
+        }
+    }
+}
+
+impl ReducedSolverConfig {
+    fn check(&self, errors: &mut Vec<FemError>) {
+        let t = self.tolerance;
+        if !(t.is_finite() && t > 0.0 && t < 1.0) {
+            errors.push(FemError::InvalidConfig {
+                field: "reduced.tolerance".into(),
+                reason: format!("must be in (0, 1), got {t}"),
+            });
+        }
+    }
 }
 
 impl Scene {
@@ -107,6 +145,7 @@ impl Scene {
         self.material.check(&mut errors);
         self.time.check(&mut errors);
         self.solver.check(&mut errors);
+        self.reduced.check(&mut errors);
         self.training().check("training", &mut errors);
         self.test().check("test", &mut errors);
         let mut cub_errors = Vec::new();

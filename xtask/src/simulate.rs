@@ -311,15 +311,23 @@ pub fn setup(
     Ok((model, time, solver))
 }
 
-/// The solver settings of `method` on `scene`.
+/// The solver settings of `method` on `scene`: `[solver]` for the full-space methods,
+/// `[reduced]` for the reduced ones.
 pub fn solver_for(scene: &Scene, method: Method) -> SolverConfig {
     let mut solver = scene.solver.clone();
-    // Reduced methods (and full-lbfgs) default to preconditioned L-BFGS (the paper's solver; their Newton
-    // Hessian costs a k×k projection over every element per iteration), with at least
-    // REDUCED_MIN_ITERATIONS iterations: quasi-Newton needs more, cheaper iterations than Newton.
-    if method != Method::Full {
-        solver.method = SolverMethod::Lbfgs;
-        solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
+    // Reduced methods (and full-lbfgs) get at least REDUCED_MIN_ITERATIONS iterations: quasi-Newton
+    // needs more, cheaper iterations than Newton.
+    match method {
+        Method::Full => {}
+        Method::FullLbfgs => {
+            solver.method = SolverMethod::Lbfgs;
+            solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
+        }
+        Method::Pca | Method::PcaCubature | Method::Neural | Method::NeuralCubature => {
+            solver.method = scene.reduced.method;
+            solver.tolerance = scene.reduced.tolerance;
+            solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
+        }
     }
     solver
 }

@@ -224,7 +224,8 @@ fn out_of_range_values_are_reported_together() {
         .replace("step = 0.01", "step = 0.0")
         .replace("frames = 10", "frames = 0")
         .replace("tolerance = 1.0e-6\n", "tolerance = 2.0\n")
-        .replace("[0.0, -9.81, 0.0]", "[0.0, nan, 0.0]");
+        .replace("[0.0, -9.81, 0.0]", "[0.0, nan, 0.0]")
+        + "\n[reduced]\ntolerance = 0.0\n";
     let err = read_error(&text);
     assert_names(
         &err,
@@ -235,12 +236,13 @@ fn out_of_range_values_are_reported_together() {
             "time.step",
             "time.frames",
             "solver.tolerance",
+            "reduced.tolerance",
             "gravity.acceleration",
         ],
     );
     assert_eq!(
         err.matches("\n  - ").count(),
-        7,
+        8,
         "one line per problem: {err}"
     );
 }
