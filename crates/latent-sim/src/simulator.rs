@@ -24,6 +24,8 @@ pub struct ReducedState {
     pub z: Vec<f64>,
     pub q: Vec<f64>,
     pub qdot: Vec<f64>,
+    /// (z_n − z_{n−1})/h: the next solve starts from z_n + h ż_n.
+    pub zdot: Vec<f64>,
 }
 
 /// Per-step statistics.
@@ -159,6 +161,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                 z,
                 q: qz,
                 qdot: vec![0.0; k],
+                zdot: vec![0.0; d],
             },
             work: Work {
                 u: vec![0.0; n],
@@ -256,7 +259,18 @@ impl<S: Subspace> ReducedSimulator<S> {
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
-        let mut z = self.state.z.clone();
+        // Warm start on the latent trajectory's tangent: the minimiser moves little from z_n + h ż_n
+        // in smooth motion (AutoDef started at z_n).
+        let mut z: Vec<f64> = if self.time.quasi_static {
+            self.state.z.clone()
+        } else {
+            self.state
+                .z
+                .iter()
+                .zip(&self.state.zdot)
+                .map(|(z, v)| z + h * v)
+                .collect()
+        };
         let inv_h2 = self.inv_h2();
         let stats: SolveStats = {
             let mut obj = StepObjective {
@@ -319,6 +333,13 @@ impl<S: Subspace> ReducedSimulator<S> {
             };
         }
         self.state.q = q_new;
+        for (v, (new, old)) in self.state.zdot.iter_mut().zip(z.iter().zip(&self.state.z)) {
+            *v = if self.time.quasi_static {
+                0.0
+            } else {
+                (new - old) / h
+            };
+        }
         self.state.z = z;
         self.state.step += 1;
         self.state.time = t;
