@@ -18,56 +18,79 @@ use crate::ReducedError;
 /// larger ones go through the parallel full-length assembly.
 pub const SERIAL_MAX_ELEMENTS: usize = 2048;
 
-/// Rows of U of a list of vertices, column-major (3n × k): entry (3i + c, j) at j·3n + 3i + c.
+/// Rows of the packed layout per panel: one panel's slice of a column fills a cache line.
+const PANEL: usize = 8;
+
+/// Rows of U of a list of vertices (3 per vertex, row 3i + c), in panels of [`PANEL`] rows:
+/// entry (r, j) at (r / PANEL)·PANEL·k + j·PANEL + r % PANEL, the last panel padded with zeros.
+/// Decode then streams through memory once with a panel of accumulators in registers, and each
+/// panel of a gradient is loaded once for all k dot products.
 #[derive(Debug, Clone)]
 pub(crate) struct PackedRows {
-    /// 3 × the number of vertices (the leading dimension).
+    /// 3 × the number of vertices.
     pub(crate) rows: usize,
-    pub(crate) data: Vec<f64>,
+    k: usize,
+    data: Vec<f64>,
 }
 
 impl PackedRows {
     fn new(vertex_rows: &[f64], k: usize, vertices: &[usize]) -> Self {
         let rows = 3 * vertices.len();
-        let mut data = vec![0.0; rows * k];
+        let mut data = vec![0.0; rows.div_ceil(PANEL) * PANEL * k];
         for (i, &v) in vertices.iter().enumerate() {
             for c in 0..3 {
                 let r = &vertex_rows[(3 * v + c) * k..(3 * v + c + 1) * k];
+                let row = 3 * i + c;
                 for (j, &x) in r.iter().enumerate() {
-                    data[j * rows + 3 * i + c] = x;
+                    data[(row / PANEL) * PANEL * k + j * PANEL + row % PANEL] = x;
                 }
             }
         }
-        Self { rows, data }
+        Self { rows, k, data }
     }
 
+    /// Entry (r, j).
     #[inline]
-    pub(crate) fn column(&self, j: usize) -> &[f64] {
-        &self.data[j * self.rows..(j + 1) * self.rows]
+    pub(crate) fn get(&self, r: usize, j: usize) -> f64 {
+        self.data[(r / PANEL) * PANEL * self.k + j * PANEL + r % PANEL]
     }
 
-    /// out = P q (out has `rows` entries).
+    /// out = P q (out has `rows` entries); each entry is the sequential sum over j.
     fn apply(&self, q: &[f64], out: &mut [f64]) {
-        out.fill(0.0);
-        for (j, &qj) in q.iter().enumerate() {
-            axpy(qj, self.column(j), out);
+        let k = self.k;
+        for (panel, o) in self.data.chunks_exact(PANEL * k).zip(out.chunks_mut(PANEL)) {
+            let mut acc = [0.0f64; PANEL];
+            for (c, &qj) in panel.chunks_exact(PANEL).zip(q) {
+                for i in 0..PANEL {
+                    acc[i] += c[i] * qj;
+                }
+            }
+            o.copy_from_slice(&acc[..o.len()]);
         }
     }
 
     /// out_j += (column j)ᵀ g over the first g.len() rows.
     fn apply_transpose_add(&self, g: &[f64], out: &mut [f64]) {
-        let m = g.len();
-        for (j, o) in out.iter_mut().enumerate() {
-            *o += dot(&self.column(j)[..m], g);
+        let k = self.k;
+        for (panel, gp) in self.data.chunks_exact(PANEL * k).zip(g.chunks(PANEL)) {
+            let mut g8 = [0.0f64; PANEL];
+            g8[..gp.len()].copy_from_slice(gp);
+            for (c, o) in panel.chunks_exact(PANEL).zip(out.iter_mut()) {
+                let p: [f64; PANEL] = std::array::from_fn(|i| c[i] * g8[i]);
+                *o += ((p[0] + p[4]) + (p[1] + p[5])) + ((p[2] + p[6]) + (p[3] + p[7]));
+            }
         }
     }
 
     /// Pᵀ P (k×k, column-major).
-    fn gram(&self, k: usize) -> Vec<f64> {
+    fn gram(&self) -> Vec<f64> {
+        let k = self.k;
         let mut out = vec![0.0; k * k];
         for b in 0..k {
             for a in 0..k {
-                out[b * k + a] = dot(self.column(a), self.column(b));
+                out[b * k + a] = (0..self.rows)
+                    .map(|r| self.get(r, a) * self.get(r, b))
+                    .sum();
             }
         }
         out
@@ -181,7 +204,7 @@ impl ReducedSpace {
             .iter()
             .map(|f| PackedRows::new(&rows, k, &f.vertices))
             .collect();
-        let force_gram = force_rows.iter().map(|p| p.gram(k)).collect();
+        let force_gram = force_rows.iter().map(PackedRows::gram).collect();
         let mut space = Self {
             k,
             rows,

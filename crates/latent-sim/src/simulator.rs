@@ -615,7 +615,7 @@ impl<S: Subspace> StepObjective<'_, S> {
 
     /// Decodes z into work.u and forms the parts of the Newton matrix that do not depend on the
     /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and U J on the
-    /// element rows (work.uj, unless J is the identity).
+    /// element rows (work.uj, 3·n × d column-major).
     fn newton_matrix_constant(&mut self, z: &[f64]) {
         let (model, space) = (self.model, self.space);
         let (k, d) = (space.k, self.subspace.latent_dim());
@@ -628,16 +628,19 @@ impl<S: Subspace> StepObjective<'_, S> {
             *a = self.inv_h2 * space.mass[i] + springs[i];
         }
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
-        if !is_identity(&w.jac, k, d) {
-            let m = space.element_rows();
-            w.uj.resize(m * d, 0.0);
+        let m = space.element_rows();
+        w.uj.resize(m * d, 0.0);
+        let packed = &space.packed;
+        if is_identity(&w.jac, k, d) {
             for (j, col) in w.uj.chunks_exact_mut(m).enumerate() {
-                col.fill(0.0);
-                for l in 0..k {
-                    let jl = w.jac[j * k + l];
-                    if jl != 0.0 {
-                        axpy(jl, &space.packed.column(l)[..m], col);
-                    }
+                for (r, x) in col.iter_mut().enumerate() {
+                    *x = packed.get(r, j);
+                }
+            }
+        } else {
+            for (j, col) in w.uj.chunks_exact_mut(m).enumerate() {
+                for (r, x) in col.iter_mut().enumerate() {
+                    *x = (0..k).map(|l| packed.get(r, l) * w.jac[j * k + l]).sum();
                 }
             }
         }
@@ -647,13 +650,9 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// that costs 12·12·d + 12·d² per element instead of 12·12·k + 12·k² and a k×k sandwich.
     fn newton_matrix(&mut self, projected: bool) {
         let (model, space) = (self.model, self.space);
-        let (k, d) = (space.k, self.subspace.latent_dim());
+        let d = self.subspace.latent_dim();
         let w = &mut *self.work;
-        let (uj, ld): (&[f64], usize) = if is_identity(&w.jac, k, d) {
-            (&space.packed.data, space.packed.rows)
-        } else {
-            (&w.uj, space.element_rows())
-        };
+        let (uj, ld) = (&w.uj, space.element_rows());
         w.hz.copy_from_slice(&w.hz_const);
         let (u, uj_e, huj_e, hz) = (&w.u, &mut w.uj_e, &mut w.huj_e, &mut w.hz);
         with_material!(&model.material, |material| {
