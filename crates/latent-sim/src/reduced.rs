@@ -19,7 +19,7 @@ use crate::ReducedError;
 pub const SERIAL_MAX_ELEMENTS: usize = 2048;
 
 /// Rows of the packed layout per panel: one panel's slice of a column fills a cache line.
-const PANEL: usize = 8;
+pub(crate) const PANEL: usize = 8;
 
 /// Rows of U of a list of vertices (3 per vertex, row 3i + c), in panels of [`PANEL`] rows:
 /// entry (r, j) at (r / PANEL)·PANEL·k + j·PANEL + r % PANEL, the last panel padded with zeros.
@@ -53,6 +53,12 @@ impl PackedRows {
     #[inline]
     pub(crate) fn get(&self, r: usize, j: usize) -> f64 {
         self.data[(r / PANEL) * PANEL * self.k + j * PANEL + r % PANEL]
+    }
+
+    /// The panels in row order, each PANEL·k entries (column j at j·PANEL).
+    #[inline]
+    pub(crate) fn panels(&self) -> std::slice::ChunksExact<'_, f64> {
+        self.data.chunks_exact(PANEL * self.k)
     }
 
     /// out = P q (out has `rows` entries); each entry is the sequential sum over j.

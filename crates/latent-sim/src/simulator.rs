@@ -11,7 +11,7 @@ use fem_core::optim::{
 };
 use fem_core::with_material;
 
-use crate::reduced::{ReducedSpace, SpaceBuffers, axpy, dot};
+use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
 use crate::{ReducedError, Subspace};
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
@@ -630,18 +630,21 @@ impl<S: Subspace> StepObjective<'_, S> {
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
         let m = space.element_rows();
         w.uj.resize(m * d, 0.0);
-        let packed = &space.packed;
-        if is_identity(&w.jac, k, d) {
-            for (j, col) in w.uj.chunks_exact_mut(m).enumerate() {
-                for (r, x) in col.iter_mut().enumerate() {
-                    *x = packed.get(r, j);
-                }
+        // Panel by panel: 8 rows of U J from one pass over the panel (J = I copies exactly).
+        for (p, panel) in space.packed.panels().enumerate() {
+            let r0 = p * PANEL;
+            if r0 >= m {
+                break;
             }
-        } else {
-            for (j, col) in w.uj.chunks_exact_mut(m).enumerate() {
-                for (r, x) in col.iter_mut().enumerate() {
-                    *x = (0..k).map(|l| packed.get(r, l) * w.jac[j * k + l]).sum();
+            let rows = PANEL.min(m - r0);
+            for j in 0..d {
+                let mut acc = [0.0f64; PANEL];
+                for (c, &jl) in panel.chunks_exact(PANEL).zip(&w.jac[j * k..(j + 1) * k]) {
+                    for i in 0..PANEL {
+                        acc[i] += c[i] * jl;
+                    }
                 }
+                w.uj[j * m + r0..j * m + r0 + rows].copy_from_slice(&acc[..rows]);
             }
         }
     }
@@ -694,14 +697,6 @@ impl<S: Subspace> StepObjective<'_, S> {
             }
         });
     }
-}
-
-/// Whether the k×d matrix `j` (column-major) is the identity.
-fn is_identity(j: &[f64], k: usize, d: usize) -> bool {
-    k == d
-        && j.iter()
-            .enumerate()
-            .all(|(i, &x)| x == if i % (k + 1) == 0 { 1.0 } else { 0.0 })
 }
 
 impl<S: Subspace> Objective for StepObjective<'_, S> {
