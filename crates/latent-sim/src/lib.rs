@@ -15,7 +15,7 @@ mod simulator;
 mod subspace;
 
 pub use neural::NeuralSubspace;
-pub use reduced::ReducedSpace;
+pub use reduced::{ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
 pub use simulator::{ReducedEnergy, ReducedSimulator, ReducedState, ReducedStepReport};
 pub use subspace::{LinearSubspace, Subspace};
 

@@ -1,5 +1,10 @@
 //! The reduced space of a model: rows of the basis U per vertex and the projected constant
 //! matrices, plus partial decode and projection over the vertices an element set touches.
+//!
+//! The rows of the touched vertices are also kept packed, column-major (3·n_touched × k), so that
+//! the partial decode u_t = U_t q is k contiguous axpys and the projection U_tᵀ g is k dot
+//! products with independent accumulators: both vectorise, where a dot per row is one dependent
+//! chain of adds.
 
 use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::FIXED;
@@ -8,6 +13,105 @@ use fem_core::material::Material;
 use fem_core::{Mat3, with_material};
 
 use crate::ReducedError;
+
+/// Weighted sets up to this many elements are evaluated serially over the touched entries only;
+/// larger ones go through the parallel full-length assembly.
+pub const SERIAL_MAX_ELEMENTS: usize = 2048;
+
+/// Rows of the packed layout per panel: one panel's slice of a column fills a cache line.
+pub(crate) const PANEL: usize = 8;
+
+/// Rows of U of a list of vertices (3 per vertex, row 3i + c), in panels of [`PANEL`] rows:
+/// entry (r, j) at (r / PANEL)·PANEL·k + j·PANEL + r % PANEL, the last panel padded with zeros.
+/// Decode then streams through memory once with a panel of accumulators in registers, and each
+/// panel of a gradient is loaded once for all k dot products.
+#[derive(Debug, Clone)]
+pub(crate) struct PackedRows {
+    /// 3 × the number of vertices.
+    pub(crate) rows: usize,
+    k: usize,
+    data: Vec<f64>,
+}
+
+impl PackedRows {
+    fn new(vertex_rows: &[f64], k: usize, vertices: &[usize]) -> Self {
+        let rows = 3 * vertices.len();
+        let mut data = vec![0.0; rows.div_ceil(PANEL) * PANEL * k];
+        for (i, &v) in vertices.iter().enumerate() {
+            for c in 0..3 {
+                let r = &vertex_rows[(3 * v + c) * k..(3 * v + c + 1) * k];
+                let row = 3 * i + c;
+                for (j, &x) in r.iter().enumerate() {
+                    data[(row / PANEL) * PANEL * k + j * PANEL + row % PANEL] = x;
+                }
+            }
+        }
+        Self { rows, k, data }
+    }
+
+    /// Entry (r, j).
+    #[inline]
+    pub(crate) fn get(&self, r: usize, j: usize) -> f64 {
+        self.data[(r / PANEL) * PANEL * self.k + j * PANEL + r % PANEL]
+    }
+
+    /// The panels in row order, each PANEL·k entries (column j at j·PANEL).
+    #[inline]
+    pub(crate) fn panels(&self) -> std::slice::ChunksExact<'_, f64> {
+        self.data.chunks_exact(PANEL * self.k)
+    }
+
+    /// out = P q (out has `rows` entries); each entry is the sequential sum over j.
+    fn apply(&self, q: &[f64], out: &mut [f64]) {
+        let k = self.k;
+        for (panel, o) in self.data.chunks_exact(PANEL * k).zip(out.chunks_mut(PANEL)) {
+            let mut acc = [0.0f64; PANEL];
+            for (c, &qj) in panel.chunks_exact(PANEL).zip(q) {
+                for i in 0..PANEL {
+                    acc[i] += c[i] * qj;
+                }
+            }
+            o.copy_from_slice(&acc[..o.len()]);
+        }
+    }
+
+    /// out_j += (column j)ᵀ g over the first g.len() rows.
+    fn apply_transpose_add(&self, g: &[f64], out: &mut [f64]) {
+        let k = self.k;
+        for (panel, gp) in self.data.chunks_exact(PANEL * k).zip(g.chunks(PANEL)) {
+            let mut g8 = [0.0f64; PANEL];
+            g8[..gp.len()].copy_from_slice(gp);
+            for (c, o) in panel.chunks_exact(PANEL).zip(out.iter_mut()) {
+                let p: [f64; PANEL] = std::array::from_fn(|i| c[i] * g8[i]);
+                *o += ((p[0] + p[4]) + (p[1] + p[5])) + ((p[2] + p[6]) + (p[3] + p[7]));
+            }
+        }
+    }
+
+    /// Pᵀ P (k×k, column-major).
+    fn gram(&self) -> Vec<f64> {
+        let k = self.k;
+        let mut out = vec![0.0; k * k];
+        for b in 0..k {
+            for a in 0..k {
+                out[b * k + a] = (0..self.rows)
+                    .map(|r| self.get(r, a) * self.get(r, b))
+                    .sum();
+            }
+        }
+        out
+    }
+}
+
+/// Scratch of the partial decode and projection, sized by [`ReducedSpace::buffers`].
+#[derive(Debug, Default)]
+pub struct SpaceBuffers {
+    /// Packed touched values (decoded displacement, then gradients), 3 per touched vertex.
+    packed: Vec<f64>,
+    /// The packed gradient of one force, 3 per vertex of the largest force.
+    force: Vec<f64>,
+    assembly: AssemblyBuffers,
+}
 
 /// Basis rows, reduced mass / rest stiffness / gravity, and the element set with its vertices.
 #[derive(Debug, Clone)]
@@ -25,8 +129,21 @@ pub struct ReducedSpace {
     /// Elements evaluated and their weights (all elements, weight 1, without cubature).
     pub elements: Vec<usize>,
     pub weights: Vec<f64>,
-    /// Vertices of those elements and of the external forces: the only rows ever decoded.
+    /// Vertices of those elements and of the external forces: the only rows ever decoded. The
+    /// vertices of the elements come first (sorted), then those only forces touch (sorted).
     pub touched: Vec<usize>,
+    /// How many of `touched` are vertices of the elements.
+    element_vertices: usize,
+    /// For each element of the set, the positions of its four vertices in `touched`.
+    element_touched: Vec<[u32; 4]>,
+    /// The rows of `touched`, packed.
+    pub(crate) packed: PackedRows,
+    /// The rows of each force's vertices, packed, and their Gram matrix Σ_v U_vᵀU_v (k×k).
+    force_rows: Vec<PackedRows>,
+    pub(crate) force_gram: Vec<Vec<f64>>,
+    /// Weighted sets of at most this many elements take the serial path (see
+    /// [`SERIAL_MAX_ELEMENTS`]); both paths give bit-identical results.
+    pub serial_max_elements: usize,
 }
 
 impl ReducedSpace {
@@ -66,10 +183,34 @@ impl ReducedSpace {
         let mut touched: Vec<usize> = elements
             .iter()
             .flat_map(|&e| model.elements.tets[e])
-            .chain(model.forces.iter().flat_map(|f| f.vertices.iter().copied()))
             .collect();
         touched.sort_unstable();
         touched.dedup();
+        let element_vertices = touched.len();
+        let mut position = vec![u32::MAX; nv];
+        for (i, &v) in touched.iter().enumerate() {
+            position[v] = i as u32;
+        }
+        let mut force_only: Vec<usize> = model
+            .forces
+            .iter()
+            .flat_map(|f| f.vertices.iter().copied())
+            .filter(|&v| position[v] == u32::MAX)
+            .collect();
+        force_only.sort_unstable();
+        force_only.dedup();
+        touched.extend(force_only);
+        let element_touched = elements
+            .iter()
+            .map(|&e| model.elements.tets[e].map(|v| position[v]))
+            .collect();
+        let packed = PackedRows::new(&rows, k, &touched);
+        let force_rows: Vec<PackedRows> = model
+            .forces
+            .iter()
+            .map(|f| PackedRows::new(&rows, k, &f.vertices))
+            .collect();
+        let force_gram = force_rows.iter().map(PackedRows::gram).collect();
         let mut space = Self {
             k,
             rows,
@@ -79,6 +220,12 @@ impl ReducedSpace {
             elements,
             weights,
             touched,
+            element_vertices,
+            element_touched,
+            packed,
+            force_rows,
+            force_gram,
+            serial_max_elements: SERIAL_MAX_ELEMENTS,
         };
         // UᵀMU and Uᵀf_g from the full mass matrix, one basis column at a time.
         let n = model.num_full();
@@ -107,90 +254,142 @@ impl ReducedSpace {
         Ok(space)
     }
 
+    /// Work buffers for [`Self::decode_touched`] and [`Self::elastic_energy_gradient`].
+    pub fn buffers(&self) -> SpaceBuffers {
+        let largest = self.force_rows.iter().map(|p| p.rows).max().unwrap_or(0);
+        SpaceBuffers {
+            packed: vec![0.0; self.packed.rows],
+            force: vec![0.0; largest],
+            assembly: AssemblyBuffers::default(),
+        }
+    }
+
     /// The 3×k rows of U for vertex `v`, row-major.
     #[inline]
     pub fn vertex_rows(&self, v: usize) -> &[f64] {
         &self.rows[v * 3 * self.k..(v + 1) * 3 * self.k]
     }
 
-    /// u_v = U_v q for the touched vertices only (other entries of `u` are left alone).
-    pub fn decode_touched(&self, q: &[f64], u: &mut [f64]) {
-        for &v in &self.touched {
-            self.decode_vertex(v, q, u);
-        }
+    /// Rows of the element vertices in the packed order (3 per vertex).
+    #[inline]
+    pub(crate) fn element_rows(&self) -> usize {
+        3 * self.element_vertices
     }
 
+    /// The positions in `touched` of each element's vertices.
     #[inline]
-    fn decode_vertex(&self, v: usize, q: &[f64], u: &mut [f64]) {
-        let r = self.vertex_rows(v);
-        let k = self.k;
-        for c in 0..3 {
-            u[3 * v + c] = dot(&r[c * k..(c + 1) * k], q);
+    pub(crate) fn element_touched(&self) -> &[[u32; 4]] {
+        &self.element_touched
+    }
+
+    /// u_v = U_v q for the touched vertices only (other entries of `u` are left alone).
+    pub fn decode_touched(&self, q: &[f64], u: &mut [f64], buf: &mut SpaceBuffers) {
+        let ut = &mut buf.packed;
+        self.packed.apply(q, ut);
+        for (&v, x) in self.touched.iter().zip(ut.chunks_exact(3)) {
+            u[3 * v..3 * v + 3].copy_from_slice(x);
         }
     }
 
     /// The full displacement u = Uq (for output frames).
     pub fn reconstruct(&self, q: &[f64], u: &mut [f64]) {
+        let k = self.k;
         for v in 0..u.len() / 3 {
-            self.decode_vertex(v, q, u);
-        }
-    }
-
-    /// out = Σ_v U_vᵀ g_v over the touched vertices.
-    pub fn project_touched(&self, g: &[f64], out: &mut [f64]) {
-        out.fill(0.0);
-        let k = self.k;
-        for &v in &self.touched {
             let r = self.vertex_rows(v);
             for c in 0..3 {
-                let gv = g[3 * v + c];
-                if gv != 0.0 {
-                    for (o, u) in out.iter_mut().zip(&r[c * k..(c + 1) * k]) {
-                        *o += u * gv;
-                    }
-                }
+                u[3 * v + c] = dot(&r[c * k..(c + 1) * k], q);
             }
         }
     }
 
-    /// out += Σ_v U_vᵀ g_v over `vertices`.
-    pub fn project_vertices_add(&self, g: &[f64], vertices: &[usize], out: &mut [f64]) {
-        let k = self.k;
-        for &v in vertices {
-            let r = self.vertex_rows(v);
-            for c in 0..3 {
-                let gv = g[3 * v + c];
-                for (o, u) in out.iter_mut().zip(&r[c * k..(c + 1) * k]) {
-                    *o += u * gv;
-                }
-            }
+    /// out += Σ_v U_vᵀ g_v over the vertices of force `force` (g full length).
+    pub fn project_force_add(
+        &self,
+        model: &FullSpaceModel,
+        force: usize,
+        g: &[f64],
+        out: &mut [f64],
+        buf: &mut SpaceBuffers,
+    ) {
+        let vertices = &model.forces[force].vertices;
+        let gf = &mut buf.force[..3 * vertices.len()];
+        for (&v, x) in vertices.iter().zip(gf.chunks_exact_mut(3)) {
+            x.copy_from_slice(&g[3 * v..3 * v + 3]);
         }
+        self.force_rows[force].apply_transpose_add(gf, out);
     }
 
-    /// Weighted elastic energy over the element set and its gradient ∂V/∂q (into `grad_q`).
-    /// `u` must hold the decoded touched rows; `grad_full` is scratch of full length.
+    /// Weighted elastic energy over the element set and its gradient ∂V/∂q (into `grad_q`);
+    /// `+∞` when some element's energy is undefined. `u` must hold the decoded touched rows;
+    /// `grad_full` is scratch of full length (used by large sets only).
+    ///
+    /// Small sets (cubature rules) run serially and touch only the entries of their vertices;
+    /// large ones use the parallel assembly. Each gradient entry and the energy are the same
+    /// sums in the same (element) order either way.
     pub fn elastic_energy_gradient(
         &self,
         model: &FullSpaceModel,
         u: &[f64],
         grad_full: &mut [f64],
         grad_q: &mut [f64],
-        buf: &mut AssemblyBuffers,
+        buf: &mut SpaceBuffers,
     ) -> f64 {
-        let set = ElementSet::Weighted {
-            indices: &self.elements,
-            weights: &self.weights,
+        let m = self.element_rows();
+        let gt = &mut buf.packed[..m];
+        let energy = if self.elements.len() <= self.serial_max_elements {
+            with_material!(&model.material, |mat| self
+                .elastic_serial(model, mat, u, gt))
+        } else {
+            let set = ElementSet::Weighted {
+                indices: &self.elements,
+                weights: &self.weights,
+            };
+            let e = with_material!(&model.material, |mat| assembly::energy_gradient(
+                mat,
+                &model.elements,
+                set,
+                u,
+                grad_full,
+                &mut buf.assembly
+            ));
+            for (&v, x) in self.touched.iter().zip(gt.chunks_exact_mut(3)) {
+                x.copy_from_slice(&grad_full[3 * v..3 * v + 3]);
+            }
+            e
         };
-        let e = with_material!(&model.material, |m| assembly::energy_gradient(
-            m,
-            &model.elements,
-            set,
-            u,
-            grad_full,
-            buf
-        ));
-        self.project_touched(grad_full, grad_q);
-        e
+        grad_q.fill(0.0);
+        self.packed.apply_transpose_add(gt, grad_q);
+        energy
+    }
+
+    /// Energy of the set and its gradient in packed order (`gt`, 3 per element vertex).
+    fn elastic_serial<M: Material>(
+        &self,
+        model: &FullSpaceModel,
+        material: &M,
+        u: &[f64],
+        gt: &mut [f64],
+    ) -> f64 {
+        gt.fill(0.0);
+        let mut energy = 0.0;
+        let mut undefined = false;
+        for ((&e, &w), at) in self
+            .elements
+            .iter()
+            .zip(&self.weights)
+            .zip(&self.element_touched)
+        {
+            let (psi_w, g, _) = model.elements.energy_gradient(material, e, u, w);
+            undefined |= psi_w.is_nan();
+            energy += psi_w;
+            for a in 0..4 {
+                let p = 3 * at[a] as usize;
+                for i in 0..3 {
+                    gt[p + i] += g[3 * a + i];
+                }
+            }
+        }
+        if undefined { f64::INFINITY } else { energy }
     }
 
     /// Σ_e w_e U_eᵀ H_e U_e over `elements` at displacement `u` (H_e projected when asked),
@@ -229,9 +428,7 @@ impl ReducedSpace {
                 dst.fill(0.0);
                 for (l, &hv) in hrow.iter().enumerate() {
                     if hv != 0.0 {
-                        for (d, s) in dst.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
-                            *d += hv * s;
-                        }
+                        axpy(hv, &ue[l * k..(l + 1) * k], dst);
                     }
                 }
             }
@@ -241,9 +438,7 @@ impl ReducedSpace {
                 for b in 0..k {
                     let hb = hrow[b];
                     if hb != 0.0 {
-                        for a2 in 0..k {
-                            out[b * k + a2] += urow[a2] * hb;
-                        }
+                        axpy(hb, urow, &mut out[b * k..(b + 1) * k]);
                     }
                 }
             }
@@ -252,6 +447,31 @@ impl ReducedSpace {
     }
 }
 
+/// aᵀb with eight independent accumulators (vectorisable; the order of the sum differs from
+/// the sequential one only by rounding).
+#[inline]
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let mut acc = [0.0f64; 8];
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    let mut s = ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
+    for (x, y) in ra.iter().zip(rb) {
+        s += x * y;
+    }
+    s
+}
+
+/// y += a x.
+#[inline]
+pub(crate) fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
+    for (y, x) in y.iter_mut().zip(x) {
+        *y += a * x;
+    }
 }

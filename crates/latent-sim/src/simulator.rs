@@ -2,18 +2,16 @@
 
 use std::time::Instant;
 
-use faer::Side;
-use faer::linalg::solvers::Solve;
 use fem_core::FemError;
-use fem_core::assembly::AssemblyBuffers;
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
+use fem_core::material::Material;
 use fem_core::optim::{
     Lbfgs, NewtonSystem, Objective, Preconditioner, SolveParams, SolveStats, SolverConfig,
     SolverMethod, newton,
 };
 use fem_core::with_material;
 
-use crate::reduced::{ReducedSpace, dot};
+use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
 use crate::{ReducedError, Subspace};
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
@@ -65,37 +63,118 @@ struct Timers {
     vjp: f64,
 }
 
-/// Dense SPD factor used as a preconditioner (z = P⁻¹ r).
-#[derive(Debug)]
-struct DenseFactor(faer::linalg::solvers::Llt<f64>);
+/// Dense Cholesky factor L (lower, column-major) of a symmetric d×d matrix, reused between
+/// factorisations so that refactorising allocates nothing. Also the preconditioner z = P⁻¹ r.
+#[derive(Debug, Default)]
+struct DenseFactor {
+    n: usize,
+    l: Vec<f64>,
+}
 
 impl Preconditioner for DenseFactor {
     fn apply(&mut self, r: &[f64], z: &mut [f64]) {
         z.copy_from_slice(r);
-        let n = z.len();
-        self.0
-            .solve_in_place(faer::MatMut::from_column_major_slice_mut(z, n, 1));
+        self.solve_in_place(z);
     }
 }
 
-/// Factorises a symmetric d×d matrix (column-major), adding a growing diagonal shift when it is
-/// only semidefinite.
-fn factor_dense(a: &[f64], d: usize, what: &'static str) -> Result<DenseFactor, ReducedError> {
-    let mean = (0..d).map(|i| a[i * d + i].abs()).sum::<f64>() / d.max(1) as f64;
-    let mut shift = 0.0;
-    for _ in 0..12 {
-        let m =
-            faer::Mat::<f64>::from_fn(d, d, |i, j| a[j * d + i] + if i == j { shift } else { 0.0 });
-        if let Ok(llt) = m.llt(Side::Lower) {
-            return Ok(DenseFactor(llt));
+impl DenseFactor {
+    /// Cholesky of a + shift·I from the lower triangle of `a`; false when a pivot is not
+    /// positive (or not finite).
+    fn try_factor(&mut self, a: &[f64], n: usize, shift: f64) -> bool {
+        self.n = n;
+        self.l.clear();
+        self.l.resize(n * n, 0.0);
+        let l = &mut self.l;
+        for j in 0..n {
+            let mut djj = a[j * n + j] + shift;
+            for p in 0..j {
+                djj -= l[p * n + j] * l[p * n + j];
+            }
+            if !(djj > 0.0 && djj.is_finite()) {
+                return false;
+            }
+            let ljj = djj.sqrt();
+            l[j * n + j] = ljj;
+            for i in j + 1..n {
+                let mut s = a[j * n + i];
+                for p in 0..j {
+                    s -= l[p * n + i] * l[p * n + j];
+                }
+                l[j * n + i] = s / ljj;
+            }
         }
-        shift = if shift == 0.0 {
-            1e-12 * mean.max(f64::MIN_POSITIVE)
-        } else {
-            shift * 10.0
-        };
+        true
     }
-    Err(ReducedError::NotPositiveDefinite { what })
+
+    /// Factorises, adding a growing diagonal shift when `a` is only semidefinite.
+    fn factor(&mut self, a: &[f64], d: usize, what: &'static str) -> Result<(), ReducedError> {
+        let mean = (0..d).map(|i| a[i * d + i].abs()).sum::<f64>() / d.max(1) as f64;
+        let mut shift = 0.0;
+        for _ in 0..12 {
+            if self.try_factor(a, d, shift) {
+                return Ok(());
+            }
+            shift = if shift == 0.0 {
+                1e-12 * mean.max(f64::MIN_POSITIVE)
+            } else {
+                shift * 10.0
+            };
+        }
+        Err(ReducedError::NotPositiveDefinite { what })
+    }
+
+    /// x ← (LLᵀ)⁻¹ x.
+    fn solve_in_place(&self, x: &mut [f64]) {
+        let (n, l) = (self.n, &self.l);
+        for j in 0..n {
+            x[j] /= l[j * n + j];
+            let xj = x[j];
+            for i in j + 1..n {
+                x[i] -= l[j * n + i] * xj;
+            }
+        }
+        for j in (0..n).rev() {
+            let s = dot(&l[j * n + j + 1..(j + 1) * n], &x[j + 1..]);
+            x[j] = (x[j] - s) / l[j * n + j];
+        }
+    }
+}
+
+/// Σ_f k_f/n_f Σ_v U_vᵀU_v over the springs active at the time it was updated for (k×k): the
+/// springs' constant Hessian in q, rebuilt only when a force switches on or off.
+#[derive(Debug, Default)]
+struct SpringTerm {
+    active: Vec<bool>,
+    valid: bool,
+    matrix: Vec<f64>,
+}
+
+impl SpringTerm {
+    fn update(&mut self, model: &FullSpaceModel, space: &ReducedSpace, t: f64) -> &[f64] {
+        let same = self.valid
+            && model
+                .forces
+                .iter()
+                .map(|f| f.is_active(t))
+                .eq(self.active.iter().copied());
+        if !same {
+            let k = space.k;
+            self.active.clear();
+            self.active
+                .extend(model.forces.iter().map(|f| f.is_active(t)));
+            self.matrix.clear();
+            self.matrix.resize(k * k, 0.0);
+            for (f, gram) in model.forces.iter().zip(&space.force_gram) {
+                if f.is_active(t) && f.stiffness > 0.0 {
+                    let s = f.stiffness / f.vertices.len() as f64;
+                    axpy(s, gram, &mut self.matrix);
+                }
+            }
+            self.valid = true;
+        }
+        &self.matrix
+    }
 }
 
 /// Implicit Euler in a subspace.
@@ -109,9 +188,13 @@ pub struct ReducedSimulator<S: Subspace> {
     pub state: ReducedState,
     work: Work,
     lbfgs: Lbfgs,
-    /// For a linear subspace the preconditioner only changes when a force switches on or off:
-    /// it is factorised for the active set recorded beside it.
-    fixed_precond: Option<(Vec<bool>, DenseFactor)>,
+    /// The factorised preconditioner. For a linear subspace it only changes when a force
+    /// switches on or off: `precond_active` records the active set it was built for.
+    precond: DenseFactor,
+    precond_active: Option<Vec<bool>>,
+    /// The next z and q while a step solves (swapped with the state after it).
+    next_z: Vec<f64>,
+    next_q: Vec<f64>,
 }
 
 /// Reusable buffers of one step.
@@ -122,9 +205,25 @@ struct Work {
     q: Vec<f64>,
     grad_q: Vec<f64>,
     tmp_q: Vec<f64>,
+    /// (UᵀMU)(q − q̃).
+    mass_q: Vec<f64>,
     predicted: Vec<f64>,
     jac: Vec<f64>,
-    buffers: AssemblyBuffers,
+    space: SpaceBuffers,
+    springs: SpringTerm,
+    /// A k×k matrix in q (preconditioner or the constant part of the Newton matrix).
+    hk: Vec<f64>,
+    /// k×d scratch of the sandwich JᵀAJ.
+    ab: Vec<f64>,
+    /// d×d: the preconditioner or Newton matrix, and the Newton matrix's constant part.
+    hz: Vec<f64>,
+    hz_const: Vec<f64>,
+    /// U J on the rows of the element vertices (3·n × d, column-major), and one element's 12
+    /// rows of it and of H_e U_e J (row-major 12×d).
+    uj: Vec<f64>,
+    uj_e: Vec<f64>,
+    huj_e: Vec<f64>,
+    newton: DenseFactor,
     timers: Timers,
 }
 
@@ -169,13 +268,26 @@ impl<S: Subspace> ReducedSimulator<S> {
                 q: vec![0.0; k],
                 grad_q: vec![0.0; k],
                 tmp_q: vec![0.0; k],
+                mass_q: vec![0.0; k],
                 predicted: vec![0.0; k],
                 jac: vec![0.0; k * d],
-                buffers: AssemblyBuffers::default(),
+                space: space.buffers(),
+                springs: SpringTerm::default(),
+                hk: vec![0.0; k * k],
+                ab: vec![0.0; k * d],
+                hz: vec![0.0; d * d],
+                hz_const: vec![0.0; d * d],
+                uj: Vec::new(),
+                uj_e: vec![0.0; 12 * d],
+                huj_e: vec![0.0; 12 * d],
+                newton: DenseFactor::default(),
                 timers: Timers::default(),
             },
             lbfgs: Lbfgs::new(d, solver.lbfgs_memory),
-            fixed_precond: None,
+            precond: DenseFactor::default(),
+            precond_active: None,
+            next_z: vec![0.0; d],
+            next_q: vec![0.0; k],
             model,
             space,
             subspace,
@@ -185,37 +297,20 @@ impl<S: Subspace> ReducedSimulator<S> {
         Ok(sim)
     }
 
-    /// Jᵀ (UᵀK₀U + UᵀMU/h² + Σ k_s/n U_vᵀU_v) J at the current z (d×d, column-major): every
-    /// constant quadratic term of the step energy, including the springs active at time `t`
-    /// (a stiff spring left out of the preconditioner stalls L-BFGS along its direction).
-    fn preconditioner_matrix(&mut self, t: f64) -> Vec<f64> {
+    /// Jᵀ (UᵀK₀U + UᵀMU/h² + Σ k_s/n U_vᵀU_v) J at the current z (d×d, column-major, into
+    /// `work.hz`): every constant quadratic term of the step energy, including the springs
+    /// active at time `t` (a stiff spring left out of the preconditioner stalls L-BFGS along its
+    /// direction).
+    fn preconditioner_matrix(&mut self, t: f64) {
         let (k, d) = (self.space.k, self.subspace.latent_dim());
         let inv_h2 = self.inv_h2();
-        let mut a: Vec<f64> = self
-            .space
-            .rest_stiffness
-            .iter()
-            .zip(&self.space.mass)
-            .map(|(kk, m)| kk + inv_h2 * m)
-            .collect();
-        for f in &self.model.forces {
-            if f.is_active(t) && f.stiffness > 0.0 {
-                let s = f.stiffness / f.vertices.len() as f64;
-                for &v in &f.vertices {
-                    let r = self.space.vertex_rows(v);
-                    for c in 0..3 {
-                        let row = &r[c * k..(c + 1) * k];
-                        for b in 0..k {
-                            for i in 0..k {
-                                a[b * k + i] += s * row[i] * row[b];
-                            }
-                        }
-                    }
-                }
-            }
+        let w = &mut self.work;
+        let springs = w.springs.update(&self.model, &self.space, t);
+        for (i, a) in w.hk.iter_mut().enumerate() {
+            *a = (self.space.rest_stiffness[i] + inv_h2 * self.space.mass[i]) + springs[i];
         }
-        self.subspace.jacobian(&self.state.z, &mut self.work.jac);
-        sandwich(&a, &self.work.jac, k, d)
+        self.subspace.jacobian(&self.state.z, &mut w.jac);
+        sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz);
     }
 
     fn inv_h2(&self) -> f64 {
@@ -240,37 +335,36 @@ impl<S: Subspace> ReducedSimulator<S> {
             step: self.state.step + 1,
         };
         let pstart = Instant::now();
-        let mut varying = None;
         if self.solver.method == SolverMethod::Lbfgs {
             let d = self.subspace.latent_dim();
-            if self.subspace.is_linear() {
-                let active: Vec<bool> = self.model.forces.iter().map(|f| f.is_active(t)).collect();
-                if self
-                    .fixed_precond
-                    .as_ref()
-                    .is_none_or(|(a, _)| *a != active)
-                {
-                    let p = self.preconditioner_matrix(t);
-                    self.fixed_precond = Some((active, factor_dense(&p, d, "preconditioner")?));
+            let current = self.precond_active.as_ref().is_some_and(|a| {
+                self.model
+                    .forces
+                    .iter()
+                    .map(|f| f.is_active(t))
+                    .eq(a.iter().copied())
+            });
+            if !(self.subspace.is_linear() && current) {
+                self.preconditioner_matrix(t);
+                self.precond_active = None;
+                self.precond.factor(&self.work.hz, d, "preconditioner")?;
+                if self.subspace.is_linear() {
+                    self.precond_active =
+                        Some(self.model.forces.iter().map(|f| f.is_active(t)).collect());
                 }
-            } else {
-                let p = self.preconditioner_matrix(t);
-                varying = Some(factor_dense(&p, d, "preconditioner")?);
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
         // Warm start on the latent trajectory's tangent: the minimiser moves little from z_n + h ż_n
         // in smooth motion (AutoDef started at z_n).
-        let mut z: Vec<f64> = if self.time.quasi_static {
-            self.state.z.clone()
-        } else {
-            self.state
-                .z
-                .iter()
-                .zip(&self.state.zdot)
-                .map(|(z, v)| z + h * v)
-                .collect()
-        };
+        let mut z = std::mem::take(&mut self.next_z);
+        z.clear();
+        z.extend_from_slice(&self.state.z);
+        if !self.time.quasi_static {
+            for (z, v) in z.iter_mut().zip(&self.state.zdot) {
+                *z += h * v;
+            }
+        }
         let inv_h2 = self.inv_h2();
         let stats: SolveStats = {
             let mut obj = StepObjective {
@@ -285,18 +379,10 @@ impl<S: Subspace> ReducedSimulator<S> {
             };
             match self.solver.method {
                 SolverMethod::Lbfgs => {
-                    let pre = match varying.as_mut() {
-                        Some(p) => p,
-                        None => {
-                            &mut self
-                                .fixed_precond
-                                .as_mut()
-                                .expect("linear subspaces factor before the solve")
-                                .1
-                        }
-                    };
-                    let start_z = z.clone();
-                    match self.lbfgs.minimize(&mut obj, pre, &mut z, params) {
+                    match self
+                        .lbfgs
+                        .minimize(&mut obj, &mut self.precond, &mut z, params)
+                    {
                         Ok(s) => s,
                         // Where the energy curves far more than the rest-state preconditioner
                         // says (a nearly degenerate element along the subspace), L-BFGS crawls:
@@ -305,7 +391,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                             e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
                         ) => {
                             tracing::info!("{e}; retrying the step with reduced Newton");
-                            z.copy_from_slice(&start_z);
+                            z.copy_from_slice(&self.state.z);
                             let mut s = newton(&mut obj, &mut z, params)?;
                             s.iterations += params.max_iterations;
                             s
@@ -316,7 +402,8 @@ impl<S: Subspace> ReducedSimulator<S> {
                 SolverMethod::Newton => newton(&mut obj, &mut z, params)?,
             }
         };
-        let mut q_new = vec![0.0; k];
+        let mut q_new = std::mem::take(&mut self.next_q);
+        q_new.resize(k, 0.0);
         self.subspace.decode(&z, &mut q_new);
         if q_new.iter().chain(&z).any(|v| !v.is_finite()) {
             return Err(FemError::NonFinite {
@@ -332,7 +419,6 @@ impl<S: Subspace> ReducedSimulator<S> {
                 (q_new[i] - self.state.q[i]) / h
             };
         }
-        self.state.q = q_new;
         for (v, (new, old)) in self.state.zdot.iter_mut().zip(z.iter().zip(&self.state.z)) {
             *v = if self.time.quasi_static {
                 0.0
@@ -340,7 +426,9 @@ impl<S: Subspace> ReducedSimulator<S> {
                 (new - old) / h
             };
         }
-        self.state.z = z;
+        // The old state's vectors become the next step's buffers.
+        self.next_q = std::mem::replace(&mut self.state.q, q_new);
+        self.next_z = std::mem::replace(&mut self.state.z, z);
         self.state.step += 1;
         self.state.time = t;
         Ok(ReducedStepReport {
@@ -368,13 +456,12 @@ impl<S: Subspace> ReducedSimulator<S> {
         }
     }
 
-    /// The next step's objective E(z) and its gradient (into `g`), for the current state: what
-    /// [`step`](Self::step) minimises. For diagnostics and derivative checks.
-    pub fn objective(&mut self, z: &[f64], g: &mut [f64]) -> f64 {
+    /// The objective of the next step, for the current state.
+    fn step_objective(&mut self) -> StepObjective<'_, S> {
         let h = self.time.step;
         self.predict();
         let inv_h2 = self.inv_h2();
-        let mut obj = StepObjective {
+        StepObjective {
             model: &self.model,
             space: &self.space,
             subspace: &mut self.subspace,
@@ -383,8 +470,24 @@ impl<S: Subspace> ReducedSimulator<S> {
             inv_h2,
             scale: 0.0,
             noise: 0.0,
-        };
-        obj.value_gradient(z, g)
+        }
+    }
+
+    /// The next step's objective E(z) and its gradient (into `g`), for the current state: what
+    /// [`step`](Self::step) minimises. For diagnostics and derivative checks.
+    pub fn objective(&mut self, z: &[f64], g: &mut [f64]) -> f64 {
+        self.step_objective().value_gradient(z, g)
+    }
+
+    /// The next step's Newton matrix Jᵀ H_q J at z (d×d, column-major, into `out`), H_q the
+    /// reduced Hessian in q with the element tangents projected when `projected`: the exact
+    /// Hessian of [`objective`](Self::objective) for a linear subspace, its Gauss–Newton part
+    /// otherwise. For diagnostics and derivative checks.
+    pub fn newton_matrix(&mut self, z: &[f64], projected: bool, out: &mut [f64]) {
+        let mut obj = self.step_objective();
+        obj.newton_matrix_constant(z);
+        obj.newton_matrix(projected);
+        out.copy_from_slice(&obj.work.hz);
     }
 
     /// The energies of the current state: elastic over the subspace's element set (the cubature
@@ -392,13 +495,13 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// potential of gravity and of the forces active now.
     pub fn energy(&mut self) -> ReducedEnergy {
         let (model, space, w) = (&self.model, &self.space, &mut self.work);
-        space.decode_touched(&self.state.q, &mut w.u);
+        space.decode_touched(&self.state.q, &mut w.u, &mut w.space);
         let elastic = space.elastic_energy_gradient(
             model,
             &w.u,
             &mut w.grad_full,
             &mut w.grad_q,
-            &mut w.buffers,
+            &mut w.space,
         );
         let k = space.k;
         let mut kinetic = 0.0;
@@ -431,26 +534,23 @@ impl<S: Subspace> ReducedSimulator<S> {
     }
 }
 
-/// Bᵀ A B for A k×k and B k×d (column-major).
-fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize) -> Vec<f64> {
-    let mut ab = vec![0.0; k * d];
+/// out = Bᵀ A B for A k×k and B k×d (column-major); `ab` is k×d scratch.
+fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize, ab: &mut [f64], out: &mut [f64]) {
+    ab.fill(0.0);
     for j in 0..d {
+        let abj = &mut ab[j * k..(j + 1) * k];
         for l in 0..k {
             let blj = b[j * k + l];
             if blj != 0.0 {
-                for i in 0..k {
-                    ab[j * k + i] += a[l * k + i] * blj;
-                }
+                axpy(blj, &a[l * k..(l + 1) * k], abj);
             }
         }
     }
-    let mut out = vec![0.0; d * d];
     for j in 0..d {
         for i in 0..d {
             out[j * d + i] = dot(&b[i * k..(i + 1) * k], &ab[j * k..(j + 1) * k]);
         }
     }
-    out
 }
 
 /// The objective of one reduced step, over latent coordinates z.
@@ -471,14 +571,14 @@ impl<S: Subspace> StepObjective<'_, S> {
         let (model, space, w) = (self.model, self.space, &mut *self.work);
         let t0 = Instant::now();
         self.subspace.decode(z, &mut w.q);
-        space.decode_touched(&w.q, &mut w.u);
+        space.decode_touched(&w.q, &mut w.u, &mut w.space);
         let t1 = Instant::now();
         let elastic = space.elastic_energy_gradient(
             model,
             &w.u,
             &mut w.grad_full,
             &mut w.grad_q,
-            &mut w.buffers,
+            &mut w.space,
         );
         w.timers.decode += (t1 - t0).as_secs_f64();
         w.timers.elastic += t1.elapsed().as_secs_f64();
@@ -489,7 +589,7 @@ impl<S: Subspace> StepObjective<'_, S> {
         for (t, g) in w.tmp_q.iter_mut().zip(&space.gravity) {
             *t = -g;
         }
-        for f in &model.forces {
+        for (i, f) in model.forces.iter().enumerate() {
             if !f.is_active(self.t) {
                 continue;
             }
@@ -497,7 +597,7 @@ impl<S: Subspace> StepObjective<'_, S> {
                 w.grad_full[3 * v..3 * v + 3].fill(0.0);
             }
             external += f.accumulate(self.t, &w.u, Some(&mut w.grad_full), None);
-            space.project_vertices_add(&w.grad_full, &f.vertices, &mut w.tmp_q);
+            space.project_force_add(model, i, &w.grad_full, &mut w.tmp_q, &mut w.space);
         }
         scale = scale.max(norm(&w.tmp_q));
         for i in 0..space.k {
@@ -509,12 +609,14 @@ impl<S: Subspace> StepObjective<'_, S> {
             for i in 0..k {
                 w.tmp_q[i] = w.q[i] - w.predicted[i];
             }
+            // (UᵀMU)(q − q̃) by columns: the same sums as row by row, vectorised.
+            w.mass_q.fill(0.0);
+            for (j, &x) in w.tmp_q.iter().enumerate() {
+                axpy(x, &space.mass[j * k..(j + 1) * k], &mut w.mass_q);
+            }
             let mut in_norm2 = 0.0;
             for i in 0..k {
-                let mut m = 0.0;
-                for j in 0..k {
-                    m += space.mass[j * k + i] * w.tmp_q[j];
-                }
+                let m = w.mass_q[i];
                 inertia += 0.5 * self.inv_h2 * w.tmp_q[i] * m;
                 w.grad_q[i] += self.inv_h2 * m;
                 in_norm2 += (self.inv_h2 * m).powi(2);
@@ -526,6 +628,91 @@ impl<S: Subspace> StepObjective<'_, S> {
             * f64::EPSILON
             * (model.energy_scale + elastic.abs() + external.abs() + inertia.abs());
         elastic + external + inertia
+    }
+
+    /// Decodes z into work.u and forms the parts of the Newton matrix that do not depend on the
+    /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and U J on the
+    /// element rows (work.uj, 3·n × d column-major).
+    fn newton_matrix_constant(&mut self, z: &[f64]) {
+        let (model, space) = (self.model, self.space);
+        let (k, d) = (space.k, self.subspace.latent_dim());
+        let w = &mut *self.work;
+        self.subspace.decode(z, &mut w.q);
+        space.decode_touched(&w.q, &mut w.u, &mut w.space);
+        self.subspace.jacobian(z, &mut w.jac);
+        let springs = w.springs.update(model, space, self.t);
+        for (i, a) in w.hk.iter_mut().enumerate() {
+            *a = self.inv_h2 * space.mass[i] + springs[i];
+        }
+        sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
+        let m = space.element_rows();
+        w.uj.resize(m * d, 0.0);
+        // Panel by panel: 8 rows of U J from one pass over the panel (J = I copies exactly).
+        for (p, panel) in space.packed.panels().enumerate() {
+            let r0 = p * PANEL;
+            if r0 >= m {
+                break;
+            }
+            let rows = PANEL.min(m - r0);
+            for j in 0..d {
+                let mut acc = [0.0f64; PANEL];
+                for (c, &jl) in panel.chunks_exact(PANEL).zip(&w.jac[j * k..(j + 1) * k]) {
+                    for i in 0..PANEL {
+                        acc[i] += c[i] * jl;
+                    }
+                }
+                w.uj[j * m + r0..j * m + r0 + rows].copy_from_slice(&acc[..rows]);
+            }
+        }
+    }
+
+    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J), formed in z directly: with d < k
+    /// that costs 12·12·d + 12·d² per element instead of 12·12·k + 12·k² and a k×k sandwich.
+    fn newton_matrix(&mut self, projected: bool) {
+        let (model, space) = (self.model, self.space);
+        let d = self.subspace.latent_dim();
+        let w = &mut *self.work;
+        let (uj, ld) = (&w.uj, space.element_rows());
+        w.hz.copy_from_slice(&w.hz_const);
+        let (u, uj_e, huj_e, hz) = (&w.u, &mut w.uj_e, &mut w.huj_e, &mut w.hz);
+        with_material!(&model.material, |material| {
+            for ((&e, &weight), at) in space
+                .elements
+                .iter()
+                .zip(&space.weights)
+                .zip(space.element_touched())
+            {
+                let f = model.elements.deformation_gradient(e, u);
+                let a = if projected {
+                    material.dpdf_projected(&f)
+                } else {
+                    material.dpdf(&f)
+                };
+                let h = model.elements.local_hessian(e, &a, weight);
+                for (a, &p) in at.iter().enumerate() {
+                    for i in 0..3 {
+                        let r = 3 * p as usize + i;
+                        let row = &mut uj_e[(3 * a + i) * d..(3 * a + i + 1) * d];
+                        for (j, x) in row.iter_mut().enumerate() {
+                            *x = uj[j * ld + r];
+                        }
+                    }
+                }
+                for r in 0..12 {
+                    let dst = &mut huj_e[r * d..(r + 1) * d];
+                    dst.fill(0.0);
+                    for l in 0..12 {
+                        axpy(h[r * 12 + l], &uj_e[l * d..(l + 1) * d], dst);
+                    }
+                }
+                for r in 0..12 {
+                    let (b, hb) = (&uj_e[r * d..(r + 1) * d], &huj_e[r * d..(r + 1) * d]);
+                    for (j, &x) in hb.iter().enumerate() {
+                        axpy(x, b, &mut hz[j * d..(j + 1) * d]);
+                    }
+                }
+            }
+        });
     }
 }
 
@@ -556,65 +743,23 @@ impl<S: Subspace> NewtonSystem for StepObjective<'_, S> {
     /// space, H_q is first the exact reduced Hessian (elastic + UᵀMU/h² + springs); only when
     /// that is not positive definite are the element tangents projected.
     fn newton_direction(&mut self, z: &[f64], g: &[f64], d: &mut [f64]) -> Result<(), FemError> {
-        let (model, space) = (self.model, self.space);
-        let k = space.k;
         let dim = self.subspace.latent_dim();
-        let w = &mut *self.work;
-        self.subspace.decode(z, &mut w.q);
-        space.decode_touched(&w.q, &mut w.u);
-        self.subspace.jacobian(z, &mut w.jac);
-        let mut hq = vec![0.0; k * k];
-        let mut factor = None;
+        self.newton_matrix_constant(z);
         for projected in [false, true] {
-            with_material!(&model.material, |m| {
-                space.project_hessian(
-                    model,
-                    m,
-                    &space.elements,
-                    &space.weights,
-                    &w.u,
-                    projected,
-                    &mut hq,
-                );
-            });
-            for i in 0..k * k {
-                hq[i] += self.inv_h2 * space.mass[i];
-            }
-            for f in &model.forces {
-                if f.is_active(self.t) {
-                    let s = f.stiffness / f.vertices.len() as f64;
-                    for &v in &f.vertices {
-                        let r = space.vertex_rows(v);
-                        for c in 0..3 {
-                            let row = &r[c * k..(c + 1) * k];
-                            for b in 0..k {
-                                for a in 0..k {
-                                    hq[b * k + a] += s * row[a] * row[b];
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            let hz = sandwich(&hq, &w.jac, k, dim);
+            self.newton_matrix(projected);
+            let w = &mut *self.work;
             if projected {
-                factor = Some(factor_dense(&hz, dim, "Newton").map_err(|_| {
+                w.newton.factor(&w.hz, dim, "Newton").map_err(|_| {
                     FemError::Factorization("reduced Hessian is not positive definite".into())
-                })?);
-            } else {
-                let m = faer::Mat::<f64>::from_fn(dim, dim, |i, j| hz[j * dim + i]);
-                if let Ok(llt) = m.llt(Side::Lower) {
-                    factor = Some(DenseFactor(llt));
-                    break;
-                }
+                })?;
+            } else if w.newton.try_factor(&w.hz, dim, 0.0) {
+                break;
             }
         }
-        let mut f = factor.expect("the projected attempt yields a factor or an error");
         for i in 0..dim {
             d[i] = -g[i];
         }
-        let r = d.to_vec();
-        f.apply(&r, d);
+        self.work.newton.solve_in_place(d);
         Ok(())
     }
 }

@@ -236,3 +236,137 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
         assert_gradient_matches_fd(&mut sim, &z, &what);
     }
 }
+
+/// Small element sets are evaluated serially over their own vertices, large ones through the
+/// parallel full-length assembly: both must give the same sums in the same order.
+#[test]
+fn serial_and_parallel_elastic_paths_agree_bit_for_bit() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let q: Vec<f64> = (0..k).map(|i| 0.05 * (i as f64 + 0.3).sin()).collect();
+    for cubature in [
+        None,
+        Some((vec![0usize, 3, 7, 11, 20], vec![2.0, 0.5, 1.5, 3.0, 0.7])),
+    ] {
+        let mut results = Vec::new();
+        for serial_max in [usize::MAX, 0] {
+            let mut space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+            space.serial_max_elements = serial_max;
+            let mut buf = space.buffers();
+            let n = m.num_full();
+            let (mut u, mut grad_full, mut grad_q) = (vec![0.0; n], vec![0.0; n], vec![0.0; k]);
+            space.decode_touched(&q, &mut u, &mut buf);
+            let e = space.elastic_energy_gradient(&m, &u, &mut grad_full, &mut grad_q, &mut buf);
+            assert!(e > 0.0 && grad_q.iter().any(|&g| g != 0.0));
+            results.push((e, grad_q));
+        }
+        assert_eq!(results[0], results[1], "cubature {}", cubature.is_some());
+    }
+}
+
+/// Central differences of the objective's gradient, d×d column-major.
+fn fd_hessian<S: Subspace>(sim: &mut ReducedSimulator<S>, z: &[f64]) -> Vec<f64> {
+    let d = z.len();
+    let mut h = vec![0.0; d * d];
+    let (mut gp, mut gm) = (vec![0.0; d], vec![0.0; d]);
+    let step = 1e-6;
+    for j in 0..d {
+        let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
+        zp[j] += step;
+        zm[j] -= step;
+        sim.objective(&zp, &mut gp);
+        sim.objective(&zm, &mut gm);
+        for i in 0..d {
+            h[j * d + i] = (gp[i] - gm[i]) / (2.0 * step);
+        }
+    }
+    h
+}
+
+fn assert_close(a: &[f64], b: &[f64], rel: f64, what: &str) {
+    let size = b.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let diff = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(diff <= rel * size, "{what}: {:.2e} relative", diff / size);
+}
+
+/// The Newton matrix is formed in z directly (Σ_e (U_eJ)ᵀH_e(U_eJ) + Jᵀ(M/h² + springs)J). For a
+/// linear subspace it is the exact Hessian of the objective; for the decoder it is Jᵀ H_q J with
+/// H_q the exact Hessian in q, which a linear subspace at the same state measures.
+#[test]
+fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let cubature = Some((vec![1usize, 4, 9, 15], vec![1.5, 0.5, 2.0, 1.0]));
+    let space = ReducedSpace::new(&m, &basis, k, cubature).unwrap();
+    let mut lin = ReducedSimulator::new(
+        m.clone(),
+        space.clone(),
+        LinearSubspace::new(k),
+        time(10),
+        solver(SolverMethod::Newton),
+    )
+    .unwrap();
+    for _ in 0..3 {
+        lin.step().unwrap();
+    }
+    // Linear: exact Hessian (the spring is active, so its term is checked too).
+    let z: Vec<f64> = lin.state.z.iter().map(|v| v * 1.1 + 0.01).collect();
+    let mut h = vec![0.0; k * k];
+    lin.newton_matrix(&z, false, &mut h);
+    assert_close(&h, &fd_hessian(&mut lin, &z), 1e-6, "linear");
+
+    // Neural: Jᵀ H_q J, H_q by differences of the linear objective at the same state.
+    let ae =
+        nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    let mut neural = ReducedSimulator::new(
+        m.clone(),
+        space,
+        NeuralSubspace::new(ae),
+        time(10),
+        solver(SolverMethod::Newton),
+    )
+    .unwrap();
+    for _ in 0..2 {
+        neural.step().unwrap();
+    }
+    let d = 3;
+    let z: Vec<f64> = neural
+        .state
+        .z
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
+        .collect();
+    let mut hz = vec![0.0; d * d];
+    neural.newton_matrix(&z, false, &mut hz);
+    lin.state = latent_sim::ReducedState {
+        z: neural.state.q.clone(),
+        ..neural.state.clone()
+    };
+    let mut q = vec![0.0; k];
+    neural.subspace.decode(&z, &mut q);
+    let hq = fd_hessian(&mut lin, &q);
+    let mut jac = vec![0.0; k * d];
+    neural.subspace.jacobian(&z, &mut jac);
+    let mut reference = vec![0.0; d * d];
+    for a in 0..d {
+        for b in 0..d {
+            for i in 0..k {
+                for j in 0..k {
+                    reference[b * d + a] += jac[a * k + i] * hq[j * k + i] * jac[b * k + j];
+                }
+            }
+        }
+    }
+    assert_close(&hz, &reference, 1e-6, "neural");
+    // Projected tangents: positive semidefinite elastic part, so the matrix is SPD here.
+    neural.newton_matrix(&z, true, &mut hz);
+    assert!((0..d).all(|i| hz[i * d + i] > 0.0));
+}
