@@ -177,6 +177,9 @@ impl SpringTerm {
     }
 }
 
+/// The most steps a nonlinear subspace's L-BFGS preconditioner is kept.
+pub const PRECOND_MAX_AGE: usize = 8;
+
 /// Implicit Euler in a subspace.
 #[derive(Debug)]
 pub struct ReducedSimulator<S: Subspace> {
@@ -188,10 +191,17 @@ pub struct ReducedSimulator<S: Subspace> {
     pub state: ReducedState,
     work: Work,
     lbfgs: Lbfgs,
-    /// The factorised preconditioner. For a linear subspace it only changes when a force
-    /// switches on or off: `precond_active` records the active set it was built for.
+    /// The factorised preconditioner. It is rebuilt when a force switches on or off
+    /// (`precond_active` records the active set it was built for); for a nonlinear subspace also
+    /// when it is [`PRECOND_MAX_AGE`] steps old or the solves it serves got harder (see
+    /// [`ReducedSimulator::step`]).
     precond: DenseFactor,
     precond_active: Option<Vec<bool>>,
+    /// Steps solved with the current preconditioner, iterations of the first of them and of the
+    /// last step.
+    precond_age: usize,
+    precond_base_iterations: usize,
+    last_iterations: usize,
     /// The next z and q while a step solves (swapped with the state after it).
     next_z: Vec<f64>,
     next_q: Vec<f64>,
@@ -286,6 +296,9 @@ impl<S: Subspace> ReducedSimulator<S> {
             lbfgs: Lbfgs::new(d, solver.lbfgs_memory),
             precond: DenseFactor::default(),
             precond_active: None,
+            precond_age: 0,
+            precond_base_iterations: 0,
+            last_iterations: 0,
             next_z: vec![0.0; d],
             next_q: vec![0.0; k],
             model,
@@ -344,14 +357,19 @@ impl<S: Subspace> ReducedSimulator<S> {
                     .map(|f| f.is_active(t))
                     .eq(a.iter().copied())
             });
-            if !(self.subspace.is_linear() && current) {
+            // J(z) changes little from step to step: a nonlinear subspace keeps the factor of
+            // an earlier state until it is PRECOND_MAX_AGE steps old or a solve takes half again
+            // as many iterations as the first one it served (AutoDef rebuilt it every step).
+            let stale = !self.subspace.is_linear()
+                && (self.precond_age >= PRECOND_MAX_AGE
+                    || 2 * self.last_iterations > 3 * self.precond_base_iterations + 2);
+            if !current || stale {
                 self.preconditioner_matrix(t);
                 self.precond_active = None;
                 self.precond.factor(&self.work.hz, d, "preconditioner")?;
-                if self.subspace.is_linear() {
-                    self.precond_active =
-                        Some(self.model.forces.iter().map(|f| f.is_active(t)).collect());
-                }
+                self.precond_active =
+                    Some(self.model.forces.iter().map(|f| f.is_active(t)).collect());
+                self.precond_age = 0;
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
@@ -419,6 +437,11 @@ impl<S: Subspace> ReducedSimulator<S> {
                 (q_new[i] - self.state.q[i]) / h
             };
         }
+        if self.precond_age == 0 {
+            self.precond_base_iterations = stats.iterations;
+        }
+        self.precond_age += 1;
+        self.last_iterations = stats.iterations;
         for (v, (new, old)) in self.state.zdot.iter_mut().zip(z.iter().zip(&self.state.z)) {
             *v = if self.time.quasi_static {
                 0.0
