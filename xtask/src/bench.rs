@@ -105,9 +105,19 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         v.push(Variant {
             method: Method::Pca,
             label: format!("pca k={k}"),
-            scene: s,
+            scene: s.clone(),
             solver: None,
         });
+        // With cubature at the scene's tolerance too, so that the reduced methods are compared at
+        // equal error on speed (the scene's own k is in the tolerance sweep below).
+        if k < chosen_k {
+            v.push(Variant {
+                method: Method::PcaCubature,
+                label: format!("pca-cubature k={k}"),
+                scene: s,
+                solver: None,
+            });
+        }
     }
     let tolerances = if opts.tolerances.is_empty() {
         DEFAULT_TOLERANCES.to_vec()
@@ -142,6 +152,12 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         v.push(Variant {
             method: Method::Neural,
             label: format!("neural d={d}"),
+            scene: s.clone(),
+            solver: None,
+        });
+        v.push(Variant {
+            method: Method::NeuralCubature,
+            label: format!("neural-cubature d={d}"),
             scene: s,
             solver: None,
         });

@@ -1,4 +1,4 @@
-//! Test fixture shared by the tests and the `fit_timing` example: a cantilever beam, a smooth
+//! Test fixture shared by the tests and the `cubature_fit_timing` example: a cantilever beam, a smooth
 //! mass-orthonormal modal basis on it and random poses shaped like static load responses.
 
 use faer::{Mat, MatRef};

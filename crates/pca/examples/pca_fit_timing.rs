@@ -1,5 +1,5 @@
 //! Times a fit on a large synthetic snapshot matrix (not a benchmark harness; run once with
-//! `cargo run -p pca --release --example fit_timing [n] [N]`).
+//! `cargo run -p pca --release --example pca_fit_timing [n] [N]`).
 
 use std::time::Instant;
 

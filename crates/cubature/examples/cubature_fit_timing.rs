@@ -1,7 +1,7 @@
 //! Times the training-matrix build and greedy fits on a cantilever beam with a 10-mode smooth
 //! basis (the test fixture), and reports elements chosen and training / held-out errors.
 //!
-//! `cargo run -p cubature --release --example fit_timing -- [cells_x cells_yz train_poses]`
+//! `cargo run -p cubature --release --example cubature_fit_timing -- [cells_x cells_yz train_poses]`
 //! (default 40 8 150: 15,360 tets, 150 training and 50 held-out poses).
 
 #[path = "../tests/unit_tests/fixture.rs"]
