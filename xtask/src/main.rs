@@ -301,7 +301,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             if !reduced.is_empty() {
                 println!("\nwhere a reduced step's time goes (mean ms per step):\n");
                 println!(
-                    "| method | decode | elastic | VJP | preconditioner |\n|---|---:|---:|---:|---:|"
+                    "| method | decode | elastic | VJP | preconditioner or Newton matrix |\n|---|---:|---:|---:|---:|"
                 );
                 for r in reduced {
                     println!(

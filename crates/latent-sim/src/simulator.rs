@@ -34,7 +34,8 @@ pub struct ReducedStepReport {
     pub iterations: usize,
     pub relative_gradient: f64,
     pub wall_seconds: f64,
-    /// Time building and factorising the preconditioner.
+    /// Time building and factorising the L-BFGS preconditioner, or Newton's matrix
+    /// (Gauss–Newton Jᵀ H J, its Jacobian included) with the Newton solver.
     pub precond_seconds: f64,
     /// Time decoding: the network's forward pass (q = decode(z)) and the partial decode Uq over
     /// the vertices the elastic energy touches.
@@ -61,6 +62,8 @@ struct Timers {
     decode: f64,
     elastic: f64,
     vjp: f64,
+    /// Building and factorising Newton's matrix.
+    newton: f64,
 }
 
 /// Dense Cholesky factor L (lower, column-major) of a symmetric d×d matrix, reused between
@@ -460,7 +463,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             iterations: stats.iterations,
             relative_gradient: stats.relative_gradient,
             wall_seconds: start.elapsed().as_secs_f64(),
-            precond_seconds,
+            precond_seconds: precond_seconds + self.work.timers.newton,
             decode_seconds: self.work.timers.decode,
             elastic_seconds: self.work.timers.elastic,
             vjp_seconds: self.work.timers.vjp,
@@ -766,6 +769,7 @@ impl<S: Subspace> NewtonSystem for StepObjective<'_, S> {
     /// space, H_q is first the exact reduced Hessian (elastic + UᵀMU/h² + springs); only when
     /// that is not positive definite are the element tangents projected.
     fn newton_direction(&mut self, z: &[f64], g: &[f64], d: &mut [f64]) -> Result<(), FemError> {
+        let start = Instant::now();
         let dim = self.subspace.latent_dim();
         self.newton_matrix_constant(z);
         for projected in [false, true] {
@@ -783,6 +787,7 @@ impl<S: Subspace> NewtonSystem for StepObjective<'_, S> {
             d[i] = -g[i];
         }
         self.work.newton.solve_in_place(d);
+        self.work.timers.newton += start.elapsed().as_secs_f64();
         Ok(())
     }
 }
