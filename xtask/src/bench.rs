@@ -331,6 +331,7 @@ mod tests {
                 cubature_elements: 1,
                 ms_per_step: ms,
                 ms_min: ms,
+                ms_mean: ms,
                 ms_max: ms,
                 hz: 1e3 / ms,
                 speedup: 1.0,

@@ -74,6 +74,10 @@ pub struct ReducedSolverConfig {
     /// tenths of a percent to a few percent away from the full one, so solving each step to 1e-4
     /// changes it far less than that while taking fewer iterations than the full solver's 1e-6.
     pub tolerance: f64,
+    /// L-BFGS's preconditioner: `current-state` (the Gauss–Newton matrix at the step's start,
+    /// kept for a few steps), `rest` (the stiffness at rest, AutoDef's) or `auto` (the first with
+    /// cubature, the second without).
+    pub preconditioner: latent_sim::Preconditioning,
 }
 
 impl Default for ReducedSolverConfig {
@@ -81,6 +85,7 @@ impl Default for ReducedSolverConfig {
         Self {
             method: SolverMethod::Lbfgs,
             tolerance: 1e-4,
+            preconditioner: latent_sim::Preconditioning::default(),
         }
     }
 }

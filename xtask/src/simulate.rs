@@ -185,13 +185,15 @@ impl Runner {
                     None
                 };
                 let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
-                Runner::Pca(ReducedSimulator::new(
+                let mut sim = ReducedSimulator::new(
                     model,
                     space,
                     LinearSubspace::new(basis.k()),
                     time,
                     solver,
-                )?)
+                )?;
+                sim.preconditioning = pipeline.scene.reduced.preconditioner;
+                Runner::Pca(sim)
             }
             Method::Neural | Method::NeuralCubature => {
                 let fit = pipeline.pca(progress)?;
@@ -205,13 +207,15 @@ impl Runner {
                     None
                 };
                 let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
-                Runner::Neural(ReducedSimulator::new(
+                let mut sim = ReducedSimulator::new(
                     model,
                     space,
                     NeuralSubspace::new(trained.model),
                     time,
                     solver,
-                )?)
+                )?;
+                sim.preconditioning = pipeline.scene.reduced.preconditioner;
+                Runner::Neural(sim)
             }
         })
     }

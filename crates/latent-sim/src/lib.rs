@@ -16,7 +16,10 @@ mod subspace;
 
 pub use neural::NeuralSubspace;
 pub use reduced::{ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
-pub use simulator::{ReducedEnergy, ReducedSimulator, ReducedState, ReducedStepReport};
+pub use simulator::{
+    PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
+    ReducedStepReport,
+};
 pub use subspace::{LinearSubspace, Subspace};
 
 /// Errors of the reduced integrators.

@@ -180,8 +180,26 @@ impl SpringTerm {
     }
 }
 
-/// The most steps a nonlinear subspace's L-BFGS preconditioner is kept.
+/// The most steps an L-BFGS preconditioner that depends on the state is kept.
 pub const PRECOND_MAX_AGE: usize = 8;
+
+/// The matrix that preconditions the reduced L-BFGS.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preconditioning {
+    /// `current-state` with cubature (its matrix costs the few hundred cubature elements),
+    /// `rest` without (it would cost every element of the mesh; the rest matrix is precomputed).
+    #[default]
+    Auto,
+    /// The Gauss–Newton matrix Jᵀ(Σ_e w_e U_eᵀ H_e⁺ U_e + UᵀMU/h² + springs)J at the state the
+    /// step starts from, element tangents projected to be positive semidefinite (the matrix of
+    /// reduced Newton, over the same elements): it sees the rotations and stretches the body is
+    /// in. Kept for several steps (see [`PRECOND_MAX_AGE`]).
+    CurrentState,
+    /// Jᵀ(UᵀK₀U + UᵀMU/h² + springs)J with the stiffness at rest over every element (AutoDef's):
+    /// cheap to form, but far from the Hessian once the body rotates or stretches.
+    Rest,
+}
 
 /// Implicit Euler in a subspace.
 #[derive(Debug)]
@@ -200,6 +218,8 @@ pub struct ReducedSimulator<S: Subspace> {
     /// [`ReducedSimulator::step`]).
     precond: DenseFactor,
     precond_active: Option<Vec<bool>>,
+    /// Which matrix preconditions L-BFGS.
+    pub preconditioning: Preconditioning,
     /// Steps solved with the current preconditioner, iterations of the first of them and of the
     /// last step.
     precond_age: usize,
@@ -299,6 +319,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             lbfgs: Lbfgs::new(d, solver.lbfgs_memory),
             precond: DenseFactor::default(),
             precond_active: None,
+            preconditioning: Preconditioning::default(),
             precond_age: 0,
             precond_base_iterations: 0,
             last_iterations: 0,
@@ -360,14 +381,33 @@ impl<S: Subspace> ReducedSimulator<S> {
                     .map(|f| f.is_active(t))
                     .eq(a.iter().copied())
             });
-            // J(z) changes little from step to step: a nonlinear subspace keeps the factor of
-            // an earlier state until it is PRECOND_MAX_AGE steps old or a solve takes half again
-            // as many iterations as the first one it served (AutoDef rebuilt it every step).
-            let stale = !self.subspace.is_linear()
+            // The state changes little from step to step: a preconditioner that depends on it
+            // (J(z), or the tangents) is kept until it is PRECOND_MAX_AGE steps old or a solve
+            // takes half again as many iterations as the first one it served (AutoDef rebuilt
+            // it every step). The rest-state one of a linear subspace never goes stale.
+            let preconditioning = match self.preconditioning {
+                Preconditioning::Auto if self.space.elements.len() < self.model.elements.len() => {
+                    Preconditioning::CurrentState
+                }
+                Preconditioning::Auto => Preconditioning::Rest,
+                p => p,
+            };
+            let depends_on_state =
+                !self.subspace.is_linear() || preconditioning == Preconditioning::CurrentState;
+            let stale = depends_on_state
                 && (self.precond_age >= PRECOND_MAX_AGE
                     || 2 * self.last_iterations > 3 * self.precond_base_iterations + 2);
             if !current || stale {
-                self.preconditioner_matrix(t);
+                match preconditioning {
+                    Preconditioning::Auto | Preconditioning::CurrentState => {
+                        let z = std::mem::take(&mut self.state.z);
+                        let mut obj = self.step_objective();
+                        obj.newton_matrix_constant(&z);
+                        obj.newton_matrix(true);
+                        self.state.z = z;
+                    }
+                    Preconditioning::Rest => self.preconditioner_matrix(t),
+                }
                 self.precond_active = None;
                 self.precond.factor(&self.work.hz, d, "preconditioner")?;
                 self.precond_active =

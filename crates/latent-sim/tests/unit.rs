@@ -7,7 +7,9 @@ use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use fem_core::optim::{SolverConfig, SolverMethod};
-use latent_sim::{LinearSubspace, NeuralSubspace, ReducedSimulator, ReducedSpace, Subspace};
+use latent_sim::{
+    LinearSubspace, NeuralSubspace, Preconditioning, ReducedSimulator, ReducedSpace, Subspace,
+};
 
 fn model() -> FullSpaceModel {
     let mesh = box_mesh(&BoxSpec {
@@ -170,7 +172,11 @@ fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
     let n = m.dofs.num_free();
     let frames = 15;
     let space = ReducedSpace::new(&m, &full_rank_basis(&m), n, None).unwrap();
-    for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
+    for (method, preconditioning) in [
+        (SolverMethod::Newton, Preconditioning::Auto),
+        (SolverMethod::Lbfgs, Preconditioning::Rest),
+        (SolverMethod::Lbfgs, Preconditioning::CurrentState),
+    ] {
         let mut red = ReducedSimulator::new(
             m.clone(),
             space.clone(),
@@ -179,6 +185,7 @@ fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
             solver(method),
         )
         .unwrap();
+        red.preconditioning = preconditioning;
         let mut full =
             Simulator::new(m.clone(), time(frames), solver(SolverMethod::Newton)).unwrap();
         for f in 0..frames {
@@ -194,7 +201,7 @@ fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
             let size: f64 = full.state.u.iter().map(|a| a * a).sum::<f64>().sqrt();
             assert!(
                 diff <= 1e-7 * size,
-                "{method:?} frame {f}: {:.2e}",
+                "{method:?} {preconditioning:?} frame {f}: {:.2e}",
                 diff / size
             );
         }
@@ -369,4 +376,59 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
     // Projected tangents: positive semidefinite elastic part, so the matrix is SPD here.
     neural.newton_matrix(&z, true, &mut hz);
     assert!((0..d).all(|i| hz[i * d + i] > 0.0));
+}
+
+/// The preconditioner changes how L-BFGS gets there, not where: with cubature, a neural subspace
+/// follows the same trajectory with the rest-state and the current-state preconditioner (rebuilt
+/// every few steps) and with Newton, to the solver tolerance.
+#[test]
+fn every_preconditioner_and_newton_follow_the_same_neural_trajectory() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let ae =
+        nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 7).unwrap();
+    let cubature = Some((vec![1usize, 4, 9, 15, 22], vec![1.5, 0.5, 2.0, 1.0, 3.0]));
+    let space = ReducedSpace::new(&m, &basis, k, cubature).unwrap();
+    let frames = 30;
+    let run = |method: SolverMethod, preconditioning: Preconditioning| {
+        let mut sim = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            NeuralSubspace::new(ae.clone()),
+            time(frames),
+            solver(method),
+        )
+        .unwrap();
+        sim.preconditioning = preconditioning;
+        let mut iterations = 0;
+        let mut states = Vec::new();
+        for _ in 0..frames {
+            iterations += sim.step().unwrap().iterations;
+            states.push(sim.state.q.clone());
+        }
+        (states, iterations)
+    };
+    let (reference, _) = run(SolverMethod::Newton, Preconditioning::Auto);
+    let size = reference
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, &b| a.max(b.abs()));
+    assert!(size > 0.0);
+    for p in [
+        Preconditioning::Rest,
+        Preconditioning::CurrentState,
+        Preconditioning::Auto,
+    ] {
+        let (states, iterations) = run(SolverMethod::Lbfgs, p);
+        assert!(iterations > 0);
+        for (f, (a, b)) in states.iter().zip(&reference).enumerate() {
+            for (x, y) in a.iter().zip(b) {
+                assert!(
+                    (x - y).abs() <= 1e-6 * size,
+                    "{p:?} frame {f}: {x} vs {y} (scale {size:e})"
+                );
+            }
+        }
+    }
 }
