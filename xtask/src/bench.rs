@@ -253,12 +253,12 @@ fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
 /// The sweep as a markdown table (Pareto-optimal variants marked with ★).
 pub fn markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(
-        "| variant | dim | elements | ms/step (median) | spread | Hz | speed-up | mean rel. error | max rel. error | subspace error | iterations | offline s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
+        "| variant | dim | elements | ms/step (median) | spread | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | subspace error | iterations | offline s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
     );
     for r in rows {
         let m = &r.report;
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} |\n",
             match &m.failure {
                 Some(f) => format!("{} (failed at {f})", r.variant),
                 None => r.variant.clone(),
@@ -268,6 +268,7 @@ pub fn markdown(rows: &[BenchRow]) -> String {
             m.ms_per_step,
             m.ms_min,
             m.ms_max,
+            m.ms_mean,
             m.hz,
             m.speedup,
             m.mean_rel_error,
