@@ -208,9 +208,7 @@ pub fn measure(
             cubature_elements: model.elements.len(),
             ms_per_step: full_ms,
             ms_min: full_ms,
-            ms_mean: reference.step_seconds.iter().sum::<f64>()
-                / reference.step_seconds.len().max(1) as f64
-                * 1e3,
+            ms_mean: mean(&reference.step_seconds) * 1e3,
             ms_max: full_ms,
             hz: 1e3 / full_ms,
             speedup: 1.0,
@@ -284,7 +282,7 @@ pub fn measure(
             }
         }
         medians.push(median(&times) * 1e3);
-        means.push(times.iter().sum::<f64>() / times.len().max(1) as f64 * 1e3);
+        means.push(mean(&times) * 1e3);
         cubature_elements = match &runner {
             Runner::Full(s) => s.model.elements.len(),
             Runner::Pca(s) => s.space.elements.len(),
@@ -312,7 +310,7 @@ pub fn measure(
         ms_max: medians.iter().copied().fold(0.0, f64::max),
         hz: 1e3 / ms,
         speedup: 1.0,
-        mean_rel_error: errors.rel.iter().sum::<f64>() / errors.rel.len().max(1) as f64,
+        mean_rel_error: mean(&errors.rel),
         max_rel_error: errors.rel.iter().fold(0.0, |a, &b| a.max(b)),
         max_vertex_error: errors.max_vertex,
         iterations: mean_usize(&iterations),
@@ -366,7 +364,12 @@ fn subspace_error(
         model.dofs.scatter(f, &mut r);
         errors.add_full(model, &u, &r);
     }
-    Ok(errors.rel.iter().sum::<f64>() / errors.rel.len().max(1) as f64)
+    Ok(mean(&errors.rel))
+}
+
+/// The mean of `v` (0 when empty).
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
 fn mean_usize(v: &[usize]) -> f64 {
