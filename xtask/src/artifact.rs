@@ -30,7 +30,9 @@ pub fn stage_version(stage: &str) -> u32 {
         // 3: the training gradient sums in a different (still fixed) order.
         "train" => 4,
         // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
-        "snapshots" | "snapshots-shard" | "reference" => 2,
+        // 3: sequential sparse factorisation on small pools (round-off), current-state L-BFGS
+        //    preconditioner (iterates within tolerance).
+        "snapshots" | "snapshots-shard" | "reference" => 3,
         // 2: the held-out error along the greedy path is stored with the rule.
         "cubature" | "cubature-neural" => 2,
         _ => 1,

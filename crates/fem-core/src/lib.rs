@@ -31,6 +31,7 @@ pub mod optim;
 pub mod rng;
 pub mod snapshots;
 pub mod sparse;
+pub mod sparse_cholesky;
 
 pub use error::{FemError, MeshError};
 pub use mesh::TetMesh;

@@ -240,7 +240,7 @@ impl ScheduleConfig {
 
 /// The body's stiffness at a surface patch: A = K₀ + M/T² factorised once per mesh.
 pub struct StiffnessProbe {
-    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    chol: crate::sparse_cholesky::SparseCholesky,
 }
 
 impl std::fmt::Debug for StiffnessProbe {
@@ -266,9 +266,8 @@ impl StiffnessProbe {
             &mut buf
         ));
         parts.add_mass(model, 1.0 / (time_scale * time_scale));
-        Ok(Self {
-            llt: parts.factor()?,
-        })
+        parts.factor()?;
+        Ok(Self { chol: parts.chol })
     }
 
     /// 1 / (mean displacement along `direction` of `vertices` under a unit total load along it).
@@ -278,7 +277,6 @@ impl StiffnessProbe {
         vertices: &[usize],
         direction: [f64; 3],
     ) -> f64 {
-        use faer::linalg::solvers::Solve;
         let n = model.dofs.num_free();
         let mut x = vec![0.0; n];
         let share = 1.0 / vertices.len() as f64;
@@ -290,8 +288,7 @@ impl StiffnessProbe {
                 }
             }
         }
-        self.llt
-            .solve_in_place(faer::MatMut::from_column_major_slice_mut(&mut x, n, 1));
+        self.chol.solve_in_place(&mut x);
         let mut mean = 0.0;
         for &v in vertices {
             for c in 0..3 {

@@ -47,6 +47,14 @@ pub struct SolverConfig {
     /// Number of correction pairs kept by L-BFGS.
     #[serde(default = "default_memory")]
     pub lbfgs_memory: usize,
+    /// L-BFGS's initial inverse Hessian. Left out of the serialised form at its default, so that
+    /// the cache keys of scenes that never set it (every Newton scene) stay what they were.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub preconditioner: LbfgsPreconditioner,
+}
+
+fn is_default<T: Default + PartialEq>(v: &T) -> bool {
+    *v == T::default()
 }
 
 fn default_tolerance() -> f64 {
@@ -66,6 +74,7 @@ impl Default for SolverConfig {
             tolerance: default_tolerance(),
             max_iterations: default_max_iterations(),
             lbfgs_memory: default_memory(),
+            preconditioner: LbfgsPreconditioner::default(),
         }
     }
 }
@@ -100,8 +109,22 @@ pub enum SolverMethod {
     /// Newton with projected Hessians and sparse Cholesky: robust reference.
     #[default]
     Newton,
-    /// L-BFGS preconditioned by a once-factorised rest system: fast.
+    /// L-BFGS preconditioned by a factorised system matrix ([`LbfgsPreconditioner`]): fast.
     Lbfgs,
+}
+
+/// The matrix whose factor preconditions full-space L-BFGS.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LbfgsPreconditioner {
+    /// The projected Hessian + M/h² at the start of a step, refactorised only when the solves
+    /// it serves slow down (or it is [`crate::integrator::PRECOND_MAX_AGE`] steps old). Large
+    /// rotations leave the rest matrix far from the true curvature; this one follows them.
+    #[default]
+    CurrentState,
+    /// K₀ + M/h² at rest, factorised once (AutoDef's choice): cheapest while deformations stay
+    /// small, slow to converge once parts of the body rotate.
+    Rest,
 }
 
 /// Outcome of one minimisation.
