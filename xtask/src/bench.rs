@@ -71,7 +71,11 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         Method::Full,
         format!("full ({:?})", scene.solver.method).to_lowercase(),
     ));
-    v.push(base(Method::FullLbfgs, "full-lbfgs".into()));
+    // The other full-space solver beside the scene's.
+    v.push(match scene.solver.method {
+        SolverMethod::Newton => base(Method::FullLbfgs, "full-lbfgs".into()),
+        SolverMethod::Lbfgs => base(Method::FullNewton, "full-newton".into()),
+    });
     let mut latent_dims = opts.latent_dims.clone();
     if latent_dims.is_empty() {
         let d = scene

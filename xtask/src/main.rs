@@ -44,7 +44,7 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         every: usize,
         /// Methods to compare.
-        #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
+        #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
         methods: Vec<MethodArg>,
         /// Held-out test trajectory to simulate.
         #[arg(long, default_value_t = 0)]
@@ -132,7 +132,7 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Methods to stress.
-        #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
+        #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
         methods: Vec<MethodArg>,
         /// Steps of the free-run condition (test trajectory, then no external force).
         #[arg(long, default_value_t = 2000)]
@@ -157,6 +157,8 @@ enum MethodArg {
     Full,
     /// Full space with preconditioned L-BFGS.
     FullLbfgs,
+    /// Full space with Newton.
+    FullNewton,
     Pca,
     PcaCubature,
     Neural,
@@ -168,6 +170,7 @@ impl From<MethodArg> for Method {
         match m {
             MethodArg::Full => Method::Full,
             MethodArg::FullLbfgs => Method::FullLbfgs,
+            MethodArg::FullNewton => Method::FullNewton,
             MethodArg::Pca => Method::Pca,
             MethodArg::PcaCubature => Method::PcaCubature,
             MethodArg::Neural => Method::Neural,

@@ -107,6 +107,16 @@ pub fn run(
 ) -> Result<Vec<MethodReport>> {
     let mut rows = Vec::new();
     for &method in &opts.methods {
+        // `full` already is the scene's solver: a row forcing the same solver would repeat it.
+        if opts.methods.contains(&Method::Full)
+            && method.forced_full_solver() == Some(pipeline.scene.solver.method)
+        {
+            tracing::info!(
+                "{} is the scene's solver, measured as `full`",
+                method.name()
+            );
+            continue;
+        }
         let m = Measure {
             method,
             trajectory: opts.trajectory,
@@ -132,7 +142,11 @@ pub fn run(
 pub fn set_speedups(rows: &mut [MethodReport]) {
     let fastest_full = rows
         .iter()
-        .filter(|r| r.method == Method::Full.name() || r.method == Method::FullLbfgs.name())
+        .filter(|r| {
+            [Method::Full, Method::FullLbfgs, Method::FullNewton]
+                .iter()
+                .any(|m| r.method == m.name())
+        })
         .map(|r| r.ms_per_step)
         .fold(f64::INFINITY, f64::min);
     if fastest_full.is_finite() {
@@ -339,7 +353,7 @@ fn subspace_error(
     frames: &[Vec<f64>],
     progress: Progress<'_>,
 ) -> Result<f64> {
-    if matches!(method, Method::Full | Method::FullLbfgs) {
+    if method.is_full() {
         return Ok(0.0);
     }
     let fit = pipeline.pca(progress)?;

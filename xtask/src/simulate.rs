@@ -24,8 +24,10 @@ pub enum Method {
     #[default]
     Full,
     /// Full space with preconditioned L-BFGS whatever the scene's solver (the reference uses the
-    /// scene's): the other full-space solver, so speed-ups are measured against the faster one.
+    /// scene's), so speed-ups are measured against the faster full-space solver.
     FullLbfgs,
+    /// Full space with Newton whatever the scene's solver.
+    FullNewton,
     /// Linear model reduction with the PCA basis, every element evaluated.
     Pca,
     /// The PCA basis with the elastic energy on the cubature elements only.
@@ -41,10 +43,26 @@ impl Method {
         match self {
             Method::Full => "full",
             Method::FullLbfgs => "full-lbfgs",
+            Method::FullNewton => "full-newton",
             Method::Pca => "pca",
             Method::PcaCubature => "pca-cubature",
             Method::Neural => "neural",
             Method::NeuralCubature => "neural-cubature",
+        }
+    }
+
+    /// Whether the method simulates in full space.
+    pub fn is_full(self) -> bool {
+        matches!(self, Method::Full | Method::FullLbfgs | Method::FullNewton)
+    }
+
+    /// The full-space solver this method forces, whatever the scene's (`None` for `full`, which
+    /// uses the scene's, and for the reduced methods).
+    pub fn forced_full_solver(self) -> Option<SolverMethod> {
+        match self {
+            Method::FullLbfgs => Some(SolverMethod::Lbfgs),
+            Method::FullNewton => Some(SolverMethod::Newton),
+            _ => None,
         }
     }
 }
@@ -173,7 +191,9 @@ impl Runner {
         progress: Progress<'_>,
     ) -> Result<Self> {
         Ok(match method {
-            Method::Full | Method::FullLbfgs => Runner::Full(Simulator::new(model, time, solver)?),
+            Method::Full | Method::FullLbfgs | Method::FullNewton => {
+                Runner::Full(Simulator::new(model, time, solver)?)
+            }
             Method::Pca | Method::PcaCubature => {
                 let fit = pipeline.pca(progress)?;
                 let basis = &fit.basis;
@@ -323,6 +343,7 @@ pub fn solver_for(scene: &Scene, method: Method) -> SolverConfig {
     // needs more, cheaper iterations than Newton.
     match method {
         Method::Full => {}
+        Method::FullNewton => solver.method = SolverMethod::Newton,
         Method::FullLbfgs => {
             solver.method = SolverMethod::Lbfgs;
             solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
