@@ -56,10 +56,19 @@ fn unchanged_scenes_do_no_work_and_pca_changes_reuse_snapshots() {
     let cache = scratch_dir("pipeline-cache");
     let s = scene(TINY);
     let mut p = Pipeline::new(&s, &cache).unwrap();
+    let start = std::time::Instant::now();
     let first = p.pca(&no_progress).unwrap();
+    let wall = start.elapsed().as_secs_f64();
     assert_eq!(
         stages(&p),
         [("snapshots".into(), false), ("pca".into(), false)]
+    );
+    // Each stage reports its own time: the PCA's excludes the snapshots it had to compute first.
+    let own: f64 = p.outcomes.iter().map(|o| o.seconds).sum();
+    assert!(
+        own <= wall && p.outcomes[0].seconds > 0.0,
+        "stage seconds {:?} add up to more than the {wall} s they took",
+        p.outcomes.iter().map(|o| o.seconds).collect::<Vec<_>>()
     );
     // Second run: nothing is computed, the basis is identical.
     let mut p = Pipeline::new(&s, &cache).unwrap();

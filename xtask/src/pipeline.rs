@@ -29,6 +29,8 @@ pub struct StageOutcome {
     pub stage: String,
     /// Loaded from the cache instead of computed.
     pub cached: bool,
+    /// Time spent in this stage itself: loading, or computing less the upstream stages that the
+    /// computation had to load or compute first (each of those has its own outcome).
     pub seconds: f64,
     pub path: PathBuf,
 }
@@ -104,6 +106,8 @@ pub struct Pipeline<'a> {
     /// Artifacts already loaded or computed in this run, by path: a stage that several later
     /// stages need is read (and announced) once.
     memo: std::collections::HashMap<PathBuf, Box<dyn std::any::Any>>,
+    /// Sum of the recorded stages' own seconds, to take nested stages out of a stage's time.
+    recorded_seconds: f64,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -142,6 +146,7 @@ impl<'a> Pipeline<'a> {
             outcomes: Vec::new(),
             on_stage: Box::new(|_| {}),
             memo: std::collections::HashMap::new(),
+            recorded_seconds: 0.0,
         })
     }
 
@@ -219,7 +224,7 @@ impl<'a> Pipeline<'a> {
         path: PathBuf,
         compute: impl FnOnce(&mut Self) -> Result<T>,
     ) -> Result<T> {
-        let start = Instant::now();
+        let start = (Instant::now(), self.recorded_seconds);
         if path.exists() {
             let expect = Expect {
                 stage,
@@ -241,11 +246,15 @@ impl<'a> Pipeline<'a> {
         Ok(value)
     }
 
-    fn record(&mut self, stage: &str, cached: bool, start: Instant, path: PathBuf) {
+    /// Records a finished stage; `start` is its start time and the recorded seconds then.
+    fn record(&mut self, stage: &str, cached: bool, start: (Instant, f64), path: PathBuf) {
+        let nested = self.recorded_seconds - start.1;
+        let seconds = (start.0.elapsed().as_secs_f64() - nested).max(0.0);
+        self.recorded_seconds += seconds;
         let o = StageOutcome {
             stage: stage.to_string(),
             cached,
-            seconds: start.elapsed().as_secs_f64(),
+            seconds,
             path,
         };
         (self.on_stage)(&o);
