@@ -44,6 +44,13 @@ fn main() -> Result<()> {
         solver.tolerance = t.parse().context("tolerance")?;
     }
     let (model, _) = scene.build_model()?;
+    let pattern = fem_core::sparse::HessianPattern::new(&model.elements.tets, &model.dofs);
+    let chol = fem_core::sparse_cholesky::SparseCholesky::analyse(&pattern)?;
+    println!(
+        "Hessian: {} nonzeros; Cholesky factor: {} nonzeros",
+        pattern.nnz(),
+        chol.factor_nnz()
+    );
     let training = scene.training();
     let probe = StiffnessProbe::new(
         &model,
