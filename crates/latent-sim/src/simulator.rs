@@ -251,11 +251,13 @@ struct Work {
     /// d×d: the preconditioner or Newton matrix, and the Newton matrix's constant part.
     hz: Vec<f64>,
     hz_const: Vec<f64>,
-    /// U J on the rows of the element vertices (3·n × d, column-major), and one element's 12
-    /// rows of it and of H_e U_e J (row-major 12×d).
+    /// U J on the rows of the element vertices (3·n × d, row-major: a vertex's three rows are
+    /// 3·d contiguous values), one element's 12 rows of it (12×d), their image in F (9×d) and
+    /// ∂P/∂F times that (9×d), all row-major.
     uj: Vec<f64>,
     uj_e: Vec<f64>,
-    huj_e: Vec<f64>,
+    fj_e: Vec<f64>,
+    afj_e: Vec<f64>,
     newton: DenseFactor,
     timers: Timers,
 }
@@ -312,7 +314,8 @@ impl<S: Subspace> ReducedSimulator<S> {
                 hz_const: vec![0.0; d * d],
                 uj: Vec::new(),
                 uj_e: vec![0.0; 12 * d],
-                huj_e: vec![0.0; 12 * d],
+                fj_e: vec![0.0; 9 * d],
+                afj_e: vec![0.0; 9 * d],
                 newton: DenseFactor::default(),
                 timers: Timers::default(),
             },
@@ -698,7 +701,7 @@ impl<S: Subspace> StepObjective<'_, S> {
 
     /// Decodes z into work.u and forms the parts of the Newton matrix that do not depend on the
     /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and U J on the
-    /// element rows (work.uj, 3·n × d column-major).
+    /// element rows (work.uj, 3·n × d row-major).
     fn newton_matrix_constant(&mut self, z: &[f64]) {
         let (model, space) = (self.model, self.space);
         let (k, d) = (space.k, self.subspace.latent_dim());
@@ -727,20 +730,26 @@ impl<S: Subspace> StepObjective<'_, S> {
                         acc[i] += c[i] * jl;
                     }
                 }
-                w.uj[j * m + r0..j * m + r0 + rows].copy_from_slice(&acc[..rows]);
+                for (i, &a) in acc[..rows].iter().enumerate() {
+                    w.uj[(r0 + i) * d + j] = a;
+                }
             }
         }
     }
 
-    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J), formed in z directly: with d < k
-    /// that costs 12·12·d + 12·d² per element instead of 12·12·k + 12·k² and a k×k sandwich.
+    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J), formed in z directly.
+    ///
+    /// H_e = W Gᵀ A G with A = ∂P/∂F (9×9) and G = ∂vec(F)/∂x_e (9×12), so with B = U_e J
+    /// (12×d) the element's term is W (G B)ᵀ A (G B): G B costs 36·d (row 3j + i of it is
+    /// Σ_a g_a[j] B[3a + i], g_a the shape gradients), A (G B) 81·d and the product 9·d², instead
+    /// of forming the 12×12 H_e (about 2,300) and B ᵀ H_e B (144·d + 12·d²).
     fn newton_matrix(&mut self, projected: bool) {
         let (model, space) = (self.model, self.space);
         let d = self.subspace.latent_dim();
         let w = &mut *self.work;
-        let (uj, ld) = (&w.uj, space.element_rows());
         w.hz.copy_from_slice(&w.hz_const);
-        let (u, uj_e, huj_e, hz) = (&w.u, &mut w.uj_e, &mut w.huj_e, &mut w.hz);
+        let (u, uj) = (&w.u, &w.uj);
+        let (b, fb, afb, hz) = (&mut w.uj_e, &mut w.fj_e, &mut w.afj_e, &mut w.hz);
         with_material!(&model.material, |material| {
             for ((&e, &weight), at) in space
                 .elements
@@ -754,27 +763,42 @@ impl<S: Subspace> StepObjective<'_, S> {
                 } else {
                     material.dpdf(&f)
                 };
-                let h = model.elements.local_hessian(e, &a, weight);
-                for (a, &p) in at.iter().enumerate() {
+                for (v, &p) in at.iter().enumerate() {
+                    let p = p as usize;
+                    b[3 * v * d..3 * (v + 1) * d].copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
+                }
+                // Shape gradients: g_1..g_3 are the rows of Bm, g_0 = −(g_1 + g_2 + g_3).
+                let bm = &model.elements.bm[e];
+                let mut g = [[0.0f64; 3]; 4];
+                for v in 1..4 {
+                    for j in 0..3 {
+                        g[v][j] = bm[(v - 1, j)];
+                    }
+                }
+                for j in 0..3 {
+                    g[0][j] = -(g[1][j] + g[2][j] + g[3][j]);
+                }
+                for j in 0..3 {
                     for i in 0..3 {
-                        let r = 3 * p as usize + i;
-                        let row = &mut uj_e[(3 * a + i) * d..(3 * a + i + 1) * d];
-                        for (j, x) in row.iter_mut().enumerate() {
-                            *x = uj[j * ld + r];
+                        let dst = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
+                        dst.fill(0.0);
+                        for (v, gv) in g.iter().enumerate() {
+                            axpy(gv[j], &b[(3 * v + i) * d..(3 * v + i + 1) * d], dst);
                         }
                     }
                 }
-                for r in 0..12 {
-                    let dst = &mut huj_e[r * d..(r + 1) * d];
+                let scale = model.elements.volume[e] * weight;
+                for r in 0..9 {
+                    let dst = &mut afb[r * d..(r + 1) * d];
                     dst.fill(0.0);
-                    for l in 0..12 {
-                        axpy(h[r * 12 + l], &uj_e[l * d..(l + 1) * d], dst);
+                    for c in 0..9 {
+                        axpy(scale * a[(r, c)], &fb[c * d..(c + 1) * d], dst);
                     }
                 }
-                for r in 0..12 {
-                    let (b, hb) = (&uj_e[r * d..(r + 1) * d], &huj_e[r * d..(r + 1) * d]);
-                    for (j, &x) in hb.iter().enumerate() {
-                        axpy(x, b, &mut hz[j * d..(j + 1) * d]);
+                for r in 0..9 {
+                    let (x, ax) = (&fb[r * d..(r + 1) * d], &afb[r * d..(r + 1) * d]);
+                    for (m, &xm) in x.iter().enumerate() {
+                        axpy(xm, ax, &mut hz[m * d..(m + 1) * d]);
                     }
                 }
             }
