@@ -21,6 +21,10 @@ use crate::artifact::{self, Expect, KeyBuilder, fnv1a};
 use crate::scene::Scene;
 
 /// The stages, in order.
+/// Age past which a temporary file in the cache belongs to a killed run (a live write takes
+/// seconds).
+pub const STALE_TEMPORARY_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
+
 pub const STAGES: [&str; 4] = ["snapshots", "pca", "cubature", "train"];
 
 /// What happened to one stage in a run.
@@ -138,6 +142,14 @@ impl<'a> Pipeline<'a> {
         }
         std::fs::create_dir_all(cache)
             .with_context(|| format!("cannot create cache folder {}", cache.display()))?;
+        match fem_core::io::remove_stale_temporaries(cache, STALE_TEMPORARY_AGE) {
+            Ok(0) => {}
+            Ok(n) => tracing::info!(
+                "removed {n} temporary file(s) left in {} by killed runs",
+                cache.display()
+            ),
+            Err(e) => tracing::warn!("cannot clean temporaries in {}: {e}", cache.display()),
+        }
         Ok(Self {
             scene,
             mesh_hash: fnv1a(&bytes),

@@ -472,3 +472,28 @@ fn a_killed_writer_leaves_the_previous_artifact() {
     assert!(mid_write >= 1, "no kill landed during a write");
     assert!(kept_previous >= 1, "no trial kept the previous artifact");
 }
+
+/// Temporaries that killed writers left in the cache are removed when a pipeline opens it, once
+/// they are older than any live write; a temporary being written now and the artifacts stay.
+#[test]
+fn opening_the_cache_removes_temporaries_of_killed_writers() {
+    let cache = scratch("stale-temporaries");
+    let stale = cache.join(".snapshots-00000000000000aa.art.4242-0-000000001.tmp");
+    let fresh = cache.join(".snapshots-00000000000000aa.art.4343-0-000000002.tmp");
+    let artifact = cache.join("snapshots-00000000000000aa.art");
+    for p in [&stale, &fresh, &artifact] {
+        std::fs::write(p, b"partial").unwrap();
+    }
+    let old = std::time::SystemTime::now() - 2 * xtask::pipeline::STALE_TEMPORARY_AGE;
+    std::fs::File::options()
+        .write(true)
+        .open(&stale)
+        .unwrap()
+        .set_modified(old)
+        .unwrap();
+    let s = Scene::from_str(TINY, Path::new("."), "tiny.toml").unwrap();
+    Pipeline::new(&s, &cache).unwrap();
+    assert!(!stale.exists(), "a killed writer's temporary stayed");
+    assert!(fresh.exists(), "a temporary that may be in use was removed");
+    assert!(artifact.exists(), "an artifact was removed");
+}

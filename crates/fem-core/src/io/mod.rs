@@ -72,7 +72,8 @@ fn format_of(path: &Path) -> Result<Format, MeshError> {
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed to disk,
 /// then renamed over the target, so a reader never sees a half-written file and a writer killed
-/// part-way leaves the previous file in place (and at worst a stray `.NAME.*.tmp`).
+/// part-way leaves the previous file in place (and at worst a stray `.NAME.*.tmp`, which
+/// [`remove_stale_temporaries`] clears).
 ///
 /// The temporary name is unique per process, call and time, so concurrent writers of the same
 /// path (threads, or array jobs on a shared file system) never write into one temporary file.
@@ -117,4 +118,33 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+/// Removes the temporaries of [`write_atomic`] (`.NAME.*.tmp`) in `dir` that were last modified
+/// more than `older_than` ago: left behind by writers that were killed. A live writer holds its
+/// temporary for the seconds one write takes, so an age test is safe even when several processes
+/// share the folder (array jobs writing shards of one cache). Returns how many were removed.
+pub fn remove_stale_temporaries(
+    dir: &Path,
+    older_than: std::time::Duration,
+) -> std::io::Result<usize> {
+    let now = std::time::SystemTime::now();
+    let mut removed = 0;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if !(name.starts_with('.') && name.ends_with(".tmp") && entry.file_type()?.is_file()) {
+            continue;
+        }
+        let age = entry
+            .metadata()?
+            .modified()
+            .ok()
+            .and_then(|m| now.duration_since(m).ok());
+        if age.is_some_and(|a| a > older_than) && std::fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    Ok(removed)
 }
