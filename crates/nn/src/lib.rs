@@ -65,6 +65,7 @@ pub mod batch;
 pub mod config;
 pub mod error;
 mod gradient;
+mod kernels;
 mod linalg;
 pub mod mlp;
 pub mod rng;

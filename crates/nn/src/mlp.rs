@@ -14,7 +14,7 @@
 //! None of them allocate: scratch lives in an [`MlpWorkspace`] made once by [`Mlp::workspace`].
 //! Batched evaluation and backpropagation for training are in [`crate::batch`].
 
-use crate::{Activation, NnError, SplitMix64, linalg};
+use crate::{Activation, NnError, SplitMix64, kernels, linalg};
 
 /// A dense feed-forward network with an activation on every hidden layer and a linear output.
 ///
@@ -275,15 +275,15 @@ impl Mlp {
         );
     }
 
-    /// h_l = σ(W_l x + b_l) for the hidden layers l = 0..L−1 into `ws.hidden`, from x = `z`.
-    fn forward_hidden(&self, z: &[f64], ws: &mut MlpWorkspace) {
-        for l in 0..self.num_layers() - 1 {
-            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+    /// h_l = σ(W_l h_{l−1} + b_l) for the hidden layers l = 0..end into `ws.hidden`, from
+    /// h₋₁ = x = `z`.
+    fn forward_hidden(&self, z: &[f64], end: usize, ws: &mut MlpWorkspace) {
+        for l in 0..end {
+            let n_out = self.sizes[l + 1];
             let (done, rest) = ws.hidden.split_at_mut(l);
             let x: &[f64] = if l == 0 { z } else { &done[l - 1] };
-            let a = &mut rest[0][..n_out];
-            linalg::mat_vec(a, &self.weights[l], x, n_out, n_in);
-            self.activation(l).apply_biased(a, &self.biases[l]);
+            let h = &mut rest[0][..n_out];
+            kernels::dense_layer(self.activation(l), h, &self.weights[l], &self.biases[l], x);
         }
     }
 
@@ -292,10 +292,10 @@ impl Mlp {
         self.check_workspace(ws);
         assert_eq!(z.len(), self.input_dim(), "input length");
         assert_eq!(out.len(), self.output_dim(), "output length");
-        self.forward_hidden(z, ws);
         let last = self.num_layers() - 1;
+        self.forward_hidden(z, last, ws);
         let x: &[f64] = if last == 0 { z } else { &ws.hidden[last - 1] };
-        linalg::mat_vec(
+        kernels::mat_vec(
             out,
             &self.weights[last],
             x,
@@ -310,12 +310,47 @@ impl Mlp {
 
     /// out = J(z)ᵀ v, the vector–Jacobian product (one forward and one backward pass; the
     /// output layer's value is not needed).
+    ///
+    /// The top hidden layer k = L − 2 runs forward and backward in one pass over its weights:
+    /// u = W_Lᵀ v is known before h_k is, so each row i of W_k gives
+    /// h_{k,i} = σ(W_k[i, :] h_{k−1} + b_{k,i}), then adds σ'(h_{k,i}) u_i W_k[i, :] to W_kᵀ g_k
+    /// while the row is in L1 (`kernels::fused_layer`). The result is bit-identical to
+    /// [`Mlp::forward`] followed by [`Mlp::vjp_cached`].
     pub fn vjp(&self, z: &[f64], v: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
         assert_eq!(z.len(), self.input_dim(), "input length");
-        self.forward_hidden(z, ws);
+        assert_eq!(v.len(), self.output_dim(), "cotangent length");
+        assert_eq!(out.len(), self.input_dim(), "output length");
         ws.cached = false;
-        self.backward(v, out, ws);
+        let last = self.num_layers() - 1;
+        if last == 0 {
+            self.backward(v, out, ws);
+            return;
+        }
+        let k = last - 1;
+        self.forward_hidden(z, k, ws);
+        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
+        kernels::mat_t_vec(&mut ws.grad[k], &self.weights[last], v, n_out, n_in);
+        let (below, above) = ws.hidden.split_at_mut(k);
+        let x: &[f64] = if k == 0 { z } else { &below[k - 1] };
+        let (grad_below, grad_above) = ws.grad.split_at_mut(k);
+        let gx: &mut [f64] = if k == 0 {
+            &mut *out
+        } else {
+            &mut grad_below[k - 1]
+        };
+        kernels::fused_layer(
+            self.activation(k),
+            &self.weights[k],
+            &self.biases[k],
+            x,
+            &grad_above[0],
+            &mut above[0],
+            gx,
+        );
+        if k > 0 {
+            self.backward_below(k, out, ws);
+        }
     }
 
     /// out = J(z)ᵀ v at the z of the last [`Mlp::forward`] on `ws` (saves the forward pass when
@@ -338,17 +373,36 @@ impl Mlp {
         assert_eq!(v.len(), self.output_dim(), "cotangent length");
         assert_eq!(out.len(), self.input_dim(), "output length");
         let last = self.num_layers() - 1;
-        for l in (1..=last).rev() {
-            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
+        if last == 0 {
+            kernels::mat_t_vec(out, &self.weights[0], v, n_out, n_in);
+            return;
+        }
+        kernels::mat_t_vec(&mut ws.grad[last - 1], &self.weights[last], v, n_out, n_in);
+        self.backward_below(last, out, ws);
+    }
+
+    /// The reverse sweep below layer `top ≥ 1`, from `ws.grad[top − 1]` = W_topᵀ g_top (before
+    /// the activation's derivative): out = ∂/∂z.
+    fn backward_below(&self, top: usize, out: &mut [f64], ws: &mut MlpWorkspace) {
+        for l in (1..=top).rev() {
+            let n_in = self.sizes[l];
             let (below, above) = ws.grad.split_at_mut(l);
-            let g: &[f64] = if l == last { v } else { &above[0] };
             let dst = &mut below[l - 1][..n_in];
-            linalg::mat_t_vec(dst, &self.weights[l], g, n_out, n_in);
+            if l < top {
+                let n_out = self.sizes[l + 1];
+                kernels::mat_t_vec(dst, &self.weights[l], &above[0], n_out, n_in);
+            }
             self.activation(l - 1)
                 .scale_by_derivative(&ws.hidden[l - 1][..n_in], dst);
         }
-        let g: &[f64] = if last == 0 { v } else { &ws.grad[0] };
-        linalg::mat_t_vec(out, &self.weights[0], g, self.sizes[1], self.sizes[0]);
+        kernels::mat_t_vec(
+            out,
+            &self.weights[0],
+            &ws.grad[0],
+            self.sizes[1],
+            self.sizes[0],
+        );
     }
 
     /// out = J(z) w, the Jacobian–vector product (forward mode: the value and the tangent are
@@ -369,10 +423,8 @@ impl Mlp {
                 (&done[l - 1], &done_t[l - 1])
             };
             let (h, s) = (&mut rest[0][..n_out], &mut rest_t[0][..n_out]);
-            // Two matrix–vector products: faer's kernel for a row-major matrix and two columns
-            // measured slower than two matrix–vector products (200 × 200).
-            linalg::mat_vec(h, &self.weights[l], x, n_out, n_in);
-            linalg::mat_vec(s, &self.weights[l], t, n_out, n_in);
+            // One pass over W for both products (the value is bit-identical to `forward`'s).
+            kernels::mat_vec2(h, s, &self.weights[l], x, t, n_out, n_in);
             let act = self.activation(l);
             act.apply_biased(h, &self.biases[l]);
             s.iter_mut()
@@ -380,7 +432,7 @@ impl Mlp {
                 .for_each(|(s, &h)| *s *= act.derivative_from_output(h));
         }
         let t: &[f64] = if last == 0 { w } else { &ws.grad[last - 1] };
-        linalg::mat_vec(
+        kernels::mat_vec(
             out,
             &self.weights[last],
             t,
@@ -424,7 +476,7 @@ impl Mlp {
             if l == 0 {
                 // W₁ [z | I] = [W₁z | W₁]: only the value column is a product.
                 let w = &self.weights[0];
-                linalg::mat_vec(&mut ws.y[..n_out], w, z, n_out, n_in);
+                kernels::mat_vec(&mut ws.y[..n_out], w, z, n_out, n_in);
                 for (i, row) in y.chunks_exact_mut(m).enumerate() {
                     row[0] = ws.y[i];
                     row[1..].copy_from_slice(&w[i * n0..(i + 1) * n0]);

@@ -1,0 +1,495 @@
+//! Single-vector dense kernels with explicit SIMD, for the per-call operations of [`crate::Mlp`]
+//! (forward, VJP, JVP): y = W x, y = Wᵀ g, the pair (W x, W t), and one hidden layer's forward
+//! and backward step fused into a single pass over W.
+//!
+//! W is row-major `m × n`. These products are bound by reading W (a 200 × 200 layer is 320 kB, in
+//! L2), so the kernels stream each row once per call and keep everything else in registers or
+//! L1; the fused step reads W once where a forward then a backward pass would read it twice.
+//! SIMD goes through `pulp`'s safe API: [`pulp::Arch::dispatch`] picks AVX2 + FMA (or the scalar
+//! fallback) at run time, and every helper is `#[inline(always)]` so it is compiled inside the
+//! dispatched function with those target features.
+//!
+//! Every output element is computed by one fixed sequence of operations that does not depend on
+//! how rows are grouped into register blocks: a row's dot product is one vector accumulator over
+//! the full-width chunks of the row (fused multiply–adds, in column order), summed across lanes,
+//! then the columns past the last full chunk added in order; Wᵀg adds the rows' contributions to
+//! each element in row order. So [`fused_layer`] gives bit-for-bit the values of [`mat_vec`]
+//! followed by [`mat_t_vec`], and `Mlp::vjp` equals `Mlp::forward` + `Mlp::vjp_cached`.
+
+use pulp::{Arch, Simd, WithSimd};
+
+use crate::Activation;
+
+/// Rows per register block: eight independent dot products hide the fused multiply–add latency
+/// (2 units × 4 cycles) while W is streamed.
+const ROWS: usize = 8;
+
+/// Rows per register block of the two-vector product: 2 × 4 accumulators, so that they and the
+/// two input chunks stay in the 16 AVX2 registers (8 rows spilled to the stack).
+const ROWS2: usize = 4;
+
+/// Rows per block of Wᵀg and of the fused layer, whose loop carries 4 dot products of the next
+/// block and the 4 gradient updates of the current one (11 registers).
+const ROWS_T: usize = 4;
+
+/// `row` split into its full-width SIMD chunks (exactly `chunks` of them) and the remaining
+/// columns.
+#[inline(always)]
+fn split_row<S: Simd>(row: &[f64], chunks: usize) -> (&[S::f64s], &[f64]) {
+    let (head, tail) = S::as_simd_f64s(row);
+    (&head[..chunks], tail)
+}
+
+/// The dot products of the R rows of `w` (R × n, row-major) with x.
+#[inline(always)]
+fn dot_rows<S: Simd, const R: usize>(simd: S, w: &[f64], x: &[f64]) -> [f64; R] {
+    let n = x.len();
+    let (xv, xt) = S::as_simd_f64s(x);
+    let chunks = xv.len();
+    let rows: [(&[S::f64s], &[f64]); R] =
+        std::array::from_fn(|r| split_row::<S>(&w[r * n..(r + 1) * n], chunks));
+    let mut acc = [simd.splat_f64s(0.0); R];
+    for (k, &x) in xv.iter().enumerate() {
+        for r in 0..R {
+            acc[r] = simd.mul_add_e_f64s(rows[r].0[k], x, acc[r]);
+        }
+    }
+    std::array::from_fn(|r| {
+        let mut s = simd.reduce_sum_f64s(acc[r]);
+        for (w, x) in rows[r].1.iter().zip(xt) {
+            s += w * x;
+        }
+        s
+    })
+}
+
+/// The dot products of the R rows of `w` with x and with t, sharing the loads of W. Each of
+/// the two results is computed exactly as [`dot_rows`] computes it.
+#[inline(always)]
+fn dot2_rows<S: Simd, const R: usize>(
+    simd: S,
+    w: &[f64],
+    x: &[f64],
+    t: &[f64],
+) -> ([f64; R], [f64; R]) {
+    let n = x.len();
+    let (xv, xt) = S::as_simd_f64s(x);
+    let chunks = xv.len();
+    let (tv, tt) = split_row::<S>(t, chunks);
+    let rows: [(&[S::f64s], &[f64]); R] =
+        std::array::from_fn(|r| split_row::<S>(&w[r * n..(r + 1) * n], chunks));
+    let mut acc = [simd.splat_f64s(0.0); R];
+    let mut tan = [simd.splat_f64s(0.0); R];
+    for (k, (&x, &t)) in xv.iter().zip(tv).enumerate() {
+        for r in 0..R {
+            let w = rows[r].0[k];
+            acc[r] = simd.mul_add_e_f64s(w, x, acc[r]);
+            tan[r] = simd.mul_add_e_f64s(w, t, tan[r]);
+        }
+    }
+    let finish = |acc: &[S::f64s; R], x: &[f64]| -> [f64; R] {
+        std::array::from_fn(|r| {
+            let mut s = simd.reduce_sum_f64s(acc[r]);
+            for (w, x) in rows[r].1.iter().zip(x) {
+                s += w * x;
+            }
+            s
+        })
+    };
+    (finish(&acc, xt), finish(&tan, tt))
+}
+
+/// y += Σ_r g_r W[r, :] over the R rows of `w` (R × n, row-major), rows in order.
+#[inline(always)]
+fn add_rows<S: Simd, const R: usize>(simd: S, y: &mut [f64], w: &[f64], g: &[f64; R]) {
+    let n = y.len();
+    let (yv, yt) = S::as_mut_simd_f64s(y);
+    let chunks = yv.len();
+    let rows: [(&[S::f64s], &[f64]); R] =
+        std::array::from_fn(|r| split_row::<S>(&w[r * n..(r + 1) * n], chunks));
+    let gs = g.map(|g| simd.splat_f64s(g));
+    for (k, y) in yv.iter_mut().enumerate() {
+        let mut acc = *y;
+        for r in 0..R {
+            acc = simd.mul_add_e_f64s(gs[r], rows[r].0[k], acc);
+        }
+        *y = acc;
+    }
+    for (j, y) in yt.iter_mut().enumerate() {
+        for r in 0..R {
+            *y += g[r] * rows[r].1[j];
+        }
+    }
+}
+
+/// The dot products of the R rows of `w_next` with x (exactly as [`dot_rows`]) and, in the same
+/// sweep over the columns, y += Σ_r g_r W[r, :] over the R rows of `w` (exactly as
+/// [`add_rows`]): the streaming of the next rows from L2 overlaps the update from the current
+/// rows, which are in L1.
+#[inline(always)]
+fn dot_add_rows<S: Simd, const R: usize>(
+    simd: S,
+    w_next: &[f64],
+    x: &[f64],
+    y: &mut [f64],
+    w: &[f64],
+    g: &[f64; R],
+) -> [f64; R] {
+    let n = x.len();
+    let (xv, xt) = S::as_simd_f64s(x);
+    let chunks = xv.len();
+    let (yv, yt) = S::as_mut_simd_f64s(y);
+    let yv = &mut yv[..chunks];
+    let next: [(&[S::f64s], &[f64]); R] =
+        std::array::from_fn(|r| split_row::<S>(&w_next[r * n..(r + 1) * n], chunks));
+    let rows: [(&[S::f64s], &[f64]); R] =
+        std::array::from_fn(|r| split_row::<S>(&w[r * n..(r + 1) * n], chunks));
+    let gs = g.map(|g| simd.splat_f64s(g));
+    let mut acc = [simd.splat_f64s(0.0); R];
+    for (k, (&x, y)) in xv.iter().zip(yv).enumerate() {
+        let mut sum = *y;
+        for r in 0..R {
+            acc[r] = simd.mul_add_e_f64s(next[r].0[k], x, acc[r]);
+            sum = simd.mul_add_e_f64s(gs[r], rows[r].0[k], sum);
+        }
+        *y = sum;
+    }
+    for (j, y) in yt.iter_mut().enumerate() {
+        for r in 0..R {
+            *y += g[r] * rows[r].1[j];
+        }
+    }
+    std::array::from_fn(|r| {
+        let mut s = simd.reduce_sum_f64s(acc[r]);
+        for (w, x) in next[r].1.iter().zip(xt) {
+            s += w * x;
+        }
+        s
+    })
+}
+
+struct MatVec<'a> {
+    y: &'a mut [f64],
+    w: &'a [f64],
+    x: &'a [f64],
+}
+
+impl WithSimd for MatVec<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { y, w, x } = self;
+        let (m, n) = (y.len(), x.len());
+        let full = m - m % ROWS;
+        for i in (0..full).step_by(ROWS) {
+            y[i..i + ROWS].copy_from_slice(&dot_rows::<S, ROWS>(
+                simd,
+                &w[i * n..(i + ROWS) * n],
+                x,
+            ));
+        }
+        for i in full..m {
+            y[i] = dot_rows::<S, 1>(simd, &w[i * n..(i + 1) * n], x)[0];
+        }
+    }
+}
+
+/// y (m) = W (m × n, row-major) · x (n).
+pub(crate) fn mat_vec(y: &mut [f64], w: &[f64], x: &[f64], m: usize, n: usize) {
+    Arch::new().dispatch(MatVec {
+        y: &mut y[..m],
+        w: &w[..m * n],
+        x: &x[..n],
+    });
+}
+
+struct DenseLayer<'a> {
+    act: Activation,
+    h: &'a mut [f64],
+    w: &'a [f64],
+    b: &'a [f64],
+    x: &'a [f64],
+}
+
+impl WithSimd for DenseLayer<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { act, h, w, b, x } = self;
+        MatVec { y: h, w, x }.with_simd(simd);
+        act.apply_biased(h, b);
+    }
+}
+
+/// h (m) = σ(W x + b) with W (m × n, row-major): [`mat_vec`] and [`Activation::apply_biased`]
+/// in one dispatch, so that σ is compiled with the SIMD target features too.
+pub(crate) fn dense_layer(act: Activation, h: &mut [f64], w: &[f64], b: &[f64], x: &[f64]) {
+    let (m, n) = (b.len(), x.len());
+    Arch::new().dispatch(DenseLayer {
+        act,
+        h: &mut h[..m],
+        w: &w[..m * n],
+        b,
+        x,
+    });
+}
+
+struct MatVec2<'a> {
+    y: &'a mut [f64],
+    s: &'a mut [f64],
+    w: &'a [f64],
+    x: &'a [f64],
+    t: &'a [f64],
+}
+
+impl WithSimd for MatVec2<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { y, s, w, x, t } = self;
+        let (m, n) = (y.len(), x.len());
+        let full = m - m % ROWS2;
+        for i in (0..full).step_by(ROWS2) {
+            let (a, b) = dot2_rows::<S, ROWS2>(simd, &w[i * n..(i + ROWS2) * n], x, t);
+            y[i..i + ROWS2].copy_from_slice(&a);
+            s[i..i + ROWS2].copy_from_slice(&b);
+        }
+        for i in full..m {
+            let (a, b) = dot2_rows::<S, 1>(simd, &w[i * n..(i + 1) * n], x, t);
+            (y[i], s[i]) = (a[0], b[0]);
+        }
+    }
+}
+
+/// y = W x and s = W t (W m × n, row-major) in one pass over W; y is bit-identical to
+/// [`mat_vec`]'s.
+pub(crate) fn mat_vec2(
+    y: &mut [f64],
+    s: &mut [f64],
+    w: &[f64],
+    x: &[f64],
+    t: &[f64],
+    m: usize,
+    n: usize,
+) {
+    Arch::new().dispatch(MatVec2 {
+        y: &mut y[..m],
+        s: &mut s[..m],
+        w: &w[..m * n],
+        x: &x[..n],
+        t: &t[..n],
+    });
+}
+
+struct MatTVec<'a> {
+    y: &'a mut [f64],
+    w: &'a [f64],
+    g: &'a [f64],
+}
+
+impl WithSimd for MatTVec<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { y, w, g } = self;
+        let n = y.len();
+        y.fill(0.0);
+        let mut blocks = g.chunks_exact(ROWS_T);
+        for (g, w) in (&mut blocks).zip(w.chunks_exact(ROWS_T * n)) {
+            let g: &[f64; ROWS_T] = g.try_into().expect("a block of ROWS_T gradients");
+            add_rows::<S, ROWS_T>(simd, y, w, g);
+        }
+        let done = g.len() - blocks.remainder().len();
+        for (i, &g) in g.iter().enumerate().skip(done) {
+            add_rows::<S, 1>(simd, y, &w[i * n..(i + 1) * n], &[g]);
+        }
+    }
+}
+
+/// y (n) = Wᵀ g (g of length m), with W stored as (m × n) row-major.
+pub(crate) fn mat_t_vec(y: &mut [f64], w: &[f64], g: &[f64], m: usize, n: usize) {
+    Arch::new().dispatch(MatTVec {
+        y: &mut y[..n],
+        w: &w[..m * n],
+        g: &g[..m],
+    });
+}
+
+/// One hidden layer's forward and backward step, see [`fused_layer`].
+struct FusedLayer<'a> {
+    act: Activation,
+    w: &'a [f64],
+    b: &'a [f64],
+    x: &'a [f64],
+    u: &'a [f64],
+    h: &'a mut [f64],
+    gx: &'a mut [f64],
+}
+
+impl FusedLayer<'_> {
+    /// h = σ(a + b) and g = σ'(h) ⊙ u for rows `i..i + R` with pre-activations W x = `a`.
+    /// On a fixed-size array, so that σ vectorises (on a slice of unknown length the compiler
+    /// left it scalar).
+    #[inline(always)]
+    fn activate<const R: usize>(&mut self, i: usize, a: [f64; R]) -> [f64; R] {
+        let mut h: [f64; R] = std::array::from_fn(|r| a[r] + self.b[i + r]);
+        self.act.apply_in_place(&mut h);
+        self.h[i..i + R].copy_from_slice(&h);
+        let mut g: [f64; R] = self.u[i..i + R].try_into().expect("R cotangents");
+        self.act.scale_by_derivative(&h, &mut g);
+        g
+    }
+}
+
+impl WithSimd for FusedLayer<'_> {
+    type Output = ();
+
+    /// A software pipeline over blocks of [`ROWS_T`] rows: block i's gradient update runs in
+    /// the same sweep as block i + 1's dot products. The remaining rows go one at a time.
+    #[inline(always)]
+    fn with_simd<S: Simd>(mut self, simd: S) {
+        const R: usize = ROWS_T;
+        let (m, n) = (self.h.len(), self.x.len());
+        let (w, x) = (self.w, self.x);
+        self.gx.fill(0.0);
+        let full = m - m % R;
+        if full > 0 {
+            let mut a = dot_rows::<S, R>(simd, &w[..R * n], x);
+            for i in (0..full).step_by(R) {
+                let g = self.activate(i, a);
+                let rows = &w[i * n..(i + R) * n];
+                if i + R < full {
+                    let next = &w[(i + R) * n..(i + 2 * R) * n];
+                    a = dot_add_rows::<S, R>(simd, next, x, self.gx, rows, &g);
+                } else {
+                    add_rows::<S, R>(simd, self.gx, rows, &g);
+                }
+            }
+        }
+        for i in full..m {
+            let row = &w[i * n..(i + 1) * n];
+            let a = dot_rows::<S, 1>(simd, row, x);
+            let g = self.activate(i, a);
+            add_rows::<S, 1>(simd, self.gx, row, &g);
+        }
+    }
+}
+
+/// One hidden layer h = σ(W x + b) (W m × n, row-major) and its backward step in one pass over
+/// W: given u = ∂ℒ/∂h (length m), gx = Wᵀ (σ'(h) ⊙ u) = ∂ℒ/∂x (length n). h and gx are
+/// bit-identical to [`mat_vec`], [`Activation::apply_biased`], [`Activation::scale_by_derivative`]
+/// and [`mat_t_vec`] in sequence.
+pub(crate) fn fused_layer(
+    act: Activation,
+    w: &[f64],
+    b: &[f64],
+    x: &[f64],
+    u: &[f64],
+    h: &mut [f64],
+    gx: &mut [f64],
+) {
+    let (m, n) = (b.len(), x.len());
+    Arch::new().dispatch(FusedLayer {
+        act,
+        w: &w[..m * n],
+        b,
+        x,
+        u: &u[..m],
+        h: &mut h[..m],
+        gx: &mut gx[..n],
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::SplitMix64;
+
+    fn random(rng: &mut SplitMix64, n: usize) -> Vec<f64> {
+        (0..n).map(|_| rng.range(-1.0, 1.0)).collect()
+    }
+
+    fn close(a: &[f64], b: &[f64]) -> bool {
+        a.iter()
+            .zip(b)
+            .all(|(a, b)| (a - b).abs() <= 1e-13 * (1.0 + a.abs().max(b.abs())))
+    }
+
+    /// Sizes around the SIMD width and the row block, including 1 and odd ones.
+    const SIZES: [usize; 10] = [1, 2, 3, 5, 7, 8, 9, 17, 31, 200];
+
+    #[test]
+    fn kernels_match_plain_loops_on_odd_sizes() {
+        let mut rng = SplitMix64::new(3);
+        for m in SIZES {
+            for n in SIZES {
+                let w = random(&mut rng, m * n);
+                let (x, t, g) = (
+                    random(&mut rng, n),
+                    random(&mut rng, n),
+                    random(&mut rng, m),
+                );
+                let wx: Vec<f64> = (0..m)
+                    .map(|i| (0..n).map(|j| w[i * n + j] * x[j]).sum())
+                    .collect();
+                let wt: Vec<f64> = (0..m)
+                    .map(|i| (0..n).map(|j| w[i * n + j] * t[j]).sum())
+                    .collect();
+                let wtg: Vec<f64> = (0..n)
+                    .map(|j| (0..m).map(|i| w[i * n + j] * g[i]).sum())
+                    .collect();
+                let mut y = vec![f64::NAN; m];
+                mat_vec(&mut y, &w, &x, m, n);
+                assert!(close(&y, &wx), "W x, {m} × {n}");
+                let (mut y2, mut s) = (vec![f64::NAN; m], vec![f64::NAN; m]);
+                mat_vec2(&mut y2, &mut s, &w, &x, &t, m, n);
+                assert_eq!(y2, y, "W x beside W t, {m} × {n}");
+                assert!(close(&s, &wt), "W t, {m} × {n}");
+                let mut z = vec![f64::NAN; n];
+                mat_t_vec(&mut z, &w, &g, m, n);
+                assert!(close(&z, &wtg), "Wᵀ g, {m} × {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn fused_layer_is_bit_identical_to_the_separate_passes() {
+        let mut rng = SplitMix64::new(4);
+        for act in Activation::ALL {
+            for m in SIZES {
+                for n in SIZES {
+                    let w = random(&mut rng, m * n);
+                    let (b, x, u) = (
+                        random(&mut rng, m),
+                        random(&mut rng, n),
+                        random(&mut rng, m),
+                    );
+                    let mut h = vec![f64::NAN; m];
+                    mat_vec(&mut h, &w, &x, m, n);
+                    act.apply_biased(&mut h, &b);
+                    let mut g = u.clone();
+                    act.scale_by_derivative(&h, &mut g);
+                    let mut gx = vec![f64::NAN; n];
+                    mat_t_vec(&mut gx, &w, &g, m, n);
+                    // Against a plain loop too, so the shared pieces cannot both be wrong.
+                    let plain: Vec<f64> = (0..n)
+                        .map(|j| (0..m).map(|i| w[i * n + j] * g[i]).sum())
+                        .collect();
+                    assert!(close(&gx, &plain), "{act} {m} × {n}");
+                    let mut h1 = vec![f64::NAN; m];
+                    dense_layer(act, &mut h1, &w, &b, &x);
+                    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&h1), bits(&h), "{act} dense layer, {m} × {n}");
+                    let (mut h2, mut gx2) = (vec![f64::NAN; m], vec![f64::NAN; n]);
+                    fused_layer(act, &w, &b, &x, &u, &mut h2, &mut gx2);
+                    assert_eq!(bits(&h2), bits(&h), "{act} h, {m} × {n}");
+                    assert_eq!(bits(&gx2), bits(&gx), "{act} gx, {m} × {n}");
+                }
+            }
+        }
+    }
+}
