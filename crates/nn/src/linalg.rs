@@ -1,9 +1,9 @@
-//! The dense matrix products of batches and of the Jacobian, on plain slices, through faer's matmul (which
+//! The dense matrix products of batches (training), on plain slices, through faer's matmul (which
 //! dispatches to AVX2/AVX-512 kernels at run time). Weights are row-major `m × n` (one output
 //! neuron per contiguous row); activations, tangents and gradients are column-major `n × c`
 //! blocks (one sample or tangent direction per contiguous column). Always sequential: callers
-//! parallelise over independent sample chunks instead. Single-vector products are in
-//! [`crate::kernels`].
+//! parallelise over independent sample chunks instead. The products of single inputs (forward,
+//! derivatives, Jacobian) are in [`crate::kernels`].
 
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
@@ -14,32 +14,6 @@ pub(crate) fn mul_w(dst: &mut [f64], w: &[f64], x: &[f64], m: usize, n: usize, c
     let x = MatRef::from_column_major_slice(&x[..n * c], n, c);
     let dst = MatMut::from_column_major_slice_mut(&mut dst[..m * c], m, c);
     matmul(dst, Accum::Replace, w, x, 1.0, Par::Seq);
-}
-
-/// Y (m × c, row-major) = W (m × n, row-major) · X (n × c, row-major): forward mode with c
-/// columns. Row-major X and Y measured 1.5× faster in faer than column-major ones for
-/// 200 × 200 × 7.
-pub(crate) fn mat_mat_rows(y: &mut [f64], w: &[f64], x: &[f64], m: usize, n: usize, c: usize) {
-    let w = MatRef::from_row_major_slice(&w[..m * n], m, n);
-    let x = MatRef::from_row_major_slice(&x[..n * c], n, c);
-    let y = MatMut::from_row_major_slice_mut(&mut y[..m * c], m, c);
-    matmul(y, Accum::Replace, w, x, 1.0, Par::Seq);
-}
-
-/// J (m × (c − 1), column-major) = W (m × n, row-major) · X[:, 1..] with X (n × c) row-major:
-/// the output layer of the Jacobian, whose value column is not needed.
-pub(crate) fn mat_tangents_col_major(
-    j: &mut [f64],
-    w: &[f64],
-    x: &[f64],
-    m: usize,
-    n: usize,
-    c: usize,
-) {
-    let w = MatRef::from_row_major_slice(&w[..m * n], m, n);
-    let t = MatRef::from_row_major_slice(&x[..n * c], n, c).subcols(1, c - 1);
-    let j = MatMut::from_column_major_slice_mut(&mut j[..m * (c - 1)], m, c - 1);
-    matmul(j, Accum::Replace, w, t, 1.0, Par::Seq);
 }
 
 /// dst (n × c) = Wᵀ (n × m) · G (m × c), with W stored as (m × n).
