@@ -60,6 +60,7 @@
 
 pub mod activation;
 pub mod adam;
+mod aligned;
 pub mod autoencoder;
 pub mod batch;
 pub mod config;

@@ -16,6 +16,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::aligned::AlignedVec;
 use crate::{Activation, NnError, SplitMix64, kernels};
 
 /// A dense feed-forward network with an activation on every hidden layer and a linear output.
@@ -29,10 +30,10 @@ pub struct Mlp {
     sizes: Vec<usize>,
     /// One activation per hidden layer (`sizes.len() − 2`).
     activations: Vec<Activation>,
-    /// W_l, row-major `sizes[l+1] × sizes[l]`.
-    weights: Vec<Vec<f64>>,
+    /// W_l, row-major `sizes[l+1] × sizes[l]`, on a cache-line boundary.
+    weights: Vec<AlignedVec>,
     /// b_l, length `sizes[l+1]`.
-    biases: Vec<Vec<f64>>,
+    biases: Vec<AlignedVec>,
     /// Identifies the parameter values: a fresh number from [`fresh_version`] whenever they may
     /// change (every `&mut` accessor), kept by clones (same values). A workspace holding weights
     /// packed for [`Mlp::jacobian`] repacks when it differs. Not serialised.
@@ -138,12 +139,12 @@ impl Mlp {
             .map(|w| {
                 let (n_in, n_out) = (w[0], w[1]);
                 let limit = (6.0 / (n_in + n_out) as f64).sqrt();
-                (0..n_in * n_out)
-                    .map(|_| rng.range(-limit, limit))
-                    .collect()
+                let mut a = AlignedVec::zeros(n_in * n_out);
+                a.iter_mut().for_each(|x| *x = rng.range(-limit, limit));
+                a
             })
             .collect();
-        let biases = sizes[1..].iter().map(|&n| vec![0.0; n]).collect();
+        let biases = sizes[1..].iter().map(|&n| AlignedVec::zeros(n)).collect();
         Ok(Self {
             sizes: sizes.to_vec(),
             activations: activations.to_vec(),
@@ -201,11 +202,12 @@ impl Mlp {
                 ));
             }
         }
+        let aligned = |a: Vec<Vec<f64>>| a.iter().map(|a| AlignedVec::from_slice(a)).collect();
         Ok(Self {
             sizes,
             activations,
-            weights,
-            biases,
+            weights: aligned(weights),
+            biases: aligned(biases),
             version: fresh_version(),
         })
     }
@@ -259,8 +261,8 @@ impl Mlp {
 
     /// The total number of weights and biases.
     pub fn num_parameters(&self) -> usize {
-        self.weights.iter().map(Vec::len).sum::<usize>()
-            + self.biases.iter().map(Vec::len).sum::<usize>()
+        self.weights.iter().map(|w| w.len()).sum::<usize>()
+            + self.biases.iter().map(|b| b.len()).sum::<usize>()
     }
 
     /// Every parameter array in a fixed order (W₁, b₁, W₂, b₂, …), as the optimiser sees them.
@@ -575,9 +577,9 @@ impl Mlp {
 pub struct MlpWorkspace {
     sizes: Vec<usize>,
     /// h_l = σ(a_l) for every hidden layer (the forward state of `vjp_cached`).
-    hidden: Vec<Vec<f64>>,
+    hidden: Vec<AlignedVec>,
     /// Backward gradients (VJP) or tangents (JVP) per hidden layer.
-    grad: Vec<Vec<f64>>,
+    grad: Vec<AlignedVec>,
     /// SIMD lanes of this machine: the padding of the packed weights and of `tan` and `jac`.
     lanes: usize,
     /// X_l = [h_l | T_l] for every hidden layer (Jacobian), row-major, with n_l rounded up to
@@ -586,7 +588,7 @@ pub struct MlpWorkspace {
     /// W_L T_{L−1}, row-major with the padded rows (Jacobian).
     jac: Vec<f64>,
     /// W_l packed for the Jacobian's products, for l = 2, …, L.
-    packed: Vec<Vec<f64>>,
+    packed: Vec<AlignedVec>,
     /// The [`Mlp`] version whose weights are in `packed` (0: none).
     packed_version: u64,
     /// Whether `hidden` holds the state of the last [`Mlp::forward`] (for `vjp_cached`).
@@ -601,8 +603,8 @@ impl MlpWorkspace {
         let n_last = sizes[sizes.len() - 1];
         Self {
             sizes: sizes.to_vec(),
-            hidden: hidden.iter().map(|&n| vec![0.0; n]).collect(),
-            grad: hidden.iter().map(|&n| vec![0.0; n]).collect(),
+            hidden: hidden.iter().map(|&n| AlignedVec::zeros(n)).collect(),
+            grad: hidden.iter().map(|&n| AlignedVec::zeros(n)).collect(),
             lanes,
             tan: hidden
                 .iter()
@@ -615,7 +617,7 @@ impl MlpWorkspace {
             },
             packed: sizes[1..]
                 .windows(2)
-                .map(|w| vec![0.0; kernels::packed_len(w[1], w[0], lanes)])
+                .map(|w| AlignedVec::zeros(kernels::packed_len(w[1], w[0], lanes)))
                 .collect(),
             packed_version: 0,
             cached: false,
