@@ -1,20 +1,25 @@
-//! Single-vector dense kernels with explicit SIMD, for the per-call operations of [`crate::Mlp`]
-//! (forward, VJP, JVP): y = W x, y = Wᵀ g, the pair (W x, W t), and one hidden layer's forward
-//! and backward step fused into a single pass over W.
+//! Single-input dense kernels with explicit SIMD, for the per-call operations of [`crate::Mlp`]:
+//! y = W x, y = Wᵀ g, the pair (W x, W t), one hidden layer's forward and backward step fused
+//! into a single pass over W (VJP), and Y = W X for the Jacobian's few columns on a packed copy
+//! of W. Also the dispatch that compiles the elementwise loops of training (σ, σ', Adam) for the
+//! same instruction set.
 //!
-//! W is row-major `m × n`. These products are bound by reading W (a 200 × 200 layer is 320 kB, in
-//! L2), so the kernels stream each row once per call and keep everything else in registers or
-//! L1; the fused step reads W once where a forward then a backward pass would read it twice.
-//! SIMD goes through `pulp`'s safe API: [`pulp::Arch::dispatch`] picks AVX2 + FMA (or the scalar
-//! fallback) at run time, and every helper is `#[inline(always)]` so it is compiled inside the
-//! dispatched function with those target features.
+//! W is row-major `m × n`. The matrix–vector products are bound by reading W (a 200 × 200 layer
+//! is 320 kB, in L2), so the kernels stream each row once per call and keep everything else in
+//! registers or L1; the fused step reads W from L2 once where a forward then a backward pass
+//! would read it twice. The Jacobian's product (200 × 200 × 7) is bound by multiply–adds
+//! instead: [`mat_mat_packed`] keeps 12 rows × 4 columns of Y in registers. SIMD goes through
+//! `pulp`'s safe API: [`pulp::Arch::dispatch`] picks AVX2 + FMA (or the scalar fallback) at run
+//! time, and every helper is `#[inline(always)]` so it is compiled inside the dispatched function
+//! with those target features.
 //!
-//! Every output element is computed by one fixed sequence of operations that does not depend on
-//! how rows are grouped into register blocks: a row's dot product is one vector accumulator over
-//! the full-width chunks of the row (fused multiply–adds, in column order), summed across lanes,
-//! then the columns past the last full chunk added in order; Wᵀg adds the rows' contributions to
-//! each element in row order. So [`fused_layer`] gives bit-for-bit the values of [`mat_vec`]
-//! followed by [`mat_t_vec`], and `Mlp::vjp` equals `Mlp::forward` + `Mlp::vjp_cached`.
+//! Every output element of the matrix–vector kernels is computed by one fixed sequence of
+//! operations that does not depend on how rows are grouped into register blocks: a row's dot
+//! product is one vector accumulator over the full-width chunks of the row (fused multiply–adds,
+//! in column order), summed across lanes, then the columns past the last full chunk added in
+//! order; Wᵀg adds the rows' contributions to each element in row order, four rows at a time. So
+//! [`fused_layer`] gives bit for bit the values of [`mat_vec`] followed by [`mat_t_vec`], and
+//! `Mlp::vjp` equals `Mlp::forward` + `Mlp::vjp_cached`.
 
 use pulp::{Arch, Simd, WithSimd};
 

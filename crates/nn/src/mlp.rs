@@ -4,13 +4,16 @@
 //! h₀ = x; hidden layers apply an activation h_l = σ_l(a_l) and the output is linear, y = a_L.
 //! With D_l = diag(σ_l'(a_l)) the Jacobian is J = W_L D_{L−1} W_{L−1} ⋯ D₁ W₁, and
 //!
-//! * [`Mlp::vjp`] computes Jᵀv by one forward pass and one backward pass (reverse mode),
-//! * [`Mlp::jvp`] computes Jw by pushing the pair [h | t] through the layers (forward mode, one
-//!   two-column product per layer),
+//! * [`Mlp::vjp`] computes Jᵀv by one forward pass and one backward pass (reverse mode), the
+//!   top hidden layer's two steps fused into one pass over its weights,
+//! * [`Mlp::jvp`] computes Jw by pushing the pair [h | t] through the layers (forward mode, both
+//!   products of a layer in one pass over its weights),
 //! * [`Mlp::jacobian`] computes J by pushing [h | I] through the layers (forward mode with n₀
 //!   tangent columns at once). For a decoder n₀ = d is small (≈ 6), so this costs a few forward
 //!   passes, far less than n_L reverse passes.
 //!
+//! The products are the explicit-SIMD kernels of [`crate::kernels`]; the weights start on a
+//! cache line so that no SIMD load of a row splits.
 //! None of them allocate: scratch lives in an [`MlpWorkspace`] made once by [`Mlp::workspace`].
 //! Batched evaluation and backpropagation for training are in [`crate::batch`].
 
