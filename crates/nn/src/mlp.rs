@@ -516,20 +516,12 @@ impl Mlp {
             }
             ws.packed_version = self.version;
         }
-        // X₁ = [W₁z | W₁], then σ.
+        // X₁ = [σ(W₁z + b₁) | σ' ⊙ W₁].
         let (n1, w) = (self.sizes[1], &self.weights[0]);
-        let x = &mut ws.tan[0];
-        kernels::mat_vec(&mut ws.grad[0], w, z, n1, n0);
-        for ((row, a), w) in x
-            .chunks_exact_mut(c)
-            .zip(&ws.grad[0])
-            .zip(w.chunks_exact(n0))
-        {
-            row[0] = *a;
-            // Not `copy_from_slice`: a call to memmove per 6-element row.
-            row[1..].iter_mut().zip(w).for_each(|(t, w)| *t = *w);
-        }
-        self.activate_tangents(0, x, &mut ws.grad[0], &mut ws.hidden[0], c);
+        let (h, d) = (&mut ws.grad[0][..n1], &mut ws.hidden[0][..n1]);
+        kernels::mat_vec(h, w, z, n1, n0);
+        kernels::activate(self.activation(0), h, &self.biases[0], d);
+        tangent_rows(&mut ws.tan[0], h, d, Some(w), c);
         for l in 1..last {
             let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
             let (done, rest) = ws.tan.split_at_mut(l);
@@ -567,10 +559,42 @@ impl Mlp {
             *h = row[0];
         }
         kernels::activate(act, h, &self.biases[l], d);
-        for ((row, &h), &d) in x.chunks_exact_mut(c).zip(h.iter()).zip(d.iter()) {
-            row[0] = h;
-            row[1..].iter_mut().for_each(|t| *t *= d);
+        tangent_rows(x, h, d, None, c);
+    }
+}
+
+/// The rows [h_i | d_i t_i] of X (row-major, `c` columns), where t_i is the row's own tangents
+/// (`seed` = None) or row i of `seed` (c − 1 columns). The loop over a row is unrolled for
+/// c ≤ 8: with c a run-time number it cost more than the 200 × 7 multiplications.
+fn tangent_rows(x: &mut [f64], h: &[f64], d: &[f64], seed: Option<&[f64]>, c: usize) {
+    #[inline(always)]
+    fn rows<const C: usize>(x: &mut [f64], h: &[f64], d: &[f64], seed: Option<&[f64]>, c: usize) {
+        let c = if C == 0 { c } else { C };
+        let rows = x.chunks_exact_mut(c).zip(h).zip(d);
+        match seed {
+            Some(w) => {
+                for (((row, &h), &d), w) in rows.zip(w.chunks_exact(c - 1)) {
+                    row[0] = h;
+                    row[1..].iter_mut().zip(w).for_each(|(t, w)| *t = d * w);
+                }
+            }
+            None => {
+                for ((row, &h), &d) in rows {
+                    row[0] = h;
+                    row[1..].iter_mut().for_each(|t| *t *= d);
+                }
+            }
         }
+    }
+    match c {
+        2 => rows::<2>(x, h, d, seed, c),
+        3 => rows::<3>(x, h, d, seed, c),
+        4 => rows::<4>(x, h, d, seed, c),
+        5 => rows::<5>(x, h, d, seed, c),
+        6 => rows::<6>(x, h, d, seed, c),
+        7 => rows::<7>(x, h, d, seed, c),
+        8 => rows::<8>(x, h, d, seed, c),
+        _ => rows::<0>(x, h, d, seed, c),
     }
 }
 
