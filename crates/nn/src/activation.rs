@@ -81,6 +81,7 @@ impl Activation {
 
     /// x ← σ(x) elementwise (pre-activations in, activations out). The match is outside the
     /// loop so each arm is a tight loop.
+    #[inline(always)] // also into the SIMD kernels, compiled with their target features
     pub(crate) fn apply_in_place(self, x: &mut [f64]) {
         match self {
             Activation::Elu => x.iter_mut().for_each(|x| *x = elu(*x)),
@@ -93,6 +94,7 @@ impl Activation {
 
     /// x ← σ(x + b) for every column x of a block (`x.len()` a multiple of `b.len()`): the bias
     /// and the activation in one pass over the block.
+    #[inline(always)] // also into the SIMD kernels, compiled with their target features
     pub(crate) fn apply_biased(self, x: &mut [f64], b: &[f64]) {
         for col in x.chunks_exact_mut(b.len()) {
             let pairs = col.iter_mut().zip(b);
@@ -107,6 +109,7 @@ impl Activation {
     }
 
     /// g ← σ'(a) ⊙ g elementwise, given h = σ(a) (the backward step through the activation).
+    #[inline(always)] // also into the SIMD kernels, compiled with their target features
     pub(crate) fn scale_by_derivative(self, h: &[f64], g: &mut [f64]) {
         let g = &mut g[..h.len()];
         match self {

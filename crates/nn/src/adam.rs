@@ -129,6 +129,7 @@ pub(crate) struct AdamUpdate {
 
 impl AdamUpdate {
     /// p ← p − lr · m̂/(√v̂ + ε) after m ← β₁m + (1 − β₁)g, v ← β₂v + (1 − β₂)g², elementwise.
+    #[inline(always)] // into `kernels::vectorized`, compiled with the SIMD target features
     pub(crate) fn apply(&self, p: &mut [f64], g: &[f64], m: &mut [f64], v: &mut [f64]) {
         let Self {
             learning_rate,

@@ -5,7 +5,7 @@
 //! ∂ℒ/∂W_l = G_l H_{l−1}ᵀ, ∂ℒ/∂b_l = G_l 1, G_{l−1} = σ'(A_{l−1}) ⊙ (W_lᵀ G_l), and the input
 //! gradient Wᵀ₁G₁ when asked. Every product is one matrix–matrix multiplication.
 
-use crate::{Mlp, linalg};
+use crate::{Mlp, kernels, linalg};
 
 /// ∂ℒ/∂W_l and ∂ℒ/∂b_l for every layer of an [`Mlp`], in the network's layout.
 #[derive(Debug, Clone, PartialEq)]
@@ -174,7 +174,7 @@ impl Mlp {
             linalg::mul_w(a, self.weights(l), input, n_out, n_in, c);
             let b = self.bias(l);
             if l < last {
-                self.activations()[l].apply_biased(a, b);
+                kernels::vectorized(kernels::ApplyBiased(self.activations()[l], a, b));
             } else {
                 for col in a.chunks_exact_mut(n_out) {
                     col.iter_mut().zip(b).for_each(|(a, b)| *a += b);
@@ -235,7 +235,8 @@ impl Mlp {
             let (below, above) = ws.grad.split_at_mut(l);
             let gh = &mut below[l - 1][..n_in * c];
             linalg::mul_wt(gh, self.weights(l), &above[0][..n_out * c], n_out, n_in, c);
-            self.activations()[l - 1].scale_by_derivative(&ws.act[l - 1][..n_in * c], gh);
+            let (act, h) = (self.activations()[l - 1], &ws.act[l - 1][..n_in * c]);
+            kernels::vectorized(kernels::ScaleByDerivative(act, h, gh));
         }
         if let Some(g_in) = g_in {
             let (n_in, n_out) = (sizes[0], sizes[1]);

@@ -16,7 +16,7 @@
 use rayon::prelude::*;
 
 use crate::adam::{Adam, AdamUpdate};
-use crate::{Autoencoder, AutoencoderGradient, CHUNK, MlpBatchWorkspace, batch};
+use crate::{Autoencoder, AutoencoderGradient, CHUNK, MlpBatchWorkspace, batch, kernels};
 
 /// About this many weights per row block of phase 2: a 200 × 200 layer is split in four (enough
 /// blocks to balance two threads), small layers are one block.
@@ -301,7 +301,33 @@ fn weight_block(
         start += c;
     }
     if let (Some(s), Some(u)) = (step, update) {
-        u.apply(s.w, dw, s.mw, s.vw);
-        u.apply(s.b, db, s.mb, s.vb);
+        kernels::vectorized(AdamRows {
+            update: u,
+            step: s,
+            dw,
+            db,
+        });
+    }
+}
+
+/// The Adam update of one row block's weights and biases, vectorised.
+struct AdamRows<'a, 'b> {
+    update: AdamUpdate,
+    step: StepBlock<'a>,
+    dw: &'b [f64],
+    db: &'b [f64],
+}
+
+impl kernels::Elementwise for AdamRows<'_, '_> {
+    #[inline(always)]
+    fn run(self) {
+        let Self {
+            update,
+            step: s,
+            dw,
+            db,
+        } = self;
+        update.apply(s.w, dw, s.mw, s.vw);
+        update.apply(s.b, db, s.mb, s.vb);
     }
 }

@@ -60,11 +60,13 @@
 
 pub mod activation;
 pub mod adam;
+mod aligned;
 pub mod autoencoder;
 pub mod batch;
 pub mod config;
 pub mod error;
 mod gradient;
+mod kernels;
 mod linalg;
 pub mod mlp;
 pub mod rng;

@@ -4,33 +4,60 @@
 //! h₀ = x; hidden layers apply an activation h_l = σ_l(a_l) and the output is linear, y = a_L.
 //! With D_l = diag(σ_l'(a_l)) the Jacobian is J = W_L D_{L−1} W_{L−1} ⋯ D₁ W₁, and
 //!
-//! * [`Mlp::vjp`] computes Jᵀv by one forward pass and one backward pass (reverse mode),
-//! * [`Mlp::jvp`] computes Jw by pushing the pair [h | t] through the layers (forward mode, one
-//!   two-column product per layer),
+//! * [`Mlp::vjp`] computes Jᵀv by one forward pass and one backward pass (reverse mode), the
+//!   top hidden layer's two steps fused into one pass over its weights,
+//! * [`Mlp::jvp`] computes Jw by pushing the pair [h | t] through the layers (forward mode, both
+//!   products of a layer in one pass over its weights),
 //! * [`Mlp::jacobian`] computes J by pushing [h | I] through the layers (forward mode with n₀
 //!   tangent columns at once). For a decoder n₀ = d is small (≈ 6), so this costs a few forward
 //!   passes, far less than n_L reverse passes.
 //!
+//! The products are the explicit-SIMD kernels of [`crate::kernels`]; the weights start on a
+//! cache line so that no SIMD load of a row splits.
 //! None of them allocate: scratch lives in an [`MlpWorkspace`] made once by [`Mlp::workspace`].
 //! Batched evaluation and backpropagation for training are in [`crate::batch`].
 
-use crate::{Activation, NnError, SplitMix64, linalg};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::aligned::AlignedVec;
+use crate::{Activation, NnError, SplitMix64, kernels};
 
 /// A dense feed-forward network with an activation on every hidden layer and a linear output.
 ///
 /// Weights are stored row-major (`n_out × n_in`, one output neuron per contiguous row) so every
 /// product runs on contiguous memory. Deserialisation validates sizes and finiteness.
-#[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "MlpData")]
 pub struct Mlp {
     /// Layer widths n₀, …, n_L (at least two).
     sizes: Vec<usize>,
     /// One activation per hidden layer (`sizes.len() − 2`).
     activations: Vec<Activation>,
-    /// W_l, row-major `sizes[l+1] × sizes[l]`.
-    weights: Vec<Vec<f64>>,
+    /// W_l, row-major `sizes[l+1] × sizes[l]`, on a cache-line boundary.
+    weights: Vec<AlignedVec>,
     /// b_l, length `sizes[l+1]`.
-    biases: Vec<Vec<f64>>,
+    biases: Vec<AlignedVec>,
+    /// Identifies the parameter values: a fresh number from [`fresh_version`] whenever they may
+    /// change (every `&mut` accessor), kept by clones (same values). A workspace holding weights
+    /// packed for [`Mlp::jacobian`] repacks when it differs. Not serialised.
+    #[serde(skip_serializing)]
+    version: u64,
+}
+
+/// A number no other [`Mlp`] parameter state has had in this process (never 0).
+fn fresh_version() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
+/// Equal architecture and parameters (the version is bookkeeping).
+impl PartialEq for Mlp {
+    fn eq(&self, other: &Self) -> bool {
+        self.sizes == other.sizes
+            && self.activations == other.activations
+            && self.weights == other.weights
+            && self.biases == other.biases
+    }
 }
 
 impl Clone for Mlp {
@@ -40,6 +67,7 @@ impl Clone for Mlp {
             activations: self.activations.clone(),
             weights: self.weights.clone(),
             biases: self.biases.clone(),
+            version: self.version,
         }
     }
 
@@ -49,6 +77,7 @@ impl Clone for Mlp {
         self.activations.clone_from(&source.activations);
         self.weights.clone_from(&source.weights);
         self.biases.clone_from(&source.biases);
+        self.version = source.version;
     }
 }
 
@@ -113,17 +142,18 @@ impl Mlp {
             .map(|w| {
                 let (n_in, n_out) = (w[0], w[1]);
                 let limit = (6.0 / (n_in + n_out) as f64).sqrt();
-                (0..n_in * n_out)
-                    .map(|_| rng.range(-limit, limit))
-                    .collect()
+                let mut a = AlignedVec::zeros(n_in * n_out);
+                a.iter_mut().for_each(|x| *x = rng.range(-limit, limit));
+                a
             })
             .collect();
-        let biases = sizes[1..].iter().map(|&n| vec![0.0; n]).collect();
+        let biases = sizes[1..].iter().map(|&n| AlignedVec::zeros(n)).collect();
         Ok(Self {
             sizes: sizes.to_vec(),
             activations: activations.to_vec(),
             weights,
             biases,
+            version: fresh_version(),
         })
     }
 
@@ -175,11 +205,13 @@ impl Mlp {
                 ));
             }
         }
+        let aligned = |a: Vec<Vec<f64>>| a.iter().map(|a| AlignedVec::from_slice(a)).collect();
         Ok(Self {
             sizes,
             activations,
-            weights,
-            biases,
+            weights: aligned(weights),
+            biases: aligned(biases),
+            version: fresh_version(),
         })
     }
 
@@ -215,6 +247,7 @@ impl Mlp {
 
     /// W_l, mutable (the caller keeps it finite).
     pub fn weights_mut(&mut self, layer: usize) -> &mut [f64] {
+        self.version = fresh_version();
         &mut self.weights[layer]
     }
 
@@ -225,17 +258,19 @@ impl Mlp {
 
     /// b_l, mutable (the caller keeps it finite).
     pub fn bias_mut(&mut self, layer: usize) -> &mut [f64] {
+        self.version = fresh_version();
         &mut self.biases[layer]
     }
 
     /// The total number of weights and biases.
     pub fn num_parameters(&self) -> usize {
-        self.weights.iter().map(Vec::len).sum::<usize>()
-            + self.biases.iter().map(Vec::len).sum::<usize>()
+        self.weights.iter().map(|w| w.len()).sum::<usize>()
+            + self.biases.iter().map(|b| b.len()).sum::<usize>()
     }
 
     /// Every parameter array in a fixed order (W₁, b₁, W₂, b₂, …), as the optimiser sees them.
     pub fn parameters_mut(&mut self) -> impl Iterator<Item = &mut [f64]> {
+        self.version = fresh_version();
         self.weights
             .iter_mut()
             .zip(self.biases.iter_mut())
@@ -275,15 +310,15 @@ impl Mlp {
         );
     }
 
-    /// h_l = σ(W_l x + b_l) for the hidden layers l = 0..L−1 into `ws.hidden`, from x = `z`.
-    fn forward_hidden(&self, z: &[f64], ws: &mut MlpWorkspace) {
-        for l in 0..self.num_layers() - 1 {
-            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+    /// h_l = σ(W_l h_{l−1} + b_l) for the hidden layers l = 0..end into `ws.hidden`, from
+    /// h₋₁ = x = `z`.
+    fn forward_hidden(&self, z: &[f64], end: usize, ws: &mut MlpWorkspace) {
+        for l in 0..end {
+            let n_out = self.sizes[l + 1];
             let (done, rest) = ws.hidden.split_at_mut(l);
             let x: &[f64] = if l == 0 { z } else { &done[l - 1] };
-            let a = &mut rest[0][..n_out];
-            linalg::mat_vec(a, &self.weights[l], x, n_out, n_in);
-            self.activation(l).apply_biased(a, &self.biases[l]);
+            let h = &mut rest[0][..n_out];
+            kernels::dense_layer(self.activation(l), h, &self.weights[l], &self.biases[l], x);
         }
     }
 
@@ -292,10 +327,10 @@ impl Mlp {
         self.check_workspace(ws);
         assert_eq!(z.len(), self.input_dim(), "input length");
         assert_eq!(out.len(), self.output_dim(), "output length");
-        self.forward_hidden(z, ws);
         let last = self.num_layers() - 1;
+        self.forward_hidden(z, last, ws);
         let x: &[f64] = if last == 0 { z } else { &ws.hidden[last - 1] };
-        linalg::mat_vec(
+        kernels::mat_vec(
             out,
             &self.weights[last],
             x,
@@ -310,12 +345,47 @@ impl Mlp {
 
     /// out = J(z)ᵀ v, the vector–Jacobian product (one forward and one backward pass; the
     /// output layer's value is not needed).
+    ///
+    /// The top hidden layer k = L − 2 runs forward and backward in one pass over its weights:
+    /// u = W_Lᵀ v is known before h_k is, so each row i of W_k gives
+    /// h_{k,i} = σ(W_k[i, :] h_{k−1} + b_{k,i}), then adds σ'(h_{k,i}) u_i W_k[i, :] to W_kᵀ g_k
+    /// while the row is in L1 (`kernels::fused_layer`). The result is bit-identical to
+    /// [`Mlp::forward`] followed by [`Mlp::vjp_cached`].
     pub fn vjp(&self, z: &[f64], v: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
         assert_eq!(z.len(), self.input_dim(), "input length");
-        self.forward_hidden(z, ws);
+        assert_eq!(v.len(), self.output_dim(), "cotangent length");
+        assert_eq!(out.len(), self.input_dim(), "output length");
         ws.cached = false;
-        self.backward(v, out, ws);
+        let last = self.num_layers() - 1;
+        if last == 0 {
+            self.backward(v, out, ws);
+            return;
+        }
+        let k = last - 1;
+        self.forward_hidden(z, k, ws);
+        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
+        kernels::mat_t_vec(&mut ws.grad[k], &self.weights[last], v, n_out, n_in);
+        let (below, above) = ws.hidden.split_at_mut(k);
+        let x: &[f64] = if k == 0 { z } else { &below[k - 1] };
+        let (grad_below, grad_above) = ws.grad.split_at_mut(k);
+        let gx: &mut [f64] = if k == 0 {
+            &mut *out
+        } else {
+            &mut grad_below[k - 1]
+        };
+        kernels::fused_layer(
+            self.activation(k),
+            &self.weights[k],
+            &self.biases[k],
+            x,
+            &grad_above[0],
+            &mut above[0],
+            gx,
+        );
+        if k > 0 {
+            self.backward_below(k, out, ws);
+        }
     }
 
     /// out = J(z)ᵀ v at the z of the last [`Mlp::forward`] on `ws` (saves the forward pass when
@@ -338,17 +408,36 @@ impl Mlp {
         assert_eq!(v.len(), self.output_dim(), "cotangent length");
         assert_eq!(out.len(), self.input_dim(), "output length");
         let last = self.num_layers() - 1;
-        for l in (1..=last).rev() {
-            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
+        if last == 0 {
+            kernels::mat_t_vec(out, &self.weights[0], v, n_out, n_in);
+            return;
+        }
+        kernels::mat_t_vec(&mut ws.grad[last - 1], &self.weights[last], v, n_out, n_in);
+        self.backward_below(last, out, ws);
+    }
+
+    /// The reverse sweep below layer `top ≥ 1`, from `ws.grad[top − 1]` = W_topᵀ g_top (before
+    /// the activation's derivative): out = ∂/∂z.
+    fn backward_below(&self, top: usize, out: &mut [f64], ws: &mut MlpWorkspace) {
+        for l in (1..=top).rev() {
+            let n_in = self.sizes[l];
             let (below, above) = ws.grad.split_at_mut(l);
-            let g: &[f64] = if l == last { v } else { &above[0] };
             let dst = &mut below[l - 1][..n_in];
-            linalg::mat_t_vec(dst, &self.weights[l], g, n_out, n_in);
+            if l < top {
+                let n_out = self.sizes[l + 1];
+                kernels::mat_t_vec(dst, &self.weights[l], &above[0], n_out, n_in);
+            }
             self.activation(l - 1)
                 .scale_by_derivative(&ws.hidden[l - 1][..n_in], dst);
         }
-        let g: &[f64] = if last == 0 { v } else { &ws.grad[0] };
-        linalg::mat_t_vec(out, &self.weights[0], g, self.sizes[1], self.sizes[0]);
+        kernels::mat_t_vec(
+            out,
+            &self.weights[0],
+            &ws.grad[0],
+            self.sizes[1],
+            self.sizes[0],
+        );
     }
 
     /// out = J(z) w, the Jacobian–vector product (forward mode: the value and the tangent are
@@ -369,10 +458,8 @@ impl Mlp {
                 (&done[l - 1], &done_t[l - 1])
             };
             let (h, s) = (&mut rest[0][..n_out], &mut rest_t[0][..n_out]);
-            // Two matrix–vector products: faer's kernel for a row-major matrix and two columns
-            // measured slower than two matrix–vector products (200 × 200).
-            linalg::mat_vec(h, &self.weights[l], x, n_out, n_in);
-            linalg::mat_vec(s, &self.weights[l], t, n_out, n_in);
+            // One pass over W for both products (the value is bit-identical to `forward`'s).
+            kernels::mat_vec2(h, s, &self.weights[l], x, t, n_out, n_in);
             let act = self.activation(l);
             act.apply_biased(h, &self.biases[l]);
             s.iter_mut()
@@ -380,7 +467,7 @@ impl Mlp {
                 .for_each(|(s, &h)| *s *= act.derivative_from_output(h));
         }
         let t: &[f64] = if last == 0 { w } else { &ws.grad[last - 1] };
-        linalg::mat_vec(
+        kernels::mat_vec(
             out,
             &self.weights[last],
             t,
@@ -392,10 +479,15 @@ impl Mlp {
 
     /// out = J(z), the full `n_L × n₀` Jacobian, column-major (column j = ∂f/∂z_j).
     ///
-    /// Forward mode with all n₀ tangents at once: X_l = [h_l | T_l] (n_l × (1 + n₀), row-major,
-    /// so each layer is one matrix product W X with contiguous rows), T₁ = σ'(a₁) ⊙ W₁ (the seed
-    /// is the identity, so the first product is only the value's), T_{l+1} = σ'(a_{l+1}) ⊙
-    /// (W T_l), and J = W_L T_{L−1}.
+    /// Forward mode with all n₀ tangents at once: X_l = [h_l | T_l] (n_l × (1 + n₀),
+    /// row-major), X₁ = [σ(W₁z + b₁) | σ'(a₁) ⊙ W₁] (the seed is the identity, so only the
+    /// value is a product), X_{l+1} = [σ(a_{l+1}) | σ'(a_{l+1}) ⊙ (W_{l+1} T_l)] with
+    /// [a_{l+1} − b_{l+1} | W_{l+1} T_l] = W_{l+1} X_l one matrix product, and J = W_L T_{L−1}.
+    /// For the X decoder 6 → 200 → 200 → 49 that is 200·200·7 + 49·200·6 ≈ 340 k multiply–adds,
+    /// far fewer than the 49 reverse passes of reverse mode (≈ 2 M).
+    ///
+    /// The products run on copies of W_2, …, W_L packed with their rows in SIMD lanes (see
+    /// `kernels::pack_rows`), kept in `ws` and refreshed when the weights have changed since.
     pub fn jacobian(&self, z: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
         self.check_workspace(ws);
         let n0 = self.input_dim();
@@ -405,7 +497,8 @@ impl Mlp {
             self.output_dim() * n0,
             "Jacobian length (n_out × n_in)"
         );
-        let (m, last) = (1 + n0, self.num_layers() - 1);
+        ws.cached = false;
+        let (c, last, lanes) = (1 + n0, self.num_layers() - 1, ws.lanes);
         if last == 0 {
             // Affine: J = W.
             let w = &self.weights[0];
@@ -414,40 +507,94 @@ impl Mlp {
                     *o = w[i * n0 + j];
                 }
             }
-            ws.cached = false;
             return;
         }
-        for l in 0..last {
+        if ws.packed_version != self.version {
+            for l in 1..=last {
+                let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+                kernels::pack_rows(&mut ws.packed[l - 1], &self.weights[l], n_out, n_in, lanes);
+            }
+            ws.packed_version = self.version;
+        }
+        // X₁ = [σ(W₁z + b₁) | σ' ⊙ W₁].
+        let (n1, w) = (self.sizes[1], &self.weights[0]);
+        let (h, d) = (&mut ws.grad[0][..n1], &mut ws.hidden[0][..n1]);
+        kernels::mat_vec(h, w, z, n1, n0);
+        kernels::activate(self.activation(0), h, &self.biases[0], d);
+        tangent_rows(&mut ws.tan[0], h, d, Some(w), c);
+        for l in 1..last {
             let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
             let (done, rest) = ws.tan.split_at_mut(l);
-            let y = &mut rest[0][..n_out * m];
-            if l == 0 {
-                // W₁ [z | I] = [W₁z | W₁]: only the value column is a product.
-                let w = &self.weights[0];
-                linalg::mat_vec(&mut ws.y[..n_out], w, z, n_out, n_in);
-                for (i, row) in y.chunks_exact_mut(m).enumerate() {
-                    row[0] = ws.y[i];
-                    row[1..].copy_from_slice(&w[i * n0..(i + 1) * n0]);
-                }
-            } else {
-                linalg::mat_mat_rows(y, &self.weights[l], &done[l - 1], n_out, n_in, m);
-            }
-            // The value column, gathered so that σ runs as one vectorised loop.
-            let act = self.activation(l);
-            let h = &mut ws.y[..n_out];
-            for ((h, row), b) in h.iter_mut().zip(y.chunks_exact(m)).zip(&self.biases[l]) {
-                *h = row[0] + b;
-            }
-            act.apply_in_place(h);
-            for (row, &h) in y.chunks_exact_mut(m).zip(h.iter()) {
-                let d = act.derivative_from_output(h);
-                row[0] = h;
-                row[1..].iter_mut().for_each(|t| *t *= d);
+            let (x, y) = (&done[l - 1], &mut rest[0]);
+            kernels::mat_mat_packed(y, c, &ws.packed[l - 1], n_out, n_in, x, c, 0, c);
+            self.activate_tangents(l, y, &mut ws.grad[l], &mut ws.hidden[l], c);
+        }
+        // J = W_L T_{L−1}: the tangent columns only, as J row-major into `ws.jac`.
+        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
+        let x = &ws.tan[last - 1];
+        kernels::mat_mat_packed(
+            &mut ws.jac,
+            n0,
+            &ws.packed[last - 1],
+            n_out,
+            n_in,
+            x,
+            c,
+            1,
+            n0,
+        );
+        for (i, row) in ws.jac.chunks_exact(n0).take(n_out).enumerate() {
+            for (k, &j) in row.iter().enumerate() {
+                out[k * n_out + i] = j;
             }
         }
-        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
-        linalg::mat_tangents_col_major(out, &self.weights[last], &ws.tan[last - 1], n_out, n_in, m);
-        ws.cached = false;
+    }
+
+    /// X_l ← [σ(a + b_l) | σ'(a) ⊙ T] for X_l = [a | T] (row-major, `c` columns), with σ and
+    /// σ' evaluated on gathered copies in `h` and `d` so that they vectorise.
+    fn activate_tangents(&self, l: usize, x: &mut [f64], h: &mut [f64], d: &mut [f64], c: usize) {
+        let (act, n) = (self.activation(l), self.sizes[l + 1]);
+        let (h, d) = (&mut h[..n], &mut d[..n]);
+        for (h, row) in h.iter_mut().zip(x.chunks_exact(c)) {
+            *h = row[0];
+        }
+        kernels::activate(act, h, &self.biases[l], d);
+        tangent_rows(x, h, d, None, c);
+    }
+}
+
+/// The rows [h_i | d_i t_i] of X (row-major, `c` columns), where t_i is the row's own tangents
+/// (`seed` = None) or row i of `seed` (c − 1 columns). The loop over a row is unrolled for
+/// c ≤ 8: with c a run-time number it cost more than the 200 × 7 multiplications.
+fn tangent_rows(x: &mut [f64], h: &[f64], d: &[f64], seed: Option<&[f64]>, c: usize) {
+    #[inline(always)]
+    fn rows<const C: usize>(x: &mut [f64], h: &[f64], d: &[f64], seed: Option<&[f64]>, c: usize) {
+        let c = if C == 0 { c } else { C };
+        let rows = x.chunks_exact_mut(c).zip(h).zip(d);
+        match seed {
+            Some(w) => {
+                for (((row, &h), &d), w) in rows.zip(w.chunks_exact(c - 1)) {
+                    row[0] = h;
+                    row[1..].iter_mut().zip(w).for_each(|(t, w)| *t = d * w);
+                }
+            }
+            None => {
+                for ((row, &h), &d) in rows {
+                    row[0] = h;
+                    row[1..].iter_mut().for_each(|t| *t *= d);
+                }
+            }
+        }
+    }
+    match c {
+        2 => rows::<2>(x, h, d, seed, c),
+        3 => rows::<3>(x, h, d, seed, c),
+        4 => rows::<4>(x, h, d, seed, c),
+        5 => rows::<5>(x, h, d, seed, c),
+        6 => rows::<6>(x, h, d, seed, c),
+        7 => rows::<7>(x, h, d, seed, c),
+        8 => rows::<8>(x, h, d, seed, c),
+        _ => rows::<0>(x, h, d, seed, c),
     }
 }
 
@@ -457,28 +604,49 @@ impl Mlp {
 pub struct MlpWorkspace {
     sizes: Vec<usize>,
     /// h_l = σ(a_l) for every hidden layer (the forward state of `vjp_cached`).
-    hidden: Vec<Vec<f64>>,
+    hidden: Vec<AlignedVec>,
     /// Backward gradients (VJP) or tangents (JVP) per hidden layer.
-    grad: Vec<Vec<f64>>,
-    /// X_l = [h_l | T_l], n_l × (1 + n₀) row-major, for every hidden layer (Jacobian).
+    grad: Vec<AlignedVec>,
+    /// SIMD lanes of this machine: the padding of the packed weights and of `tan` and `jac`.
+    lanes: usize,
+    /// X_l = [h_l | T_l] for every hidden layer (Jacobian), row-major, with n_l rounded up to
+    /// a multiple of `lanes` rows.
     tan: Vec<Vec<f64>>,
-    /// One layer's W₁z (Jacobian).
-    y: Vec<f64>,
+    /// W_L T_{L−1}, row-major with the padded rows (Jacobian).
+    jac: Vec<f64>,
+    /// W_l packed for the Jacobian's products, for l = 2, …, L.
+    packed: Vec<AlignedVec>,
+    /// The [`Mlp`] version whose weights are in `packed` (0: none).
+    packed_version: u64,
     /// Whether `hidden` holds the state of the last [`Mlp::forward`] (for `vjp_cached`).
     cached: bool,
 }
 
 impl MlpWorkspace {
     fn new(sizes: &[usize]) -> Self {
-        let n0 = sizes[0];
-        let widest = sizes.iter().copied().max().unwrap_or(0);
+        let (n0, lanes) = (sizes[0], kernels::lanes());
         let hidden = &sizes[1..sizes.len() - 1];
+        let ld = |n: usize| kernels::padded_rows(n, lanes);
+        let n_last = sizes[sizes.len() - 1];
         Self {
             sizes: sizes.to_vec(),
-            hidden: hidden.iter().map(|&n| vec![0.0; n]).collect(),
-            grad: hidden.iter().map(|&n| vec![0.0; n]).collect(),
-            tan: hidden.iter().map(|&n| vec![0.0; n * (1 + n0)]).collect(),
-            y: vec![0.0; widest],
+            hidden: hidden.iter().map(|&n| AlignedVec::zeros(n)).collect(),
+            grad: hidden.iter().map(|&n| AlignedVec::zeros(n)).collect(),
+            lanes,
+            tan: hidden
+                .iter()
+                .map(|&n| vec![0.0; ld(n) * (1 + n0)])
+                .collect(),
+            jac: if hidden.is_empty() {
+                Vec::new()
+            } else {
+                vec![0.0; ld(n_last) * n0]
+            },
+            packed: sizes[1..]
+                .windows(2)
+                .map(|w| AlignedVec::zeros(kernels::packed_len(w[1], w[0], lanes)))
+                .collect(),
+            packed_version: 0,
             cached: false,
         }
     }

@@ -141,6 +141,40 @@ fn workspace_reuse_leaves_no_stale_state() {
 }
 
 #[test]
+fn jacobian_follows_weight_changes_on_a_reused_workspace() {
+    // The Jacobian keeps packed copies of the weights in the workspace; every way of changing
+    // the parameters must make it repack, and a workspace moved between two networks of the same
+    // shape must not mix them up.
+    let mut mlp = random_mlp(&[3, 9, 11, 5], Activation::Tanh, 21);
+    let other = random_mlp(&[3, 9, 11, 5], Activation::Tanh, 22);
+    let z = [0.2, -0.4, 0.7];
+    let mut ws = mlp.workspace();
+    let mut jac = vec![0.0; 15];
+    let fresh = |mlp: &nn::Mlp| {
+        let mut j = vec![0.0; 15];
+        mlp.jacobian(&z, &mut j, &mut mlp.workspace());
+        j
+    };
+    mlp.jacobian(&z, &mut jac, &mut ws);
+    other.jacobian(&z, &mut jac, &mut ws);
+    assert_eq!(jac, fresh(&other));
+    mlp.jacobian(&z, &mut jac, &mut ws);
+    let before = jac.clone();
+    mlp.weights_mut(2)[7] += 0.5;
+    mlp.jacobian(&z, &mut jac, &mut ws);
+    assert_eq!(jac, fresh(&mlp));
+    assert_ne!(jac, before);
+    for p in mlp.parameters_mut() {
+        p.iter_mut().for_each(|x| *x *= 0.9);
+    }
+    mlp.jacobian(&z, &mut jac, &mut ws);
+    assert_eq!(jac, fresh(&mlp));
+    mlp.clone_from(&other);
+    mlp.jacobian(&z, &mut jac, &mut ws);
+    assert_eq!(jac, fresh(&other));
+}
+
+#[test]
 #[should_panic(expected = "vjp_cached needs a forward pass")]
 fn cached_vjp_without_forward_panics() {
     let mlp = random_mlp(&SIZES, Activation::Tanh, 3);
