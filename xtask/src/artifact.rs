@@ -34,7 +34,9 @@ pub fn stage_version(stage: &str) -> u32 {
         //    preconditioner (iterates within tolerance).
         "snapshots" | "snapshots-shard" | "reference" => 3,
         // 2: the held-out error along the greedy path is stored with the rule.
-        "cubature" | "cubature-neural" => 2,
+        "cubature" => 2,
+        // 3: the decoder's Jacobian from SIMD kernels (round-off).
+        "cubature-neural" => 3,
         _ => 1,
     }
 }
