@@ -168,6 +168,20 @@ fn a_tiny_scene_runs_end_to_end() {
     assert!(pca.mean_rel_error.is_finite() && pca.mean_rel_error > 0.0);
     assert!(pca.max_rel_error < 1.0, "{pca:?}");
     assert!(pca.ms_per_step > 0.0 && full.ms_per_step > 0.0);
+    // The subspace error frame by frame covers the trajectory's frames and averages to the
+    // reported subspace error; full space has none.
+    assert!(full.subspace_frame_errors.is_empty());
+    for r in &rows[1..] {
+        let f = &r.subspace_frame_errors;
+        assert_eq!(f.len(), r.frame_errors.len(), "{}", r.method);
+        let mean = f.iter().sum::<f64>() / f.len() as f64;
+        assert!(
+            mean > 0.0 && (mean - r.subspace_error).abs() <= 1e-12 * mean,
+            "{}: {mean} vs {}",
+            r.method,
+            r.subspace_error
+        );
+    }
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     for key in [
@@ -180,6 +194,7 @@ fn a_tiny_scene_runs_end_to_end() {
         "mean_rel_error",
         "max_rel_error",
         "max_vertex_error",
+        "subspace_frame_errors",
     ] {
         assert!(report[1].get(key).is_some(), "report.json lacks {key}");
     }

@@ -350,6 +350,7 @@ mod tests {
                 vjp_ms: 0.0,
                 precond_ms: 0.0,
                 frame_errors: vec![err],
+                subspace_frame_errors: Vec::new(),
                 failure: None,
             },
             offline_seconds: 0.0,

@@ -63,6 +63,9 @@ pub struct MethodReport {
     /// ‖u − u_full‖_M / ‖u_full‖_M frame by frame (frames where the reference is at rest are
     /// skipped), to see where the error grows.
     pub frame_errors: Vec<f64>,
+    /// The subspace error frame by frame, on the same frames (empty for full space): where it is
+    /// small and `frame_errors` large, the dynamics, not the subspace, lose the trajectory.
+    pub subspace_frame_errors: Vec<f64>,
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
@@ -232,6 +235,7 @@ pub fn measure(
             iterations: mean_usize(&reference.iterations),
             subspace_error: 0.0,
             frame_errors: vec![0.0; reference.frames.len()],
+            subspace_frame_errors: Vec::new(),
             decode_ms: 0.0,
             elastic_ms: 0.0,
             vjp_ms: 0.0,
@@ -314,6 +318,8 @@ pub fn measure(
     let ms = median(&medians);
     let done = iterations.len().max(1);
     let per_step_ms = |seconds: f64| seconds * 1e3 / done as f64;
+    let subspace_frame_errors =
+        subspace_errors(pipeline, method, &model, &reference.frames, stage_progress)?;
     Ok(MethodReport {
         method: method.name().into(),
         dim,
@@ -328,33 +334,29 @@ pub fn measure(
         max_rel_error: errors.rel.iter().fold(0.0, |a, &b| a.max(b)),
         max_vertex_error: errors.max_vertex,
         iterations: mean_usize(&iterations),
-        subspace_error: subspace_error(
-            pipeline,
-            method,
-            &model,
-            &reference.frames,
-            stage_progress,
-        )?,
+        subspace_error: mean(&subspace_frame_errors),
         decode_ms: per_step_ms(parts.decode),
         elastic_ms: per_step_ms(parts.elastic),
         vjp_ms: per_step_ms(parts.vjp),
         precond_ms: per_step_ms(parts.precond),
         frame_errors: errors.rel,
+        subspace_frame_errors,
         failure,
     })
 }
 
-/// Mean relative error of the reference frames' best representation in `method`'s subspace:
-/// u ↦ U UᵀM u for PCA, u ↦ U decode(encode(UᵀM u)) for the autoencoder.
-fn subspace_error(
+/// Relative error, frame by frame, of the reference frames' best representation in `method`'s
+/// subspace: u ↦ U UᵀM u for PCA, u ↦ U decode(encode(UᵀM u)) for the autoencoder (none for
+/// full space).
+fn subspace_errors(
     pipeline: &mut Pipeline<'_>,
     method: Method,
     model: &FullSpaceModel,
     frames: &[Vec<f64>],
     progress: Progress<'_>,
-) -> Result<f64> {
+) -> Result<Vec<f64>> {
     if method.is_full() {
-        return Ok(0.0);
+        return Ok(Vec::new());
     }
     let fit = pipeline.pca(progress)?;
     let basis = &fit.basis;
@@ -378,7 +380,7 @@ fn subspace_error(
         model.dofs.scatter(f, &mut r);
         errors.add_full(model, &u, &r);
     }
-    Ok(mean(&errors.rel))
+    Ok(errors.rel)
 }
 
 /// The mean of `v` (0 when empty).
