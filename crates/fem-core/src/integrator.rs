@@ -322,6 +322,14 @@ impl NewtonParts {
         }
     }
 
+    /// Adds `diag` (one entry per DOF of the whole mesh, e.g. the springs' stiffness) to the
+    /// diagonal at the free DOFs.
+    pub(crate) fn add_diagonal(&mut self, model: &FullSpaceModel, diag: &[f64]) {
+        for (j, &dof) in model.dofs.free.iter().enumerate() {
+            self.values[self.pattern.diag[j]] += diag[dof];
+        }
+    }
+
     /// Factorises the current values into `chol`; when the matrix is only semidefinite, adds a
     /// growing multiple of its mean diagonal until the factorisation succeeds.
     pub(crate) fn factor(&mut self) -> Result<(), FemError> {
@@ -543,9 +551,7 @@ impl NewtonSystem for StepObjective<'_> {
             if self.inv_h2 > 0.0 {
                 parts.add_mass(m, self.inv_h2);
             }
-            for (j, &dof) in m.dofs.free.iter().enumerate() {
-                parts.values[parts.pattern.diag[j]] += self.spring_diag[dof];
-            }
+            parts.add_diagonal(m, &self.spring_diag);
             if projected {
                 parts.factor()?;
             } else if parts
@@ -646,9 +652,7 @@ impl Simulator {
             for f in &self.model.forces {
                 f.accumulate(t, &u, None, Some(&mut spring_diag));
             }
-            for (j, &dof) in self.model.dofs.free.iter().enumerate() {
-                parts.values[parts.pattern.diag[j]] += spring_diag[dof];
-            }
+            parts.add_diagonal(&self.model, &spring_diag);
         }
         parts.factor()?;
         self.lbfgs_factorizations += 1;
