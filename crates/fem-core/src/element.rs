@@ -72,6 +72,23 @@ impl Elements {
         Mat3::identity() + d * self.bm[e]
     }
 
+    /// The gradients g_a = ∂N_a/∂X of element `e`'s four linear shape functions: g_1..g_3 are the
+    /// rows of Bm, g_0 = −(g_1 + g_2 + g_3). F = I + Σ_a u_a ⊗ g_a.
+    #[inline]
+    pub fn shape_gradients(&self, e: usize) -> [[f64; 3]; 4] {
+        let bm = &self.bm[e];
+        let mut g = [[0.0f64; 3]; 4];
+        for b in 1..4 {
+            for l in 0..3 {
+                g[b][l] = bm[(b - 1, l)];
+            }
+        }
+        for l in 0..3 {
+            g[0][l] = -(g[1][l] + g[2][l] + g[3][l]);
+        }
+        g
+    }
+
     /// Local gradient W P gₐ of element `e` for stress `p`, weighted by `scale`.
     #[inline]
     pub fn local_gradient(&self, e: usize, p: &Mat3, scale: f64) -> LocalVector {
@@ -120,17 +137,7 @@ impl Elements {
         blocks: [bool; 4],
         out: &mut LocalMatrix,
     ) {
-        let bm = &self.bm[e];
-        // Shape gradients: g_1..g_3 are the rows of Bm, g_0 = −(g_1 + g_2 + g_3).
-        let mut g = [[0.0f64; 3]; 4];
-        for b in 1..4 {
-            for l in 0..3 {
-                g[b][l] = bm[(b - 1, l)];
-            }
-        }
-        for l in 0..3 {
-            g[0][l] = -(g[1][l] + g[2][l] + g[3][l]);
-        }
+        let g = self.shape_gradients(e);
         // W g_a for the rows of vertices a = 1..3.
         let w = self.volume[e] * scale;
         let wg: [[f64; 3]; 3] = std::array::from_fn(|av| g[av + 1].map(|x| x * w));

@@ -767,17 +767,7 @@ impl<S: Subspace> StepObjective<'_, S> {
                     let p = p as usize;
                     b[3 * v * d..3 * (v + 1) * d].copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
                 }
-                // Shape gradients: g_1..g_3 are the rows of Bm, g_0 = −(g_1 + g_2 + g_3).
-                let bm = &model.elements.bm[e];
-                let mut g = [[0.0f64; 3]; 4];
-                for v in 1..4 {
-                    for j in 0..3 {
-                        g[v][j] = bm[(v - 1, j)];
-                    }
-                }
-                for j in 0..3 {
-                    g[0][j] = -(g[1][j] + g[2][j] + g[3][j]);
-                }
+                let g = model.elements.shape_gradients(e);
                 for j in 0..3 {
                     for i in 0..3 {
                         let dst = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
