@@ -6,8 +6,11 @@
 //! E(z) = Σ_{e∈S} w_e V_e(U_e q(z)) + Φ(Uq(z), t) − f_gᵀUq(z) + 1/(2h²) (q − q̃)ᵀ (UᵀMU) (q − q̃),
 //!
 //! with q̃ = q_n + h q̇_n and ∇E(z) = J(z)ᵀ ∂E/∂q, one vector–Jacobian product. Only the rows of U
-//! of vertices that the element set S or a force touches are ever multiplied ("partial decode");
-//! the full displacement u = Uq is formed only when a frame is written out.
+//! of the element set's vertices are ever multiplied ("partial decode"); a cubature rule's
+//! scattered elements go further and keep ∂F/∂q per element, so that F = I + (∂F/∂q) q needs no
+//! displacement at all. Springs and point loads are quadratic and linear in u, hence exact
+//! functions of q through Σ_v U_vᵀU_v and Σ_v U_vᵀ: their vertices are never decoded. The full
+//! displacement u = Uq is formed only when a frame is written out.
 
 mod neural;
 mod reduced;
@@ -15,7 +18,7 @@ mod simulator;
 mod subspace;
 
 pub use neural::NeuralSubspace;
-pub use reduced::{ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
+pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
 pub use simulator::{
     PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
     ReducedStepReport,

@@ -8,6 +8,7 @@
 
 use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::FIXED;
+use fem_core::forces::ForceKind;
 use fem_core::integrator::FullSpaceModel;
 use fem_core::material::Material;
 use fem_core::{Mat3, with_material};
@@ -15,9 +16,25 @@ use pulp::{Arch, Simd, WithSimd};
 
 use crate::ReducedError;
 
-/// Weighted sets up to this many elements are evaluated serially over the touched entries only;
-/// larger ones go through the parallel full-length assembly.
+/// Weighted sets up to this many elements are evaluated serially (see [`ElasticPath`]); larger
+/// ones go through the parallel full-length assembly.
 pub const SERIAL_MAX_ELEMENTS: usize = 2048;
+
+/// How [`ReducedSpace::elastic_energy_gradient`] evaluates the weighted element set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ElasticPath {
+    /// Each element keeps B_e = ∂vec(F)/∂q (9×k, precomputed): F = I + reshape(B_e q) and
+    /// ∂V/∂q += w_e V_e B_eᵀ vec(P) in one pass over the elements, no displacement formed. For
+    /// scattered sets (cubature rules), whose elements share few vertices: it streams 9 k-vectors
+    /// per element once, where the vertex paths stream 3 per vertex twice (decode and projection).
+    ElementBasis,
+    /// Partial decode u_t = U_t q of the element vertices, the elements serially over them, and
+    /// the projection U_tᵀ g back: for small sets whose elements share most vertices.
+    Vertices,
+    /// Partial decode, the parallel full-length assembly and the projection: for large sets. The
+    /// same sums in the same order as [`ElasticPath::Vertices`], so bit-identical to it.
+    Parallel,
+}
 
 /// Rows of the packed layout per panel: one panel's slice of a column fills a cache line.
 pub(crate) const PANEL: usize = 8;
@@ -50,12 +67,6 @@ impl PackedRows {
         Self { rows, k, data }
     }
 
-    /// Entry (r, j).
-    #[inline]
-    pub(crate) fn get(&self, r: usize, j: usize) -> f64 {
-        self.data[(r / PANEL) * PANEL * self.k + j * PANEL + r % PANEL]
-    }
-
     /// The panels in row order, each PANEL·k entries (column j at j·PANEL).
     #[inline]
     pub(crate) fn panels(&self) -> std::slice::ChunksExact<'_, f64> {
@@ -80,20 +91,6 @@ impl PackedRows {
             g,
             out,
         });
-    }
-
-    /// Pᵀ P (k×k, column-major).
-    fn gram(&self) -> Vec<f64> {
-        let k = self.k;
-        let mut out = vec![0.0; k * k];
-        for b in 0..k {
-            for a in 0..k {
-                out[b * k + a] = (0..self.rows)
-                    .map(|r| self.get(r, a) * self.get(r, b))
-                    .sum();
-            }
-        }
-        out
     }
 }
 
@@ -152,13 +149,83 @@ impl WithSimd for ApplyTransposeAdd<'_> {
     }
 }
 
+/// The rows of an element basis are padded with zeros to a multiple of this, the SIMD width, so
+/// that its kernels have no scalar remainder.
+const LANES: usize = 4;
+
+/// F − I of every element in turn, and ∂V/∂q accumulated, for [`ElasticPath::ElementBasis`]:
+/// `q` and `grad` are padded with zeros to the basis rows' length. `element(i, dF)` returns the
+/// scaled stress w V vec(P) of element i at F = I + dF (column-major vec) and adds its energy.
+struct BasisPass<'a, E: FnMut(usize, &[f64; 9]) -> [f64; 9]> {
+    basis: &'a [f64],
+    q: &'a [f64],
+    grad: &'a mut [f64],
+    element: E,
+}
+
+impl<E: FnMut(usize, &[f64; 9]) -> [f64; 9]> WithSimd for BasisPass<'_, E> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self {
+            basis,
+            q,
+            grad,
+            mut element,
+        } = self;
+        let kp = q.len();
+        let (qv, qt) = S::as_simd_f64s(q);
+        let chunks = qv.len();
+        for (i, b) in basis.chunks_exact(9 * kp).enumerate() {
+            let rows: [(&[S::f64s], &[f64]); 9] = std::array::from_fn(|r| {
+                let (head, tail) = S::as_simd_f64s(&b[r * kp..(r + 1) * kp]);
+                (&head[..chunks], tail)
+            });
+            // Nine dot products at once: nine vector accumulators, one load of q per chunk.
+            let mut acc = [simd.splat_f64s(0.0); 9];
+            for (c, &x) in qv.iter().enumerate() {
+                for r in 0..9 {
+                    acc[r] = simd.mul_add_e_f64s(rows[r].0[c], x, acc[r]);
+                }
+            }
+            let df: [f64; 9] = std::array::from_fn(|r| {
+                let mut s = simd.reduce_sum_f64s(acc[r]);
+                for (w, x) in rows[r].1.iter().zip(qt) {
+                    s += w * x;
+                }
+                s
+            });
+            let p = element(i, &df);
+            // grad += Bᵀ p: one pass over grad, the nine rows summed chunk by chunk.
+            let ps = p.map(|x| simd.splat_f64s(x));
+            let (gv, gt) = S::as_mut_simd_f64s(grad);
+            for (c, g) in gv.iter_mut().enumerate() {
+                let mut a = *g;
+                for r in 0..9 {
+                    a = simd.mul_add_e_f64s(ps[r], rows[r].0[c], a);
+                }
+                *g = a;
+            }
+            for (j, g) in gt.iter_mut().enumerate() {
+                for r in 0..9 {
+                    *g += p[r] * rows[r].1[j];
+                }
+            }
+        }
+    }
+}
+
 /// Scratch of the partial decode and projection, sized by [`ReducedSpace::buffers`].
 #[derive(Debug, Default)]
 pub struct SpaceBuffers {
     /// Packed touched values (decoded displacement, then gradients), 3 per touched vertex.
     packed: Vec<f64>,
-    /// The packed gradient of one force, 3 per vertex of the largest force.
-    force: Vec<f64>,
+    /// A k-vector: G_f q of a spring.
+    gq: Vec<f64>,
+    /// q and ∂V/∂q padded to the element basis rows' stride.
+    qpad: Vec<f64>,
+    gpad: Vec<f64>,
     assembly: AssemblyBuffers,
 }
 
@@ -178,21 +245,23 @@ pub struct ReducedSpace {
     /// Elements evaluated and their weights (all elements, weight 1, without cubature).
     pub elements: Vec<usize>,
     pub weights: Vec<f64>,
-    /// Vertices of those elements and of the external forces: the only rows ever decoded. The
-    /// vertices of the elements come first (sorted), then those only forces touch (sorted).
+    /// Vertices of those elements (sorted): the only rows ever decoded.
     pub touched: Vec<usize>,
-    /// How many of `touched` are vertices of the elements.
-    element_vertices: usize,
     /// For each element of the set, the positions of its four vertices in `touched`.
     element_touched: Vec<[u32; 4]>,
     /// The rows of `touched`, packed.
     pub(crate) packed: PackedRows,
-    /// The rows of each force's vertices, packed, and their Gram matrix Σ_v U_vᵀU_v (k×k).
-    force_rows: Vec<PackedRows>,
+    /// For each element of the set, B_e = ∂vec(F)/∂q (9×k, row-major: row 3j + i is ∂F_ij/∂q,
+    /// each row padded with zeros to a multiple of [`LANES`]), when the path is
+    /// [`ElasticPath::ElementBasis`] (else empty).
+    element_basis: Vec<f64>,
+    /// Per force, Σ_v U_vᵀ U_v (k×k) and Σ_v U_vᵀ (k×3, column-major; column c sums the rows of
+    /// the c-th components) over its vertices: springs and point loads are then exact quadratic
+    /// and linear functions of q, and no force vertex is ever decoded.
     pub(crate) force_gram: Vec<Vec<f64>>,
-    /// Weighted sets of at most this many elements take the serial path (see
-    /// [`SERIAL_MAX_ELEMENTS`]); both paths give bit-identical results.
-    pub serial_max_elements: usize,
+    force_sums: Vec<Vec<f64>>,
+    /// How the elastic energy is evaluated (chosen by [`ReducedSpace::new`]).
+    elastic_path: ElasticPath,
 }
 
 impl ReducedSpace {
@@ -235,31 +304,38 @@ impl ReducedSpace {
             .collect();
         touched.sort_unstable();
         touched.dedup();
-        let element_vertices = touched.len();
         let mut position = vec![u32::MAX; nv];
         for (i, &v) in touched.iter().enumerate() {
             position[v] = i as u32;
         }
-        let mut force_only: Vec<usize> = model
-            .forces
-            .iter()
-            .flat_map(|f| f.vertices.iter().copied())
-            .filter(|&v| position[v] == u32::MAX)
-            .collect();
-        force_only.sort_unstable();
-        force_only.dedup();
-        touched.extend(force_only);
         let element_touched = elements
             .iter()
             .map(|&e| model.elements.tets[e].map(|v| position[v]))
             .collect();
         let packed = PackedRows::new(&rows, k, &touched);
-        let force_rows: Vec<PackedRows> = model
-            .forces
-            .iter()
-            .map(|f| PackedRows::new(&rows, k, &f.vertices))
-            .collect();
-        let force_gram = force_rows.iter().map(PackedRows::gram).collect();
+        let mut force_gram = Vec::with_capacity(model.forces.len());
+        let mut force_sums = Vec::with_capacity(model.forces.len());
+        for f in &model.forces {
+            let (mut gram, mut sums) = (vec![0.0; k * k], vec![0.0; 3 * k]);
+            for &v in &f.vertices {
+                for c in 0..3 {
+                    let r = &rows[(3 * v + c) * k..(3 * v + c + 1) * k];
+                    axpy(1.0, r, &mut sums[c * k..(c + 1) * k]);
+                    for (b, &rb) in r.iter().enumerate() {
+                        axpy(rb, r, &mut gram[b * k..(b + 1) * k]);
+                    }
+                }
+            }
+            force_gram.push(gram);
+            force_sums.push(sums);
+        }
+        let path = if elements.len() > SERIAL_MAX_ELEMENTS {
+            ElasticPath::Parallel
+        } else if 9 * elements.len() <= 6 * touched.len() {
+            ElasticPath::ElementBasis
+        } else {
+            ElasticPath::Vertices
+        };
         let mut space = Self {
             k,
             rows,
@@ -269,13 +345,14 @@ impl ReducedSpace {
             elements,
             weights,
             touched,
-            element_vertices,
             element_touched,
             packed,
-            force_rows,
+            element_basis: Vec::new(),
             force_gram,
-            serial_max_elements: SERIAL_MAX_ELEMENTS,
+            force_sums,
+            elastic_path: ElasticPath::Vertices,
         };
+        space.set_elastic_path(model, path);
         // UᵀMU and Uᵀf_g from the full mass matrix, one basis column at a time.
         let n = model.num_full();
         let (mut col, mut mcol) = (vec![0.0; n], vec![0.0; n]);
@@ -303,14 +380,48 @@ impl ReducedSpace {
         Ok(space)
     }
 
-    /// Work buffers for [`Self::decode_touched`] and [`Self::elastic_energy_gradient`].
+    /// Work buffers for [`Self::decode_touched`], [`Self::elastic_energy_gradient`] and
+    /// [`Self::force_energy_gradient`].
     pub fn buffers(&self) -> SpaceBuffers {
-        let largest = self.force_rows.iter().map(|p| p.rows).max().unwrap_or(0);
         SpaceBuffers {
             packed: vec![0.0; self.packed.rows],
-            force: vec![0.0; largest],
+            gq: vec![0.0; self.k],
+            qpad: vec![0.0; self.k.next_multiple_of(LANES)],
+            gpad: vec![0.0; self.k.next_multiple_of(LANES)],
             assembly: AssemblyBuffers::default(),
         }
+    }
+
+    /// How the elastic energy is evaluated.
+    pub fn elastic_path(&self) -> ElasticPath {
+        self.elastic_path
+    }
+
+    /// Evaluates the elastic energy by `path` from now on (the default is chosen by
+    /// [`Self::new`]); builds the element basis when `path` needs it.
+    pub fn set_elastic_path(&mut self, model: &FullSpaceModel, path: ElasticPath) {
+        self.elastic_path = path;
+        if path != ElasticPath::ElementBasis {
+            self.element_basis = Vec::new();
+            return;
+        }
+        let k = self.k;
+        let kp = k.next_multiple_of(LANES);
+        let mut basis = vec![0.0; self.elements.len() * 9 * kp];
+        for (&e, b) in self.elements.iter().zip(basis.chunks_exact_mut(9 * kp)) {
+            // F_ij = δ_ij + Σ_a u_a[i] g_a[j] with u_a[i] = (row 3v_a + i of U) q.
+            let g = model.elements.shape_gradients(e);
+            for (a, &v) in model.elements.tets[e].iter().enumerate() {
+                for j in 0..3 {
+                    for i in 0..3 {
+                        let r = &self.rows[(3 * v + i) * k..(3 * v + i + 1) * k];
+                        let row = 3 * j + i;
+                        axpy(g[a][j], r, &mut b[row * kp..row * kp + k]);
+                    }
+                }
+            }
+        }
+        self.element_basis = basis;
     }
 
     /// The 3×k rows of U for vertex `v`, row-major.
@@ -322,7 +433,7 @@ impl ReducedSpace {
     /// Rows of the element vertices in the packed order (3 per vertex).
     #[inline]
     pub(crate) fn element_rows(&self) -> usize {
-        3 * self.element_vertices
+        self.packed.rows
     }
 
     /// The positions in `touched` of each element's vertices.
@@ -351,41 +462,84 @@ impl ReducedSpace {
         }
     }
 
-    /// out += Σ_v U_vᵀ g_v over the vertices of force `force` (g full length).
-    pub fn project_force_add(
+    /// Energy of force `force` at time `t` as a function of q, with its gradient added to
+    /// `grad_q`, and the size of the terms the energy sums (for rounding estimates: a spring's
+    /// energy is a difference of larger terms). Zero when the force is not active at `t`.
+    ///
+    /// A spring pulls each of its n vertices towards the offset v(t) with stiffness κ = k_f/n:
+    /// ½κ Σ_v |U_v q − v|² = ½κ (qᵀGq − 2 qᵀSv + n|v|²), gradient κ(Gq − Sv), with G = Σ_v U_vᵀU_v
+    /// and S = Σ_v U_vᵀ precomputed. A point load f(t) spread over n vertices: −qᵀSf/n.
+    pub fn force_energy_gradient(
         &self,
         model: &FullSpaceModel,
         force: usize,
-        g: &[f64],
-        out: &mut [f64],
+        t: f64,
+        q: &[f64],
+        grad_q: &mut [f64],
         buf: &mut SpaceBuffers,
-    ) {
-        let vertices = &model.forces[force].vertices;
-        let gf = &mut buf.force[..3 * vertices.len()];
-        for (&v, x) in vertices.iter().zip(gf.chunks_exact_mut(3)) {
-            x.copy_from_slice(&g[3 * v..3 * v + 3]);
+    ) -> (f64, f64) {
+        let f = &model.forces[force];
+        if !f.is_active(t) || f.vertices.is_empty() {
+            return (0.0, 0.0);
         }
-        self.force_rows[force].apply_transpose_add(gf, out);
+        let k = self.k;
+        let n = f.vertices.len() as f64;
+        let value = f.value(t);
+        let sums = &self.force_sums[force];
+        let column = |c: usize| &sums[c * k..(c + 1) * k];
+        match f.kind {
+            ForceKind::Point => {
+                let mut energy = 0.0;
+                for c in 0..3 {
+                    let fc = value[c] / n;
+                    energy -= fc * dot(column(c), q);
+                    axpy(-fc, column(c), grad_q);
+                }
+                (energy, energy.abs())
+            }
+            ForceKind::Spring => {
+                let kappa = f.stiffness / n;
+                let gq = &mut buf.gq;
+                gq.fill(0.0);
+                for (j, &qj) in q.iter().enumerate() {
+                    axpy(qj, &self.force_gram[force][j * k..(j + 1) * k], gq);
+                }
+                let quadratic = dot(q, gq);
+                let mut linear = 0.0;
+                for c in 0..3 {
+                    linear += value[c] * dot(column(c), q);
+                    axpy(-value[c], column(c), gq);
+                }
+                axpy(kappa, gq, grad_q);
+                let constant = n * value.norm_squared();
+                let energy = 0.5 * kappa * (quadratic - 2.0 * linear + constant);
+                let size = 0.5 * kappa * (quadratic.abs() + 2.0 * linear.abs() + constant);
+                (energy, size)
+            }
+        }
     }
 
-    /// Weighted elastic energy over the element set and its gradient ∂V/∂q (into `grad_q`);
-    /// `+∞` when some element's energy is undefined. `u` must hold the decoded touched rows;
-    /// `grad_full` is scratch of full length (used by large sets only).
-    ///
-    /// Small sets (cubature rules) run serially and touch only the entries of their vertices;
-    /// large ones use the parallel assembly. Each gradient entry and the energy are the same
-    /// sums in the same (element) order either way.
+    /// Weighted elastic energy over the element set at coefficients `q` and its gradient ∂V/∂q
+    /// (into `grad_q`); `+∞` when some element's energy is undefined. `u` (full length) receives
+    /// the decoded rows of the element vertices on the vertex paths; `grad_full` is scratch of full
+    /// length (used by the parallel path only). See [`ElasticPath`] for how each path works.
     pub fn elastic_energy_gradient(
         &self,
         model: &FullSpaceModel,
-        u: &[f64],
+        q: &[f64],
+        u: &mut [f64],
         grad_full: &mut [f64],
         grad_q: &mut [f64],
         buf: &mut SpaceBuffers,
     ) -> f64 {
+        if self.elastic_path == ElasticPath::ElementBasis {
+            return with_material!(&model.material, |mat| self
+                .elastic_element_basis(model, mat, q, grad_q, buf));
+        }
+        self.decode_touched(q, u, buf);
         let m = self.element_rows();
         let gt = &mut buf.packed[..m];
-        let energy = if self.elements.len() <= self.serial_max_elements {
+        let energy = if self.elastic_path == ElasticPath::Vertices {
             with_material!(&model.material, |mat| self
                 .elastic_serial(model, mat, u, gt))
         } else {
@@ -409,6 +563,39 @@ impl ReducedSpace {
         grad_q.fill(0.0);
         self.packed.apply_transpose_add(gt, grad_q);
         energy
+    }
+
+    /// [`ElasticPath::ElementBasis`]: F = I + B_e q, then ∂V/∂q += w V B_eᵀ vec(P), element by
+    /// element.
+    fn elastic_element_basis<M: Material>(
+        &self,
+        model: &FullSpaceModel,
+        material: &M,
+        q: &[f64],
+        grad_q: &mut [f64],
+        buf: &mut SpaceBuffers,
+    ) -> f64 {
+        let k = self.k;
+        buf.qpad[..k].copy_from_slice(q);
+        buf.gpad.fill(0.0);
+        let mut energy = 0.0;
+        let mut undefined = false;
+        let (elements, weights, volume) = (&self.elements, &self.weights, &model.elements.volume);
+        Arch::new().dispatch(BasisPass {
+            basis: &self.element_basis,
+            q: &buf.qpad,
+            grad: &mut buf.gpad,
+            element: |i: usize, df: &[f64; 9]| {
+                let f = Mat3::identity() + Mat3::from_column_slice(df);
+                let (psi, p) = material.psi_pk1(&f);
+                let scale = volume[elements[i]] * weights[i];
+                undefined |= psi.is_nan();
+                energy += psi * scale;
+                std::array::from_fn(|r| scale * p[(r % 3, r / 3)])
+            },
+        });
+        grad_q.copy_from_slice(&buf.gpad[..k]);
+        if undefined { f64::INFINITY } else { energy }
     }
 
     /// Energy of the set and its gradient in packed order (`gt`, 3 per element vertex).

@@ -10,6 +10,7 @@ use fem_core::optim::{
     SolverMethod, newton,
 };
 use fem_core::with_material;
+use pulp::{Arch, Simd, WithSimd};
 
 use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
 use crate::{ReducedError, Subspace};
@@ -44,6 +45,10 @@ pub struct ReducedStepReport {
     pub elastic_seconds: f64,
     /// Time in the decoder's vector–Jacobian product Jᵀ ∂E/∂q.
     pub vjp_seconds: f64,
+    /// Evaluations of the step energy and its gradient (iterations plus line-search trials).
+    pub evaluations: usize,
+    /// Whether the L-BFGS preconditioner was rebuilt at the start of this step.
+    pub preconditioner_rebuilt: bool,
 }
 
 /// Energies of a reduced state (see [`ReducedSimulator::energy`]).
@@ -64,6 +69,8 @@ struct Timers {
     vjp: f64,
     /// Building and factorising Newton's matrix.
     newton: f64,
+    /// Evaluations of the energy and its gradient.
+    evaluations: usize,
 }
 
 /// Dense Cholesky factor L (lower, column-major) of a symmetric d×d matrix, reused between
@@ -375,6 +382,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             step: self.state.step + 1,
         };
         let pstart = Instant::now();
+        let mut rebuilt = false;
         if self.solver.method == SolverMethod::Lbfgs {
             let d = self.subspace.latent_dim();
             let current = self.precond_active.as_ref().is_some_and(|a| {
@@ -416,6 +424,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                 self.precond_active =
                     Some(self.model.forces.iter().map(|f| f.is_active(t)).collect());
                 self.precond_age = 0;
+                rebuilt = true;
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
@@ -510,6 +519,8 @@ impl<S: Subspace> ReducedSimulator<S> {
             decode_seconds: self.work.timers.decode,
             elastic_seconds: self.work.timers.elastic,
             vjp_seconds: self.work.timers.vjp,
+            evaluations: self.work.timers.evaluations,
+            preconditioner_rebuilt: rebuilt,
         })
     }
 
@@ -564,10 +575,10 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// potential of gravity and of the forces active now.
     pub fn energy(&mut self) -> ReducedEnergy {
         let (model, space, w) = (&self.model, &self.space, &mut self.work);
-        space.decode_touched(&self.state.q, &mut w.u, &mut w.space);
         let elastic = space.elastic_energy_gradient(
             model,
-            &w.u,
+            &self.state.q,
+            &mut w.u,
             &mut w.grad_full,
             &mut w.grad_q,
             &mut w.space,
@@ -582,10 +593,11 @@ impl<S: Subspace> ReducedSimulator<S> {
             kinetic += 0.5 * self.state.qdot[i] * m;
         }
         let mut external = -dot(&space.gravity, &self.state.q);
-        for f in &model.forces {
-            if f.is_active(self.state.time) {
-                external += f.accumulate(self.state.time, &w.u, None, None);
-            }
+        for i in 0..model.forces.len() {
+            let t = self.state.time;
+            external += space
+                .force_energy_gradient(model, i, t, &self.state.q, &mut w.tmp_q, &mut w.space)
+                .0;
         }
         ReducedEnergy {
             elastic,
@@ -639,12 +651,13 @@ impl<S: Subspace> StepObjective<'_, S> {
     fn energy_q(&mut self, z: &[f64]) -> f64 {
         let (model, space, w) = (self.model, self.space, &mut *self.work);
         let t0 = Instant::now();
+        w.timers.evaluations += 1;
         self.subspace.decode(z, &mut w.q);
-        space.decode_touched(&w.q, &mut w.u, &mut w.space);
         let t1 = Instant::now();
         let elastic = space.elastic_energy_gradient(
             model,
-            &w.u,
+            &w.q,
+            &mut w.u,
             &mut w.grad_full,
             &mut w.grad_q,
             &mut w.space,
@@ -652,21 +665,18 @@ impl<S: Subspace> StepObjective<'_, S> {
         w.timers.decode += (t1 - t0).as_secs_f64();
         w.timers.elastic += t1.elapsed().as_secs_f64();
         let mut scale = norm(&w.grad_q);
-        // Gravity (linear in q) and the active springs / point loads, through their rows only.
+        // Gravity (linear in q) and the active springs / point loads, as functions of q.
         let mut external = -dot(&space.gravity, &w.q);
-        // tmp_q collects ∂(external)/∂q: −Uᵀf_g plus the projected force gradients.
+        let mut external_size = external.abs();
+        // tmp_q collects ∂(external)/∂q.
         for (t, g) in w.tmp_q.iter_mut().zip(&space.gravity) {
             *t = -g;
         }
-        for (i, f) in model.forces.iter().enumerate() {
-            if !f.is_active(self.t) {
-                continue;
-            }
-            for &v in &f.vertices {
-                w.grad_full[3 * v..3 * v + 3].fill(0.0);
-            }
-            external += f.accumulate(self.t, &w.u, Some(&mut w.grad_full), None);
-            space.project_force_add(model, i, &w.grad_full, &mut w.tmp_q, &mut w.space);
+        for i in 0..model.forces.len() {
+            let (e, size) =
+                space.force_energy_gradient(model, i, self.t, &w.q, &mut w.tmp_q, &mut w.space);
+            external += e;
+            external_size += size;
         }
         scale = scale.max(norm(&w.tmp_q));
         for i in 0..space.k {
@@ -695,7 +705,7 @@ impl<S: Subspace> StepObjective<'_, S> {
         self.scale = scale;
         self.noise = 16.0
             * f64::EPSILON
-            * (model.energy_scale + elastic.abs() + external.abs() + inertia.abs());
+            * (model.energy_scale + elastic.abs() + external_size + inertia.abs());
         elastic + external + inertia
     }
 
@@ -716,25 +726,14 @@ impl<S: Subspace> StepObjective<'_, S> {
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
         let m = space.element_rows();
         w.uj.resize(m * d, 0.0);
-        // Panel by panel: 8 rows of U J from one pass over the panel (J = I copies exactly).
-        for (p, panel) in space.packed.panels().enumerate() {
-            let r0 = p * PANEL;
-            if r0 >= m {
-                break;
-            }
-            let rows = PANEL.min(m - r0);
-            for j in 0..d {
-                let mut acc = [0.0f64; PANEL];
-                for (c, &jl) in panel.chunks_exact(PANEL).zip(&w.jac[j * k..(j + 1) * k]) {
-                    for i in 0..PANEL {
-                        acc[i] += c[i] * jl;
-                    }
-                }
-                for (i, &a) in acc[..rows].iter().enumerate() {
-                    w.uj[(r0 + i) * d + j] = a;
-                }
-            }
-        }
+        Arch::new().dispatch(PanelsTimesJacobian {
+            panels: space.packed.panels(),
+            rows: m,
+            jac: &w.jac,
+            k,
+            d,
+            uj: &mut w.uj,
+        });
     }
 
     /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J), formed in z directly.
@@ -767,32 +766,143 @@ impl<S: Subspace> StepObjective<'_, S> {
                     let p = p as usize;
                     b[3 * v * d..3 * (v + 1) * d].copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
                 }
-                let g = model.elements.shape_gradients(e);
-                for j in 0..3 {
-                    for i in 0..3 {
-                        let dst = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
-                        dst.fill(0.0);
-                        for (v, gv) in g.iter().enumerate() {
-                            axpy(gv[j], &b[(3 * v + i) * d..(3 * v + i + 1) * d], dst);
+                let scale = model.elements.volume[e] * weight;
+                let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
+                Arch::new().dispatch(ElementGaussNewton {
+                    b,
+                    g: model.elements.shape_gradients(e),
+                    a: &a,
+                    d,
+                    fb,
+                    afb,
+                    hz,
+                });
+            }
+        });
+        // The element terms filled the lower triangle (column-major: rows n ≥ m of column m).
+        for m in 0..d {
+            for n in m + 1..d {
+                hz[n * d + m] = hz[m * d + n];
+            }
+        }
+    }
+}
+
+/// U J on the rows of the element vertices (3·n × d, row-major) from the packed rows of U (panels
+/// of [`PANEL`] rows) and J (k×d, column-major): four columns of J per pass over a panel, a
+/// PANEL × 4 block of accumulators in registers. Exactly J's entries when J = I.
+struct PanelsTimesJacobian<'a> {
+    panels: std::slice::ChunksExact<'a, f64>,
+    rows: usize,
+    jac: &'a [f64],
+    k: usize,
+    d: usize,
+    uj: &'a mut [f64],
+}
+
+impl WithSimd for PanelsTimesJacobian<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _: S) {
+        let Self {
+            panels,
+            rows: m,
+            jac,
+            k,
+            d,
+            uj,
+        } = self;
+        for (p, panel) in panels.enumerate() {
+            let r0 = p * PANEL;
+            if r0 >= m {
+                break;
+            }
+            let rows = PANEL.min(m - r0);
+            let mut j = 0;
+            while j + 4 <= d {
+                let cols: [&[f64]; 4] = std::array::from_fn(|t| &jac[(j + t) * k..(j + t + 1) * k]);
+                let mut acc = [[0.0f64; PANEL]; 4];
+                for (l, c) in panel.chunks_exact(PANEL).enumerate() {
+                    for t in 0..4 {
+                        let jl = cols[t][l];
+                        for i in 0..PANEL {
+                            acc[t][i] += c[i] * jl;
                         }
                     }
                 }
-                let scale = model.elements.volume[e] * weight;
-                for r in 0..9 {
-                    let dst = &mut afb[r * d..(r + 1) * d];
-                    dst.fill(0.0);
-                    for c in 0..9 {
-                        axpy(scale * a[(r, c)], &fb[c * d..(c + 1) * d], dst);
+                for i in 0..rows {
+                    for t in 0..4 {
+                        uj[(r0 + i) * d + j + t] = acc[t][i];
                     }
                 }
-                for r in 0..9 {
-                    let (x, ax) = (&fb[r * d..(r + 1) * d], &afb[r * d..(r + 1) * d]);
-                    for (m, &xm) in x.iter().enumerate() {
-                        axpy(xm, ax, &mut hz[m * d..(m + 1) * d]);
+                j += 4;
+            }
+            for j in j..d {
+                let mut acc = [0.0f64; PANEL];
+                for (c, &jl) in panel.chunks_exact(PANEL).zip(&jac[j * k..(j + 1) * k]) {
+                    for i in 0..PANEL {
+                        acc[i] += c[i] * jl;
                     }
+                }
+                for (i, &a) in acc[..rows].iter().enumerate() {
+                    uj[(r0 + i) * d + j] = a;
                 }
             }
-        });
+        }
+    }
+}
+
+/// One element's Gauss–Newton term in z: with B = U_e J (12×d, row-major), G B (9×d: row 3j + i
+/// is Σ_a g_a[j] B[3a + i]), A G B (A the 9×9 stress derivative, column-major, already scaled by
+/// w_e V_e) and hz += (G B)ᵀ A (G B) on the lower triangle (column m, rows n ≥ m) only: the term is
+/// symmetric.
+struct ElementGaussNewton<'a> {
+    b: &'a [f64],
+    g: [[f64; 3]; 4],
+    a: &'a [f64; 81],
+    d: usize,
+    fb: &'a mut [f64],
+    afb: &'a mut [f64],
+    hz: &'a mut [f64],
+}
+
+impl WithSimd for ElementGaussNewton<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _: S) {
+        let Self {
+            b,
+            g,
+            a,
+            d,
+            fb,
+            afb,
+            hz,
+        } = self;
+        for j in 0..3 {
+            for i in 0..3 {
+                let dst = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
+                dst.fill(0.0);
+                for (v, gv) in g.iter().enumerate() {
+                    axpy(gv[j], &b[(3 * v + i) * d..(3 * v + i + 1) * d], dst);
+                }
+            }
+        }
+        for r in 0..9 {
+            let dst = &mut afb[r * d..(r + 1) * d];
+            dst.fill(0.0);
+            for c in 0..9 {
+                axpy(a[c * 9 + r], &fb[c * d..(c + 1) * d], dst);
+            }
+        }
+        for r in 0..9 {
+            let (x, ax) = (&fb[r * d..(r + 1) * d], &afb[r * d..(r + 1) * d]);
+            for (m, &xm) in x.iter().enumerate() {
+                axpy(xm, &ax[m..], &mut hz[m * d + m..(m + 1) * d]);
+            }
+        }
     }
 }
 

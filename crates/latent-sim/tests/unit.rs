@@ -8,7 +8,8 @@ use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use fem_core::optim::{SolverConfig, SolverMethod};
 use latent_sim::{
-    LinearSubspace, NeuralSubspace, Preconditioning, ReducedSimulator, ReducedSpace, Subspace,
+    ElasticPath, LinearSubspace, NeuralSubspace, Preconditioning, ReducedSimulator, ReducedSpace,
+    Subspace,
 };
 
 fn model() -> FullSpaceModel {
@@ -244,10 +245,11 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
     }
 }
 
-/// Small element sets are evaluated serially over their own vertices, large ones through the
-/// parallel full-length assembly: both must give the same sums in the same order.
+/// The three ways of evaluating the elastic energy give the same energy and gradient: the serial
+/// and the parallel vertex paths the same sums in the same order (bit for bit), the element basis
+/// the same sums grouped differently (to rounding).
 #[test]
-fn serial_and_parallel_elastic_paths_agree_bit_for_bit() {
+fn elastic_paths_agree() {
     let m = model();
     let k = 6;
     let basis = small_basis(&m, k);
@@ -257,18 +259,99 @@ fn serial_and_parallel_elastic_paths_agree_bit_for_bit() {
         Some((vec![0usize, 3, 7, 11, 20], vec![2.0, 0.5, 1.5, 3.0, 0.7])),
     ] {
         let mut results = Vec::new();
-        for serial_max in [usize::MAX, 0] {
+        for path in [
+            ElasticPath::Vertices,
+            ElasticPath::Parallel,
+            ElasticPath::ElementBasis,
+        ] {
             let mut space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
-            space.serial_max_elements = serial_max;
+            space.set_elastic_path(&m, path);
+            assert_eq!(space.elastic_path(), path);
             let mut buf = space.buffers();
             let n = m.num_full();
             let (mut u, mut grad_full, mut grad_q) = (vec![0.0; n], vec![0.0; n], vec![0.0; k]);
-            space.decode_touched(&q, &mut u, &mut buf);
-            let e = space.elastic_energy_gradient(&m, &u, &mut grad_full, &mut grad_q, &mut buf);
+            let e = space.elastic_energy_gradient(
+                &m,
+                &q,
+                &mut u,
+                &mut grad_full,
+                &mut grad_q,
+                &mut buf,
+            );
             assert!(e > 0.0 && grad_q.iter().any(|&g| g != 0.0));
             results.push((e, grad_q));
         }
-        assert_eq!(results[0], results[1], "cubature {}", cubature.is_some());
+        let what = format!("cubature {}", cubature.is_some());
+        assert_eq!(results[0], results[1], "{what}");
+        let (e, g) = &results[2];
+        assert!(
+            (e - results[0].0).abs() <= 1e-12 * results[0].0,
+            "{what}: energy"
+        );
+        assert_close(g, &results[0].1, 1e-11, &format!("{what}: gradient"));
+    }
+}
+
+/// A cubature rule (scattered elements) takes the element basis, the whole mesh the vertex path.
+#[test]
+fn elastic_path_follows_the_element_set() {
+    let m = model();
+    let k = 4;
+    let basis = small_basis(&m, k);
+    let all = ReducedSpace::new(&m, &basis, k, None).unwrap();
+    assert_eq!(all.elastic_path(), ElasticPath::Vertices);
+    let rule = ReducedSpace::new(&m, &basis, k, Some((vec![0, 9, 20], vec![1.0; 3]))).unwrap();
+    assert_eq!(rule.elastic_path(), ElasticPath::ElementBasis);
+}
+
+/// Springs and point loads evaluated in q (through Σ U_vᵀU_v and Σ U_vᵀ) equal the full-space
+/// force energy at the decoded displacement, and their gradient is its projection Uᵀ∇Φ.
+#[test]
+fn forces_in_q_match_the_full_space_forces() {
+    let mut m = model();
+    let n = m.num_full();
+    let k = 5;
+    let basis = small_basis(&m, k);
+    let vertices: Vec<usize> = (0..m.mesh.num_vertices()).step_by(3).collect();
+    for kind in [ForceKind::Spring, ForceKind::Point] {
+        m.forces = vec![ExternalForce {
+            kind,
+            vertices: vertices.clone(),
+            stiffness: 75.0,
+            keyframes: vec![[0.0, 0.0, 0.0, 0.0], [1.0, 0.03, -0.02, 0.05]],
+            start: 0.0,
+            end: 1.0,
+        }];
+        let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+        let mut buf = space.buffers();
+        let q: Vec<f64> = (0..k).map(|i| 0.02 * (i as f64 + 0.7).cos()).collect();
+        let mut u = vec![0.0; n];
+        space.reconstruct(&q, &mut u);
+        let mut grad_u = vec![0.0; n];
+        let expected = m.forces[0].accumulate(0.6, &u, Some(&mut grad_u), None);
+        let mut grad_q = vec![0.0; k];
+        let (e, size) = space.force_energy_gradient(&m, 0, 0.6, &q, &mut grad_q, &mut buf);
+        assert!(size >= e.abs());
+        assert!(
+            (e - expected).abs() <= 1e-12 * size,
+            "{kind:?}: {e} against {expected}"
+        );
+        let free: Vec<f64> = m.dofs.free.iter().map(|&d| grad_u[d]).collect();
+        let projected: Vec<f64> = (0..k)
+            .map(|j| {
+                (0..free.len())
+                    .map(|r| basis[j * free.len() + r] * free[r])
+                    .sum()
+            })
+            .collect();
+        assert_close(&grad_q, &projected, 1e-12, &format!("{kind:?} gradient"));
+        // Inactive forces contribute nothing.
+        let mut zero = vec![0.0; k];
+        assert_eq!(
+            space.force_energy_gradient(&m, 0, 2.0, &q, &mut zero, &mut buf),
+            (0.0, 0.0)
+        );
+        assert!(zero.iter().all(|&x| x == 0.0));
     }
 }
 
