@@ -133,6 +133,23 @@ impl Lbfgs {
         params: SolveParams,
     ) -> Result<SolveStats, FemError> {
         self.reset();
+        self.minimize_warm(objective, precond, x, params)
+    }
+
+    /// Minimises `objective` from `x` (overwritten), starting with the curvature pairs the last
+    /// solve left. For a sequence of objectives that differ by terms linear in x, such as the
+    /// steps of implicit time integration (the inertial prediction and the loads move, the
+    /// Hessian drifts slowly), a pair's gradient difference y = ∇E(x + s) − ∇E(x) does not see
+    /// the linear terms, so the pairs keep describing the curvature. A line search that fails on
+    /// stale pairs retries without them, as within a solve. Call [`Lbfgs::reset`] when the
+    /// objective's curvature changes at once (a force switches on).
+    pub fn minimize_warm<O: Objective + ?Sized, P: Preconditioner + ?Sized>(
+        &mut self,
+        objective: &mut O,
+        precond: &mut P,
+        x: &mut [f64],
+        params: SolveParams,
+    ) -> Result<SolveStats, FemError> {
         let mut value = objective.value_gradient(x, &mut self.g);
         if !value.is_finite() || self.g.iter().any(|v| !v.is_finite()) {
             return Err(FemError::NonFinite {
