@@ -436,6 +436,20 @@ impl ReducedSpace {
         self.packed.rows
     }
 
+    /// Element i's basis B_e = ∂vec(F)/∂q on the [`ElasticPath::ElementBasis`] path: 9 rows of
+    /// [`Self::basis_stride`] entries (k, then zeros), row-major.
+    #[inline]
+    pub(crate) fn element_basis(&self, i: usize) -> &[f64] {
+        let n = 9 * self.basis_stride();
+        &self.element_basis[i * n..(i + 1) * n]
+    }
+
+    /// Length of an element basis row (k padded to the SIMD width).
+    #[inline]
+    pub(crate) fn basis_stride(&self) -> usize {
+        self.k.next_multiple_of(LANES)
+    }
+
     /// The positions in `touched` of each element's vertices.
     #[inline]
     pub(crate) fn element_touched(&self) -> &[[u32; 4]] {

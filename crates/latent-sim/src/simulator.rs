@@ -9,9 +9,10 @@ use fem_core::optim::{
     Lbfgs, NewtonSystem, Objective, Preconditioner, SolveParams, SolveStats, SolverConfig,
     SolverMethod, newton,
 };
-use fem_core::with_material;
+use fem_core::{Mat3, with_material};
 use pulp::{Arch, Simd, WithSimd};
 
+use crate::ElasticPath;
 use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
 use crate::{ReducedError, Subspace};
 
@@ -722,14 +723,27 @@ impl<S: Subspace> StepObjective<'_, S> {
         let (model, space) = (self.model, self.space);
         let (k, d) = (space.k, self.subspace.latent_dim());
         let w = &mut *self.work;
+        let basis = space.elastic_path() == ElasticPath::ElementBasis;
         self.subspace.decode(z, &mut w.q);
-        space.decode_touched(&w.q, &mut w.u, &mut w.space);
+        if !basis {
+            space.decode_touched(&w.q, &mut w.u, &mut w.space);
+        }
         self.subspace.jacobian(z, &mut w.jac);
         let springs = w.springs.update(model, space, self.t);
         for (i, a) in w.hk.iter_mut().enumerate() {
             *a = self.inv_h2 * space.mass[i] + springs[i];
         }
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
+        if basis {
+            // Jᵀ row by row (k × d, row-major) for the per-element products B_e J.
+            w.uj.resize(k * d, 0.0);
+            for j in 0..d {
+                for l in 0..k {
+                    w.uj[l * d + j] = w.jac[j * k + l];
+                }
+            }
+            return;
+        }
         let m = space.element_rows();
         w.uj.resize(m * d, 0.0);
         Arch::new().dispatch(PanelsTimesJacobian {
@@ -750,33 +764,57 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// of forming the 12×12 H_e (about 2,300) and B ᵀ H_e B (144·d + 12·d²).
     fn newton_matrix(&mut self, projected: bool) {
         let (model, space) = (self.model, self.space);
-        let d = self.subspace.latent_dim();
+        let (k, d) = (space.k, self.subspace.latent_dim());
+        let basis = space.elastic_path() == ElasticPath::ElementBasis;
         let w = &mut *self.work;
         w.hz.copy_from_slice(&w.hz_const);
-        let (u, uj) = (&w.u, &w.uj);
+        let (u, q, uj) = (&w.u, &w.q, &w.uj);
         let (b, fb, afb, hz) = (&mut w.uj_e, &mut w.fj_e, &mut w.afj_e, &mut w.hz);
         with_material!(&model.material, |material| {
-            for ((&e, &weight), at) in space
+            for (i, ((&e, &weight), at)) in space
                 .elements
                 .iter()
                 .zip(&space.weights)
                 .zip(space.element_touched())
+                .enumerate()
             {
-                let f = model.elements.deformation_gradient(e, u);
+                // F and G B: on the element-basis path from B_e (F = I + B_e q, G B = B_e J with
+                // `uj` holding J row by row), else from the decoded vertices and U J's rows.
+                let f = if basis {
+                    let mut df = [0.0; 9];
+                    Arch::new().dispatch(BasisTimesJacobian {
+                        basis: space.element_basis(i),
+                        stride: space.basis_stride(),
+                        jt: uj,
+                        q,
+                        k,
+                        d,
+                        fb,
+                        df: &mut df,
+                    });
+                    Mat3::identity() + Mat3::from_column_slice(&df)
+                } else {
+                    for (v, &p) in at.iter().enumerate() {
+                        let p = p as usize;
+                        b[3 * v * d..3 * (v + 1) * d]
+                            .copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
+                    }
+                    Arch::new().dispatch(VertexRowsToF {
+                        b,
+                        g: model.elements.shape_gradients(e),
+                        d,
+                        fb,
+                    });
+                    model.elements.deformation_gradient(e, u)
+                };
                 let a = if projected {
                     material.dpdf_projected(&f)
                 } else {
                     material.dpdf(&f)
                 };
-                for (v, &p) in at.iter().enumerate() {
-                    let p = p as usize;
-                    b[3 * v * d..3 * (v + 1) * d].copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
-                }
                 let scale = model.elements.volume[e] * weight;
                 let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
                 Arch::new().dispatch(ElementGaussNewton {
-                    b,
-                    g: model.elements.shape_gradients(e),
                     a: &a,
                     d,
                     fb,
@@ -853,16 +891,94 @@ impl WithSimd for PanelsTimesJacobian<'_> {
     }
 }
 
-/// One element's Gauss–Newton term in z: with B = U_e J (12×d, row-major), G B (9×d: row 3j + i
-/// is Σ_a g_a[j] B[3a + i]), A G B (A the 9×9 stress derivative, column-major, already scaled by
-/// w_e V_e) and hz += (G B)ᵀ A (G B), column by column. Each row of the three products is one
-/// fused linear combination of whole rows, in SIMD chunks.
-struct ElementGaussNewton<'a> {
+/// G B (9×d, row-major) from B = U_e J (12×d, row-major): row 3j + i is Σ_a g_a[j] B[3a + i].
+struct VertexRowsToF<'a> {
     b: &'a [f64],
     g: [[f64; 3]; 4],
-    a: &'a [f64; 81],
     d: usize,
     fb: &'a mut [f64],
+}
+
+impl WithSimd for VertexRowsToF<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { b, g, d, fb } = self;
+        for j in 0..3 {
+            for i in 0..3 {
+                let rows = std::array::from_fn(|v| &b[(3 * v + i) * d..(3 * v + i + 1) * d]);
+                let out = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
+                out.fill(0.0);
+                add_combination(simd, out, g.map(|gv| gv[j]), rows);
+            }
+        }
+    }
+}
+
+/// On the element-basis path: dF = B_e q and G B = B_e J (9×d, row-major: row r is
+/// Σ_j B_e[r, j] (row j of J)), with J given row by row (`jt`, k × d). Nine vector accumulators
+/// per SIMD chunk of d.
+struct BasisTimesJacobian<'a> {
+    basis: &'a [f64],
+    stride: usize,
+    jt: &'a [f64],
+    q: &'a [f64],
+    k: usize,
+    d: usize,
+    fb: &'a mut [f64],
+    df: &'a mut [f64; 9],
+}
+
+impl WithSimd for BasisTimesJacobian<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self {
+            basis,
+            stride,
+            jt,
+            q,
+            k,
+            d,
+            fb,
+            df,
+        } = self;
+        let rows: [&[f64]; 9] = std::array::from_fn(|r| &basis[r * stride..r * stride + k]);
+        for r in 0..9 {
+            df[r] = dot(rows[r], q);
+        }
+        let lanes = std::mem::size_of::<S::f64s>() / std::mem::size_of::<f64>();
+        let chunks = d / lanes;
+        for c in 0..chunks {
+            let mut acc = [simd.splat_f64s(0.0); 9];
+            for j in 0..k {
+                let x = S::as_simd_f64s(&jt[j * d + c * lanes..j * d + (c + 1) * lanes]).0[0];
+                for r in 0..9 {
+                    acc[r] = simd.mul_add_e_f64s(simd.splat_f64s(rows[r][j]), x, acc[r]);
+                }
+            }
+            for r in 0..9 {
+                let out = &mut fb[r * d + c * lanes..r * d + (c + 1) * lanes];
+                S::as_mut_simd_f64s(out).0[0] = acc[r];
+            }
+        }
+        for t in chunks * lanes..d {
+            for r in 0..9 {
+                fb[r * d + t] = (0..k).map(|j| rows[r][j] * jt[j * d + t]).sum();
+            }
+        }
+    }
+}
+
+/// One element's Gauss–Newton term in z, from G B (9×d, row-major; B = U_e J): A G B (A the 9×9
+/// stress derivative, column-major, already scaled by w_e V_e) and hz += (G B)ᵀ A (G B), column
+/// by column. Each row of the two products is one fused linear combination of whole rows.
+struct ElementGaussNewton<'a> {
+    a: &'a [f64; 81],
+    d: usize,
+    fb: &'a [f64],
     afb: &'a mut [f64],
     hz: &'a mut [f64],
 }
@@ -872,24 +988,7 @@ impl WithSimd for ElementGaussNewton<'_> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
-        let Self {
-            b,
-            g,
-            a,
-            d,
-            fb,
-            afb,
-            hz,
-        } = self;
-        for j in 0..3 {
-            for i in 0..3 {
-                let rows = std::array::from_fn(|v| &b[(3 * v + i) * d..(3 * v + i + 1) * d]);
-                let out = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
-                out.fill(0.0);
-                add_combination(simd, out, g.map(|gv| gv[j]), rows);
-            }
-        }
-        let fb: &[f64] = fb;
+        let Self { a, d, fb, afb, hz } = self;
         let fb_rows: [&[f64]; 9] = std::array::from_fn(|c| &fb[c * d..(c + 1) * d]);
         for r in 0..9 {
             let out = &mut afb[r * d..(r + 1) * d];
