@@ -383,9 +383,12 @@ fn subspace_errors(
     Ok(errors.rel)
 }
 
-/// The mean of `v` (0 when empty).
+/// The mean of `v` (0 when empty: an empty float sum is −0, which the tables would print).
 fn mean(v: &[f64]) -> f64 {
-    v.iter().sum::<f64>() / v.len().max(1) as f64
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.iter().sum::<f64>() / v.len() as f64
 }
 
 fn mean_usize(v: &[usize]) -> f64 {
@@ -450,4 +453,16 @@ pub fn markdown(rows: &[MethodReport]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::mean;
+
+    /// Full space has no subspace error: its mean must print as 0, not −0.
+    #[test]
+    fn mean_of_nothing_is_positive_zero() {
+        assert!(mean(&[]) == 0.0 && mean(&[]).is_sign_positive());
+        assert_eq!(mean(&[1.0, 2.0, 6.0]), 3.0);
+    }
 }
