@@ -747,6 +747,10 @@ impl<S: Subspace> StepObjective<'_, S> {
         }
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
         if basis {
+            if self.subspace.is_linear() {
+                // J = I: the products B_e J are B_e itself.
+                return;
+            }
             // Jᵀ row by row (k × d, row-major) for the per-element products B_e J.
             w.uj.resize(k * d, 0.0);
             for j in 0..d {
@@ -778,6 +782,7 @@ impl<S: Subspace> StepObjective<'_, S> {
         let (model, space) = (self.model, self.space);
         let (k, d) = (space.k, self.subspace.latent_dim());
         let basis = space.elastic_path() == ElasticPath::ElementBasis;
+        let identity = self.subspace.is_linear();
         let w = &mut *self.work;
         w.hz.copy_from_slice(&w.hz_const);
         let (u, q, uj) = (&w.u, &w.q, &w.uj);
@@ -797,7 +802,7 @@ impl<S: Subspace> StepObjective<'_, S> {
                     Arch::new().dispatch(BasisTimesJacobian {
                         basis: space.element_basis(i),
                         stride: space.basis_stride(),
-                        jt: uj,
+                        jt: (!identity).then_some(&uj[..]),
                         q,
                         k,
                         d,
@@ -929,12 +934,12 @@ impl WithSimd for VertexRowsToF<'_> {
 }
 
 /// On the element-basis path: dF = B_e q and G B = B_e J (9×d, row-major: row r is
-/// Σ_j B_e[r, j] (row j of J)), with J given row by row (`jt`, k × d). Nine vector accumulators
-/// per SIMD chunk of d.
+/// Σ_j B_e[r, j] (row j of J)), with J given row by row (`jt`, k × d), or J = I (d = k) when
+/// `jt` is None. Nine vector accumulators per SIMD chunk of d.
 struct BasisTimesJacobian<'a> {
     basis: &'a [f64],
     stride: usize,
-    jt: &'a [f64],
+    jt: Option<&'a [f64]>,
     q: &'a [f64],
     k: usize,
     d: usize,
@@ -961,6 +966,12 @@ impl WithSimd for BasisTimesJacobian<'_> {
         for r in 0..9 {
             df[r] = dot(rows[r], q);
         }
+        let Some(jt) = jt else {
+            for (r, row) in rows.iter().enumerate() {
+                fb[r * d..(r + 1) * d].copy_from_slice(row);
+            }
+            return;
+        };
         let lanes = std::mem::size_of::<S::f64s>() / std::mem::size_of::<f64>();
         let chunks = d / lanes;
         for c in 0..chunks {
