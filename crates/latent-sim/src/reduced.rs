@@ -182,27 +182,9 @@ impl<M: Material> WithSimd for BasisPass<'_, M> {
         let mut energy = 0.0;
         let mut undefined = false;
         let kp = q.len();
-        let (qv, qt) = S::as_simd_f64s(q);
-        let chunks = qv.len();
         for (i, b) in basis.chunks_exact(9 * kp).enumerate() {
-            let rows: [(&[S::f64s], &[f64]); 9] = std::array::from_fn(|r| {
-                let (head, tail) = S::as_simd_f64s(&b[r * kp..(r + 1) * kp]);
-                (&head[..chunks], tail)
-            });
-            // Nine dot products at once: nine vector accumulators, one load of q per chunk.
-            let mut acc = [simd.splat_f64s(0.0); 9];
-            for (c, &x) in qv.iter().enumerate() {
-                for r in 0..9 {
-                    acc[r] = simd.mul_add_e_f64s(rows[r].0[c], x, acc[r]);
-                }
-            }
-            let df: [f64; 9] = std::array::from_fn(|r| {
-                let mut s = simd.reduce_sum_f64s(acc[r]);
-                for (w, x) in rows[r].1.iter().zip(qt) {
-                    s += w * x;
-                }
-                s
-            });
+            let rows: [&[f64]; 9] = std::array::from_fn(|r| &b[r * kp..(r + 1) * kp]);
+            let df = dot_rows(simd, rows, q);
             let f = Mat3::identity() + Mat3::from_column_slice(&df);
             let (psi, stress) = material.psi_pk1(&f);
             let scale = scales[i];
@@ -210,22 +192,63 @@ impl<M: Material> WithSimd for BasisPass<'_, M> {
             energy += psi * scale;
             let p: [f64; 9] = std::array::from_fn(|r| scale * stress[(r % 3, r / 3)]);
             // grad += Bᵀ p: one pass over grad, the nine rows summed chunk by chunk.
-            let ps = p.map(|x| simd.splat_f64s(x));
-            let (gv, gt) = S::as_mut_simd_f64s(grad);
-            for (c, g) in gv.iter_mut().enumerate() {
-                let mut a = *g;
-                for r in 0..9 {
-                    a = simd.mul_add_e_f64s(ps[r], rows[r].0[c], a);
-                }
-                *g = a;
-            }
-            for (j, g) in gt.iter_mut().enumerate() {
-                for r in 0..9 {
-                    *g += p[r] * rows[r].1[j];
-                }
-            }
+            add_combination(simd, grad, p, rows);
         }
         (energy, undefined)
+    }
+}
+
+/// The dot products of R rows (each as long as x) with x: one vector accumulator per row over
+/// the full SIMD chunks, summed across lanes, then the remaining entries in order.
+#[inline(always)]
+pub(crate) fn dot_rows<S: Simd, const R: usize>(simd: S, rows: [&[f64]; R], x: &[f64]) -> [f64; R] {
+    let (xv, xt) = S::as_simd_f64s(x);
+    let n = xv.len();
+    let split: [(&[S::f64s], &[f64]); R] = std::array::from_fn(|r| {
+        let (head, tail) = S::as_simd_f64s(rows[r]);
+        (&head[..n], tail)
+    });
+    let mut acc = [simd.splat_f64s(0.0); R];
+    for (c, &x) in xv.iter().enumerate() {
+        for r in 0..R {
+            acc[r] = simd.mul_add_e_f64s(split[r].0[c], x, acc[r]);
+        }
+    }
+    std::array::from_fn(|r| {
+        let mut s = simd.reduce_sum_f64s(acc[r]);
+        for (w, x) in split[r].1.iter().zip(xt) {
+            s += w * x;
+        }
+        s
+    })
+}
+
+/// out += Σ_r c_r rows_r (every row as long as `out`), in one pass over `out`.
+#[inline(always)]
+pub(crate) fn add_combination<S: Simd, const R: usize>(
+    simd: S,
+    out: &mut [f64],
+    c: [f64; R],
+    rows: [&[f64]; R],
+) {
+    let (ov, ot) = S::as_mut_simd_f64s(out);
+    let n = ov.len();
+    let split: [(&[S::f64s], &[f64]); R] = std::array::from_fn(|r| {
+        let (head, tail) = S::as_simd_f64s(rows[r]);
+        (&head[..n], tail)
+    });
+    let cs = c.map(|x| simd.splat_f64s(x));
+    for (k, o) in ov.iter_mut().enumerate() {
+        let mut acc = *o;
+        for r in 0..R {
+            acc = simd.mul_add_e_f64s(cs[r], split[r].0[k], acc);
+        }
+        *o = acc;
+    }
+    for (k, o) in ot.iter_mut().enumerate() {
+        for r in 0..R {
+            *o += c[r] * split[r].1[k];
+        }
     }
 }
 
@@ -402,8 +425,8 @@ impl ReducedSpace {
         SpaceBuffers {
             packed: vec![0.0; self.packed.rows],
             gq: vec![0.0; self.k],
-            qpad: vec![0.0; self.k.next_multiple_of(LANES)],
-            gpad: vec![0.0; self.k.next_multiple_of(LANES)],
+            qpad: vec![0.0; self.basis_stride()],
+            gpad: vec![0.0; self.basis_stride()],
             assembly: AssemblyBuffers::default(),
         }
     }
@@ -428,8 +451,7 @@ impl ReducedSpace {
             .zip(&self.weights)
             .map(|(&e, &w)| model.elements.volume[e] * w)
             .collect();
-        let k = self.k;
-        let kp = k.next_multiple_of(LANES);
+        let (k, kp) = (self.k, self.basis_stride());
         let mut basis = vec![0.0; self.elements.len() * 9 * kp];
         for (&e, b) in self.elements.iter().zip(basis.chunks_exact_mut(9 * kp)) {
             // F_ij = δ_ij + Σ_a u_a[i] g_a[j] with u_a[i] = (row 3v_a + i of U) q.

@@ -13,7 +13,7 @@ use fem_core::{Mat3, with_material};
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::ElasticPath;
-use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
+use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, add_combination, axpy, dot, dot_rows};
 use crate::{ReducedError, Subspace};
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
@@ -728,9 +728,10 @@ impl<S: Subspace> StepObjective<'_, S> {
         elastic + external + inertia
     }
 
-    /// Decodes z into work.u and forms the parts of the Newton matrix that do not depend on the
-    /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and U J on the
-    /// element rows (work.uj, 3·n × d row-major).
+    /// Decodes z into work.q and forms the parts of the Newton matrix that do not depend on the
+    /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and, on the vertex
+    /// paths, the decoded vertices (work.u) and U J on the element rows (work.uj, 3·n × d
+    /// row-major); the element-basis path forms B_e J per element from work.jac instead.
     fn newton_matrix_constant(&mut self, z: &[f64]) {
         let (model, space) = (self.model, self.space);
         let (k, d) = (space.k, self.subspace.latent_dim());
@@ -747,17 +748,6 @@ impl<S: Subspace> StepObjective<'_, S> {
         }
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz_const);
         if basis {
-            if self.subspace.is_linear() {
-                // J = I: the products B_e J are B_e itself.
-                return;
-            }
-            // Jᵀ row by row (k × d, row-major) for the per-element products B_e J.
-            w.uj.resize(k * d, 0.0);
-            for j in 0..d {
-                for l in 0..k {
-                    w.uj[l * d + j] = w.jac[j * k + l];
-                }
-            }
             return;
         }
         let m = space.element_rows();
@@ -785,7 +775,7 @@ impl<S: Subspace> StepObjective<'_, S> {
         let identity = self.subspace.is_linear();
         let w = &mut *self.work;
         w.hz.copy_from_slice(&w.hz_const);
-        let (u, q, uj) = (&w.u, &w.q, &w.uj);
+        let (u, q, uj, jac) = (&w.u, &w.q, &w.uj, &w.jac);
         let (b, fb, afb, hz) = (&mut w.uj_e, &mut w.fj_e, &mut w.afj_e, &mut w.hz);
         with_material!(&model.material, |material| {
             for (i, ((&e, &weight), at)) in space
@@ -795,19 +785,17 @@ impl<S: Subspace> StepObjective<'_, S> {
                 .zip(space.element_touched())
                 .enumerate()
             {
-                // F and G B: on the element-basis path from B_e (F = I + B_e q, G B = B_e J with
-                // `uj` holding J row by row), else from the decoded vertices and U J's rows.
+                // F and G B: on the element-basis path from B_e (F = I + B_e q, G B = B_e J),
+                // else from the decoded vertices and U J's rows.
                 let f = if basis {
-                    let mut df = [0.0; 9];
-                    Arch::new().dispatch(BasisTimesJacobian {
+                    let df = Arch::new().dispatch(BasisTimesJacobian {
                         basis: space.element_basis(i),
                         stride: space.basis_stride(),
-                        jt: (!identity).then_some(&uj[..]),
+                        jac: (!identity).then_some(&jac[..]),
                         q,
                         k,
                         d,
                         fb,
-                        df: &mut df,
                     });
                     Mat3::identity() + Mat3::from_column_slice(&df)
                 } else {
@@ -933,65 +921,49 @@ impl WithSimd for VertexRowsToF<'_> {
     }
 }
 
-/// On the element-basis path: dF = B_e q and G B = B_e J (9×d, row-major: row r is
-/// Σ_j B_e[r, j] (row j of J)), with J given row by row (`jt`, k × d), or J = I (d = k) when
-/// `jt` is None. Nine vector accumulators per SIMD chunk of d.
+/// On the element-basis path: dF = B_e q (returned) and G B = B_e J (9×d, row-major: column m
+/// is B_e times column m of J, nine dot products), with J k×d column-major, or J = I (d = k)
+/// when `jac` is None.
 struct BasisTimesJacobian<'a> {
     basis: &'a [f64],
     stride: usize,
-    jt: Option<&'a [f64]>,
+    jac: Option<&'a [f64]>,
     q: &'a [f64],
     k: usize,
     d: usize,
     fb: &'a mut [f64],
-    df: &'a mut [f64; 9],
 }
 
 impl WithSimd for BasisTimesJacobian<'_> {
-    type Output = ();
+    type Output = [f64; 9];
 
     #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
+    fn with_simd<S: Simd>(self, simd: S) -> [f64; 9] {
         let Self {
             basis,
             stride,
-            jt,
+            jac,
             q,
             k,
             d,
             fb,
-            df,
         } = self;
         let rows: [&[f64]; 9] = std::array::from_fn(|r| &basis[r * stride..r * stride + k]);
-        for r in 0..9 {
-            df[r] = dot(rows[r], q);
-        }
-        let Some(jt) = jt else {
-            for (r, row) in rows.iter().enumerate() {
-                fb[r * d..(r + 1) * d].copy_from_slice(row);
-            }
-            return;
-        };
-        let lanes = std::mem::size_of::<S::f64s>() / std::mem::size_of::<f64>();
-        let chunks = d / lanes;
-        for c in 0..chunks {
-            let mut acc = [simd.splat_f64s(0.0); 9];
-            for j in 0..k {
-                let x = S::as_simd_f64s(&jt[j * d + c * lanes..j * d + (c + 1) * lanes]).0[0];
-                for r in 0..9 {
-                    acc[r] = simd.mul_add_e_f64s(simd.splat_f64s(rows[r][j]), x, acc[r]);
+        match jac {
+            None => {
+                for (r, row) in rows.iter().enumerate() {
+                    fb[r * d..(r + 1) * d].copy_from_slice(row);
                 }
             }
-            for r in 0..9 {
-                let out = &mut fb[r * d + c * lanes..r * d + (c + 1) * lanes];
-                S::as_mut_simd_f64s(out).0[0] = acc[r];
+            Some(jac) => {
+                for (m, column) in jac.chunks_exact(k).enumerate() {
+                    for (r, x) in dot_rows(simd, rows, column).into_iter().enumerate() {
+                        fb[r * d + m] = x;
+                    }
+                }
             }
         }
-        for t in chunks * lanes..d {
-            for r in 0..9 {
-                fb[r * d + t] = (0..k).map(|j| rows[r][j] * jt[j * d + t]).sum();
-            }
-        }
+        dot_rows(simd, rows, q)
     }
 }
 
@@ -1023,35 +995,6 @@ impl WithSimd for ElementGaussNewton<'_> {
         for m in 0..d {
             let coefficients = std::array::from_fn(|r| fb_rows[r][m]);
             add_combination(simd, &mut hz[m * d..(m + 1) * d], coefficients, afb_rows);
-        }
-    }
-}
-
-/// out += Σ_r c_r rows_r (every row as long as `out`), in one pass over `out`.
-#[inline(always)]
-fn add_combination<S: Simd, const R: usize>(
-    simd: S,
-    out: &mut [f64],
-    c: [f64; R],
-    rows: [&[f64]; R],
-) {
-    let (ov, ot) = S::as_mut_simd_f64s(out);
-    let n = ov.len();
-    let split: [(&[S::f64s], &[f64]); R] = std::array::from_fn(|r| {
-        let (head, tail) = S::as_simd_f64s(rows[r]);
-        (&head[..n], tail)
-    });
-    let cs = c.map(|x| simd.splat_f64s(x));
-    for (k, o) in ov.iter_mut().enumerate() {
-        let mut acc = *o;
-        for r in 0..R {
-            acc = simd.mul_add_e_f64s(cs[r], split[r].0[k], acc);
-        }
-        *o = acc;
-    }
-    for (k, o) in ot.iter_mut().enumerate() {
-        for r in 0..R {
-            *o += c[r] * split[r].1[k];
         }
     }
 }
