@@ -15,7 +15,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 
 use fem_core::integrator::FullSpaceModel;
-use latent_sim::{ElasticPath, ReducedSpace, Subspace};
+use latent_sim::{ElasticPath, ReducedSimulator, ReducedSpace, Subspace};
 use xtask::pipeline::Pipeline;
 use xtask::scene::Scene;
 use xtask::simulate::{Method, Runner, SimulateOptions, Trajectory, setup};
@@ -43,6 +43,31 @@ fn time_elastic_paths(space: &ReducedSpace, model: &FullSpaceModel) {
             start.elapsed().as_secs_f64() * 1e6 / reps as f64
         );
     }
+}
+
+/// Time of the Gauss–Newton matrix Jᵀ H_q J with exact tangents (what a preconditioner rebuild
+/// forms before its d×d factorisation) and of the Jacobian J alone, at the initial state: the
+/// best of 20 batches of 100, which a busy machine disturbs least.
+fn time_newton_matrix<S: Subspace>(sim: &mut ReducedSimulator<S>) {
+    let (k, d) = (sim.subspace.coeff_dim(), sim.subspace.latent_dim());
+    let z = sim.state.z.clone();
+    let (mut h, mut jac) = (vec![0.0; d * d], vec![0.0; k * d]);
+    let best = |f: &mut dyn FnMut()| {
+        (0..20)
+            .map(|_| {
+                let start = Instant::now();
+                for _ in 0..100 {
+                    f();
+                }
+                start.elapsed().as_secs_f64() * 1e4
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let matrix = best(&mut || sim.newton_matrix(&z, false, &mut h));
+    let jacobian = best(&mut || sim.subspace.jacobian(&z, &mut jac));
+    println!(
+        "Gauss–Newton matrix: {matrix:.1} µs, of which the Jacobian {jacobian:.1} µs (best of 20 × 100)"
+    );
 }
 
 fn main() -> Result<()> {
@@ -110,6 +135,11 @@ fn main() -> Result<()> {
                 space.touched.len(),
             );
             time_elastic_paths(space, runner.model());
+            match &mut runner {
+                Runner::Pca(s) => time_newton_matrix(s),
+                Runner::Neural(s) => time_newton_matrix(s),
+                Runner::Full(_) => unreachable!("full methods were refused above"),
+            }
         }
         let mut total = 0.0;
         for _ in 0..frames {

@@ -75,8 +75,7 @@ pub struct ReducedSolverConfig {
     /// changes it far less than that while taking fewer iterations than the full solver's 1e-6.
     pub tolerance: f64,
     /// L-BFGS's preconditioner: `current-state` (the Gauss–Newton matrix at the step's start,
-    /// kept for a few steps), `rest` (the stiffness at rest, AutoDef's) or `auto` (the first with
-    /// cubature, the second without).
+    /// kept for a few steps), `rest` (the stiffness at rest, AutoDef's) or `auto` (the first).
     pub preconditioner: latent_sim::Preconditioning,
 }
 
