@@ -151,7 +151,7 @@ impl WithSimd for ApplyTransposeAdd<'_> {
 
 /// The rows of an element basis are padded with zeros to a multiple of this, the SIMD width, so
 /// that its kernels have no scalar remainder.
-const LANES: usize = 4;
+pub(crate) const LANES: usize = 4;
 
 /// The elastic energy and ∂V/∂q over the element set for [`ElasticPath::ElementBasis`]: per
 /// element F = I + B_e q, ψ and P at F, then ∂V/∂q += w V B_eᵀ vec(P). `q` and `grad` are padded

@@ -13,7 +13,9 @@ use fem_core::{Mat3, with_material};
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::ElasticPath;
-use crate::reduced::{PANEL, ReducedSpace, SpaceBuffers, add_combination, axpy, dot, dot_rows};
+use crate::reduced::{
+    LANES, PANEL, ReducedSpace, SpaceBuffers, add_combination, axpy, dot, dot_rows,
+};
 use crate::{ReducedError, Subspace};
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
@@ -842,6 +844,12 @@ impl<S: Subspace> StepObjective<'_, S> {
                 });
             }
         });
+        // The elements added to the lower triangle only (and a few entries above it).
+        for m in 0..d {
+            for i in m + 1..d {
+                hz[i * d + m] = hz[m * d + i];
+            }
+        }
     }
 }
 
@@ -983,7 +991,7 @@ impl WithSimd for BasisTimesJacobian<'_> {
 
 /// One element's Gauss–Newton term in z, from G B (9×d, row-major; B = U_e J): A G B (A the 9×9
 /// stress derivative, column-major, already scaled by w_e V_e) and hz += (G B)ᵀ A (G B), column
-/// by column. Each row of the two products is one fused linear combination of whole rows.
+/// by column, on and below the diagonal. Each row of the two products is one fused linear combination of whole rows.
 struct ElementGaussNewton<'a> {
     a: &'a [f64; 81],
     d: usize,
@@ -1005,10 +1013,13 @@ impl WithSimd for ElementGaussNewton<'_> {
             add_combination(simd, out, std::array::from_fn(|c| a[c * 9 + r]), fb_rows);
         }
         let afb: &[f64] = afb;
-        let afb_rows: [&[f64]; 9] = std::array::from_fn(|r| &afb[r * d..(r + 1) * d]);
+        // hz is symmetric: column m from row m on (rounded down to a whole SIMD vector, so the
+        // rows stay vectors) is enough, and the caller mirrors the lower triangle.
         for m in 0..d {
-            let coefficients = std::array::from_fn(|r| fb_rows[r][m]);
-            add_combination(simd, &mut hz[m * d..(m + 1) * d], coefficients, afb_rows);
+            let from = m - m % LANES;
+            let coefficients: [f64; 9] = std::array::from_fn(|r| fb_rows[r][m]);
+            let rows = std::array::from_fn(|r| &afb[r * d + from..(r + 1) * d]);
+            add_combination(simd, &mut hz[m * d + from..(m + 1) * d], coefficients, rows);
         }
     }
 }
