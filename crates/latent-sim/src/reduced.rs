@@ -12,6 +12,7 @@ use fem_core::forces::ForceKind;
 use fem_core::integrator::FullSpaceModel;
 use fem_core::material::Material;
 use fem_core::{Mat3, with_material};
+use nn::simd::{add_combination, dot_rows};
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::ReducedError;
@@ -195,60 +196,6 @@ impl<M: Material> WithSimd for BasisPass<'_, M> {
             add_combination(simd, grad, p, rows);
         }
         (energy, undefined)
-    }
-}
-
-/// The dot products of R rows (each as long as x) with x: one vector accumulator per row over
-/// the full SIMD chunks, summed across lanes, then the remaining entries in order.
-#[inline(always)]
-pub(crate) fn dot_rows<S: Simd, const R: usize>(simd: S, rows: [&[f64]; R], x: &[f64]) -> [f64; R] {
-    let (xv, xt) = S::as_simd_f64s(x);
-    let n = xv.len();
-    let split: [(&[S::f64s], &[f64]); R] = std::array::from_fn(|r| {
-        let (head, tail) = S::as_simd_f64s(rows[r]);
-        (&head[..n], tail)
-    });
-    let mut acc = [simd.splat_f64s(0.0); R];
-    for (c, &x) in xv.iter().enumerate() {
-        for r in 0..R {
-            acc[r] = simd.mul_add_e_f64s(split[r].0[c], x, acc[r]);
-        }
-    }
-    std::array::from_fn(|r| {
-        let mut s = simd.reduce_sum_f64s(acc[r]);
-        for (w, x) in split[r].1.iter().zip(xt) {
-            s += w * x;
-        }
-        s
-    })
-}
-
-/// out += Σ_r c_r rows_r (every row as long as `out`), in one pass over `out`.
-#[inline(always)]
-pub(crate) fn add_combination<S: Simd, const R: usize>(
-    simd: S,
-    out: &mut [f64],
-    c: [f64; R],
-    rows: [&[f64]; R],
-) {
-    let (ov, ot) = S::as_mut_simd_f64s(out);
-    let n = ov.len();
-    let split: [(&[S::f64s], &[f64]); R] = std::array::from_fn(|r| {
-        let (head, tail) = S::as_simd_f64s(rows[r]);
-        (&head[..n], tail)
-    });
-    let cs = c.map(|x| simd.splat_f64s(x));
-    for (k, o) in ov.iter_mut().enumerate() {
-        let mut acc = *o;
-        for r in 0..R {
-            acc = simd.mul_add_e_f64s(cs[r], split[r].0[k], acc);
-        }
-        *o = acc;
-    }
-    for (k, o) in ot.iter_mut().enumerate() {
-        for r in 0..R {
-            *o += c[r] * split[r].1[k];
-        }
     }
 }
 

@@ -10,12 +10,11 @@ use fem_core::optim::{
     SolverMethod, newton,
 };
 use fem_core::{Mat3, with_material};
+use nn::simd::{add_combination, dot_rows};
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::ElasticPath;
-use crate::reduced::{
-    LANES, PANEL, ReducedSpace, SpaceBuffers, add_combination, axpy, dot, dot_rows,
-};
+use crate::reduced::{LANES, PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
 use crate::{ReducedError, Subspace};
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
@@ -991,7 +990,8 @@ impl WithSimd for BasisTimesJacobian<'_> {
 
 /// One element's Gauss–Newton term in z, from G B (9×d, row-major; B = U_e J): A G B (A the 9×9
 /// stress derivative, column-major, already scaled by w_e V_e) and hz += (G B)ᵀ A (G B), column
-/// by column, on and below the diagonal. Each row of the two products is one fused linear combination of whole rows.
+/// by column, on and below the diagonal. Each row of the two products is one fused linear
+/// combination of whole rows.
 struct ElementGaussNewton<'a> {
     a: &'a [f64; 81],
     d: usize,

@@ -23,7 +23,7 @@
 
 use pulp::{Arch, Simd, WithSimd};
 
-use crate::Activation;
+use crate::{Activation, simd};
 
 /// Rows per register block: eight independent dot products hide the fused multiply–add latency
 /// (2 units × 4 cycles) while W is streamed.
@@ -49,23 +49,7 @@ fn split_row<S: Simd>(row: &[f64], chunks: usize) -> (&[S::f64s], &[f64]) {
 #[inline(always)]
 fn dot_rows<S: Simd, const R: usize>(simd: S, w: &[f64], x: &[f64]) -> [f64; R] {
     let n = x.len();
-    let (xv, xt) = S::as_simd_f64s(x);
-    let chunks = xv.len();
-    let rows: [(&[S::f64s], &[f64]); R] =
-        std::array::from_fn(|r| split_row::<S>(&w[r * n..(r + 1) * n], chunks));
-    let mut acc = [simd.splat_f64s(0.0); R];
-    for (k, &x) in xv.iter().enumerate() {
-        for r in 0..R {
-            acc[r] = simd.mul_add_e_f64s(rows[r].0[k], x, acc[r]);
-        }
-    }
-    std::array::from_fn(|r| {
-        let mut s = simd.reduce_sum_f64s(acc[r]);
-        for (w, x) in rows[r].1.iter().zip(xt) {
-            s += w * x;
-        }
-        s
-    })
+    simd::dot_rows(simd, std::array::from_fn(|r| &w[r * n..(r + 1) * n]), x)
 }
 
 /// The dot products of the R rows of `w` with x and with t, sharing the loads of W. Each of
@@ -108,23 +92,7 @@ fn dot2_rows<S: Simd, const R: usize>(
 #[inline(always)]
 fn add_rows<S: Simd, const R: usize>(simd: S, y: &mut [f64], w: &[f64], g: &[f64; R]) {
     let n = y.len();
-    let (yv, yt) = S::as_mut_simd_f64s(y);
-    let chunks = yv.len();
-    let rows: [(&[S::f64s], &[f64]); R] =
-        std::array::from_fn(|r| split_row::<S>(&w[r * n..(r + 1) * n], chunks));
-    let gs = g.map(|g| simd.splat_f64s(g));
-    for (k, y) in yv.iter_mut().enumerate() {
-        let mut acc = *y;
-        for r in 0..R {
-            acc = simd.mul_add_e_f64s(gs[r], rows[r].0[k], acc);
-        }
-        *y = acc;
-    }
-    for (j, y) in yt.iter_mut().enumerate() {
-        for r in 0..R {
-            *y += g[r] * rows[r].1[j];
-        }
-    }
+    simd::add_combination(simd, y, *g, std::array::from_fn(|r| &w[r * n..(r + 1) * n]));
 }
 
 /// The dot products of the R rows of `w_next` with x (exactly as [`dot_rows`]) and, in the same

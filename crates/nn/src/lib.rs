@@ -71,6 +71,7 @@ mod linalg;
 pub mod mlp;
 pub mod rng;
 pub mod scaling;
+pub mod simd;
 pub mod synthetic;
 pub mod train;
 
