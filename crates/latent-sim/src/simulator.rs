@@ -435,21 +435,19 @@ impl<S: Subspace> ReducedSimulator<S> {
                 self.precond_active = None;
                 match preconditioning {
                     Preconditioning::Auto | Preconditioning::CurrentState => {
-                        // The Gauss–Newton matrix at the solve's starting point, with the exact
-                        // element tangents when it is positive definite (the inertia term M/h²
-                        // usually makes it so, and the tangents cost a fraction of their
-                        // projections: at 300 elements the rebuild takes 0.4 instead of 1 ms),
-                        // else with projected tangents, as reduced Newton does. Formed at z_n
-                        // instead of the start z_n + h ż_n, J(z) and the tangents lag a step
-                        // behind the motion: 7.2 instead of 4.5 iterations per step on the
-                        // catapult.
-                        let mut obj = self.step_objective();
-                        obj.newton_matrix_constant(&z);
-                        obj.newton_matrix(false);
-                        if !self.precond.try_factor(&self.work.hz, d, 0.0) {
-                            self.step_objective().newton_matrix(true);
-                            self.precond.factor(&self.work.hz, d, "preconditioner")?;
-                        }
+                        // The Gauss–Newton matrix at the solve's starting point, as reduced Newton
+                        // forms it (exact tangents cost a fraction of their projections: at 300
+                        // elements the rebuild takes 0.4 instead of 1 ms). Formed at z_n instead
+                        // of the start z_n + h ż_n, J(z) and the tangents lag a step behind the
+                        // motion: 7.2 instead of 4.5 iterations per step on the catapult.
+                        let mut precond = std::mem::take(&mut self.precond);
+                        let factored = self.step_objective().factor_gauss_newton(
+                            &z,
+                            &mut precond,
+                            "preconditioner",
+                        );
+                        self.precond = precond;
+                        factored?;
                     }
                     Preconditioning::Rest => {
                         self.preconditioner_matrix(&z, t);
@@ -777,6 +775,26 @@ impl<S: Subspace> StepObjective<'_, S> {
         });
     }
 
+    /// Factorises the Gauss–Newton matrix at z (in work.hz) into `factor`: with the exact element
+    /// tangents when that matrix is positive definite (the inertia term M/h² usually makes it
+    /// so), else with the tangents projected, shifted if still only semidefinite. The L-BFGS
+    /// preconditioner and reduced Newton's steps both come from here.
+    fn factor_gauss_newton(
+        &mut self,
+        z: &[f64],
+        factor: &mut DenseFactor,
+        what: &'static str,
+    ) -> Result<(), ReducedError> {
+        let d = self.subspace.latent_dim();
+        self.newton_matrix_constant(z);
+        self.newton_matrix(false);
+        if factor.try_factor(&self.work.hz, d, 0.0) {
+            return Ok(());
+        }
+        self.newton_matrix(true);
+        factor.factor(&self.work.hz, d, what)
+    }
+
     /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J), formed in z directly.
     ///
     /// H_e = W Gᵀ A G with A = ∂P/∂F (9×9) and G = ∂vec(F)/∂x_e (9×12), so with B = U_e J
@@ -1052,22 +1070,13 @@ impl<S: Subspace> NewtonSystem for StepObjective<'_, S> {
     /// that is not positive definite are the element tangents projected.
     fn newton_direction(&mut self, z: &[f64], g: &[f64], d: &mut [f64]) -> Result<(), FemError> {
         let start = Instant::now();
-        let dim = self.subspace.latent_dim();
-        self.newton_matrix_constant(z);
-        for projected in [false, true] {
-            self.newton_matrix(projected);
-            let w = &mut *self.work;
-            if projected {
-                w.newton.factor(&w.hz, dim, "Newton").map_err(|_| {
-                    FemError::Factorization("reduced Hessian is not positive definite".into())
-                })?;
-            } else if w.newton.try_factor(&w.hz, dim, 0.0) {
-                break;
-            }
-        }
-        for i in 0..dim {
-            d[i] = -g[i];
-        }
+        let mut factor = std::mem::take(&mut self.work.newton);
+        let factored = self.factor_gauss_newton(z, &mut factor, "Newton");
+        self.work.newton = factor;
+        factored.map_err(|_| {
+            FemError::Factorization("reduced Hessian is not positive definite".into())
+        })?;
+        d.iter_mut().zip(g).for_each(|(d, g)| *d = -g);
         self.work.newton.solve_in_place(d);
         self.work.timers.newton += start.elapsed().as_secs_f64();
         Ok(())
