@@ -903,34 +903,43 @@ impl WithSimd for PanelsTimesJacobian<'_> {
             let rows = PANEL.min(m - r0);
             let mut j = 0;
             while j + 4 <= d {
-                let cols: [&[f64]; 4] = std::array::from_fn(|t| &jac[(j + t) * k..(j + t + 1) * k]);
-                let mut acc = [[0.0f64; PANEL]; 4];
-                for (l, c) in panel.chunks_exact(PANEL).enumerate() {
-                    for t in 0..4 {
-                        let jl = cols[t][l];
-                        for i in 0..PANEL {
-                            acc[t][i] += c[i] * jl;
-                        }
-                    }
-                }
-                for i in 0..rows {
-                    for t in 0..4 {
-                        uj[(r0 + i) * d + j + t] = acc[t][i];
-                    }
-                }
+                panel_columns::<4>(panel, jac, k, j, r0, rows, d, uj);
                 j += 4;
             }
             for j in j..d {
-                let mut acc = [0.0f64; PANEL];
-                for (c, &jl) in panel.chunks_exact(PANEL).zip(&jac[j * k..(j + 1) * k]) {
-                    for i in 0..PANEL {
-                        acc[i] += c[i] * jl;
-                    }
-                }
-                for (i, &a) in acc[..rows].iter().enumerate() {
-                    uj[(r0 + i) * d + j] = a;
-                }
+                panel_columns::<1>(panel, jac, k, j, r0, rows, d, uj);
             }
+        }
+    }
+}
+
+/// Columns j..j + C of U J on one panel's `rows` rows (from row r0): a PANEL × C block of
+/// accumulators over the panel's columns.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn panel_columns<const C: usize>(
+    panel: &[f64],
+    jac: &[f64],
+    k: usize,
+    j: usize,
+    r0: usize,
+    rows: usize,
+    d: usize,
+    uj: &mut [f64],
+) {
+    let cols: [&[f64]; C] = std::array::from_fn(|t| &jac[(j + t) * k..(j + t + 1) * k]);
+    let mut acc = [[0.0f64; PANEL]; C];
+    for (l, c) in panel.chunks_exact(PANEL).enumerate() {
+        for t in 0..C {
+            let jl = cols[t][l];
+            for i in 0..PANEL {
+                acc[t][i] += c[i] * jl;
+            }
+        }
+    }
+    for i in 0..rows {
+        for t in 0..C {
+            uj[(r0 + i) * d + j + t] = acc[t][i];
         }
     }
 }
