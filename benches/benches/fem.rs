@@ -1,5 +1,7 @@
 //! Full-space FEM throughput: elastic assembly (energy + gradient, projected Hessian) per element,
-//! and the cost of one implicit Euler step with Newton and with L-BFGS.
+//! the sparse Cholesky's factorisation and solves (exact, and with the factor rounded to f32 as
+//! L-BFGS's preconditioner uses it), and the cost of one implicit Euler step with Newton and with
+//! L-BFGS.
 //!
 //! Two meshes: `catapult` (shared/meshes/catapult_low.mesh, skipped with a printed reason when the
 //! shared folder is absent) and `beam10k`, a generated 1 × 0.1 × 0.1 m beam of 10,000 vertices.
@@ -23,6 +25,7 @@ use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::box_mesh;
 use fem_core::optim::{SolverConfig, SolverMethod};
 use fem_core::sparse::HessianPattern;
+use fem_core::sparse_cholesky::SparseCholesky;
 use fem_core::{TetMesh, Vec3, with_material};
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
@@ -154,6 +157,69 @@ fn bench_assembly(c: &mut Criterion, cases: &[Case]) {
     group.finish();
 }
 
+/// The projected Hessian at the benchmark state, factorised and solved on one thread.
+fn bench_sparse(c: &mut Criterion, cases: &[Case]) {
+    let material = MaterialConfig::default().build();
+    let pool = pool(1);
+    let mut group = c.benchmark_group("sparse");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3));
+    for case in cases {
+        let elements = Elements::new(&case.mesh);
+        let u = smooth_displacement(&case.mesh);
+        let dofs = DofMap::new(&case.mesh, &case.pinned());
+        let pattern = HessianPattern::new(&elements.tets, &dofs);
+        let mut values = vec![0.0; pattern.nnz()];
+        with_material!(&material, |m| assembly::hessian(
+            m,
+            &elements,
+            ElementSet::All,
+            &u,
+            true,
+            &pattern,
+            &mut values,
+            &mut AssemblyBuffers::default()
+        ));
+        let mut chol = SparseCholesky::analyse(&pattern).expect("the pattern analyses");
+        pool.install(|| chol.factor(pattern.matrix(&values)))
+            .expect("the pinned projected Hessian is positive definite");
+        eprintln!(
+            "sparse/{}: {} DOFs, nnz(A) = {}, nnz(L) = {}, supernodal: {}",
+            case.name,
+            pattern.dim(),
+            pattern.nnz(),
+            chol.factor_nnz(),
+            chol.is_supernodal()
+        );
+        let b: Vec<f64> = (0..pattern.dim()).map(|i| (i % 7) as f64 - 3.0).collect();
+        let mut x = b.clone();
+        group.bench_function(format!("factor/{}", case.name), |bench| {
+            pool.install(|| bench.iter(|| chol.factor(pattern.matrix(black_box(&values)))))
+        });
+        group.bench_function(format!("solve/{}", case.name), |bench| {
+            pool.install(|| {
+                bench.iter(|| {
+                    x.copy_from_slice(&b);
+                    chol.solve_in_place(&mut x);
+                    black_box(x[0])
+                })
+            })
+        });
+        group.bench_function(format!("solve_rounded/{}", case.name), |bench| {
+            pool.install(|| {
+                bench.iter(|| {
+                    x.copy_from_slice(&b);
+                    chol.solve_rounded_in_place(&mut x);
+                    black_box(x[0])
+                })
+            })
+        });
+    }
+    group.finish();
+}
+
 /// One implicit Euler step from the same moving state, Newton and L-BFGS, on two threads.
 fn bench_step(c: &mut Criterion, cases: &[Case]) {
     let pool = pool(2);
@@ -235,6 +301,7 @@ fn main() {
     let cases = cases();
     let mut c = Criterion::default().configure_from_args();
     bench_assembly(&mut c, &cases);
+    bench_sparse(&mut c, &cases);
     bench_step(&mut c, &cases);
     c.final_summary();
 }

@@ -75,13 +75,14 @@ fn main() -> Result<()> {
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     println!(
-        "{} dofs, {frames} frames: total {:.2} s, mean {:.1} ms, median {:.1} ms, max {:.1} ms, {:.1} iterations/frame, max |u| {:.4e}",
+        "{} dofs, {frames} frames: total {:.2} s, mean {:.1} ms, median {:.1} ms, max {:.1} ms, {:.1} iterations/frame, {} factorisations, max |u| {:.4e}",
         sim.model.dofs.num_free(),
         total,
         total * 1e3 / frames as f64,
         sorted[frames / 2],
         sorted[frames - 1],
         iterations as f64 / frames as f64,
+        sim.lbfgs_factorizations(),
         sim.report().max_displacement,
     );
     Ok(())

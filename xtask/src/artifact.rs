@@ -32,7 +32,9 @@ pub fn stage_version(stage: &str) -> u32 {
         // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
         // 3: sequential sparse factorisation on small pools (round-off), current-state L-BFGS
         //    preconditioner (iterates within tolerance).
-        "snapshots" | "snapshots-shard" | "reference" => 3,
+        // 4: L-BFGS's preconditioner solves with its factor rounded to f32 (iterates within
+        //    tolerance).
+        "snapshots" | "snapshots-shard" | "reference" => 4,
         // 2: the held-out error along the greedy path is stored with the rule.
         "cubature" => 2,
         // 3: the decoder's Jacobian from SIMD kernels (round-off).

@@ -2,12 +2,14 @@
 //! plus M/h² and spring stiffness), all sharing one [`HessianPattern`]: the fill-reducing ordering
 //! and symbolic analysis are done once per mesh, each numeric factorisation refills one buffer.
 
+use std::cell::RefCell;
 use std::sync::Arc;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SparseColMatRef;
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
-    LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::{Conj, Par, Side};
 
@@ -20,13 +22,21 @@ use crate::sparse::HessianPattern;
 /// faer's high-level `Llt` factorises with its global parallelism, every rayon thread by default.
 /// On 2 cores its parallel supernodal factorisation measured 1.4–2× slower than the sequential
 /// one (catapult, 9.7k DOFs: 45–68 ms against 25–33 ms; a 27k-DOF beam: 360–440 ms against
-/// 280–330 ms), so pools of up to [`SEQUENTIAL_FACTOR_THREADS`] threads factorise and solve
-/// sequentially; larger pools keep faer's parallel default.
+/// 280–330 ms), so pools of up to [`SEQUENTIAL_FACTOR_THREADS`] threads factorise sequentially;
+/// larger pools keep faer's parallel default.
+///
+/// Solves with a supernodal factor run this module's own kernels (one vector, no workspace
+/// allocation after a thread's first solve); a simplicial factor (small or very sparse
+/// matrices) is solved by faer.
 #[derive(Debug, Clone)]
 pub struct SparseCholesky {
     symbolic: Arc<SymbolicCholesky<usize>>,
     /// The factor's values; meaningful only after a successful [`SparseCholesky::factor`].
     l: Vec<f64>,
+    /// `l` rounded to f32 for [`SparseCholesky::solve_rounded_in_place`], made on its first call
+    /// after each factorisation.
+    rounded: Vec<f32>,
+    rounded_current: bool,
     factored: bool,
 }
 
@@ -41,19 +51,34 @@ fn factor_parallelism() -> Par {
     }
 }
 
+thread_local! {
+    /// The permuted right-hand side and one supernode's gathered rows, per thread.
+    static SOLVE_SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+}
+
 impl SparseCholesky {
-    /// Symbolic analysis of `pattern`'s lower triangle.
+    /// Symbolic analysis of `pattern`'s lower triangle; faer picks a simplicial or supernodal
+    /// factor from the predicted work.
     pub fn analyse(pattern: &HessianPattern) -> Result<Self, FemError> {
+        Self::analyse_with(pattern, Default::default())
+    }
+
+    fn analyse_with(
+        pattern: &HessianPattern,
+        params: faer::sparse::linalg::cholesky::CholeskySymbolicParams<'_>,
+    ) -> Result<Self, FemError> {
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic.as_ref(),
             Side::Lower,
             SymmetricOrdering::Amd,
-            Default::default(),
+            params,
         )
         .map_err(|e| FemError::Factorization(format!("symbolic analysis: {e:?}")))?;
         Ok(Self {
             l: vec![0.0; symbolic.len_val()],
             symbolic: Arc::new(symbolic),
+            rounded: Vec::new(),
+            rounded_current: false,
             factored: false,
         })
     }
@@ -63,6 +88,8 @@ impl SparseCholesky {
         Self {
             symbolic: Arc::clone(&self.symbolic),
             l: vec![0.0; self.l.len()],
+            rounded: Vec::new(),
+            rounded_current: false,
             factored: false,
         }
     }
@@ -70,6 +97,11 @@ impl SparseCholesky {
     /// Number of stored values of L.
     pub fn factor_nnz(&self) -> usize {
         self.l.len()
+    }
+
+    /// Whether the analysis chose a supernodal factor (solved by this module's kernels).
+    pub fn is_supernodal(&self) -> bool {
+        matches!(self.symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_))
     }
 
     /// Factorises `a` (same pattern as the analysis; the lower triangle is read). On failure
@@ -82,6 +114,7 @@ impl SparseCholesky {
         )
         .map_err(|e| FemError::Factorization(format!("workspace: {e:?}")))?;
         self.factored = false;
+        self.rounded_current = false;
         self.symbolic
             .factorize_numeric_llt::<f64>(
                 &mut self.l,
@@ -106,15 +139,287 @@ impl SparseCholesky {
             self.factored,
             "solve with a sparse Cholesky never factorised"
         );
-        let par = factor_parallelism();
-        let n = x.len();
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
-        LltRef::new(&self.symbolic, &self.l).solve_in_place_with_conj(
-            Conj::No,
-            faer::MatMut::from_column_major_slice_mut(x, n, 1),
-            par,
-            MemStack::new(&mut mem),
+        match self.symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => self.permuted_solve(s, &self.l, x),
+            SymbolicCholeskyRaw::Simplicial(_) => {
+                let par = factor_parallelism();
+                let n = x.len();
+                let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+                LltRef::new(&self.symbolic, &self.l).solve_in_place_with_conj(
+                    Conj::No,
+                    faer::MatMut::from_column_major_slice_mut(x, n, 1),
+                    par,
+                    MemStack::new(&mut mem),
+                );
+            }
+        }
+    }
+
+    /// x ← (L̃L̃ᵀ)⁻¹ x, L̃ the last factor rounded to f32 (arithmetic in f64): an exact solve with
+    /// a symmetric positive definite matrix within about 1e-7 relative of A, reading half the
+    /// bytes of [`SparseCholesky::solve_in_place`]. Meant for preconditioners, where A itself
+    /// is an approximation; a simplicial factor is solved exactly.
+    ///
+    /// # Panics
+    /// If no factorisation has succeeded.
+    pub fn solve_rounded_in_place(&mut self, x: &mut [f64]) {
+        let SymbolicCholeskyRaw::Supernodal(s) = self.symbolic.raw() else {
+            return self.solve_in_place(x);
+        };
+        assert!(
+            self.factored,
+            "solve with a sparse Cholesky never factorised"
         );
+        if !self.rounded_current {
+            self.rounded.clear();
+            self.rounded.extend(self.l.iter().map(|&v| v as f32));
+            self.rounded_current = true;
+        }
+        self.permuted_solve(s, &self.rounded, x);
+    }
+
+    /// Forward and back substitution with a supernodal factor stored as `values`, in the
+    /// analysis's fill-reducing order.
+    fn permuted_solve<V: Stored>(
+        &self,
+        symbolic: &SymbolicSupernodalCholesky<usize>,
+        values: &[V],
+        x: &mut [f64],
+    ) {
+        let n = x.len();
+        assert_eq!(n, symbolic.nrows(), "right-hand side length");
+        let gathered = (0..symbolic.n_supernodes())
+            .map(|s| symbolic.supernode(s).pattern().len())
+            .max()
+            .unwrap_or(0);
+        SOLVE_SCRATCH.with_borrow_mut(|scratch| {
+            scratch.resize(n + gathered, 0.0);
+            let (y, rows) = scratch.split_at_mut(n);
+            match self.symbolic.perm() {
+                Some(perm) => {
+                    let fwd = perm.arrays().0;
+                    for (yi, &f) in y.iter_mut().zip(fwd) {
+                        *yi = x[f];
+                    }
+                    supernodal_solve(symbolic, values, y, rows);
+                    for (yi, &f) in y.iter().zip(fwd) {
+                        x[f] = *yi;
+                    }
+                }
+                None => supernodal_solve(symbolic, values, x, rows),
+            }
+        });
+    }
+}
+
+/// L Lᵀ x = b for a supernodal L, in place, with AVX2 + FMA where the CPU has them.
+fn supernodal_solve<V: Stored>(
+    symbolic: &SymbolicSupernodalCholesky<usize>,
+    values: &[V],
+    x: &mut [f64],
+    rows: &mut [f64],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(v3) = pulp::x86::V3::try_new() {
+        return v3.vectorize(|| substitute(Avx2(v3), symbolic, values, x, rows));
+    }
+    substitute(Portable, symbolic, values, x, rows)
+}
+
+/// Supernode s owns columns `c0..c0 + m` of L as one column-major block: its m × m
+/// lower-triangular diagonal block on top of the rows `pattern` (p of them, all past the block).
+///
+/// Forward: the diagonal block's triangular solve, then the p rows' update gathered in `rows`
+/// (four columns per pass over them) and scattered once. Backward, in reverse: the p rows
+/// gathered, each column's dot product with them, then the transposed triangular solve. Each
+/// pass reads every stored value of L once.
+#[inline(always)]
+fn substitute<K: Lanes, V: Stored>(
+    k: K,
+    symbolic: &SymbolicSupernodalCholesky<usize>,
+    values: &[V],
+    x: &mut [f64],
+    rows: &mut [f64],
+) {
+    let begin = symbolic.supernode_begin();
+    let end = symbolic.supernode_end();
+    let val_ptr = symbolic.col_ptr_for_val();
+    let count = symbolic.n_supernodes();
+    let block = |s: usize| {
+        let (c0, m) = (begin[s], end[s] - begin[s]);
+        let pattern = symbolic.supernode(s).pattern();
+        let ld = m + pattern.len();
+        (c0, m, pattern, ld, &values[val_ptr[s]..val_ptr[s] + ld * m])
+    };
+    for s in 0..count {
+        let (c0, m, pattern, ld, l) = block(s);
+        let top = &mut x[c0..c0 + m];
+        for j in 0..m {
+            let col = &l[j * ld..j * ld + m];
+            let xj = top[j] / col[j].into();
+            top[j] = xj;
+            k.axpy(&mut top[j + 1..], &col[j + 1..], -xj);
+        }
+        let p = pattern.len();
+        if p == 0 {
+            continue;
+        }
+        let acc = &mut rows[..p];
+        acc.fill(0.0);
+        let mut j = 0;
+        while j + 4 <= m {
+            let c = std::array::from_fn(|i| &l[(j + i) * ld + m..(j + i + 1) * ld]);
+            k.axpy4(acc, c, [top[j], top[j + 1], top[j + 2], top[j + 3]]);
+            j += 4;
+        }
+        for j in j..m {
+            k.axpy(acc, &l[j * ld + m..(j + 1) * ld], top[j]);
+        }
+        for (&r, &a) in pattern.iter().zip(acc.iter()) {
+            x[r] -= a;
+        }
+    }
+    for s in (0..count).rev() {
+        let (c0, m, pattern, ld, l) = block(s);
+        let p = pattern.len();
+        let gathered = &mut rows[..p];
+        for (g, &r) in gathered.iter_mut().zip(pattern) {
+            *g = x[r];
+        }
+        let top = &mut x[c0..c0 + m];
+        if p > 0 {
+            for (j, t) in top.iter_mut().enumerate() {
+                *t -= k.dot(&l[j * ld + m..(j + 1) * ld], gathered);
+            }
+        }
+        for j in (0..m).rev() {
+            let col = &l[j * ld..j * ld + m];
+            let (head, tail) = top.split_at_mut(j + 1);
+            head[j] = (head[j] - k.dot(&col[j + 1..], tail)) / col[j].into();
+        }
+    }
+}
+
+/// How L's values are stored: f64, or rounded to f32 (widened to f64 as they are read).
+trait Stored: Copy + Into<f64> {
+    /// Four consecutive values as f64 lanes.
+    #[cfg(target_arch = "x86_64")]
+    fn load4(v3: pulp::x86::V3, v: &[Self]) -> pulp::f64x4;
+}
+
+impl Stored for f64 {
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn load4(_: pulp::x86::V3, v: &[f64]) -> pulp::f64x4 {
+        let v: &[f64; 4] = v[..4].try_into().expect("four values");
+        pulp::cast(*v)
+    }
+}
+
+impl Stored for f32 {
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn load4(v3: pulp::x86::V3, v: &[f32]) -> pulp::f64x4 {
+        let v: &[f32; 4] = v[..4].try_into().expect("four values");
+        v3.convert_f32x4_to_f64x4(pulp::cast(*v))
+    }
+}
+
+/// The substitution's inner loops: `y += a·x` for one and for four columns, and a dot product.
+trait Lanes: Copy {
+    fn axpy<V: Stored>(self, y: &mut [f64], x: &[V], a: f64);
+    fn axpy4<V: Stored>(self, y: &mut [f64], x: [&[V]; 4], a: [f64; 4]);
+    fn dot<V: Stored>(self, a: &[V], b: &[f64]) -> f64;
+}
+
+/// Scalar loops, for CPUs without AVX2.
+#[derive(Clone, Copy)]
+struct Portable;
+
+impl Lanes for Portable {
+    #[inline(always)]
+    fn axpy<V: Stored>(self, y: &mut [f64], x: &[V], a: f64) {
+        for (y, &x) in y.iter_mut().zip(x) {
+            *y += x.into() * a;
+        }
+    }
+
+    #[inline(always)]
+    fn axpy4<V: Stored>(self, y: &mut [f64], x: [&[V]; 4], a: [f64; 4]) {
+        for (i, y) in y.iter_mut().enumerate() {
+            *y += x[0][i].into() * a[0]
+                + x[1][i].into() * a[1]
+                + x[2][i].into() * a[2]
+                + x[3][i].into() * a[3];
+        }
+    }
+
+    #[inline(always)]
+    fn dot<V: Stored>(self, a: &[V], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(&a, &b)| a.into() * b).sum()
+    }
+}
+
+/// Four-lane fused multiply–adds; only built inside [`pulp::x86::V3::vectorize`].
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct Avx2(pulp::x86::V3);
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx2 {
+    #[inline(always)]
+    fn axpy<V: Stored>(self, y: &mut [f64], x: &[V], a: f64) {
+        let v3 = self.0;
+        let n = y.len() / 4 * 4;
+        let av = v3.splat_f64x4(a);
+        let (yv, yt) = y.split_at_mut(n);
+        for (yc, xc) in yv.chunks_exact_mut(4).zip(x.chunks_exact(4)) {
+            let yc: &mut [f64; 4] = yc.try_into().expect("four values");
+            *yc = pulp::cast(v3.mul_add_f64x4(V::load4(v3, xc), av, pulp::cast(*yc)));
+        }
+        for (y, &x) in yt.iter_mut().zip(&x[n..]) {
+            *y = x.into().mul_add(a, *y);
+        }
+    }
+
+    #[inline(always)]
+    fn axpy4<V: Stored>(self, y: &mut [f64], x: [&[V]; 4], a: [f64; 4]) {
+        let v3 = self.0;
+        let n = y.len() / 4 * 4;
+        let av = a.map(|a| v3.splat_f64x4(a));
+        let (yv, yt) = y.split_at_mut(n);
+        for (c, yc) in yv.chunks_exact_mut(4).enumerate() {
+            let yc: &mut [f64; 4] = yc.try_into().expect("four values");
+            let i = 4 * c;
+            let mut acc = pulp::cast(*yc);
+            for k in 0..4 {
+                acc = v3.mul_add_f64x4(V::load4(v3, &x[k][i..]), av[k], acc);
+            }
+            *yc = pulp::cast(acc);
+        }
+        for (i, y) in yt.iter_mut().enumerate() {
+            for k in 0..4 {
+                *y = x[k][n + i].into().mul_add(a[k], *y);
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn dot<V: Stored>(self, a: &[V], b: &[f64]) -> f64 {
+        let v3 = self.0;
+        let n = a.len() / 8 * 8;
+        let mut acc = [v3.splat_f64x4(0.0); 2];
+        for (ac, bc) in a[..n].chunks_exact(8).zip(b[..n].chunks_exact(8)) {
+            for h in 0..2 {
+                let bv: &[f64; 4] = bc[4 * h..4 * h + 4].try_into().expect("four values");
+                acc[h] = v3.mul_add_f64x4(V::load4(v3, &ac[4 * h..]), pulp::cast(*bv), acc[h]);
+            }
+        }
+        let mut s = pulp::Simd::reduce_sum_f64s(v3, v3.add_f64x4(acc[0], acc[1]));
+        for (&a, &b) in a[n..].iter().zip(&b[n..]) {
+            s = a.into().mul_add(b, s);
+        }
+        s
     }
 }
 
@@ -196,6 +501,87 @@ mod tests {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         assert!(d < 1e-12, "sequential and parallel solutions differ by {d}");
+    }
+
+    /// A box pinned at one end, large enough for a supernodal factor to have wide supernodes
+    /// with long row patterns; `force` makes faer choose supernodal whatever its estimate.
+    fn supernodal(cells: [usize; 3]) -> (HessianPattern, SparseCholesky) {
+        let mesh = box_mesh(&BoxSpec {
+            size: [1.0, 0.3, 0.2],
+            cells,
+            ..Default::default()
+        })
+        .unwrap();
+        let pinned: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].x == 0.0)
+            .collect();
+        let p = HessianPattern::new(&mesh.tets, &DofMap::new(&mesh, &pinned));
+        let params = faer::sparse::linalg::cholesky::CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold:
+                faer::sparse::linalg::SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        };
+        let chol = SparseCholesky::analyse_with(&p, params).unwrap();
+        assert!(chol.is_supernodal());
+        (p, chol)
+    }
+
+    /// faer's own solve with the factor `chol` holds.
+    fn faer_solution(chol: &SparseCholesky, b: &[f64]) -> Vec<f64> {
+        let mut x = b.to_vec();
+        let n = x.len();
+        let mut mem = MemBuffer::new(chol.symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
+        LltRef::new(&chol.symbolic, &chol.l).solve_in_place_with_conj(
+            Conj::No,
+            faer::MatMut::from_column_major_slice_mut(&mut x, n, 1),
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
+        x
+    }
+
+    fn max_relative_difference(a: &[f64], b: &[f64]) -> f64 {
+        let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        a.iter()
+            .zip(b)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
+            / scale
+    }
+
+    #[test]
+    fn the_supernodal_kernels_agree_with_faers_solve() {
+        // Two sizes: many narrow supernodes, and wide ones whose column counts are not
+        // multiples of the kernels' four-column blocks.
+        for cells in [[6, 2, 2], [16, 5, 4]] {
+            let (p, mut chol) = supernodal(cells);
+            let a = values(&p, 0.1);
+            chol.factor(p.matrix(&a)).unwrap();
+            let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+            let mut x = b.clone();
+            chol.solve_in_place(&mut x);
+            let d = max_relative_difference(&x, &faer_solution(&chol, &b));
+            assert!(d < 1e-13, "{cells:?}: differs from faer by {d:e}");
+            assert!(residual(&p, &a, &x, &b) < 1e-13, "{cells:?}");
+        }
+    }
+
+    #[test]
+    fn the_rounded_solve_is_close_and_follows_refactorisations() {
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        for diag in [0.1, 3.0] {
+            let a = values(&p, diag);
+            chol.factor(p.matrix(&a)).unwrap();
+            let mut exact = b.clone();
+            chol.solve_in_place(&mut exact);
+            let mut rounded = b.clone();
+            chol.solve_rounded_in_place(&mut rounded);
+            // f32's unit roundoff is 6e-8; this matrix's condition number is modest.
+            let d = max_relative_difference(&rounded, &exact);
+            assert!(d < 1e-5, "diag {diag}: rounded solve off by {d:e}");
+            assert!(d > 0.0, "diag {diag}: the rounded solve did not round");
+            assert!(residual(&p, &a, &rounded, &b) < 1e-5, "diag {diag}");
+        }
     }
 
     #[test]
