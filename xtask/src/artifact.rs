@@ -34,7 +34,9 @@ pub fn stage_version(stage: &str) -> u32 {
         //    preconditioner (iterates within tolerance).
         // 4: L-BFGS's preconditioner solves with its factor rounded to f32 (iterates within
         //    tolerance).
-        "snapshots" | "snapshots-shard" | "reference" => 4,
+        // 5: L-BFGS's preconditioner factorised in f32 where it passes its check (iterates
+        //    within tolerance).
+        "snapshots" | "snapshots-shard" | "reference" => 5,
         // 2: the held-out error along the greedy path is stored with the rule.
         "cubature" => 2,
         // 3: the decoder's Jacobian from SIMD kernels (round-off).

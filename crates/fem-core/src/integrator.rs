@@ -333,6 +333,17 @@ impl NewtonParts {
     /// Factorises the current values into `chol`; when the matrix is only semidefinite, adds a
     /// growing multiple of its mean diagonal until the factorisation succeeds.
     pub(crate) fn factor(&mut self) -> Result<(), FemError> {
+        self.factor_with(false)
+    }
+
+    /// [`NewtonParts::factor`] for a preconditioner: the factor may be f32
+    /// ([`SparseCholesky::factor_for_preconditioning`]), solved only through
+    /// [`SparseCholesky::solve_preconditioner_in_place`].
+    pub(crate) fn factor_preconditioner(&mut self) -> Result<(), FemError> {
+        self.factor_with(true)
+    }
+
+    fn factor_with(&mut self, preconditioner: bool) -> Result<(), FemError> {
         let mean_diag = self
             .pattern
             .diag
@@ -342,7 +353,13 @@ impl NewtonParts {
             / self.pattern.dim().max(1) as f64;
         let mut shift = 0.0;
         for attempt in 0..12 {
-            match self.chol.factor(self.pattern.matrix(&self.values)) {
+            let a = self.pattern.matrix(&self.values);
+            let r = if preconditioner {
+                self.chol.factor_for_preconditioning(a).map(|_| ())
+            } else {
+                self.chol.factor(a)
+            };
+            match r {
                 Ok(()) => return Ok(()),
                 Err(e) => {
                     if attempt == 11 || !mean_diag.is_finite() {
@@ -364,9 +381,8 @@ impl NewtonParts {
     }
 }
 
-/// A factorised SPD matrix used as z = P⁻¹ r, solved with its factor rounded to f32
-/// ([`SparseCholesky::solve_rounded_in_place`]): P is itself an approximate Hessian, and the
-/// rounded factor is an exact factor of a matrix within about 1e-7 of it.
+/// A factorised SPD matrix used as z = P⁻¹ r, factorised in f32 where that passes its check
+/// ([`SparseCholesky::factor_for_preconditioning`]): P is itself an approximate Hessian.
 #[derive(Debug)]
 pub struct FactoredPreconditioner {
     chol: SparseCholesky,
@@ -375,7 +391,7 @@ pub struct FactoredPreconditioner {
 impl Preconditioner for FactoredPreconditioner {
     fn apply(&mut self, r: &[f64], z: &mut [f64]) {
         z.copy_from_slice(r);
-        self.chol.solve_rounded_in_place(z);
+        self.chol.solve_preconditioner_in_place(z);
     }
 }
 
@@ -656,7 +672,7 @@ impl Simulator {
             }
             parts.add_diagonal(&self.model, &spring_diag);
         }
-        parts.factor()?;
+        parts.factor_preconditioner()?;
         self.lbfgs_factorizations += 1;
         // The new factor moves into the preconditioner; the old one's buffer goes back to
         // Newton's parts, to be overwritten by their next factorisation.

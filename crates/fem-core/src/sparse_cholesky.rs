@@ -4,6 +4,7 @@
 
 use std::cell::RefCell;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SparseColMatRef;
@@ -31,14 +32,31 @@ use crate::sparse::HessianPattern;
 #[derive(Debug, Clone)]
 pub struct SparseCholesky {
     symbolic: Arc<SymbolicCholesky<usize>>,
-    /// The factor's values; meaningful only after a successful [`SparseCholesky::factor`].
+    /// The f64 factor's values.
     l: Vec<f64>,
-    /// `l` rounded to f32 for [`SparseCholesky::solve_rounded_in_place`], made on its first call
-    /// after each factorisation.
-    rounded: Vec<f32>,
-    rounded_current: bool,
-    factored: bool,
+    /// The f32 factor's values ([`SparseCholesky::factor_for_preconditioning`]).
+    l_single: Vec<f32>,
+    /// The matrix rounded to f32, the f32 factorisation's input.
+    a_single: Vec<f32>,
+    /// Set once an f32 factor failed its check: factors sharing this analysis then go straight
+    /// to f64 (the matrices one simulation factorises share their mesh and mass term, and so
+    /// largely their conditioning), instead of paying for a rejected f32 factor each time.
+    single_rejected: Arc<AtomicBool>,
+    factored: Factored,
 }
+
+/// Which factor the last factorisation left.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Factored {
+    /// None: never factorised, or the last factorisation failed.
+    No,
+    Double,
+    Single,
+}
+
+/// Largest error max|x − x₀| (for |x₀| ≤ 1) of an f32 factor's check solve that
+/// [`SparseCholesky::factor_for_preconditioning`] accepts.
+pub const SINGLE_FACTOR_TOLERANCE: f64 = 1e-3;
 
 /// Largest rayon pool in which sparse factorisations run sequentially.
 pub const SEQUENTIAL_FACTOR_THREADS: usize = 2;
@@ -77,9 +95,10 @@ impl SparseCholesky {
         Ok(Self {
             l: vec![0.0; symbolic.len_val()],
             symbolic: Arc::new(symbolic),
-            rounded: Vec::new(),
-            rounded_current: false,
-            factored: false,
+            l_single: Vec::new(),
+            a_single: Vec::new(),
+            single_rejected: Arc::new(AtomicBool::new(false)),
+            factored: Factored::No,
         })
     }
 
@@ -88,9 +107,10 @@ impl SparseCholesky {
         Self {
             symbolic: Arc::clone(&self.symbolic),
             l: vec![0.0; self.l.len()],
-            rounded: Vec::new(),
-            rounded_current: false,
-            factored: false,
+            l_single: Vec::new(),
+            a_single: Vec::new(),
+            single_rejected: Arc::clone(&self.single_rejected),
+            factored: Factored::No,
         }
     }
 
@@ -107,37 +127,64 @@ impl SparseCholesky {
     /// Factorises `a` (same pattern as the analysis; the lower triangle is read). On failure
     /// (not positive definite) the factor is unusable until the next successful call.
     pub fn factor(&mut self, a: SparseColMatRef<'_, usize, f64>) -> Result<(), FemError> {
-        let par = factor_parallelism();
-        let mut mem = MemBuffer::try_new(
-            self.symbolic
-                .factorize_numeric_llt_scratch::<f64>(par, Default::default()),
-        )
-        .map_err(|e| FemError::Factorization(format!("workspace: {e:?}")))?;
-        self.factored = false;
-        self.rounded_current = false;
-        self.symbolic
-            .factorize_numeric_llt::<f64>(
-                &mut self.l,
-                a,
-                Side::Lower,
-                Default::default(),
-                par,
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .map_err(|e| FemError::Factorization(format!("{e:?}")))?;
-        self.factored = true;
+        self.factored = Factored::No;
+        factorize(&self.symbolic, &mut self.l, a)?;
+        self.factored = Factored::Double;
         Ok(())
     }
 
-    /// x ← A⁻¹ x with the last factorised A.
+    /// Factorises `a` for [`SparseCholesky::solve_preconditioner_in_place`]: in f32 when the
+    /// factor is supernodal and the f32 factor passes a check, in f64 otherwise. Returns whether
+    /// f32 served.
+    ///
+    /// An f32 factor halves the factorisation's work and the solves' memory traffic, and
+    /// L̃L̃ᵀ is an exact factorisation of an SPD matrix near A: right for a preconditioner, which
+    /// approximates a Hessian anyway. The check solves A x = A x₀ for a fixed x₀ with entries in
+    /// [-1, 1] and accepts the f32 factor when max|x − x₀| ≤ [`SINGLE_FACTOR_TOLERANCE`], so a
+    /// matrix whose conditioning f32 cannot carry gets its f64 factor, as do all later ones
+    /// sharing this analysis. The check costs one product with A and one solve, a few percent
+    /// of the factorisation. After an f32 factorisation
+    /// [`SparseCholesky::solve_in_place`] is unavailable until the next [`SparseCholesky::factor`].
+    pub fn factor_for_preconditioning(
+        &mut self,
+        a: SparseColMatRef<'_, usize, f64>,
+    ) -> Result<bool, FemError> {
+        if self.is_supernodal() && !self.single_rejected.load(Ordering::Relaxed) {
+            self.factored = Factored::No;
+            self.a_single.clear();
+            self.a_single.extend(a.val().iter().map(|&v| v as f32));
+            self.l_single.resize(self.l.len(), 0.0);
+            let single = SparseColMatRef::new(a.symbolic(), &self.a_single);
+            if factorize(&self.symbolic, &mut self.l_single, single).is_ok() {
+                self.factored = Factored::Single;
+                let n = a.ncols();
+                let x0: Vec<f64> = (0..n)
+                    .map(|i| 2.0 * (i as f64 * 0.618_033_988_749_895).fract() - 1.0)
+                    .collect();
+                let mut x = vec![0.0; n];
+                symmetric_lower_product(a, &x0, &mut x);
+                self.solve_preconditioner_in_place(&mut x);
+                let err = x
+                    .iter()
+                    .zip(&x0)
+                    .fold(0.0f64, |m, (x, x0)| m.max((x - x0).abs()));
+                if err <= SINGLE_FACTOR_TOLERANCE {
+                    return Ok(true);
+                }
+            }
+            self.single_rejected.store(true, Ordering::Relaxed);
+        }
+        self.factor(a).map(|()| false)
+    }
+
+    /// x ← A⁻¹ x with the last A factorised by [`SparseCholesky::factor`].
     ///
     /// # Panics
-    /// If no factorisation has succeeded.
+    /// If the last factorisation was not a successful [`SparseCholesky::factor`].
     pub fn solve_in_place(&self, x: &mut [f64]) {
         assert!(
-            self.factored,
-            "solve with a sparse Cholesky never factorised"
+            self.factored == Factored::Double,
+            "exact solve without an f64 factorisation"
         );
         match self.symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => self.permuted_solve(s, &self.l, x),
@@ -155,27 +202,18 @@ impl SparseCholesky {
         }
     }
 
-    /// x ← (L̃L̃ᵀ)⁻¹ x, L̃ the last factor rounded to f32 (arithmetic in f64): an exact solve with
-    /// a symmetric positive definite matrix within about 1e-7 relative of A, reading half the
-    /// bytes of [`SparseCholesky::solve_in_place`]. Meant for preconditioners, where A itself
-    /// is an approximation; a simplicial factor is solved exactly.
+    /// x ← (L̃L̃ᵀ)⁻¹ x with whichever factor the last factorisation left, f32 (arithmetic in f64)
+    /// or f64.
     ///
     /// # Panics
     /// If no factorisation has succeeded.
-    pub fn solve_rounded_in_place(&mut self, x: &mut [f64]) {
-        let SymbolicCholeskyRaw::Supernodal(s) = self.symbolic.raw() else {
-            return self.solve_in_place(x);
-        };
-        assert!(
-            self.factored,
-            "solve with a sparse Cholesky never factorised"
-        );
-        if !self.rounded_current {
-            self.rounded.clear();
-            self.rounded.extend(self.l.iter().map(|&v| v as f32));
-            self.rounded_current = true;
+    pub fn solve_preconditioner_in_place(&self, x: &mut [f64]) {
+        match (self.factored, self.symbolic.raw()) {
+            (Factored::Single, SymbolicCholeskyRaw::Supernodal(s)) => {
+                self.permuted_solve(s, &self.l_single, x)
+            }
+            _ => self.solve_in_place(x),
         }
-        self.permuted_solve(s, &self.rounded, x);
     }
 
     /// Forward and back substitution with a supernodal factor stored as `values`, in the
@@ -209,6 +247,48 @@ impl SparseCholesky {
                 None => supernodal_solve(symbolic, values, x, rows),
             }
         });
+    }
+}
+
+/// Numeric LLᵀ of `a` into `l` (f64 or f32) with `symbolic`'s analysis.
+fn factorize<T: faer::traits::RealField>(
+    symbolic: &SymbolicCholesky<usize>,
+    l: &mut [T],
+    a: SparseColMatRef<'_, usize, T>,
+) -> Result<(), FemError> {
+    let par = factor_parallelism();
+    let mut mem =
+        MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<T>(par, Default::default()))
+            .map_err(|e| FemError::Factorization(format!("workspace: {e:?}")))?;
+    symbolic
+        .factorize_numeric_llt::<T>(
+            l,
+            a,
+            Side::Lower,
+            Default::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .map(|_| ())
+        .map_err(|e| FemError::Factorization(format!("{e:?}")))
+}
+
+/// y = A x for symmetric A given by (at least) its lower triangle: entries above the diagonal
+/// are skipped.
+fn symmetric_lower_product(a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
+    let (cp, ri, v) = (a.col_ptr(), a.row_idx(), a.val());
+    for j in 0..a.ncols() {
+        for k in cp[j]..cp[j + 1] {
+            let i = ri[k];
+            if i > j {
+                y[i] += v[k] * x[j];
+                y[j] += v[k] * x[i];
+            } else if i == j {
+                y[j] += v[k] * x[j];
+            }
+        }
     }
 }
 
@@ -566,7 +646,7 @@ mod tests {
     }
 
     #[test]
-    fn the_rounded_solve_is_close_and_follows_refactorisations() {
+    fn a_well_conditioned_preconditioner_is_factorised_in_f32_and_follows_refactorisations() {
         let (p, mut chol) = supernodal([16, 5, 4]);
         let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
         for diag in [0.1, 3.0] {
@@ -574,14 +654,62 @@ mod tests {
             chol.factor(p.matrix(&a)).unwrap();
             let mut exact = b.clone();
             chol.solve_in_place(&mut exact);
-            let mut rounded = b.clone();
-            chol.solve_rounded_in_place(&mut rounded);
+            assert!(chol.factor_for_preconditioning(p.matrix(&a)).unwrap());
+            let mut single = b.clone();
+            chol.solve_preconditioner_in_place(&mut single);
             // f32's unit roundoff is 6e-8; this matrix's condition number is modest.
-            let d = max_relative_difference(&rounded, &exact);
-            assert!(d < 1e-5, "diag {diag}: rounded solve off by {d:e}");
-            assert!(d > 0.0, "diag {diag}: the rounded solve did not round");
-            assert!(residual(&p, &a, &rounded, &b) < 1e-5, "diag {diag}");
+            let d = max_relative_difference(&single, &exact);
+            assert!(d < 1e-5, "diag {diag}: f32 factor's solve off by {d:e}");
+            assert!(d > 0.0, "diag {diag}: the f32 factor was not used");
+            assert!(residual(&p, &a, &single, &b) < 1e-5, "diag {diag}");
         }
+    }
+
+    #[test]
+    fn an_ill_conditioned_preconditioner_is_factorised_in_f64() {
+        // A graph Laplacian of the pattern plus 1e-9 I: condition number about 1e10. Its f32
+        // factorisation succeeds but its check solve is 0.1 off (3e-5 with 1e-4 I), so the
+        // check, not a failed pivot, sends it to f64.
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        let mut a = values(&p, 0.0);
+        let (cp, ri) = (p.symbolic.col_ptr(), p.symbolic.row_idx());
+        for j in 0..p.dim() {
+            let mut sum = 0.0;
+            for k in cp[j]..cp[j + 1] {
+                if ri[k] != j {
+                    a[k] = -a[k].abs();
+                    sum += a[k].abs();
+                }
+            }
+            a[p.diag[j]] = sum + 1e-9;
+        }
+        let sibling = chol.same_pattern();
+        assert!(!chol.factor_for_preconditioning(p.matrix(&a)).unwrap());
+        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let mut x = b.clone();
+        chol.solve_preconditioner_in_place(&mut x);
+        let mut exact = b.clone();
+        chol.solve_in_place(&mut exact);
+        assert_eq!(x, exact);
+        // The rejection is remembered by every factor sharing the analysis, even for a matrix
+        // f32 would carry; a fresh analysis tries f32 again.
+        let good = values(&p, 1.0);
+        for mut other in [chol, sibling] {
+            assert!(!other.factor_for_preconditioning(p.matrix(&good)).unwrap());
+        }
+        let (_, mut fresh) = supernodal([16, 5, 4]);
+        assert!(fresh.factor_for_preconditioning(p.matrix(&good)).unwrap());
+    }
+
+    #[test]
+    #[should_panic(expected = "exact solve without an f64 factorisation")]
+    fn an_f32_factor_refuses_exact_solves() {
+        let (p, mut chol) = supernodal([6, 2, 2]);
+        assert!(
+            chol.factor_for_preconditioning(p.matrix(&values(&p, 1.0)))
+                .unwrap()
+        );
+        chol.solve_in_place(&mut vec![1.0; p.dim()]);
     }
 
     #[test]
