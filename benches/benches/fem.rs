@@ -159,7 +159,6 @@ fn bench_assembly(c: &mut Criterion, cases: &[Case]) {
 
 /// The projected Hessian at the benchmark state plus M/h², factorised and solved on one thread.
 fn bench_sparse(c: &mut Criterion, cases: &[Case]) {
-    let material = MaterialConfig::default().build();
     let pool = pool(1);
     let mut group = c.benchmark_group("sparse");
     group
@@ -167,22 +166,6 @@ fn bench_sparse(c: &mut Criterion, cases: &[Case]) {
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(3));
     for case in cases {
-        let elements = Elements::new(&case.mesh);
-        let u = smooth_displacement(&case.mesh);
-        let dofs = DofMap::new(&case.mesh, &case.pinned());
-        let pattern = HessianPattern::new(&elements.tets, &dofs);
-        let mut values = vec![0.0; pattern.nnz()];
-        with_material!(&material, |m| assembly::hessian(
-            m,
-            &elements,
-            ElementSet::All,
-            &u,
-            true,
-            &pattern,
-            &mut values,
-            &mut AssemblyBuffers::default()
-        ));
-        // The time-stepping matrix: plus M/h², with the mass of the step benchmarks' model.
         let model = FullSpaceModel::new(
             case.mesh.clone(),
             &MaterialConfig::default(),
@@ -191,6 +174,20 @@ fn bench_sparse(c: &mut Criterion, cases: &[Case]) {
             Vec::new(),
         )
         .expect("the benchmark model is valid");
+        let u = smooth_displacement(&case.mesh);
+        let pattern = HessianPattern::new(&model.elements.tets, &model.dofs);
+        let mut values = vec![0.0; pattern.nnz()];
+        with_material!(&model.material, |m| assembly::hessian(
+            m,
+            &model.elements,
+            ElementSet::All,
+            &u,
+            true,
+            &pattern,
+            &mut values,
+            &mut AssemblyBuffers::default()
+        ));
+        // The time-stepping matrix: plus M/h².
         for (j, &d) in model.dofs.free.iter().enumerate() {
             values[pattern.diag[j]] += model.mass.lumped[d / 3] / (TIME_STEP * TIME_STEP);
         }
