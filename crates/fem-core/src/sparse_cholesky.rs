@@ -187,7 +187,7 @@ impl SparseCholesky {
             "exact solve without an f64 factorisation"
         );
         match self.symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => self.permuted_solve(s, &self.l, x),
+            SymbolicCholeskyRaw::Supernodal(s) => self.permuted_solve(s, &self.l, x, Kernels::Best),
             SymbolicCholeskyRaw::Simplicial(_) => {
                 let par = factor_parallelism();
                 let n = x.len();
@@ -210,7 +210,7 @@ impl SparseCholesky {
     pub fn solve_preconditioner_in_place(&self, x: &mut [f64]) {
         match (self.factored, self.symbolic.raw()) {
             (Factored::Single, SymbolicCholeskyRaw::Supernodal(s)) => {
-                self.permuted_solve(s, &self.l_single, x)
+                self.permuted_solve(s, &self.l_single, x, Kernels::Best)
             }
             _ => self.solve_in_place(x),
         }
@@ -223,6 +223,7 @@ impl SparseCholesky {
         symbolic: &SymbolicSupernodalCholesky<usize>,
         values: &[V],
         x: &mut [f64],
+        kernels: Kernels,
     ) {
         let n = x.len();
         assert_eq!(n, symbolic.nrows(), "right-hand side length");
@@ -239,12 +240,12 @@ impl SparseCholesky {
                     for (yi, &f) in y.iter_mut().zip(fwd) {
                         *yi = x[f];
                     }
-                    supernodal_solve(symbolic, values, y, rows);
+                    supernodal_solve(symbolic, values, y, rows, kernels);
                     for (yi, &f) in y.iter().zip(fwd) {
                         x[f] = *yi;
                     }
                 }
-                None => supernodal_solve(symbolic, values, x, rows),
+                None => supernodal_solve(symbolic, values, x, rows, kernels),
             }
         });
     }
@@ -292,15 +293,28 @@ fn symmetric_lower_product(a: SparseColMatRef<'_, usize, f64>, x: &[f64], y: &mu
     }
 }
 
+/// Which inner loops a supernodal solve runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kernels {
+    /// AVX2 + FMA where the CPU has them, the portable loops otherwise.
+    Best,
+    /// The portable loops (what CPUs without AVX2 run; tests compare the two).
+    #[cfg_attr(not(test), allow(dead_code))]
+    Portable,
+}
+
 /// L Lᵀ x = b for a supernodal L, in place, with AVX2 + FMA where the CPU has them.
 fn supernodal_solve<V: Stored>(
     symbolic: &SymbolicSupernodalCholesky<usize>,
     values: &[V],
     x: &mut [f64],
     rows: &mut [f64],
+    kernels: Kernels,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if let Some(v3) = pulp::x86::V3::try_new() {
+    if kernels == Kernels::Best
+        && let Some(v3) = pulp::x86::V3::try_new()
+    {
         return v3.vectorize(|| substitute(Avx2(v3), symbolic, values, x, rows));
     }
     substitute(Portable, symbolic, values, x, rows)
@@ -643,6 +657,23 @@ mod tests {
             assert!(d < 1e-13, "{cells:?}: differs from faer by {d:e}");
             assert!(residual(&p, &a, &x, &b) < 1e-13, "{cells:?}");
         }
+    }
+
+    #[test]
+    fn the_portable_kernels_agree_with_the_simd_ones() {
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        let a = values(&p, 0.1);
+        chol.factor(p.matrix(&a)).unwrap();
+        let SymbolicCholeskyRaw::Supernodal(s) = chol.symbolic.raw() else {
+            unreachable!("forced supernodal")
+        };
+        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let (mut best, mut portable) = (b.clone(), b.clone());
+        chol.permuted_solve(s, &chol.l, &mut best, Kernels::Best);
+        chol.permuted_solve(s, &chol.l, &mut portable, Kernels::Portable);
+        let d = max_relative_difference(&portable, &best);
+        assert!(d < 1e-13, "portable and SIMD solves differ by {d:e}");
+        assert!(residual(&p, &a, &portable, &b) < 1e-13);
     }
 
     #[test]
