@@ -42,6 +42,8 @@ pub struct SparseCholesky {
     /// to f64 (the matrices one simulation factorises share their mesh and mass term, and so
     /// largely their conditioning), instead of paying for a rejected f32 factor each time.
     single_rejected: Arc<AtomicBool>,
+    /// The longest row pattern of a supernode (the solves' gather buffer), 0 when simplicial.
+    max_pattern: usize,
     factored: Factored,
 }
 
@@ -92,12 +94,20 @@ impl SparseCholesky {
             params,
         )
         .map_err(|e| FemError::Factorization(format!("symbolic analysis: {e:?}")))?;
+        let max_pattern = match symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => (0..s.n_supernodes())
+                .map(|k| s.supernode(k).pattern().len())
+                .max()
+                .unwrap_or(0),
+            SymbolicCholeskyRaw::Simplicial(_) => 0,
+        };
         Ok(Self {
             l: vec![0.0; symbolic.len_val()],
             symbolic: Arc::new(symbolic),
             l_single: Vec::new(),
             a_single: Vec::new(),
             single_rejected: Arc::new(AtomicBool::new(false)),
+            max_pattern,
             factored: Factored::No,
         })
     }
@@ -110,6 +120,7 @@ impl SparseCholesky {
             l_single: Vec::new(),
             a_single: Vec::new(),
             single_rejected: Arc::clone(&self.single_rejected),
+            max_pattern: self.max_pattern,
             factored: Factored::No,
         }
     }
@@ -140,12 +151,13 @@ impl SparseCholesky {
     /// An f32 factor is faster to compute (twice the SIMD lanes: 18 → 16 ms on the catapult,
     /// 230 → 156 ms on a 30k-DOF beam, check included) and halves the solves' memory traffic,
     /// and L̃L̃ᵀ is an exact factorisation of an SPD matrix near A: right for a preconditioner,
-    /// which approximates a Hessian anyway. A failed f32 factorisation counts as a rejection. The check solves A x = A x₀ for a fixed x₀ with entries in
-    /// [-1, 1] and accepts the f32 factor when max|x − x₀| ≤ [`SINGLE_FACTOR_TOLERANCE`], so a
-    /// matrix whose conditioning f32 cannot carry gets its f64 factor, as do all later ones
-    /// sharing this analysis. The check costs one product with A and one solve, a few percent
-    /// of the factorisation. After an f32 factorisation
-    /// [`SparseCholesky::solve_in_place`] is unavailable until the next [`SparseCholesky::factor`].
+    /// which approximates a Hessian anyway. The check solves A x = A x₀ for a fixed x₀ with
+    /// entries in [-1, 1] and accepts the f32 factor when max|x − x₀| ≤
+    /// [`SINGLE_FACTOR_TOLERANCE`], so a matrix whose conditioning f32 cannot carry gets its f64
+    /// factor, as do all later ones sharing this analysis; a failed f32 factorisation counts as
+    /// a rejection. The check costs one product with A and one solve, a few percent of the
+    /// factorisation. After an f32 factorisation [`SparseCholesky::solve_in_place`] is
+    /// unavailable until the next [`SparseCholesky::factor`].
     pub fn factor_for_preconditioning(
         &mut self,
         a: SparseColMatRef<'_, usize, f64>,
@@ -189,18 +201,21 @@ impl SparseCholesky {
         );
         match self.symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => self.permuted_solve(s, &self.l, x, Kernels::Best),
-            SymbolicCholeskyRaw::Simplicial(_) => {
-                let par = factor_parallelism();
-                let n = x.len();
-                let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
-                LltRef::new(&self.symbolic, &self.l).solve_in_place_with_conj(
-                    Conj::No,
-                    faer::MatMut::from_column_major_slice_mut(x, n, 1),
-                    par,
-                    MemStack::new(&mut mem),
-                );
-            }
+            SymbolicCholeskyRaw::Simplicial(_) => self.faer_solve_in_place(x, factor_parallelism()),
         }
+    }
+
+    /// faer's own solve with the f64 factor (simplicial factors; tests compare it with the
+    /// supernodal kernels).
+    fn faer_solve_in_place(&self, x: &mut [f64], par: Par) {
+        let n = x.len();
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+        LltRef::new(&self.symbolic, &self.l).solve_in_place_with_conj(
+            Conj::No,
+            faer::MatMut::from_column_major_slice_mut(x, n, 1),
+            par,
+            MemStack::new(&mut mem),
+        );
     }
 
     /// x ← (L̃L̃ᵀ)⁻¹ x with whichever factor the last factorisation left, f32 (arithmetic in f64)
@@ -228,12 +243,8 @@ impl SparseCholesky {
     ) {
         let n = x.len();
         assert_eq!(n, symbolic.nrows(), "right-hand side length");
-        let gathered = (0..symbolic.n_supernodes())
-            .map(|s| symbolic.supernode(s).pattern().len())
-            .max()
-            .unwrap_or(0);
         SOLVE_SCRATCH.with_borrow_mut(|scratch| {
-            scratch.resize(n + gathered, 0.0);
+            scratch.resize(n + self.max_pattern, 0.0);
             let (y, rows) = scratch.split_at_mut(n);
             match self.symbolic.perm() {
                 Some(perm) => {
@@ -525,9 +536,14 @@ mod tests {
     use crate::mesh::generate::{BoxSpec, box_mesh};
 
     fn pattern() -> HessianPattern {
+        box_pattern([6, 2, 2])
+    }
+
+    /// The free-DOF pattern of a 1 × 0.3 × 0.2 box of `cells` pinned at x = 0.
+    fn box_pattern(cells: [usize; 3]) -> HessianPattern {
         let mesh = box_mesh(&BoxSpec {
             size: [1.0, 0.3, 0.2],
-            cells: [6, 2, 2],
+            cells,
             ..Default::default()
         })
         .unwrap();
@@ -601,16 +617,7 @@ mod tests {
     /// A box pinned at one end, large enough for a supernodal factor to have wide supernodes
     /// with long row patterns; `force` makes faer choose supernodal whatever its estimate.
     fn supernodal(cells: [usize; 3]) -> (HessianPattern, SparseCholesky) {
-        let mesh = box_mesh(&BoxSpec {
-            size: [1.0, 0.3, 0.2],
-            cells,
-            ..Default::default()
-        })
-        .unwrap();
-        let pinned: Vec<usize> = (0..mesh.num_vertices())
-            .filter(|&v| mesh.vertices[v].x == 0.0)
-            .collect();
-        let p = HessianPattern::new(&mesh.tets, &DofMap::new(&mesh, &pinned));
+        let p = box_pattern(cells);
         let params = faer::sparse::linalg::cholesky::CholeskySymbolicParams {
             supernodal_flop_ratio_threshold:
                 faer::sparse::linalg::SupernodalThreshold::FORCE_SUPERNODAL,
@@ -619,20 +626,6 @@ mod tests {
         let chol = SparseCholesky::analyse_with(&p, params).unwrap();
         assert!(chol.is_supernodal());
         (p, chol)
-    }
-
-    /// faer's own solve with the factor `chol` holds.
-    fn faer_solution(chol: &SparseCholesky, b: &[f64]) -> Vec<f64> {
-        let mut x = b.to_vec();
-        let n = x.len();
-        let mut mem = MemBuffer::new(chol.symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
-        LltRef::new(&chol.symbolic, &chol.l).solve_in_place_with_conj(
-            Conj::No,
-            faer::MatMut::from_column_major_slice_mut(&mut x, n, 1),
-            Par::Seq,
-            MemStack::new(&mut mem),
-        );
-        x
     }
 
     fn max_relative_difference(a: &[f64], b: &[f64]) -> f64 {
@@ -654,7 +647,9 @@ mod tests {
             let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
             let mut x = b.clone();
             chol.solve_in_place(&mut x);
-            let d = max_relative_difference(&x, &faer_solution(&chol, &b));
+            let mut reference = b.clone();
+            chol.faer_solve_in_place(&mut reference, Par::Seq);
+            let d = max_relative_difference(&x, &reference);
             assert!(d < 1e-13, "{cells:?}: differs from faer by {d:e}");
             assert!(residual(&p, &a, &x, &b) < 1e-13, "{cells:?}");
         }
