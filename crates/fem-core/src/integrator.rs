@@ -18,8 +18,8 @@ use crate::forces::ExternalForce;
 use crate::mass::MassMatrix;
 use crate::material::{AnyMaterial, MaterialConfig};
 use crate::optim::{
-    Lbfgs, LbfgsPreconditioner, NewtonSystem, Objective, Preconditioner, SolveParams, SolverConfig,
-    SolverMethod, newton,
+    Lbfgs, LbfgsPreconditioner, NewtonSystem, Objective, Preconditioner, PreconditionerUse,
+    SolveParams, SolverConfig, SolverMethod, newton,
 };
 use crate::sparse::{HessianPattern, NO_SLOT};
 use crate::sparse_cholesky::SparseCholesky;
@@ -237,33 +237,11 @@ const REFACTOR_COST_ITERATIONS: usize = 10;
 struct LbfgsParts {
     lbfgs: Lbfgs,
     pre: FactoredPreconditioner,
-    /// Solves served since the factorisation.
-    age: usize,
-    /// Iterations of the first solve after the factorisation.
-    fresh_iterations: usize,
-    /// Iterations beyond `fresh_iterations` summed over the later solves.
-    excess: usize,
-    /// The next step refactorises.
-    stale: bool,
-}
-
-impl LbfgsParts {
-    /// Records a converged solve of `iterations`. A current-state factor goes stale once the
-    /// iterations its later solves needed beyond its first one add up to a refactorisation:
-    /// slowing solves predict more slow ones, so paying for a fresh factor then breaks even
-    /// within a step or two.
-    fn record(&mut self, iterations: usize) {
-        self.age += 1;
-        if self.age == 1 {
-            self.fresh_iterations = iterations;
-            self.excess = 0;
-        } else {
-            self.excess += iterations.saturating_sub(self.fresh_iterations);
-            if self.excess >= REFACTOR_COST_ITERATIONS {
-                self.stale = true;
-            }
-        }
-    }
+    /// How the factor has served; a current-state factor goes stale once its later solves'
+    /// extra iterations add up to [`REFACTOR_COST_ITERATIONS`] or after [`PRECOND_MAX_AGE`].
+    usage: PreconditionerUse,
+    /// A solve with the factor failed: the next one refactorises.
+    failed: bool,
 }
 
 /// Pattern, symbolic factorisation and value buffers of the free-DOF Hessian, built once.
@@ -642,7 +620,10 @@ impl Simulator {
     fn ensure_lbfgs(&mut self, x: &[f64], t: f64, refresh: bool) -> Result<(), FemError> {
         let current = self.solver.preconditioner == LbfgsPreconditioner::CurrentState;
         if let Some(p) = &self.lbfgs
-            && !(current && (refresh || p.stale || p.age >= PRECOND_MAX_AGE))
+            && !(current
+                && (refresh
+                    || p.failed
+                    || p.usage.is_stale(PRECOND_MAX_AGE, REFACTOR_COST_ITERATIONS)))
         {
             return Ok(());
         }
@@ -679,8 +660,8 @@ impl Simulator {
         match &mut self.lbfgs {
             Some(p) => {
                 std::mem::swap(&mut p.pre.chol, &mut parts.chol);
-                p.age = 0;
-                p.stale = false;
+                p.usage.restart();
+                p.failed = false;
             }
             None => {
                 let empty = parts.chol.same_pattern();
@@ -688,10 +669,8 @@ impl Simulator {
                 self.lbfgs = Some(LbfgsParts {
                     lbfgs: Lbfgs::new(self.model.dofs.num_free(), self.solver.lbfgs_memory),
                     pre: FactoredPreconditioner { chol },
-                    age: 0,
-                    fresh_iterations: 0,
-                    excess: 0,
-                    stale: false,
+                    usage: PreconditionerUse::default(),
+                    failed: false,
                 })
             }
         }
@@ -744,14 +723,16 @@ impl Simulator {
                 let result = loop {
                     self.ensure_lbfgs(x, t, refresh)?;
                     let parts = self.lbfgs.as_mut().expect("built above");
-                    let fresh = parts.age == 0;
+                    let fresh = parts.usage.solves() == 0;
                     // An aged factor gets the iterations a fresh one needed, twice over: past
                     // that it has drifted from the curvature and a refactorisation at the
                     // current iterate pays (L-BFGS goes on from there, nothing is lost).
                     let cap = if fresh || !current {
                         params.max_iterations
                     } else {
-                        params.max_iterations.min(2 * parts.fresh_iterations + 4)
+                        params
+                            .max_iterations
+                            .min(2 * parts.usage.fresh_iterations() + 4)
                     };
                     let mut obj = StepObjective::new(
                         &self.model,
@@ -769,11 +750,11 @@ impl Simulator {
                     let mut result = parts.lbfgs.minimize(&mut obj, &mut parts.pre, x, attempt);
                     match &mut result {
                         Ok(s) => {
-                            parts.record(s.iterations);
+                            parts.usage.record(s.iterations);
                             s.iterations += spent;
                         }
                         Err(e) => {
-                            parts.stale = true;
+                            parts.failed = true;
                             spent += match *e {
                                 FemError::NotConverged { iterations, .. } => iterations,
                                 FemError::LineSearchFailed { iteration, .. } => iteration + 1,

@@ -6,8 +6,8 @@ use fem_core::FemError;
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
 use fem_core::material::Material;
 use fem_core::optim::{
-    Lbfgs, NewtonSystem, Objective, Preconditioner, SolveParams, SolveStats, SolverConfig,
-    SolverMethod, newton,
+    Lbfgs, NewtonSystem, Objective, Preconditioner, PreconditionerUse, SolveParams, SolveStats,
+    SolverConfig, SolverMethod, newton,
 };
 use fem_core::{Mat3, with_material};
 use nn::simd::{add_combination, dot_rows};
@@ -242,11 +242,8 @@ pub struct ReducedSimulator<S: Subspace> {
     precond_active: Option<Vec<bool>>,
     /// Which matrix preconditions L-BFGS.
     pub preconditioning: Preconditioning,
-    /// Steps solved with the current preconditioner, iterations of the first of them, and the
-    /// iterations of the later ones beyond that first count, summed.
-    precond_age: usize,
-    precond_base_iterations: usize,
-    precond_extra_iterations: usize,
+    /// How the current preconditioner has served.
+    precond_use: PreconditionerUse,
     /// The next z and q while a step solves (swapped with the state after it).
     next_z: Vec<f64>,
     next_q: Vec<f64>,
@@ -345,9 +342,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             precond: DenseFactor::default(),
             precond_active: None,
             preconditioning: Preconditioning::default(),
-            precond_age: 0,
-            precond_base_iterations: 0,
-            precond_extra_iterations: 0,
+            precond_use: PreconditionerUse::default(),
             next_z: vec![0.0; d],
             next_q: vec![0.0; k],
             model,
@@ -429,8 +424,9 @@ impl<S: Subspace> ReducedSimulator<S> {
             let depends_on_state =
                 !self.subspace.is_linear() || preconditioning == Preconditioning::CurrentState;
             let stale = depends_on_state
-                && (self.precond_age >= PRECOND_MAX_AGE
-                    || self.precond_extra_iterations >= PRECOND_EXTRA_ITERATIONS);
+                && self
+                    .precond_use
+                    .is_stale(PRECOND_MAX_AGE, PRECOND_EXTRA_ITERATIONS);
             if !current || stale {
                 self.precond_active = None;
                 match preconditioning {
@@ -456,7 +452,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                 }
                 self.precond_active =
                     Some(self.model.forces.iter().map(|f| f.is_active(t)).collect());
-                self.precond_age = 0;
+                self.precond_use.restart();
                 rebuilt = true;
                 // A new preconditioner also marks a change of the curvature (a force switched,
                 // or the state moved on): the next solve starts without the old pairs.
@@ -521,14 +517,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                 (q_new[i] - self.state.q[i]) / h
             };
         }
-        if self.precond_age == 0 {
-            self.precond_base_iterations = stats.iterations;
-            self.precond_extra_iterations = 0;
-        }
-        self.precond_age += 1;
-        self.precond_extra_iterations += stats
-            .iterations
-            .saturating_sub(self.precond_base_iterations);
+        self.precond_use.record(stats.iterations);
         for (v, (new, old)) in self.state.zdot.iter_mut().zip(z.iter().zip(&self.state.z)) {
             *v = if self.time.quasi_static {
                 0.0

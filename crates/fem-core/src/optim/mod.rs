@@ -13,6 +13,53 @@ pub use newton::{NewtonSystem, newton};
 
 use crate::FemError;
 
+/// How a factorised preconditioner has served since it was made: the solves it served, the
+/// iterations of the first of them, and the iterations the later ones took beyond that first
+/// count, summed. Once that excess reaches about what a refactorisation costs in iterations,
+/// slowing solves predict more slow ones and a fresh factor pays for itself within a step or
+/// two. Counts rather than timings, so that when a factor is refreshed (and so the trajectory,
+/// at the solver's tolerance) never depends on the machine's load. The full-space and the
+/// reduced integrators keep their preconditioners by it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PreconditionerUse {
+    solves: usize,
+    fresh_iterations: usize,
+    excess: usize,
+}
+
+impl PreconditionerUse {
+    /// A new factor: nothing served yet.
+    pub fn restart(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Records a converged solve of `iterations`.
+    pub fn record(&mut self, iterations: usize) {
+        if self.solves == 0 {
+            self.fresh_iterations = iterations;
+        } else {
+            self.excess += iterations.saturating_sub(self.fresh_iterations);
+        }
+        self.solves += 1;
+    }
+
+    /// Solves served since the factorisation.
+    pub fn solves(&self) -> usize {
+        self.solves
+    }
+
+    /// Iterations of the first solve after the factorisation.
+    pub fn fresh_iterations(&self) -> usize {
+        self.fresh_iterations
+    }
+
+    /// Whether the factor has served `max_solves` solves, or its later solves took
+    /// `excess_iterations` more iterations than its first one, together.
+    pub fn is_stale(&self, max_solves: usize, excess_iterations: usize) -> bool {
+        self.solves >= max_solves || self.excess >= excess_iterations
+    }
+}
+
 /// A smooth function to minimise.
 pub trait Objective {
     /// Number of unknowns.
@@ -179,5 +226,28 @@ pub(crate) fn relative(gnorm: f64, scale: f64) -> f64 {
         0.0
     } else {
         f64::INFINITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PreconditionerUse;
+
+    #[test]
+    fn a_preconditioner_goes_stale_by_extra_iterations_or_by_age() {
+        let mut u = PreconditionerUse::default();
+        u.record(5);
+        assert_eq!((u.solves(), u.fresh_iterations()), (1, 5));
+        u.record(9); // 4 beyond the first
+        u.record(3); // none
+        u.record(7); // 2 more: 6 in all
+        assert!(!u.is_stale(16, 10));
+        assert!(u.is_stale(16, 6));
+        assert!(u.is_stale(4, 10), "four solves served");
+        u.record(9); // 10 in all
+        assert!(u.is_stale(16, 10));
+        u.restart();
+        assert_eq!(u, PreconditionerUse::default());
+        assert!(!u.is_stale(16, 10));
     }
 }
