@@ -36,7 +36,9 @@ pub fn stage_version(stage: &str) -> u32 {
         //    tolerance).
         // 5: L-BFGS's preconditioner factorised in f32 where it passes its check (iterates
         //    within tolerance).
-        "snapshots" | "snapshots-shard" | "reference" => 5,
+        // 6: each step's solve starts from the extrapolation u_n + h u̇_n + h² ü_n (iterates
+        //    within tolerance).
+        "snapshots" | "snapshots-shard" | "reference" => 6,
         // 2: the held-out error along the greedy path is stored with the rule.
         "cubature" => 2,
         // 3: the decoder's Jacobian from SIMD kernels (round-off).

@@ -8,6 +8,12 @@
 //! falling back to automatic load stepping from rest when a direct solve fails.
 //!
 //! Unknowns are the free DOFs only ([`DofMap`]); pinned vertices stay at zero displacement.
+//!
+//! Each dynamic step's solve starts from the second-order extrapolation
+//! u_n + h u̇_n + h² ü_n, with ü_n = (u̇_n − u̇_{n−1})/h the last step's acceleration, rather than
+//! from u_n: the minimiser is the same, only closer (fewer L-BFGS iterations on smooth motion).
+//! The first step, a state set from outside, and an extrapolation whose energy is not finite
+//! start from u_n.
 
 use std::time::Instant;
 
@@ -220,6 +226,8 @@ pub struct Simulator {
     newton: Option<NewtonParts>,
     lbfgs: Option<LbfgsParts>,
     lbfgs_factorizations: usize,
+    /// ü_n = (u̇_n − u̇_{n−1})/h (full) and the step n it belongs to: a start hint only.
+    acceleration: Option<(usize, Vec<f64>)>,
 }
 
 /// Steps a current-state L-BFGS preconditioner serves at most before it is refactorised.
@@ -604,6 +612,7 @@ impl Simulator {
             newton: None,
             lbfgs: None,
             lbfgs_factorizations: 0,
+            acceleration: None,
         })
     }
 
@@ -820,7 +829,10 @@ impl Simulator {
                 .map(|(u, v)| u + h * v)
                 .collect()
         };
-        self.check_start(&x)?;
+        match self.extrapolated_start(&predicted) {
+            Some(guess) => x = guess,
+            None => self.check_start(&x)?,
+        }
         let mut load_steps = 0;
         let stats = match self.solve(&mut x, t, &predicted, 1.0) {
             Ok(s) => s,
@@ -847,9 +859,16 @@ impl Simulator {
         if self.time.quasi_static {
             self.state.v.fill(0.0);
         } else {
+            let mut a = match self.acceleration.take() {
+                Some((_, a)) => a,
+                None => vec![0.0; u_new.len()],
+            };
             for i in 0..u_new.len() {
-                self.state.v[i] = (u_new[i] - self.state.u[i]) / h;
+                let v = (u_new[i] - self.state.u[i]) / h;
+                a[i] = (v - self.state.v[i]) / h;
+                self.state.v[i] = v;
             }
+            self.acceleration = Some((self.state.step + 1, a));
         }
         self.state.u = u_new;
         self.state.time = t;
@@ -860,6 +879,24 @@ impl Simulator {
         report.load_steps = load_steps;
         report.wall_seconds = start.elapsed().as_secs_f64();
         Ok(report)
+    }
+
+    /// The free DOFs of u_n + h u̇_n + h² ü_n (`predicted` is u_n + h u̇_n), when the last step
+    /// left ü_n for this state and the elastic energy there is finite.
+    fn extrapolated_start(&mut self, predicted: &[f64]) -> Option<Vec<f64>> {
+        let h2 = self.time.step * self.time.step;
+        let full: Vec<f64> = match &self.acceleration {
+            Some((step, a)) if *step == self.state.step && !self.time.quasi_static => {
+                predicted.iter().zip(a).map(|(p, a)| p + h2 * a).collect()
+            }
+            _ => return None,
+        };
+        let mut x = vec![0.0; self.model.dofs.num_free()];
+        self.model.dofs.gather(&full, &mut x);
+        let mut u = vec![0.0; self.model.num_full()];
+        self.model.dofs.scatter(&x, &mut u);
+        let e = self.model.elastic_energy(&u, &mut self.buffers);
+        e.is_finite().then_some(x)
     }
 
     /// Fails with a clear error when the current state is outside the material's domain.

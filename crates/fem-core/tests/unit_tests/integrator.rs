@@ -93,6 +93,45 @@ fn a_body_at_rest_without_loads_stays_exactly_at_rest() {
     }
 }
 
+/// An unpinned body in uniform gravity translates rigidly: implicit Euler gives
+/// u_n = h² g n(n+1)/2 exactly. From the second step on, the start u_n + h u̇_n + h² ü_n is that
+/// solution, so the solver has nothing left to do.
+#[test]
+fn free_fall_follows_implicit_euler_and_the_extrapolated_start_is_already_the_solution() {
+    let g = [0.0, -9.81, 0.0];
+    for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
+        let mesh = beam([6, 2, 2]);
+        let material = MaterialConfig {
+            model: MaterialModel::StableNeoHookean,
+            youngs_modulus: 1e5,
+            poisson_ratio: 0.4,
+            ..Default::default()
+        };
+        let m = FullSpaceModel::new(mesh, &material, vec![], Vec3::from(g), vec![]).unwrap();
+        let mut sim = Simulator::new(m, dynamic(6), solver(method, 1e-8)).unwrap();
+        let h = sim.time.step;
+        for n in 1..=6 {
+            let r = sim.step().unwrap();
+            if n == 1 {
+                assert!(
+                    r.iterations > 0,
+                    "{method:?}: the first step starts from rest"
+                );
+            } else {
+                assert_eq!(r.iterations, 0, "{method:?}, step {n}");
+            }
+            let expect = h * h * g[1] * (n * (n + 1)) as f64 / 2.0;
+            for (i, &u) in sim.state.u.iter().enumerate() {
+                let want = if i % 3 == 1 { expect } else { 0.0 };
+                assert!(
+                    (u - want).abs() <= 1e-9 * expect.abs(),
+                    "{method:?}, step {n}, dof {i}: {u} against {want}"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn pinned_beam_under_gravity_settles_and_never_gains_energy() {
     // First bending mode ≈ 1.6 Hz; with h = 0.05 implicit Euler damps it within a few seconds.
