@@ -167,6 +167,53 @@ fn reduced_gradient_matches_finite_differences_with_and_without_cubature() {
     }
 }
 
+/// An unpinned body in uniform gravity translates rigidly: implicit Euler gives
+/// u_n = h² g n(n+1)/2. From the second step on, the start z_n + h ż_n + h² z̈_n is that solution
+/// (the subspace spans the translation), so the solver has nothing left to do.
+#[test]
+fn free_fall_in_the_subspace_starts_at_the_solution_after_the_first_step() {
+    let mesh = box_mesh(&BoxSpec {
+        size: [1.0, 0.2, 0.2],
+        cells: [4, 1, 1],
+        ..Default::default()
+    })
+    .unwrap();
+    let material = MaterialConfig {
+        youngs_modulus: 1e5,
+        poisson_ratio: 0.4,
+        ..Default::default()
+    };
+    let g = -9.81;
+    let m = FullSpaceModel::new(mesh, &material, vec![], Vec3::new(0.0, g, 0.0), vec![]).unwrap();
+    let n = m.dofs.num_free();
+    let space = ReducedSpace::new(&m, &full_rank_basis(&m), n, None).unwrap();
+    for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
+        let mut red = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            LinearSubspace::new(n),
+            time(6),
+            solver(method),
+        )
+        .unwrap();
+        let h = red.time.step;
+        for step in 1..=6 {
+            let r = red.step().unwrap();
+            if step > 1 {
+                assert_eq!(r.iterations, 0, "{method:?}, step {step}");
+            }
+            let expect = h * h * g * (step * (step + 1)) as f64 / 2.0;
+            for (i, &u) in red.full_displacement().iter().enumerate() {
+                let want = if i % 3 == 1 { expect } else { 0.0 };
+                assert!(
+                    (u - want).abs() <= 1e-9 * expect.abs(),
+                    "{method:?}, step {step}, dof {i}: {u} against {want}"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
     let m = model();
