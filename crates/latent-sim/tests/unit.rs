@@ -12,13 +12,26 @@ use latent_sim::{
     Subspace,
 };
 
-fn model() -> FullSpaceModel {
-    let mesh = box_mesh(&BoxSpec {
+/// A 1 m bar of 4 × 1 × 1 cells.
+fn bar() -> fem_core::TetMesh {
+    box_mesh(&BoxSpec {
         size: [1.0, 0.2, 0.2],
         cells: [4, 1, 1],
         ..Default::default()
     })
-    .unwrap();
+    .unwrap()
+}
+
+fn material() -> MaterialConfig {
+    MaterialConfig {
+        youngs_modulus: 1e5,
+        poisson_ratio: 0.4,
+        ..Default::default()
+    }
+}
+
+fn model() -> FullSpaceModel {
+    let mesh = bar();
     let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
         .select(&mesh, "pin")
         .unwrap();
@@ -33,14 +46,9 @@ fn model() -> FullSpaceModel {
         start: 0.0,
         end: 0.08,
     };
-    let material = MaterialConfig {
-        youngs_modulus: 1e5,
-        poisson_ratio: 0.4,
-        ..Default::default()
-    };
     FullSpaceModel::new(
         mesh,
-        &material,
+        &material(),
         pinned,
         Vec3::new(0.0, -9.81, 0.0),
         vec![spring],
@@ -172,19 +180,9 @@ fn reduced_gradient_matches_finite_differences_with_and_without_cubature() {
 /// (the subspace spans the translation), so the solver has nothing left to do.
 #[test]
 fn free_fall_in_the_subspace_starts_at_the_solution_after_the_first_step() {
-    let mesh = box_mesh(&BoxSpec {
-        size: [1.0, 0.2, 0.2],
-        cells: [4, 1, 1],
-        ..Default::default()
-    })
-    .unwrap();
-    let material = MaterialConfig {
-        youngs_modulus: 1e5,
-        poisson_ratio: 0.4,
-        ..Default::default()
-    };
     let g = -9.81;
-    let m = FullSpaceModel::new(mesh, &material, vec![], Vec3::new(0.0, g, 0.0), vec![]).unwrap();
+    let m =
+        FullSpaceModel::new(bar(), &material(), vec![], Vec3::new(0.0, g, 0.0), vec![]).unwrap();
     let n = m.dofs.num_free();
     let space = ReducedSpace::new(&m, &full_rank_basis(&m), n, None).unwrap();
     for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
