@@ -52,6 +52,18 @@ impl Case {
             .select(&self.mesh, "pin[0]")
             .expect("the x-min plane selects vertices")
     }
+
+    /// The pinned case under gravity with `material`, no other load.
+    fn model(&self, material: &MaterialConfig) -> FullSpaceModel {
+        FullSpaceModel::new(
+            self.mesh.clone(),
+            material,
+            self.pinned(),
+            Vec3::new(0.0, -9.81, 0.0),
+            Vec::new(),
+        )
+        .expect("the benchmark model is valid")
+    }
 }
 
 fn cases() -> Vec<Case> {
@@ -166,14 +178,7 @@ fn bench_sparse(c: &mut Criterion, cases: &[Case]) {
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(3));
     for case in cases {
-        let model = FullSpaceModel::new(
-            case.mesh.clone(),
-            &MaterialConfig::default(),
-            case.pinned(),
-            Vec3::new(0.0, -9.81, 0.0),
-            Vec::new(),
-        )
-        .expect("the benchmark model is valid");
+        let model = case.model(&MaterialConfig::default());
         let u = smooth_displacement(&case.mesh);
         let pattern = HessianPattern::new(&model.elements.tets, &model.dofs);
         let mut values = vec![0.0; pattern.nnz()];
@@ -261,14 +266,7 @@ fn bench_step(c: &mut Criterion, cases: &[Case]) {
             youngs_modulus: case.step_youngs_modulus,
             ..Default::default()
         };
-        let model = FullSpaceModel::new(
-            case.mesh.clone(),
-            &material,
-            case.pinned(),
-            Vec3::new(0.0, -9.81, 0.0),
-            Vec::new(),
-        )
-        .expect("the benchmark model is valid");
+        let model = case.model(&material);
         let start = pool.install(|| {
             let mut warm = Simulator::new(model.clone(), time.clone(), SolverConfig::default())
                 .expect("the benchmark simulator is valid");

@@ -893,17 +893,21 @@ impl Simulator {
         };
         let mut x = vec![0.0; self.model.dofs.num_free()];
         self.model.dofs.gather(&full, &mut x);
-        let mut u = vec![0.0; self.model.num_full()];
-        self.model.dofs.scatter(&x, &mut u);
-        let e = self.model.elastic_energy(&u, &mut self.buffers);
+        let (_, e) = self.start_energy(&x);
         e.is_finite().then_some(x)
+    }
+
+    /// The full displacement of free DOFs `x` and its elastic energy.
+    fn start_energy(&mut self, x: &[f64]) -> (Vec<f64>, f64) {
+        let mut u = vec![0.0; self.model.num_full()];
+        self.model.dofs.scatter(x, &mut u);
+        let e = self.model.elastic_energy(&u, &mut self.buffers);
+        (u, e)
     }
 
     /// Fails with a clear error when the current state is outside the material's domain.
     fn check_start(&mut self, x: &[f64]) -> Result<(), FemError> {
-        let mut u = vec![0.0; self.model.num_full()];
-        self.model.dofs.scatter(x, &mut u);
-        let e = self.model.elastic_energy(&u, &mut self.buffers);
+        let (u, e) = self.start_energy(x);
         if e.is_finite() {
             return Ok(());
         }
