@@ -225,7 +225,7 @@ fn bench_sparse(c: &mut Criterion, cases: &[Case]) {
             .factor_for_preconditioning(pattern.matrix(&values))
             .expect("the pinned projected Hessian is positive definite");
         eprintln!(
-            "sparse/{}: preconditioner factor in f32: {single}",
+            "sparse/{}: preconditioner factor stored in {single:?} precision",
             case.name
         );
         group.bench_function(format!("factor_preconditioner/{}", case.name), |bench| {

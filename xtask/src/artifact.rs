@@ -38,7 +38,9 @@ pub fn stage_version(stage: &str) -> u32 {
         //    within tolerance).
         // 6: each step's solve starts from the extrapolation u_n + h u̇_n + h² ü_n (iterates
         //    within tolerance).
-        "snapshots" | "snapshots-shard" | "reference" => 6,
+        // 7: the preconditioner's f32 factor stored in 16 bits where that passes its check
+        //    (iterates within tolerance).
+        "snapshots" | "snapshots-shard" | "reference" => 7,
         // 2: the held-out error along the greedy path is stored with the rule.
         "cubature" => 2,
         // 3: the decoder's Jacobian from SIMD kernels (round-off).

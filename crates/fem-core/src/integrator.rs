@@ -322,7 +322,7 @@ impl NewtonParts {
         self.factor_with(false)
     }
 
-    /// [`NewtonParts::factor`] for a preconditioner: the factor may be f32
+    /// [`NewtonParts::factor`] for a preconditioner: the factor may be f32 or 16-bit
     /// ([`SparseCholesky::factor_for_preconditioning`]), solved only through
     /// [`SparseCholesky::solve_preconditioner_in_place`].
     pub(crate) fn factor_preconditioner(&mut self) -> Result<(), FemError> {
@@ -367,8 +367,9 @@ impl NewtonParts {
     }
 }
 
-/// A factorised SPD matrix used as z = P⁻¹ r, factorised in f32 where that passes its check
-/// ([`SparseCholesky::factor_for_preconditioning`]): P is itself an approximate Hessian.
+/// A factorised SPD matrix used as z = P⁻¹ r, factorised in f32 (and stored in 16 bits) where
+/// that passes its check ([`SparseCholesky::factor_for_preconditioning`]): P is itself an
+/// approximate Hessian.
 #[derive(Debug)]
 pub struct FactoredPreconditioner {
     chol: SparseCholesky,

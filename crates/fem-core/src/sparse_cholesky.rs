@@ -36,12 +36,20 @@ pub struct SparseCholesky {
     l: Vec<f64>,
     /// The f32 factor's values ([`SparseCholesky::factor_for_preconditioning`]).
     l_single: Vec<f32>,
+    /// The f32 factor rounded to 16 bits ([`Half`]), each column scaled by its own power of two.
+    l_half: Vec<Half>,
+    /// Per column of L (in the factor's order), the square of the factor by which its 16-bit
+    /// values, widened, exceed L̃'s; the solve multiplies by it between its two passes.
+    half_scaling: Vec<f64>,
     /// The matrix rounded to f32, the f32 factorisation's input.
     a_single: Vec<f32>,
     /// Set once an f32 factor failed its check: factors sharing this analysis then go straight
     /// to f64 (the matrices one simulation factorises share their mesh and mass term, and so
     /// largely their conditioning), instead of paying for a rejected f32 factor each time.
     single_rejected: Arc<AtomicBool>,
+    /// The same for the 16-bit factor: set once one failed its check, after which the f32
+    /// factor serves.
+    half_rejected: Arc<AtomicBool>,
     /// The longest row pattern of a supernode (the solves' gather buffer), 0 when simplicial.
     max_pattern: usize,
     factored: Factored,
@@ -54,11 +62,37 @@ enum Factored {
     No,
     Double,
     Single,
+    Half,
+}
+
+/// How the factor of [`SparseCholesky::factor_for_preconditioning`] is stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FactorPrecision {
+    /// f64: the matrix's conditioning is beyond what f32 carries, or the factor is simplicial.
+    Double,
+    /// f32.
+    Single,
+    /// 16 bits per value (IEEE half precision, subnormals flushed, after a power-of-two scaling
+    /// that puts the largest value near 2¹⁵).
+    Half,
 }
 
 /// Largest error max|x − x₀| (for |x₀| ≤ 1) of an f32 factor's check solve that
 /// [`SparseCholesky::factor_for_preconditioning`] accepts.
 pub const SINGLE_FACTOR_TOLERANCE: f64 = 1e-3;
+
+/// Largest error max|x − x₀| (for |x₀| ≤ 1) of a 16-bit factor's check solve that
+/// [`SparseCholesky::factor_for_preconditioning`] accepts.
+///
+/// The check solve returns x = P⁻¹A x₀, so the error measures how far the preconditioned operator
+/// moves a generic vector from itself. Half precision rounds each value by up to 2⁻¹¹, and the
+/// error grows with the matrix's conditioning: over the training schedules of this project's
+/// scenes it was 0.022–0.034 (cantilever), 0.034–0.046 (beam6k), 0.035–0.081 (catapult) and
+/// 0.055–0.12 (dino), and the L-BFGS iterations per frame with the 16-bit factor were within
+/// 3 % of the f32 one's (7.0 → 7.1, 18.3 → 18.2, 7.9 → 8.1, 36.2 → 36.7). L-BFGS's curvature
+/// pairs correct a preconditioner that far off, as they correct its age; a factor further off
+/// falls back to f32.
+pub const HALF_FACTOR_TOLERANCE: f64 = 0.25;
 
 /// Largest rayon pool in which sparse factorisations run sequentially.
 pub const SEQUENTIAL_FACTOR_THREADS: usize = 2;
@@ -105,8 +139,11 @@ impl SparseCholesky {
             l: vec![0.0; symbolic.len_val()],
             symbolic: Arc::new(symbolic),
             l_single: Vec::new(),
+            l_half: Vec::new(),
+            half_scaling: Vec::new(),
             a_single: Vec::new(),
             single_rejected: Arc::new(AtomicBool::new(false)),
+            half_rejected: Arc::new(AtomicBool::new(false)),
             max_pattern,
             factored: Factored::No,
         })
@@ -118,8 +155,11 @@ impl SparseCholesky {
             symbolic: Arc::clone(&self.symbolic),
             l: vec![0.0; self.l.len()],
             l_single: Vec::new(),
+            l_half: Vec::new(),
+            half_scaling: Vec::new(),
             a_single: Vec::new(),
             single_rejected: Arc::clone(&self.single_rejected),
+            half_rejected: Arc::clone(&self.half_rejected),
             max_pattern: self.max_pattern,
             factored: Factored::No,
         }
@@ -145,23 +185,27 @@ impl SparseCholesky {
     }
 
     /// Factorises `a` for [`SparseCholesky::solve_preconditioner_in_place`]: in f32 when the
-    /// factor is supernodal and the f32 factor passes a check, in f64 otherwise. Returns whether
-    /// f32 served.
+    /// factor is supernodal and the f32 factor passes a check, stored in 16 bits when that
+    /// passes its own check too, in f64 otherwise. Returns how the factor is stored.
     ///
     /// An f32 factor is faster to compute (twice the SIMD lanes: 18 → 16 ms on the catapult,
     /// 230 → 156 ms on a 30k-DOF beam, check included) and halves the solves' memory traffic,
     /// and L̃L̃ᵀ is an exact factorisation of an SPD matrix near A: right for a preconditioner,
-    /// which approximates a Hessian anyway. The check solves A x = A x₀ for a fixed x₀ with
-    /// entries in [-1, 1] and accepts the f32 factor when max|x − x₀| ≤
-    /// [`SINGLE_FACTOR_TOLERANCE`], so a matrix whose conditioning f32 cannot carry gets its f64
-    /// factor, as do all later ones sharing this analysis; a failed f32 factorisation counts as
-    /// a rejection. The check costs one product with A and one solve, a few percent of the
-    /// factorisation. After an f32 factorisation [`SparseCholesky::solve_in_place`] is
-    /// unavailable until the next [`SparseCholesky::factor`].
+    /// which approximates a Hessian anyway. The solves stream the whole factor twice and are
+    /// bound by memory bandwidth, so 16-bit values (the f32 factor rounded, where this CPU has
+    /// the AVX2 kernels that widen them) halve their traffic again.
+    ///
+    /// The check solves A x = A x₀ for a fixed x₀ with entries in [-1, 1] and accepts the 16-bit
+    /// factor when max|x − x₀| ≤ [`HALF_FACTOR_TOLERANCE`], else the f32 one when it is within
+    /// [`SINGLE_FACTOR_TOLERANCE`]. A matrix whose conditioning a precision cannot carry gets
+    /// the next, as do all later ones sharing this analysis; a failed f32 factorisation counts
+    /// as a rejection. A check costs one product with A and one solve, a few percent of the
+    /// factorisation. After a reduced-precision factorisation [`SparseCholesky::solve_in_place`]
+    /// is unavailable until the next [`SparseCholesky::factor`].
     pub fn factor_for_preconditioning(
         &mut self,
         a: SparseColMatRef<'_, usize, f64>,
-    ) -> Result<bool, FemError> {
+    ) -> Result<FactorPrecision, FemError> {
         if self.is_supernodal() && !self.single_rejected.load(Ordering::Relaxed) {
             self.factored = Factored::No;
             self.a_single.clear();
@@ -169,25 +213,74 @@ impl SparseCholesky {
             self.l_single.resize(self.l.len(), 0.0);
             let single = SparseColMatRef::new(a.symbolic(), &self.a_single);
             if factorize(&self.symbolic, &mut self.l_single, single).is_ok() {
+                if half_kernels() && !self.half_rejected.load(Ordering::Relaxed) {
+                    if self.encode_half() {
+                        self.factored = Factored::Half;
+                        if self.check_error(a) <= HALF_FACTOR_TOLERANCE {
+                            return Ok(FactorPrecision::Half);
+                        }
+                    }
+                    self.half_rejected.store(true, Ordering::Relaxed);
+                }
                 self.factored = Factored::Single;
-                let n = a.ncols();
-                let x0: Vec<f64> = (0..n)
-                    .map(|i| 2.0 * (i as f64 * 0.618_033_988_749_895).fract() - 1.0)
-                    .collect();
-                let mut x = vec![0.0; n];
-                symmetric_lower_product(a, &x0, &mut x);
-                self.solve_preconditioner_in_place(&mut x);
-                let err = x
-                    .iter()
-                    .zip(&x0)
-                    .fold(0.0f64, |m, (x, x0)| m.max((x - x0).abs()));
-                if err <= SINGLE_FACTOR_TOLERANCE {
-                    return Ok(true);
+                if self.check_error(a) <= SINGLE_FACTOR_TOLERANCE {
+                    return Ok(FactorPrecision::Single);
                 }
             }
             self.single_rejected.store(true, Ordering::Relaxed);
         }
-        self.factor(a).map(|()| false)
+        self.factor(a).map(|()| FactorPrecision::Double)
+    }
+
+    /// Rounds the f32 factor into `l_half`, column by column ([`Half::encode_column`]), and
+    /// records each column's scaling; false when a column is not finite.
+    fn encode_half(&mut self) -> bool {
+        let SymbolicCholeskyRaw::Supernodal(symbolic) = self.symbolic.raw() else {
+            return false;
+        };
+        self.l_half.clear();
+        self.l_half.resize(self.l_single.len(), Half(0));
+        self.half_scaling.clear();
+        let (begin, end, val_ptr) = (
+            symbolic.supernode_begin(),
+            symbolic.supernode_end(),
+            symbolic.col_ptr_for_val(),
+        );
+        for s in 0..symbolic.n_supernodes() {
+            let m = end[s] - begin[s];
+            let ld = m + symbolic.supernode(s).pattern().len();
+            let block = val_ptr[s]..val_ptr[s] + ld * m;
+            let (single, half) = (&self.l_single[block.clone()], &mut self.l_half[block]);
+            // Column j's values are its rows j.. (the diagonal block's upper part is unused).
+            for (j, (col, out)) in single
+                .chunks_exact(ld)
+                .zip(half.chunks_exact_mut(ld))
+                .enumerate()
+            {
+                match Half::encode_column(&col[j..], &mut out[j..]) {
+                    Some(scaling) => self.half_scaling.push(scaling),
+                    None => return false,
+                }
+            }
+        }
+        true
+    }
+
+    /// max|x − x₀| for x the preconditioner solve of A x = A x₀, x₀ a fixed vector with entries
+    /// in [-1, 1]; infinite when x is not finite (a zero pivot, an overflow).
+    fn check_error(&self, a: SparseColMatRef<'_, usize, f64>) -> f64 {
+        let n = a.ncols();
+        let x0: Vec<f64> = (0..n)
+            .map(|i| 2.0 * (i as f64 * 0.618_033_988_749_895).fract() - 1.0)
+            .collect();
+        let mut x = vec![0.0; n];
+        symmetric_lower_product(a, &x0, &mut x);
+        self.solve_preconditioner_in_place(&mut x);
+        x.iter().zip(&x0).fold(0.0f64, |m, (x, x0)| {
+            let e = (x - x0).abs();
+            // f64::max would drop a NaN.
+            if e.is_nan() { f64::INFINITY } else { m.max(e) }
+        })
     }
 
     /// x ← A⁻¹ x with the last A factorised by [`SparseCholesky::factor`].
@@ -200,7 +293,9 @@ impl SparseCholesky {
             "exact solve without an f64 factorisation"
         );
         match self.symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => self.permuted_solve(s, &self.l, x, Kernels::Best),
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                self.permuted_solve(s, &self.l, None, x, Kernels::Best)
+            }
             SymbolicCholeskyRaw::Simplicial(_) => self.faer_solve_in_place(x, factor_parallelism()),
         }
     }
@@ -218,15 +313,18 @@ impl SparseCholesky {
         );
     }
 
-    /// x ← (L̃L̃ᵀ)⁻¹ x with whichever factor the last factorisation left, f32 (arithmetic in f64)
-    /// or f64.
+    /// x ← (L̃L̃ᵀ)⁻¹ x with whichever factor the last factorisation left, 16-bit or f32
+    /// (arithmetic in f64) or f64.
     ///
     /// # Panics
     /// If no factorisation has succeeded.
     pub fn solve_preconditioner_in_place(&self, x: &mut [f64]) {
         match (self.factored, self.symbolic.raw()) {
             (Factored::Single, SymbolicCholeskyRaw::Supernodal(s)) => {
-                self.permuted_solve(s, &self.l_single, x, Kernels::Best)
+                self.permuted_solve(s, &self.l_single, None, x, Kernels::Best)
+            }
+            (Factored::Half, SymbolicCholeskyRaw::Supernodal(s)) => {
+                self.permuted_solve(s, &self.l_half, Some(&self.half_scaling), x, Kernels::Best)
             }
             _ => self.solve_in_place(x),
         }
@@ -238,6 +336,7 @@ impl SparseCholesky {
         &self,
         symbolic: &SymbolicSupernodalCholesky<usize>,
         values: &[V],
+        scaling: Option<&[f64]>,
         x: &mut [f64],
         kernels: Kernels,
     ) {
@@ -252,12 +351,12 @@ impl SparseCholesky {
                     for (yi, &f) in y.iter_mut().zip(fwd) {
                         *yi = x[f];
                     }
-                    supernodal_solve(symbolic, values, y, rows, kernels);
+                    supernodal_solve(symbolic, values, scaling, y, rows, kernels);
                     for (yi, &f) in y.iter().zip(fwd) {
                         x[f] = *yi;
                     }
                 }
-                None => supernodal_solve(symbolic, values, x, rows, kernels),
+                None => supernodal_solve(symbolic, values, scaling, x, rows, kernels),
             }
         });
     }
@@ -315,10 +414,13 @@ enum Kernels {
     Portable,
 }
 
-/// L Lᵀ x = b for a supernodal L, in place, with AVX2 + FMA where the CPU has them.
+/// L Lᵀ x = b for a supernodal L, in place, with AVX2 + FMA where the CPU has them. With
+/// `scaling` the stored factor is L̂ = L Σ for a diagonal Σ, and L Lᵀ = L̂ Σ⁻² L̂ᵀ is solved by
+/// multiplying by Σ² (`scaling`, per column) between the two passes.
 fn supernodal_solve<V: Stored>(
     symbolic: &SymbolicSupernodalCholesky<usize>,
     values: &[V],
+    scaling: Option<&[f64]>,
     x: &mut [f64],
     rows: &mut [f64],
     kernels: Kernels,
@@ -327,9 +429,9 @@ fn supernodal_solve<V: Stored>(
     if kernels == Kernels::Best
         && let Some(v3) = pulp::x86::V3::try_new()
     {
-        return v3.vectorize(|| substitute(Avx2(v3), symbolic, values, x, rows));
+        return v3.vectorize(|| substitute(Avx2(v3), symbolic, values, scaling, x, rows));
     }
-    substitute(Portable, symbolic, values, x, rows)
+    substitute(Portable, symbolic, values, scaling, x, rows)
 }
 
 /// Supernode s owns columns `c0..c0 + m` of L as one column-major block: its m × m
@@ -344,6 +446,7 @@ fn substitute<K: Lanes, V: Stored>(
     k: K,
     symbolic: &SymbolicSupernodalCholesky<usize>,
     values: &[V],
+    scaling: Option<&[f64]>,
     x: &mut [f64],
     rows: &mut [f64],
 ) {
@@ -362,7 +465,7 @@ fn substitute<K: Lanes, V: Stored>(
         let top = &mut x[c0..c0 + m];
         for j in 0..m {
             let col = &l[j * ld..j * ld + m];
-            let xj = top[j] / col[j].into();
+            let xj = top[j] / col[j].widen();
             top[j] = xj;
             k.axpy(&mut top[j + 1..], &col[j + 1..], -xj);
         }
@@ -385,6 +488,11 @@ fn substitute<K: Lanes, V: Stored>(
             x[r] -= a;
         }
     }
+    if let Some(scaling) = scaling {
+        for (x, s) in x.iter_mut().zip(scaling) {
+            *x *= s;
+        }
+    }
     for s in (0..count).rev() {
         let (c0, m, pattern, ld, l) = block(s);
         let p = pattern.len();
@@ -401,19 +509,28 @@ fn substitute<K: Lanes, V: Stored>(
         for j in (0..m).rev() {
             let col = &l[j * ld..j * ld + m];
             let (head, tail) = top.split_at_mut(j + 1);
-            head[j] = (head[j] - k.dot(&col[j + 1..], tail)) / col[j].into();
+            head[j] = (head[j] - k.dot(&col[j + 1..], tail)) / col[j].widen();
         }
     }
 }
 
-/// How L's values are stored: f64, or rounded to f32 (widened to f64 as they are read).
-trait Stored: Copy + Into<f64> {
+/// How L's values are stored: f64, rounded to f32, or to 16 bits (widened to f64 as they are
+/// read).
+trait Stored: Copy {
+    /// The value as f64.
+    fn widen(self) -> f64;
+
     /// Four consecutive values as f64 lanes.
     #[cfg(target_arch = "x86_64")]
     fn load4(v3: pulp::x86::V3, v: &[Self]) -> pulp::f64x4;
 }
 
 impl Stored for f64 {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        self
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     fn load4(_: pulp::x86::V3, v: &[f64]) -> pulp::f64x4 {
@@ -423,11 +540,112 @@ impl Stored for f64 {
 }
 
 impl Stored for f32 {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        self.into()
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     fn load4(v3: pulp::x86::V3, v: &[f32]) -> pulp::f64x4 {
         let v: &[f32; 4] = v[..4].try_into().expect("four values");
         v3.convert_f32x4_to_f64x4(pulp::cast(*v))
+    }
+}
+
+/// An IEEE half-precision bit pattern read as 2⁻¹¹² times its value, the factor of a 16-bit
+/// preconditioner.
+///
+/// Widening shifts the half's exponent and mantissa into an f32's fields, which rebiases the
+/// exponent by −112 for free (three integer operations and one conversion per four values, cheap
+/// enough for a loop bound by memory bandwidth); the solve multiplies its result back. Encoding
+/// flushes halves below the normal range (2⁻¹⁴) to zero, so every widened value is a normal f32.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Half(u16);
+
+impl Half {
+    /// Largest value encoded: max|v|·c lands in (2¹⁴, 2¹⁵] for the power-of-two scale c, below
+    /// the half range's 65504.
+    const TOP_EXPONENT: i32 = 15;
+
+    /// Rounds one column of L into `out`, scaled by the power of two c that puts its largest
+    /// value in (2¹⁴, 2¹⁵], to nearest even; values below 2⁻¹⁴ after scaling (2⁻²⁹ of the
+    /// column's largest) become zero. Widened, the halves are σ = c·2⁻¹¹² times the values;
+    /// returns σ², or None when a value is not finite. An all-zero column gets c = 1.
+    fn encode_column(values: &[f32], out: &mut [Half]) -> Option<f64> {
+        let mut max = 0.0f32;
+        for v in values {
+            if !v.is_finite() {
+                return None;
+            }
+            max = max.max(v.abs());
+        }
+        let k = if max > 0.0 {
+            (Self::TOP_EXPONENT - f64::from(max).log2().ceil() as i32).min(127)
+        } else {
+            0
+        };
+        let c = 2f32.powi(k);
+        for (o, &v) in out.iter_mut().zip(values) {
+            *o = Half::round(v * c);
+        }
+        let sigma = f64::from(c) * 2f64.powi(-112);
+        Some(sigma * sigma)
+    }
+
+    /// The half nearest `v` (ties to even), zero below 2⁻¹⁴; `v` below 65504 in magnitude.
+    fn round(v: f32) -> Half {
+        let bits = v.to_bits();
+        let sign = ((bits >> 16) & 0x8000) as u16;
+        let magnitude = bits & 0x7fff_ffff;
+        if magnitude < 0x3880_0000 {
+            return Half(0);
+        }
+        // Round the 23-bit mantissa to 10 bits (a carry into the exponent is right), then
+        // rebias the exponent from 127 to 15.
+        let rounded = (magnitude + 0x0fff + ((magnitude >> 13) & 1)) >> 13;
+        Half(sign | (rounded - (112 << 10)) as u16)
+    }
+
+    /// The f32 bit pattern of 2⁻¹¹² times the half's value: sign-extend, shift the exponent and
+    /// mantissa into place, clear the three exponent bits the sign extension set.
+    #[inline(always)]
+    fn f32_bits(bits: i32) -> u32 {
+        ((bits << 13) as u32) & 0x8fff_ffff
+    }
+}
+
+impl Stored for Half {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        f32::from_bits(Half::f32_bits(i32::from(self.0 as i16))).into()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn load4(v3: pulp::x86::V3, v: &[Half]) -> pulp::f64x4 {
+        let v: &[Half; 4] = v[..4].try_into().expect("four values");
+        let lanes: [u16; 8] = [v[0].0, v[1].0, v[2].0, v[3].0, 0, 0, 0, 0];
+        let wide = v3.sse4_1._mm_cvtepi16_epi32(pulp::cast(lanes));
+        let shifted = v3.sse2._mm_slli_epi32::<13>(wide);
+        let mask = v3.sse2._mm_set1_epi32(0x8fff_ffff_u32 as i32);
+        let f = v3
+            .sse2
+            ._mm_castsi128_ps(v3.sse2._mm_and_si128(shifted, mask));
+        pulp::cast(v3.avx._mm256_cvtps_pd(f))
+    }
+}
+
+/// Whether 16-bit factors are worth storing: only the AVX2 kernels widen them at the speed of
+/// the memory they save.
+fn half_kernels() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        pulp::x86::V3::try_new().is_some()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
@@ -446,23 +664,23 @@ impl Lanes for Portable {
     #[inline(always)]
     fn axpy<V: Stored>(self, y: &mut [f64], x: &[V], a: f64) {
         for (y, &x) in y.iter_mut().zip(x) {
-            *y += x.into() * a;
+            *y += x.widen() * a;
         }
     }
 
     #[inline(always)]
     fn axpy4<V: Stored>(self, y: &mut [f64], x: [&[V]; 4], a: [f64; 4]) {
         for (i, y) in y.iter_mut().enumerate() {
-            *y += x[0][i].into() * a[0]
-                + x[1][i].into() * a[1]
-                + x[2][i].into() * a[2]
-                + x[3][i].into() * a[3];
+            *y += x[0][i].widen() * a[0]
+                + x[1][i].widen() * a[1]
+                + x[2][i].widen() * a[2]
+                + x[3][i].widen() * a[3];
         }
     }
 
     #[inline(always)]
     fn dot<V: Stored>(self, a: &[V], b: &[f64]) -> f64 {
-        a.iter().zip(b).map(|(&a, &b)| a.into() * b).sum()
+        a.iter().zip(b).map(|(&a, &b)| a.widen() * b).sum()
     }
 }
 
@@ -484,7 +702,7 @@ impl Lanes for Avx2 {
             *yc = pulp::cast(v3.mul_add_f64x4(V::load4(v3, xc), av, pulp::cast(*yc)));
         }
         for (y, &x) in yt.iter_mut().zip(&x[n..]) {
-            *y = x.into().mul_add(a, *y);
+            *y = x.widen().mul_add(a, *y);
         }
     }
 
@@ -505,7 +723,7 @@ impl Lanes for Avx2 {
         }
         for (i, y) in yt.iter_mut().enumerate() {
             for k in 0..4 {
-                *y = x[k][n + i].into().mul_add(a[k], *y);
+                *y = x[k][n + i].widen().mul_add(a[k], *y);
             }
         }
     }
@@ -523,7 +741,7 @@ impl Lanes for Avx2 {
         }
         let mut s = pulp::Simd::reduce_sum_f64s(v3, v3.add_f64x4(acc[0], acc[1]));
         for (&a, &b) in a[n..].iter().zip(&b[n..]) {
-            s = a.into().mul_add(b, s);
+            s = a.widen().mul_add(b, s);
         }
         s
     }
@@ -628,7 +846,11 @@ mod tests {
         (p, chol)
     }
 
+    /// max|a − b| / max|b|; infinite when a value is not finite (f64::max would drop a NaN).
     fn max_relative_difference(a: &[f64], b: &[f64]) -> f64 {
+        if !a.iter().chain(b).all(|v| v.is_finite()) {
+            return f64::INFINITY;
+        }
         let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         a.iter()
             .zip(b)
@@ -665,40 +887,54 @@ mod tests {
         };
         let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
         let (mut best, mut portable) = (b.clone(), b.clone());
-        chol.permuted_solve(s, &chol.l, &mut best, Kernels::Best);
-        chol.permuted_solve(s, &chol.l, &mut portable, Kernels::Portable);
+        chol.permuted_solve(s, &chol.l, None, &mut best, Kernels::Best);
+        chol.permuted_solve(s, &chol.l, None, &mut portable, Kernels::Portable);
         let d = max_relative_difference(&portable, &best);
         assert!(d < 1e-13, "portable and SIMD solves differ by {d:e}");
         assert!(residual(&p, &a, &portable, &b) < 1e-13);
     }
 
     #[test]
-    fn a_well_conditioned_preconditioner_is_factorised_in_f32_and_follows_refactorisations() {
+    fn a_well_conditioned_preconditioner_is_stored_in_16_bits_and_follows_refactorisations() {
         let (p, mut chol) = supernodal([16, 5, 4]);
         let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let expected = if half_kernels() {
+            FactorPrecision::Half
+        } else {
+            FactorPrecision::Single
+        };
         for diag in [0.1, 3.0] {
             let a = values(&p, diag);
             chol.factor(p.matrix(&a)).unwrap();
             let mut exact = b.clone();
             chol.solve_in_place(&mut exact);
-            assert!(chol.factor_for_preconditioning(p.matrix(&a)).unwrap());
-            let mut single = b.clone();
-            chol.solve_preconditioner_in_place(&mut single);
-            // f32's unit roundoff is 6e-8; this matrix's condition number is modest.
-            let d = max_relative_difference(&single, &exact);
-            assert!(d < 1e-5, "diag {diag}: f32 factor's solve off by {d:e}");
-            assert!(d > 0.0, "diag {diag}: the f32 factor was not used");
-            assert!(residual(&p, &a, &single, &b) < 1e-5, "diag {diag}");
+            assert_eq!(
+                chol.factor_for_preconditioning(p.matrix(&a)).unwrap(),
+                expected
+            );
+            let mut reduced = b.clone();
+            chol.solve_preconditioner_in_place(&mut reduced);
+            // Half's unit roundoff is 2⁻¹¹ ≈ 5e-4, f32's 6e-8; the condition number is modest.
+            let (tolerance, floor) = match expected {
+                FactorPrecision::Half => (1e-2, 1e-6),
+                _ => (1e-5, 0.0),
+            };
+            let d = max_relative_difference(&reduced, &exact);
+            assert!(
+                d < tolerance,
+                "diag {diag}: {expected:?} solve off by {d:e}"
+            );
+            assert!(
+                d > floor,
+                "diag {diag}: the {expected:?} factor was not used ({d:e})"
+            );
+            assert!(residual(&p, &a, &reduced, &b) < tolerance, "diag {diag}");
         }
     }
 
-    #[test]
-    fn an_ill_conditioned_preconditioner_is_factorised_in_f64() {
-        // A graph Laplacian of the pattern plus 1e-9 I: condition number about 1e10. Its f32
-        // factorisation succeeds but its check solve is 0.1 off (3e-5 with 1e-4 I), so the
-        // check, not a failed pivot, sends it to f64.
-        let (p, mut chol) = supernodal([16, 5, 4]);
-        let mut a = values(&p, 0.0);
+    /// A graph Laplacian of the pattern plus `shift` I: condition number about 1/shift.
+    fn laplacian(p: &HessianPattern, shift: f64) -> Vec<f64> {
+        let mut a = values(p, 0.0);
         let (cp, ri) = (p.symbolic.col_ptr(), p.symbolic.row_idx());
         for j in 0..p.dim() {
             let mut sum = 0.0;
@@ -708,10 +944,22 @@ mod tests {
                     sum += a[k].abs();
                 }
             }
-            a[p.diag[j]] = sum + 1e-9;
+            a[p.diag[j]] = sum + shift;
         }
+        a
+    }
+
+    #[test]
+    fn an_ill_conditioned_preconditioner_is_factorised_in_f64() {
+        // Condition number about 1e10: the f32 factorisation succeeds but its check solve is 0.1
+        // off (3e-5 with 1e-4 I), so the check, not a failed pivot, sends it to f64.
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        let a = laplacian(&p, 1e-9);
         let sibling = chol.same_pattern();
-        assert!(!chol.factor_for_preconditioning(p.matrix(&a)).unwrap());
+        assert_eq!(
+            chol.factor_for_preconditioning(p.matrix(&a)).unwrap(),
+            FactorPrecision::Double
+        );
         let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
         let mut x = b.clone();
         chol.solve_preconditioner_in_place(&mut x);
@@ -719,22 +967,209 @@ mod tests {
         chol.solve_in_place(&mut exact);
         assert_eq!(x, exact);
         // The rejection is remembered by every factor sharing the analysis, even for a matrix
-        // f32 would carry; a fresh analysis tries f32 again.
+        // f32 would carry; a fresh analysis tries the reduced precisions again.
         let good = values(&p, 1.0);
         for mut other in [chol, sibling] {
-            assert!(!other.factor_for_preconditioning(p.matrix(&good)).unwrap());
+            assert_eq!(
+                other.factor_for_preconditioning(p.matrix(&good)).unwrap(),
+                FactorPrecision::Double
+            );
         }
         let (_, mut fresh) = supernodal([16, 5, 4]);
-        assert!(fresh.factor_for_preconditioning(p.matrix(&good)).unwrap());
+        assert_ne!(
+            fresh.factor_for_preconditioning(p.matrix(&good)).unwrap(),
+            FactorPrecision::Double
+        );
+    }
+
+    #[test]
+    fn a_matrix_16_bits_cannot_carry_gets_the_f32_factor() {
+        if !half_kernels() {
+            eprintln!("skipping: no AVX2 kernels for 16-bit factors on this CPU");
+            return;
+        }
+        // Condition number about 3e4: f32's check error is 3e-4, half's beyond its tolerance
+        // (0.24 already at 1e-4 I, 1e-3 at 3e-4 I).
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        let a = laplacian(&p, 3e-5);
+        let sibling = chol.same_pattern();
+        assert_eq!(
+            chol.factor_for_preconditioning(p.matrix(&a)).unwrap(),
+            FactorPrecision::Single
+        );
+        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let mut x = b.clone();
+        chol.solve_preconditioner_in_place(&mut x);
+        assert!(residual(&p, &a, &x, &b) < 1e-3);
+        // Remembered: a well-conditioned matrix then also gets f32, on either factor.
+        let good = values(&p, 1.0);
+        for mut other in [chol, sibling] {
+            assert_eq!(
+                other.factor_for_preconditioning(p.matrix(&good)).unwrap(),
+                FactorPrecision::Single
+            );
+        }
+    }
+
+    #[test]
+    fn columns_of_very_different_scales_keep_their_16_bit_accuracy() {
+        if !half_kernels() {
+            eprintln!("skipping: no AVX2 kernels for 16-bit factors on this CPU");
+            return;
+        }
+        // L' = L D with every third column of an f32 factor scaled by 1e-10 is the factor of
+        // L D² Lᵀ. Scaled per column, its 16-bit copy solves as accurately as L's; with one
+        // scale for the whole factor those columns would fall below the half range and vanish.
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        assert_eq!(
+            chol.factor_for_preconditioning(p.matrix(&values(&p, 0.1)))
+                .unwrap(),
+            FactorPrecision::Half
+        );
+        let symbolic = Arc::clone(&chol.symbolic);
+        let SymbolicCholeskyRaw::Supernodal(s) = symbolic.raw() else {
+            unreachable!("forced supernodal")
+        };
+        for k in 0..s.n_supernodes() {
+            let (c0, m) = (
+                s.supernode_begin()[k],
+                s.supernode_end()[k] - s.supernode_begin()[k],
+            );
+            let ld = m + s.supernode(k).pattern().len();
+            let block = &mut chol.l_single[s.col_ptr_for_val()[k]..][..ld * m];
+            for (j, col) in block.chunks_exact_mut(ld).enumerate() {
+                if (c0 + j) % 3 == 0 {
+                    col.iter_mut().for_each(|v| *v *= 1e-10);
+                }
+            }
+        }
+        assert!(chol.encode_half());
+        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let (mut single, mut half) = (b.clone(), b.clone());
+        chol.permuted_solve(s, &chol.l_single, None, &mut single, Kernels::Best);
+        let scaling = Some(&chol.half_scaling[..]);
+        chol.permuted_solve(s, &chol.l_half, scaling, &mut half, Kernels::Best);
+        let d = max_relative_difference(&half, &single);
+        assert!(d < 1e-2, "16-bit solve off by {d:e}");
+    }
+
+    #[test]
+    fn halves_round_to_nearest_and_widen_exactly() {
+        let scale = 2f64.powi(112);
+        // Every finite normal half and zero: widening gives its value (times 2⁻¹¹²), and
+        // rounding that value gives the half back.
+        for bits in 0..=u16::MAX {
+            let exponent = i32::from((bits >> 10) & 0x1f);
+            if exponent == 0x1f || (exponent == 0 && bits & 0x3ff != 0) || bits == 0x8000 {
+                continue;
+            }
+            let magnitude = if exponent == 0 {
+                0.0
+            } else {
+                (1.0 + f64::from(bits & 0x3ff) / 1024.0) * 2f64.powi(exponent - 15)
+            };
+            let value = if bits & 0x8000 != 0 {
+                -magnitude
+            } else {
+                magnitude
+            };
+            assert_eq!(Half(bits).widen() * scale, value, "{bits:#06x}");
+            assert_eq!(Half::round(value as f32), Half(bits), "{bits:#06x}");
+        }
+        // Between two halves: the nearer one, and on a tie the one with an even mantissa.
+        let one_ulp = 2f32.powi(-10);
+        for (v, expected) in [
+            (1.0 + 0.49 * one_ulp, 1.0),
+            (1.0 + 0.51 * one_ulp, 1.0 + one_ulp),
+            (1.0 + 0.5 * one_ulp, 1.0),
+            (1.0 + 1.5 * one_ulp, 1.0 + 2.0 * one_ulp),
+            (-(1.0 + 0.51 * one_ulp), -(1.0 + one_ulp)),
+            (2047.5, 2048.0),
+        ] {
+            assert_eq!(Half::round(v).widen() * scale, f64::from(expected), "{v}");
+        }
+        // Below the normal range: zero.
+        for v in [6.0e-5f32, -6.0e-5, 1e-30, 0.0] {
+            assert_eq!(Half::round(v), Half(0), "{v}");
+        }
+    }
+
+    #[test]
+    fn encoding_scales_each_column_s_largest_value_to_the_top_of_the_half_range() {
+        for max in [1e-20f32, 3.7e-3, 1.0, 631.0, 4.2e12] {
+            let values = [max, -0.5 * max, 1e-3 * max, 1e-10 * max, 0.0];
+            let mut out = [Half(0); 5];
+            let scaling = Half::encode_column(&values, &mut out).unwrap();
+            // Widened, the halves are σ times the values, and scaling is σ².
+            let sigma = scaling.sqrt();
+            for (v, h) in values.iter().zip(&out) {
+                let back = h.widen() / sigma;
+                let v = f64::from(*v);
+                assert!(
+                    (back - v).abs() <= 2f64.powi(-11) * v.abs() + 1e-9 * f64::from(max),
+                    "max {max}: {v} → {back}"
+                );
+            }
+            let top = out[0].widen() * 2f64.powi(112);
+            assert!(
+                top > 16384.0 && top <= 32768.0,
+                "max {max}: scaled to {top}"
+            );
+        }
+        let mut out = [Half(1); 2];
+        assert!(Half::encode_column(&[0.0, 0.0], &mut out).is_some());
+        assert_eq!(out, [Half(0); 2]);
+        assert!(Half::encode_column(&[1.0, f32::INFINITY], &mut out).is_none());
+        assert!(Half::encode_column(&[f32::NAN, 1.0], &mut out).is_none());
+    }
+
+    #[test]
+    fn the_simd_widening_of_halves_matches_the_scalar_one() {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(v3) = pulp::x86::V3::try_new() {
+            let all: Vec<Half> = (0..=u16::MAX)
+                .map(Half)
+                .filter(|h| (h.0 >> 10) & 0x1f != 0x1f)
+                .collect();
+            for chunk in all.chunks_exact(4) {
+                let wide: [f64; 4] = pulp::cast(Half::load4(v3, chunk));
+                for (w, h) in wide.iter().zip(chunk) {
+                    assert_eq!(w.to_bits(), h.widen().to_bits(), "{:#06x}", h.0);
+                }
+            }
+            return;
+        }
+        eprintln!("skipping: no AVX2 on this CPU");
+    }
+
+    #[test]
+    fn the_portable_kernels_agree_with_the_simd_ones_on_16_bit_factors() {
+        let (p, mut chol) = supernodal([16, 5, 4]);
+        let a = values(&p, 0.1);
+        if chol.factor_for_preconditioning(p.matrix(&a)).unwrap() != FactorPrecision::Half {
+            eprintln!("skipping: no 16-bit factors on this CPU");
+            return;
+        }
+        let SymbolicCholeskyRaw::Supernodal(s) = chol.symbolic.raw() else {
+            unreachable!("forced supernodal")
+        };
+        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let (mut best, mut portable) = (b.clone(), b.clone());
+        let scaling = Some(&chol.half_scaling[..]);
+        chol.permuted_solve(s, &chol.l_half, scaling, &mut best, Kernels::Best);
+        chol.permuted_solve(s, &chol.l_half, scaling, &mut portable, Kernels::Portable);
+        let d = max_relative_difference(&portable, &best);
+        assert!(d < 1e-13, "portable and SIMD solves differ by {d:e}");
     }
 
     #[test]
     #[should_panic(expected = "exact solve without an f64 factorisation")]
-    fn an_f32_factor_refuses_exact_solves() {
+    fn a_reduced_precision_factor_refuses_exact_solves() {
         let (p, mut chol) = supernodal([6, 2, 2]);
-        assert!(
+        assert_ne!(
             chol.factor_for_preconditioning(p.matrix(&values(&p, 1.0)))
-                .unwrap()
+                .unwrap(),
+            FactorPrecision::Double
         );
         chol.solve_in_place(&mut vec![1.0; p.dim()]);
     }
