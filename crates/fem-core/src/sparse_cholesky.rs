@@ -795,6 +795,24 @@ mod tests {
         v
     }
 
+    /// A fixed right-hand side of entries in [-5, 5].
+    fn rhs(p: &HessianPattern) -> Vec<f64> {
+        (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect()
+    }
+
+    /// Every factor in `factors` factorises `a` into `expected` (a rejection is remembered by
+    /// all factors sharing an analysis).
+    fn assert_all_factor_as(
+        factors: impl IntoIterator<Item = SparseCholesky>,
+        p: &HessianPattern,
+        a: &[f64],
+        expected: FactorPrecision,
+    ) {
+        for mut f in factors {
+            assert_eq!(f.factor_for_preconditioning(p.matrix(a)).unwrap(), expected);
+        }
+    }
+
     fn residual(p: &HessianPattern, values: &[f64], x: &[f64], b: &[f64]) -> f64 {
         let mut ax = vec![0.0; b.len()];
         p.mul_vec(values, x, &mut ax);
@@ -806,7 +824,7 @@ mod tests {
     fn solves_spd_systems_sequentially_and_in_parallel() {
         let p = pattern();
         let a = values(&p, 0.1);
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let mut chol = SparseCholesky::analyse(&p).unwrap();
         assert!(chol.factor_nnz() >= p.dim());
         let mut solutions = Vec::new();
@@ -867,7 +885,7 @@ mod tests {
             let (p, mut chol) = supernodal(cells);
             let a = values(&p, 0.1);
             chol.factor(p.matrix(&a)).unwrap();
-            let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+            let b = rhs(&p);
             let mut x = b.clone();
             chol.solve_in_place(&mut x);
             let mut reference = b.clone();
@@ -886,7 +904,7 @@ mod tests {
         let SymbolicCholeskyRaw::Supernodal(s) = chol.symbolic.raw() else {
             unreachable!("forced supernodal")
         };
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let (mut best, mut portable) = (b.clone(), b.clone());
         chol.permuted_solve(s, &chol.l, None, &mut best, Kernels::Best);
         chol.permuted_solve(s, &chol.l, None, &mut portable, Kernels::Portable);
@@ -898,7 +916,7 @@ mod tests {
     #[test]
     fn a_well_conditioned_preconditioner_is_stored_in_16_bits_and_follows_refactorisations() {
         let (p, mut chol) = supernodal([16, 5, 4]);
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let expected = if half_kernels() {
             FactorPrecision::Half
         } else {
@@ -961,7 +979,7 @@ mod tests {
             chol.factor_for_preconditioning(p.matrix(&a)).unwrap(),
             FactorPrecision::Double
         );
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let mut x = b.clone();
         chol.solve_preconditioner_in_place(&mut x);
         let mut exact = b.clone();
@@ -970,12 +988,7 @@ mod tests {
         // The rejection is remembered by every factor sharing the analysis, even for a matrix
         // f32 would carry; a fresh analysis tries the reduced precisions again.
         let good = values(&p, 1.0);
-        for mut other in [chol, sibling] {
-            assert_eq!(
-                other.factor_for_preconditioning(p.matrix(&good)).unwrap(),
-                FactorPrecision::Double
-            );
-        }
+        assert_all_factor_as([chol, sibling], &p, &good, FactorPrecision::Double);
         let (_, mut fresh) = supernodal([16, 5, 4]);
         assert_ne!(
             fresh.factor_for_preconditioning(p.matrix(&good)).unwrap(),
@@ -998,18 +1011,13 @@ mod tests {
             chol.factor_for_preconditioning(p.matrix(&a)).unwrap(),
             FactorPrecision::Single
         );
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let mut x = b.clone();
         chol.solve_preconditioner_in_place(&mut x);
         assert!(residual(&p, &a, &x, &b) < 1e-3);
         // Remembered: a well-conditioned matrix then also gets f32, on either factor.
         let good = values(&p, 1.0);
-        for mut other in [chol, sibling] {
-            assert_eq!(
-                other.factor_for_preconditioning(p.matrix(&good)).unwrap(),
-                FactorPrecision::Single
-            );
-        }
+        assert_all_factor_as([chol, sibling], &p, &good, FactorPrecision::Single);
     }
 
     #[test]
@@ -1045,7 +1053,7 @@ mod tests {
             }
         }
         assert!(chol.encode_half());
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let (mut single, mut half) = (b.clone(), b.clone());
         chol.permuted_solve(s, &chol.l_single, None, &mut single, Kernels::Best);
         let scaling = Some(&chol.half_scaling[..]);
@@ -1154,7 +1162,7 @@ mod tests {
         let SymbolicCholeskyRaw::Supernodal(s) = chol.symbolic.raw() else {
             unreachable!("forced supernodal")
         };
-        let b: Vec<f64> = (0..p.dim()).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let b = rhs(&p);
         let (mut best, mut portable) = (b.clone(), b.clone());
         let scaling = Some(&chol.half_scaling[..]);
         chol.permuted_solve(s, &chol.l_half, scaling, &mut best, Kernels::Best);
