@@ -52,17 +52,8 @@ pub struct SparseCholesky {
     half_rejected: Arc<AtomicBool>,
     /// The longest row pattern of a supernode (the solves' gather buffer), 0 when simplicial.
     max_pattern: usize,
-    factored: Factored,
-}
-
-/// Which factor the last factorisation left.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Factored {
-    /// None: never factorised, or the last factorisation failed.
-    No,
-    Double,
-    Single,
-    Half,
+    /// How the last successful factorisation stored its factor; None before one.
+    factored: Option<FactorPrecision>,
 }
 
 /// How the factor of [`SparseCholesky::factor_for_preconditioning`] is stored.
@@ -145,7 +136,7 @@ impl SparseCholesky {
             single_rejected: Arc::new(AtomicBool::new(false)),
             half_rejected: Arc::new(AtomicBool::new(false)),
             max_pattern,
-            factored: Factored::No,
+            factored: None,
         })
     }
 
@@ -161,7 +152,7 @@ impl SparseCholesky {
             single_rejected: Arc::clone(&self.single_rejected),
             half_rejected: Arc::clone(&self.half_rejected),
             max_pattern: self.max_pattern,
-            factored: Factored::No,
+            factored: None,
         }
     }
 
@@ -178,9 +169,9 @@ impl SparseCholesky {
     /// Factorises `a` (same pattern as the analysis; the lower triangle is read). On failure
     /// (not positive definite) the factor is unusable until the next successful call.
     pub fn factor(&mut self, a: SparseColMatRef<'_, usize, f64>) -> Result<(), FemError> {
-        self.factored = Factored::No;
+        self.factored = None;
         factorize(&self.symbolic, &mut self.l, a)?;
-        self.factored = Factored::Double;
+        self.factored = Some(FactorPrecision::Double);
         Ok(())
     }
 
@@ -208,7 +199,7 @@ impl SparseCholesky {
         a: SparseColMatRef<'_, usize, f64>,
     ) -> Result<FactorPrecision, FemError> {
         if self.is_supernodal() && !self.single_rejected.load(Ordering::Relaxed) {
-            self.factored = Factored::No;
+            self.factored = None;
             self.a_single.clear();
             self.a_single.extend(a.val().iter().map(|&v| v as f32));
             self.l_single.resize(self.l.len(), 0.0);
@@ -216,14 +207,14 @@ impl SparseCholesky {
             if factorize(&self.symbolic, &mut self.l_single, single).is_ok() {
                 if half_kernels() && !self.half_rejected.load(Ordering::Relaxed) {
                     if self.encode_half() {
-                        self.factored = Factored::Half;
+                        self.factored = Some(FactorPrecision::Half);
                         if self.check_error(a) <= HALF_FACTOR_TOLERANCE {
                             return Ok(FactorPrecision::Half);
                         }
                     }
                     self.half_rejected.store(true, Ordering::Relaxed);
                 }
-                self.factored = Factored::Single;
+                self.factored = Some(FactorPrecision::Single);
                 if self.check_error(a) <= SINGLE_FACTOR_TOLERANCE {
                     return Ok(FactorPrecision::Single);
                 }
@@ -239,23 +230,16 @@ impl SparseCholesky {
         let SymbolicCholeskyRaw::Supernodal(symbolic) = self.symbolic.raw() else {
             return false;
         };
-        self.l_half.clear();
+        // Values above a diagonal block's diagonal are never read, so they are left as they are.
         self.l_half.resize(self.l_single.len(), Half(0));
         self.half_scaling.clear();
-        let (begin, end, val_ptr) = (
-            symbolic.supernode_begin(),
-            symbolic.supernode_end(),
-            symbolic.col_ptr_for_val(),
-        );
         for s in 0..symbolic.n_supernodes() {
-            let m = end[s] - begin[s];
-            let ld = m + symbolic.supernode(s).pattern().len();
-            let block = val_ptr[s]..val_ptr[s] + ld * m;
-            let (single, half) = (&self.l_single[block.clone()], &mut self.l_half[block]);
+            let b = SupernodeBlock::new(symbolic, s);
+            let (single, half) = (&self.l_single[b.values.clone()], &mut self.l_half[b.values]);
             // Column j's values are its rows j.. (the diagonal block's upper part is unused).
             for (j, (col, out)) in single
-                .chunks_exact(ld)
-                .zip(half.chunks_exact_mut(ld))
+                .chunks_exact(b.ld)
+                .zip(half.chunks_exact_mut(b.ld))
                 .enumerate()
             {
                 match Half::encode_column(&col[j..], &mut out[j..]) {
@@ -290,7 +274,7 @@ impl SparseCholesky {
     /// If the last factorisation was not a successful [`SparseCholesky::factor`].
     pub fn solve_in_place(&self, x: &mut [f64]) {
         assert!(
-            self.factored == Factored::Double,
+            self.factored == Some(FactorPrecision::Double),
             "exact solve without an f64 factorisation"
         );
         match self.symbolic.raw() {
@@ -321,10 +305,10 @@ impl SparseCholesky {
     /// If no factorisation has succeeded.
     pub fn solve_preconditioner_in_place(&self, x: &mut [f64]) {
         match (self.factored, self.symbolic.raw()) {
-            (Factored::Single, SymbolicCholeskyRaw::Supernodal(s)) => {
+            (Some(FactorPrecision::Single), SymbolicCholeskyRaw::Supernodal(s)) => {
                 self.permuted_solve(s, &self.l_single, None, x, Kernels::Best)
             }
-            (Factored::Half, SymbolicCholeskyRaw::Supernodal(s)) => {
+            (Some(FactorPrecision::Half), SymbolicCholeskyRaw::Supernodal(s)) => {
                 self.permuted_solve(s, &self.l_half, Some(&self.half_scaling), x, Kernels::Best)
             }
             _ => self.solve_in_place(x),
@@ -435,6 +419,34 @@ fn supernodal_solve<V: Stored>(
     substitute(Portable, symbolic, values, scaling, x, rows)
 }
 
+/// Where supernode s of a supernodal factor lies: its first column `c0`, its `m` columns, its
+/// row `pattern` below the diagonal block, the block's leading dimension `ld = m + p`, and the
+/// range of its `ld × m` values in the factor's value array.
+struct SupernodeBlock<'a> {
+    c0: usize,
+    m: usize,
+    pattern: &'a [usize],
+    ld: usize,
+    values: std::ops::Range<usize>,
+}
+
+impl<'a> SupernodeBlock<'a> {
+    fn new(symbolic: &'a SymbolicSupernodalCholesky<usize>, s: usize) -> Self {
+        let c0 = symbolic.supernode_begin()[s];
+        let m = symbolic.supernode_end()[s] - c0;
+        let pattern = symbolic.supernode(s).pattern();
+        let ld = m + pattern.len();
+        let start = symbolic.col_ptr_for_val()[s];
+        Self {
+            c0,
+            m,
+            pattern,
+            ld,
+            values: start..start + ld * m,
+        }
+    }
+}
+
 /// Supernode s owns columns `c0..c0 + m` of L as one column-major block: its m × m
 /// lower-triangular diagonal block on top of the rows `pattern` (p of them, all past the block).
 ///
@@ -451,15 +463,10 @@ fn substitute<K: Lanes, V: Stored>(
     x: &mut [f64],
     rows: &mut [f64],
 ) {
-    let begin = symbolic.supernode_begin();
-    let end = symbolic.supernode_end();
-    let val_ptr = symbolic.col_ptr_for_val();
     let count = symbolic.n_supernodes();
     let block = |s: usize| {
-        let (c0, m) = (begin[s], end[s] - begin[s]);
-        let pattern = symbolic.supernode(s).pattern();
-        let ld = m + pattern.len();
-        (c0, m, pattern, ld, &values[val_ptr[s]..val_ptr[s] + ld * m])
+        let b = SupernodeBlock::new(symbolic, s);
+        (b.c0, b.m, b.pattern, b.ld, &values[b.values])
     };
     for s in 0..count {
         let (c0, m, pattern, ld, l) = block(s);
@@ -1040,14 +1047,9 @@ mod tests {
             unreachable!("forced supernodal")
         };
         for k in 0..s.n_supernodes() {
-            let (c0, m) = (
-                s.supernode_begin()[k],
-                s.supernode_end()[k] - s.supernode_begin()[k],
-            );
-            let ld = m + s.supernode(k).pattern().len();
-            let block = &mut chol.l_single[s.col_ptr_for_val()[k]..][..ld * m];
-            for (j, col) in block.chunks_exact_mut(ld).enumerate() {
-                if (c0 + j) % 3 == 0 {
+            let b = SupernodeBlock::new(s, k);
+            for (j, col) in chol.l_single[b.values].chunks_exact_mut(b.ld).enumerate() {
+                if (b.c0 + j).is_multiple_of(3) {
                     col.iter_mut().for_each(|v| *v *= 1e-10);
                 }
             }
