@@ -12,7 +12,9 @@
 //! After the criterion groups a summary measures the same operations side by side (median of
 //! short rounds, robust on a shared machine) and prints them beside the PyTorch and hand-written
 //! numpy figures of `benches/peers/torch_autoencoder.py`, read from `target/peers/torch.json`
-//! (or `$NN_PEERS_JSON`) when that file exists.
+//! (or `$NN_PEERS_JSON`) when that file exists. Each figure is also given as a fraction of the
+//! f64 multiply–add rate this thread sustains ([`nn::peak::fma_rate`], probed before and after
+//! the summary): the number that stays put when the machine's clock does not.
 //!
 //! ```sh
 //! python3 benches/peers/torch_autoencoder.py     # optional: needs torch and numpy
@@ -246,11 +248,53 @@ fn micros(median: Option<f64>, best: Option<f64>) -> String {
     }
 }
 
+/// Σ n_l n_{l+1} over the layers of `sizes`, from layer `from` on (the multiply–adds of one
+/// matrix–vector product per layer).
+fn layer_products(sizes: &[usize], from: usize) -> usize {
+    sizes.windows(2).skip(from).map(|w| w[0] * w[1]).sum()
+}
+
+/// The multiply–adds of a single-vector decoder operation on a network of `sizes` (bias
+/// additions and activations not counted): the work no implementation can skip.
+fn multiply_adds(name: &str, sizes: &[usize]) -> Option<usize> {
+    let all = layer_products(sizes, 0);
+    let last = sizes[sizes.len() - 2] * sizes[sizes.len() - 1];
+    let n0 = sizes[0];
+    Some(match name {
+        "forward" | "vjp_cached" => all,
+        // The forward pass up to the last hidden layer, then the reverse sweep.
+        "vjp" => all - last + all,
+        "forward+vjp_cached" => 2 * all,
+        // Value and tangent side by side below the output layer, the tangent alone through it.
+        "jvp" => 2 * (all - last) + last,
+        // Forward mode with n₀ tangents: the first layer's tangents are its weights (only the
+        // value is a product), the hidden layers carry 1 + n₀ columns, the output layer n₀.
+        "jacobian" => {
+            let first = sizes[0] * sizes[1];
+            first + (all - first - last) * (1 + n0) + last * n0
+        }
+        _ => return None,
+    })
+}
+
+/// The probed multiply–add rate, printed.
+fn probe(when: &str) -> f64 {
+    let rate = nn::peak::fma_rate(Duration::from_millis(300));
+    println!(
+        "f64 multiply–add rate of one thread ({when}, {} SIMD lanes, {} chains): {:.1} G/s",
+        rate.lanes,
+        nn::peak::CHAINS,
+        rate.multiply_adds_per_second / 1e9
+    );
+    rate.multiply_adds_per_second
+}
+
 /// Side-by-side figures of this build and the peers.
 fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
     let peers = Peers::load();
     let peer = |key: &str| peers.as_ref().and_then(|p| p.number(key));
     println!("\nsummary (short rounds, median and best; this machine, this run)");
+    let peak = probe("before");
     if let Some(p) = &peers {
         println!(
             "peers from {}: torch {} ({}), numpy {}, {}",
@@ -262,12 +306,12 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
         );
     }
     println!(
-        "{:<22} {:>15} {:>17} {:>15}",
-        "decoder 6→200→200→49", "nn µs", "torch µs", "numpy µs"
+        "{:<22} {:>15} {:>17} {:>15} {:>18}",
+        "decoder 6→200→200→49", "nn µs", "torch µs", "numpy µs", "nn multiply–adds"
     );
     println!(
-        "{:<22} {:>15} {:>17} {:>15}",
-        "", "median / best", "median / best", "median / best"
+        "{:<22} {:>15} {:>17} {:>15} {:>18}",
+        "", "median / best", "median / best", "median / best", "(best, % of rate)"
     );
     let peer_keys = [
         (
@@ -291,8 +335,12 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
             .map_or(((None, None), (None, None)), |(_, t, n)| {
                 (peer_pair(t), peer_pair(n))
             });
+        let share = multiply_adds(name, decoder.mlp.sizes()).map_or_else(
+            || "—".into(),
+            |n| format!("{n} ({:.0} %)", 100.0 * n as f64 / (best * 1e-9) / peak),
+        );
         println!(
-            "{name:<22} {:>15} {:>17} {:>15}",
+            "{name:<22} {:>15} {:>17} {:>15} {share:>18}",
             micros(Some(median), Some(best)),
             micros(torch, torch_best),
             micros(numpy, numpy_best),
@@ -300,9 +348,13 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
     }
     println!("(torch jacobian: torch.func.jacrev; numpy: hand-written forward mode)");
 
+    // Per sample: forward, the weights' gradients and the data gradients, except the input's.
+    let (encoder, decoder_sizes) = ([49, 200, 200, LATENT], [LATENT, 200, 200, 49]);
+    let per_sample = 3 * (layer_products(&encoder, 0) + layer_products(&decoder_sizes, 0))
+        - encoder[0] * encoder[1];
     println!(
-        "{:<22} {:>12} {:>12} {:>8} {:>14}",
-        "training (2000 samples)", "nn", "torch", "nn/torch", "nn 1000 epochs"
+        "{:<22} {:>12} {:>12} {:>8} {:>14} {:>10}",
+        "training (2000 samples)", "nn", "torch", "nn/torch", "nn 1000 epochs", "% of rate"
     );
     for (threads, pool) in pools {
         let mut trainer = new_trainer();
@@ -314,13 +366,16 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
         });
         let rate = SAMPLES as f64 / (epoch_ns * 1e-9);
         let torch = peer(&format!("train_{threads}t_samples_per_s"));
+        // Against one thread's rate times the threads: what the cores could give at most.
+        let share = 100.0 * rate * per_sample as f64 / (peak * *threads as f64);
         println!(
-            "{:<22} {:>12} {:>12} {:>8} {:>12.1} s",
+            "{:<22} {:>12} {:>12} {:>8} {:>12.1} s {:>8.0} %",
             format!("{threads} thread(s)"),
             cell(Some(rate), 1e3, "k/s"),
             cell(torch, 1e3, "k/s"),
             torch.map_or_else(|| "—".into(), |t| format!("{:.2}×", rate / t)),
             1e3 * epoch_ns * 1e-9,
+            share,
         );
     }
     if let Some(p) = &peers {
@@ -341,6 +396,7 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
             }
         }
     }
+    probe("after");
 }
 
 fn main() {

@@ -14,6 +14,9 @@ use crate::simulate::{
     Method, Runner, SimulateOptions, StepParts, Trajectory, median, setup, write_json,
 };
 
+/// How long the machine's multiply–add rate is probed before a method is timed.
+const PROBE_TIME: std::time::Duration = std::time::Duration::from_millis(100);
+
 /// What `run` does.
 #[derive(Debug, Clone)]
 pub struct RunOptions {
@@ -69,6 +72,12 @@ pub struct MethodReport {
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
+    /// The f64 multiply–add rate of one thread (G/s, [`nn::peak::fma_rate`]) probed just
+    /// before this method's timed runs: times taken at different rates (a shared machine, a
+    /// clock that scales) compare only after dividing by it. None where the times were taken
+    /// earlier (`run`'s full space, timed when the cached reference was computed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub machine_gfma: Option<f64>,
 }
 
 /// Errors of a trajectory against the reference, frame by frame.
@@ -241,8 +250,10 @@ pub fn measure(
             vjp_ms: 0.0,
             precond_ms: 0.0,
             failure: None,
+            machine_gfma: None,
         });
     }
+    let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
     let mut errors = ErrorAccumulator::default();
     let mut medians = Vec::with_capacity(m.repeats.max(1));
     let mut means = Vec::with_capacity(m.repeats.max(1));
@@ -342,6 +353,7 @@ pub fn measure(
         frame_errors: errors.rel,
         subspace_frame_errors,
         failure,
+        machine_gfma,
     })
 }
 
@@ -422,14 +434,19 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     crate::plot::svg(&plot, &series)
 }
 
+/// A probed multiply–add rate as a table cell (a dash where none was probed).
+pub(crate) fn gfma_cell(rate: Option<f64>) -> String {
+    rate.map_or_else(|| "—".into(), |g| format!("{g:.1}"))
+}
+
 /// The report as a markdown table.
 pub fn markdown(rows: &[MethodReport]) -> String {
     let mut s = String::from(
-        "| method | dim | elements | ms/step | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | iterations |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| method | dim | elements | ms/step | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} |\n",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
                 None => r.method.clone(),
@@ -444,7 +461,8 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             r.max_rel_error,
             r.max_vertex_error,
             r.subspace_error,
-            r.iterations
+            r.iterations,
+            gfma_cell(r.machine_gfma),
         ));
     }
     for r in rows {

@@ -69,6 +69,7 @@ mod gradient;
 mod kernels;
 mod linalg;
 pub mod mlp;
+pub mod peak;
 pub mod rng;
 pub mod scaling;
 pub mod simd;
