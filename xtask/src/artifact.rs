@@ -40,7 +40,9 @@ pub fn stage_version(stage: &str) -> u32 {
         //    within tolerance).
         // 7: the preconditioner's f32 factor stored in 16 bits where that passes its check
         //    (iterates within tolerance).
-        "snapshots" | "snapshots-shard" | "reference" => 7,
+        // 8: the substitutions multiply by the diagonal's reciprocals instead of dividing
+        //    (round-off).
+        "snapshots" | "snapshots-shard" | "reference" => 8,
         // 2: the held-out error along the greedy path is stored with the rule.
         "cubature" => 2,
         // 3: the decoder's Jacobian from SIMD kernels (round-off).

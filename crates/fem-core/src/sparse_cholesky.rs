@@ -38,6 +38,12 @@ pub struct SparseCholesky {
     l_single: Vec<f32>,
     /// The f32 factor rounded to 16 bits ([`Half`]), each column scaled by its own power of two.
     l_half: Vec<Half>,
+    /// 1 / (diagonal of L as each of the three stores holds it), by column in the factor's
+    /// order: the substitutions multiply by it instead of dividing, which took a division's
+    /// latency out of each column's dependency chain.
+    inv_l: Vec<f64>,
+    inv_single: Vec<f64>,
+    inv_half: Vec<f64>,
     /// Per column of L (in the factor's order), the square of the factor by which its 16-bit
     /// values, widened, exceed L̃'s; the solve multiplies by it between its two passes.
     half_scaling: Vec<f64>,
@@ -131,6 +137,9 @@ impl SparseCholesky {
             symbolic: Arc::new(symbolic),
             l_single: Vec::new(),
             l_half: Vec::new(),
+            inv_l: Vec::new(),
+            inv_single: Vec::new(),
+            inv_half: Vec::new(),
             half_scaling: Vec::new(),
             a_single: Vec::new(),
             single_rejected: Arc::new(AtomicBool::new(false)),
@@ -147,6 +156,9 @@ impl SparseCholesky {
             l: vec![0.0; self.l.len()],
             l_single: Vec::new(),
             l_half: Vec::new(),
+            inv_l: Vec::new(),
+            inv_single: Vec::new(),
+            inv_half: Vec::new(),
             half_scaling: Vec::new(),
             a_single: Vec::new(),
             single_rejected: Arc::clone(&self.single_rejected),
@@ -171,6 +183,7 @@ impl SparseCholesky {
     pub fn factor(&mut self, a: SparseColMatRef<'_, usize, f64>) -> Result<(), FemError> {
         self.factored = None;
         factorize(&self.symbolic, &mut self.l, a)?;
+        reciprocal_diagonal(&self.symbolic, &self.l, &mut self.inv_l);
         self.factored = Some(FactorPrecision::Double);
         Ok(())
     }
@@ -205,6 +218,7 @@ impl SparseCholesky {
             self.l_single.resize(self.l.len(), 0.0);
             let single = SparseColMatRef::new(a.symbolic(), &self.a_single);
             if factorize(&self.symbolic, &mut self.l_single, single).is_ok() {
+                reciprocal_diagonal(&self.symbolic, &self.l_single, &mut self.inv_single);
                 if half_kernels() && !self.half_rejected.load(Ordering::Relaxed) {
                     if self.encode_half() {
                         self.factored = Some(FactorPrecision::Half);
@@ -248,6 +262,7 @@ impl SparseCholesky {
                 }
             }
         }
+        reciprocal_diagonal(&self.symbolic, &self.l_half, &mut self.inv_half);
         true
     }
 
@@ -279,7 +294,7 @@ impl SparseCholesky {
         );
         match self.symbolic.raw() {
             SymbolicCholeskyRaw::Supernodal(s) => {
-                self.permuted_solve(s, &self.l, None, x, Kernels::Best)
+                self.permuted_solve(s, &self.l, &self.inv_l, None, x, Kernels::Best)
             }
             SymbolicCholeskyRaw::Simplicial(_) => self.faer_solve_in_place(x, factor_parallelism()),
         }
@@ -306,10 +321,11 @@ impl SparseCholesky {
     pub fn solve_preconditioner_in_place(&self, x: &mut [f64]) {
         match (self.factored, self.symbolic.raw()) {
             (Some(FactorPrecision::Single), SymbolicCholeskyRaw::Supernodal(s)) => {
-                self.permuted_solve(s, &self.l_single, None, x, Kernels::Best)
+                self.permuted_solve(s, &self.l_single, &self.inv_single, None, x, Kernels::Best)
             }
             (Some(FactorPrecision::Half), SymbolicCholeskyRaw::Supernodal(s)) => {
-                self.permuted_solve(s, &self.l_half, Some(&self.half_scaling), x, Kernels::Best)
+                let scaling = Some(&self.half_scaling[..]);
+                self.permuted_solve(s, &self.l_half, &self.inv_half, scaling, x, Kernels::Best)
             }
             _ => self.solve_in_place(x),
         }
@@ -321,6 +337,7 @@ impl SparseCholesky {
         &self,
         symbolic: &SymbolicSupernodalCholesky<usize>,
         values: &[V],
+        inv_diag: &[f64],
         scaling: Option<&[f64]>,
         x: &mut [f64],
         kernels: Kernels,
@@ -336,12 +353,12 @@ impl SparseCholesky {
                     for (yi, &f) in y.iter_mut().zip(fwd) {
                         *yi = x[f];
                     }
-                    supernodal_solve(symbolic, values, scaling, y, rows, kernels);
+                    supernodal_solve(symbolic, values, inv_diag, scaling, y, rows, kernels);
                     for (yi, &f) in y.iter().zip(fwd) {
                         x[f] = *yi;
                     }
                 }
-                None => supernodal_solve(symbolic, values, scaling, x, rows, kernels),
+                None => supernodal_solve(symbolic, values, inv_diag, scaling, x, rows, kernels),
             }
         });
     }
@@ -405,6 +422,7 @@ enum Kernels {
 fn supernodal_solve<V: Stored>(
     symbolic: &SymbolicSupernodalCholesky<usize>,
     values: &[V],
+    inv_diag: &[f64],
     scaling: Option<&[f64]>,
     x: &mut [f64],
     rows: &mut [f64],
@@ -414,9 +432,27 @@ fn supernodal_solve<V: Stored>(
     if kernels == Kernels::Best
         && let Some(v3) = pulp::x86::V3::try_new()
     {
-        return v3.vectorize(|| substitute(Avx2(v3), symbolic, values, scaling, x, rows));
+        return v3.vectorize(|| substitute(Avx2(v3), symbolic, values, inv_diag, scaling, x, rows));
     }
-    substitute(Portable, symbolic, values, scaling, x, rows)
+    substitute(Portable, symbolic, values, inv_diag, scaling, x, rows)
+}
+
+/// 1 / L_jj for every column j of a supernodal factor stored as `values` (in the factor's
+/// order; empty for a simplicial factor).
+fn reciprocal_diagonal<V: Stored>(
+    symbolic: &SymbolicCholesky<usize>,
+    values: &[V],
+    out: &mut Vec<f64>,
+) {
+    out.clear();
+    let SymbolicCholeskyRaw::Supernodal(symbolic) = symbolic.raw() else {
+        return;
+    };
+    for s in 0..symbolic.n_supernodes() {
+        let b = SupernodeBlock::new(symbolic, s);
+        let l = &values[b.values];
+        out.extend((0..b.m).map(|j| 1.0 / l[j * b.ld + j].widen()));
+    }
 }
 
 /// Where supernode s of a supernodal factor lies: its first column `c0`, its `m` columns, its
@@ -459,6 +495,7 @@ fn substitute<K: Lanes, V: Stored>(
     k: K,
     symbolic: &SymbolicSupernodalCholesky<usize>,
     values: &[V],
+    inv_diag: &[f64],
     scaling: Option<&[f64]>,
     x: &mut [f64],
     rows: &mut [f64],
@@ -471,9 +508,10 @@ fn substitute<K: Lanes, V: Stored>(
     for s in 0..count {
         let (c0, m, pattern, ld, l) = block(s);
         let top = &mut x[c0..c0 + m];
+        let inv = &inv_diag[c0..c0 + m];
         for j in 0..m {
             let col = &l[j * ld..j * ld + m];
-            let xj = top[j] / col[j].widen();
+            let xj = top[j] * inv[j];
             top[j] = xj;
             k.axpy(&mut top[j + 1..], &col[j + 1..], -xj);
         }
@@ -514,10 +552,11 @@ fn substitute<K: Lanes, V: Stored>(
                 *t -= k.dot(&l[j * ld + m..(j + 1) * ld], gathered);
             }
         }
+        let inv = &inv_diag[c0..c0 + m];
         for j in (0..m).rev() {
             let col = &l[j * ld..j * ld + m];
             let (head, tail) = top.split_at_mut(j + 1);
-            head[j] = (head[j] - k.dot(&col[j + 1..], tail)) / col[j].widen();
+            head[j] = (head[j] - k.dot(&col[j + 1..], tail)) * inv[j];
         }
     }
 }
@@ -913,8 +952,15 @@ mod tests {
         };
         let b = rhs(&p);
         let (mut best, mut portable) = (b.clone(), b.clone());
-        chol.permuted_solve(s, &chol.l, None, &mut best, Kernels::Best);
-        chol.permuted_solve(s, &chol.l, None, &mut portable, Kernels::Portable);
+        chol.permuted_solve(s, &chol.l, &chol.inv_l, None, &mut best, Kernels::Best);
+        chol.permuted_solve(
+            s,
+            &chol.l,
+            &chol.inv_l,
+            None,
+            &mut portable,
+            Kernels::Portable,
+        );
         let d = max_relative_difference(&portable, &best);
         assert!(d < 1e-13, "portable and SIMD solves differ by {d:e}");
         assert!(residual(&p, &a, &portable, &b) < 1e-13);
@@ -1054,12 +1100,27 @@ mod tests {
                 }
             }
         }
+        reciprocal_diagonal(&chol.symbolic, &chol.l_single, &mut chol.inv_single);
         assert!(chol.encode_half());
         let b = rhs(&p);
         let (mut single, mut half) = (b.clone(), b.clone());
-        chol.permuted_solve(s, &chol.l_single, None, &mut single, Kernels::Best);
+        chol.permuted_solve(
+            s,
+            &chol.l_single,
+            &chol.inv_single,
+            None,
+            &mut single,
+            Kernels::Best,
+        );
         let scaling = Some(&chol.half_scaling[..]);
-        chol.permuted_solve(s, &chol.l_half, scaling, &mut half, Kernels::Best);
+        chol.permuted_solve(
+            s,
+            &chol.l_half,
+            &chol.inv_half,
+            scaling,
+            &mut half,
+            Kernels::Best,
+        );
         let d = max_relative_difference(&half, &single);
         assert!(d < 1e-2, "16-bit solve off by {d:e}");
     }
@@ -1167,8 +1228,16 @@ mod tests {
         let b = rhs(&p);
         let (mut best, mut portable) = (b.clone(), b.clone());
         let scaling = Some(&chol.half_scaling[..]);
-        chol.permuted_solve(s, &chol.l_half, scaling, &mut best, Kernels::Best);
-        chol.permuted_solve(s, &chol.l_half, scaling, &mut portable, Kernels::Portable);
+        let inv = &chol.inv_half;
+        chol.permuted_solve(s, &chol.l_half, inv, scaling, &mut best, Kernels::Best);
+        chol.permuted_solve(
+            s,
+            &chol.l_half,
+            inv,
+            scaling,
+            &mut portable,
+            Kernels::Portable,
+        );
         let d = max_relative_difference(&portable, &best);
         assert!(d < 1e-13, "portable and SIMD solves differ by {d:e}");
     }
