@@ -17,6 +17,8 @@ use std::time::{Duration, Instant};
 
 use pulp::{Arch, Simd, WithSimd};
 
+use crate::kernels;
+
 /// Independent accumulator chains of the probe.
 pub const CHAINS: usize = 12;
 
@@ -32,7 +34,7 @@ pub struct FmaRate {
 /// Measures the f64 multiply–add rate of the calling thread for about `duration` (the best of
 /// several rounds, which a busy machine disturbs least).
 pub fn fma_rate(duration: Duration) -> FmaRate {
-    let lanes = Arch::new().dispatch(Lanes);
+    let lanes = kernels::lanes();
     // Rounds of about 2 ms: long next to the timer's resolution, short next to a scheduler slice.
     let iterations = calibrate();
     let per_round = (iterations * CHAINS * lanes) as f64;
@@ -109,17 +111,6 @@ impl WithSimd for Chains {
     }
 }
 
-struct Lanes;
-
-impl WithSimd for Lanes {
-    type Output = usize;
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, _: S) -> usize {
-        S::F64_LANES
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,7 +119,7 @@ mod tests {
     /// closed form of a ← a·b + c with c = 1 − b.
     #[test]
     fn the_probe_runs_every_multiply_add() {
-        let lanes = Arch::new().dispatch(Lanes);
+        let lanes = kernels::lanes();
         for iterations in [0, 1, 7, 1_000, 123_457] {
             let a0 = 3.0;
             let expected = (CHAINS * lanes) as f64 * (1.0 + PROBE_B.powi(iterations) * (a0 - 1.0));
