@@ -658,21 +658,80 @@ impl<S: Subspace> ReducedSimulator<S> {
     }
 }
 
-/// out = Bᵀ A B for A k×k and B k×d (column-major); `ab` is k×d scratch.
+/// out = Bᵀ A B for a symmetric A (k×k) and B (k×d), column-major; `ab` is k×d scratch.
 fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize, ab: &mut [f64], out: &mut [f64]) {
-    ab.fill(0.0);
-    for j in 0..d {
-        let abj = &mut ab[j * k..(j + 1) * k];
-        for l in 0..k {
-            let blj = b[j * k + l];
-            if blj != 0.0 {
-                axpy(blj, &a[l * k..(l + 1) * k], abj);
+    Arch::new().dispatch(Sandwich {
+        a: &a[..k * k],
+        b: &b[..k * d],
+        k,
+        d,
+        ab: &mut ab[..k * d],
+        out: &mut out[..d * d],
+    });
+}
+
+/// Bᵀ A B under SIMD dispatch: A B column by column as combinations of four columns of A at a
+/// time (groups of four zero coefficients skipped: B = I for a linear subspace), then Bᵀ(A B) on
+/// and below the diagonal by dot products of four columns of B at a time, mirrored, so the
+/// result is exactly symmetric.
+struct Sandwich<'a> {
+    a: &'a [f64],
+    b: &'a [f64],
+    k: usize,
+    d: usize,
+    ab: &'a mut [f64],
+    out: &'a mut [f64],
+}
+
+impl WithSimd for Sandwich<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self {
+            a,
+            b,
+            k,
+            d,
+            ab,
+            out,
+        } = self;
+        fn column(m: &[f64], k: usize, j: usize) -> &[f64] {
+            &m[j * k..(j + 1) * k]
+        }
+        for (bj, abj) in b.chunks_exact(k).zip(ab.chunks_exact_mut(k)) {
+            abj.fill(0.0);
+            let mut l = 0;
+            while l + 4 <= k {
+                let c = [bj[l], bj[l + 1], bj[l + 2], bj[l + 3]];
+                if c != [0.0; 4] {
+                    add_combination(simd, abj, c, std::array::from_fn(|t| column(a, k, l + t)));
+                }
+                l += 4;
+            }
+            for l in l..k {
+                if bj[l] != 0.0 {
+                    add_combination(simd, abj, [bj[l]], [column(a, k, l)]);
+                }
             }
         }
-    }
-    for j in 0..d {
-        for i in 0..d {
-            out[j * d + i] = dot(&b[i * k..(i + 1) * k], &ab[j * k..(j + 1) * k]);
+        let ab: &[f64] = ab;
+        for j in 0..d {
+            let abj = column(ab, k, j);
+            let mut i = j;
+            while i + 4 <= d {
+                let r: [f64; 4] = dot_rows(simd, std::array::from_fn(|t| column(b, k, i + t)), abj);
+                for (t, &x) in r.iter().enumerate() {
+                    out[j * d + i + t] = x;
+                    out[(i + t) * d + j] = x;
+                }
+                i += 4;
+            }
+            for i in i..d {
+                let x = dot_rows(simd, [column(b, k, i)], abj)[0];
+                out[j * d + i] = x;
+                out[i * d + j] = x;
+            }
         }
     }
 }
