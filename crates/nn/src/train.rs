@@ -3,7 +3,8 @@
 //! and the latent-dimension search.
 //!
 //! Reproducibility: the seed fixes the initial weights (streams 0 and 1), the validation split
-//! (stream 2) and the mini-batch order (stream 3). Each mini-batch is cut into fixed chunks of
+//! (stream 2) and the mini-batch order (stream 3); restart r of `restarts` takes its weights and
+//! order from seed + r and its split from the seed. Each mini-batch is cut into fixed chunks of
 //! [`crate::CHUNK`] samples evaluated in parallel and summed in chunk order, so the result does
 //! not depend on the number of threads either.
 
@@ -46,6 +47,8 @@ pub struct TrainOutcome {
     pub train_indices: Vec<usize>,
     /// Columns held out for validation, ascending.
     pub validation_indices: Vec<usize>,
+    /// Which of the `restarts` networks this is (0-based: trained from seed `seed + restart`).
+    pub restart: usize,
 }
 
 /// Trains an autoencoder with latent dimension `latent_dim` on `data` (k × N PCA coefficients, one
@@ -57,7 +60,39 @@ pub fn train(
     config: &AutoencoderConfig,
     mut progress: impl FnMut(EpochReport),
 ) -> Result<TrainOutcome, NnError> {
-    let mut trainer = Trainer::new(data, latent_dim, config)?;
+    config.validate()?;
+    let mut kept: Option<TrainOutcome> = None;
+    let total = config.epochs * config.restarts;
+    for restart in 0..config.restarts {
+        // Progress counts the epochs of all restarts; each outcome keeps its own history.
+        let done = restart * config.epochs;
+        let outcome = train_one(data, latent_dim, config, restart, |r| {
+            progress(EpochReport {
+                epoch: done + r.epoch,
+                epochs: total,
+                ..r
+            })
+        })?;
+        tracing::info!(restart, best_loss = outcome.best_loss, "restart finished");
+        if kept
+            .as_ref()
+            .is_none_or(|k| outcome.best_loss < k.best_loss)
+        {
+            kept = Some(outcome);
+        }
+    }
+    Ok(kept.expect("validated: restarts ≥ 1"))
+}
+
+/// One network of [`train`]: restart `restart` of `config`.
+fn train_one(
+    data: MatRef<'_, f64>,
+    latent_dim: usize,
+    config: &AutoencoderConfig,
+    restart: usize,
+    mut progress: impl FnMut(EpochReport),
+) -> Result<TrainOutcome, NnError> {
+    let mut trainer = Trainer::for_restart(data, latent_dim, config, restart)?;
     let mut history = Vec::with_capacity(config.epochs);
     let mut stopped_early = false;
     for epoch in 1..=config.epochs {
@@ -92,6 +127,7 @@ pub fn train(
         stopped_early,
         train_indices,
         validation_indices,
+        restart,
     })
 }
 
@@ -130,13 +166,25 @@ pub struct Trainer {
 
 impl Trainer {
     /// Checks `config` and `data` (k × N, finite), splits, scales and initialises as [`train`]
-    /// does.
+    /// does (for its first network).
     pub fn new(
         data: MatRef<'_, f64>,
         latent_dim: usize,
         config: &AutoencoderConfig,
     ) -> Result<Self, NnError> {
+        Self::for_restart(data, latent_dim, config, 0)
+    }
+
+    /// [`Trainer::new`] for network `restart` of [`train`]: the validation split of
+    /// `config.seed`, the initial weights and mini-batch order of `config.seed + restart`.
+    pub fn for_restart(
+        data: MatRef<'_, f64>,
+        latent_dim: usize,
+        config: &AutoencoderConfig,
+        restart: usize,
+    ) -> Result<Self, NnError> {
         config.validate()?;
+        let init_seed = config.seed.wrapping_add(restart as u64);
         if latent_dim == 0 {
             return Err(NnError::InvalidConfig {
                 field: "autoencoder.latent_dim".into(),
@@ -184,7 +232,7 @@ impl Trainer {
             &config.hidden,
             config.activation,
             scaling,
-            config.seed,
+            init_seed,
         )?;
         let model = if config.skip {
             model.with_skip()?
@@ -222,7 +270,7 @@ impl Trainer {
             epoch: 0,
             engine,
             adam,
-            rng: SplitMix64::for_item(config.seed, 3),
+            rng: SplitMix64::for_item(init_seed, 3),
             order: (0..n_train).collect(),
             buffer: vec![0.0; k * batch],
             x_train,

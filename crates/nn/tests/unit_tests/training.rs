@@ -79,6 +79,72 @@ fn training_is_bit_reproducible() {
     assert_ne!(a.history[14].train_loss, d.history[14].train_loss);
 }
 
+/// Restarts train from seeds seed, seed + 1, … on one validation split and keep the network with
+/// the lowest monitored loss: the same network, bit for bit, as the best of the restarts trained
+/// one at a time; progress counts the epochs of all of them.
+#[test]
+fn restarts_keep_the_network_with_the_lowest_validation_loss() {
+    let data = manifold_data(300, 7);
+    let config = AutoencoderConfig {
+        hidden: vec![16, 16],
+        epochs: 20,
+        batch_size: 50,
+        patience: 0,
+        seed: 11,
+        restarts: 3,
+        ..AutoencoderConfig::default()
+    };
+    let mut epochs_seen = Vec::new();
+    let kept = train(data.as_ref(), 2, &config, |r| {
+        epochs_seen.push((r.epoch, r.epochs))
+    })
+    .unwrap();
+    assert_eq!(epochs_seen.len(), 60);
+    assert_eq!(epochs_seen.last(), Some(&(60, 60)));
+    let single = |restart: usize| {
+        let mut t = Trainer::for_restart(data.as_ref(), 2, &config, restart).unwrap();
+        for _ in 0..config.epochs {
+            t.run_epoch().unwrap();
+        }
+        let (_, loss) = t.best();
+        (loss, t.validation_indices().to_vec())
+    };
+    let runs: Vec<(f64, Vec<usize>)> = (0..3).map(single).collect();
+    // One split for all; different networks (different losses).
+    assert!(runs.iter().all(|(_, v)| *v == kept.validation_indices));
+    assert!(runs[0].0 != runs[1].0 && runs[1].0 != runs[2].0);
+    let best = (0..3)
+        .min_by(|&a, &b| runs[a].0.total_cmp(&runs[b].0))
+        .unwrap();
+    assert_eq!(kept.restart, best);
+    assert_eq!(kept.best_loss, runs[best].0);
+    // Restart 0 is the network one restart trains.
+    let one = train(
+        data.as_ref(),
+        2,
+        &AutoencoderConfig {
+            restarts: 1,
+            ..config.clone()
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(one.best_loss, runs[0].0);
+    assert_eq!(one.restart, 0);
+    // No restarts is a configuration error naming the field.
+    let err = train(
+        data.as_ref(),
+        2,
+        &AutoencoderConfig {
+            restarts: 0,
+            ..config
+        },
+        |_| {},
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("restarts"), "{err}");
+}
+
 #[test]
 fn early_stopping_restores_the_best_weights() {
     // Noise has no structure to learn: the validation loss stalls while the net memorises.
