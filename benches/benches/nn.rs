@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, SamplingMode, Throughput};
 use nn::synthetic::TanhManifold;
-use nn::{Activation, AutoencoderConfig, Mlp, Trainer};
+use nn::{Activation, Autoencoder, AutoencoderConfig, Mlp, Trainer};
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
 /// Thread counts of the training benchmarks.
@@ -248,16 +248,16 @@ fn micros(median: Option<f64>, best: Option<f64>) -> String {
     }
 }
 
-/// Σ n_l n_{l+1} over the layers of `sizes`, from layer `from` on (the multiply–adds of one
-/// matrix–vector product per layer).
-fn layer_products(sizes: &[usize], from: usize) -> usize {
-    sizes.windows(2).skip(from).map(|w| w[0] * w[1]).sum()
+/// Σ n_l n_{l+1} over the layers of `sizes` (the multiply–adds of one matrix–vector product per
+/// layer).
+fn layer_products(sizes: &[usize]) -> usize {
+    sizes.windows(2).map(|w| w[0] * w[1]).sum()
 }
 
 /// The multiply–adds of a single-vector decoder operation on a network of `sizes` (bias
 /// additions and activations not counted): the work no implementation can skip.
 fn multiply_adds(name: &str, sizes: &[usize]) -> Option<usize> {
-    let all = layer_products(sizes, 0);
+    let all = layer_products(sizes);
     let last = sizes[sizes.len() - 2] * sizes[sizes.len() - 1];
     let n0 = sizes[0];
     Some(match name {
@@ -275,6 +275,13 @@ fn multiply_adds(name: &str, sizes: &[usize]) -> Option<usize> {
         }
         _ => return None,
     })
+}
+
+/// The multiply–adds of one training sample of `ae`: the forward pass, the weights' gradients
+/// and the data gradients, all but the input's.
+fn training_multiply_adds(ae: &Autoencoder) -> usize {
+    let (encoder, decoder) = (ae.encoder().sizes(), ae.decoder().sizes());
+    3 * (layer_products(encoder) + layer_products(decoder)) - encoder[0] * encoder[1]
 }
 
 /// The probed multiply–add rate, printed.
@@ -348,16 +355,13 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
     }
     println!("(torch jacobian: torch.func.jacrev; numpy: hand-written forward mode)");
 
-    // Per sample: forward, the weights' gradients and the data gradients, except the input's.
-    let (encoder, decoder_sizes) = ([49, 200, 200, LATENT], [LATENT, 200, 200, 49]);
-    let per_sample = 3 * (layer_products(&encoder, 0) + layer_products(&decoder_sizes, 0))
-        - encoder[0] * encoder[1];
     println!(
         "{:<22} {:>12} {:>12} {:>8} {:>14} {:>10}",
         "training (2000 samples)", "nn", "torch", "nn/torch", "nn 1000 epochs", "% of rate"
     );
     for (threads, pool) in pools {
         let mut trainer = new_trainer();
+        let per_sample = training_multiply_adds(trainer.model());
         let epoch_ns = pool.install(|| {
             timings_ns(7, 1, || {
                 trainer.run_epoch().expect("training stays finite");
