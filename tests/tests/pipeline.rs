@@ -182,6 +182,38 @@ fn a_tiny_scene_runs_end_to_end() {
             r.subspace_error
         );
     }
+    // One step from the reference: the first starts from rest like the trajectory, so the two
+    // agree there to rounding; later steps start from the reference, not from the method's own
+    // (drifting) states.
+    assert!(full.step_frame_errors.is_empty());
+    for r in &rows[1..] {
+        let (f, st) = (&r.frame_errors, &r.step_frame_errors);
+        assert_eq!(st.len(), f.len(), "{}", r.method);
+        assert!(
+            (st[0] - f[0]).abs() <= 1e-9 * f[0],
+            "{}: first step {} vs {}",
+            r.method,
+            st[0],
+            f[0]
+        );
+        assert!(
+            st[1..] != f[1..],
+            "{}: one-step errors repeat the trajectory's",
+            r.method
+        );
+        let mean = st.iter().sum::<f64>() / st.len() as f64;
+        assert!((mean - r.step_error).abs() <= 1e-12 * mean, "{}", r.method);
+    }
+    let csv = std::fs::read_to_string(out.join("errors.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "frame,time,pca,pca one-step,pca-cubature,pca-cubature one-step,neural,neural one-step,\
+         neural-cubature,neural-cubature one-step"
+    );
+    assert_eq!(lines.count(), rows[1].frame_errors.len());
+    let svg = std::fs::read_to_string(out.join("errors.svg")).unwrap();
+    assert_eq!(svg.matches("<polyline").count(), 8, "{svg}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     for key in [
@@ -195,6 +227,8 @@ fn a_tiny_scene_runs_end_to_end() {
         "max_rel_error",
         "max_vertex_error",
         "subspace_frame_errors",
+        "step_error",
+        "step_frame_errors",
     ] {
         assert!(report[1].get(key).is_some(), "report.json lacks {key}");
     }

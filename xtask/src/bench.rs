@@ -300,6 +300,7 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
                 name: r.report.method.clone(),
                 points: vec![point],
                 line: false,
+                ..Default::default()
             }),
         }
     }
@@ -313,6 +314,7 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
         name: "Pareto front".into(),
         points: front,
         line: true,
+        ..Default::default()
     });
     let p = Plot {
         title: format!("{scene}: error against cost, every method and size"),
@@ -346,12 +348,14 @@ mod tests {
                 max_vertex_error: err,
                 iterations: 1.0,
                 subspace_error: 0.0,
+                step_error: 0.0,
                 decode_ms: 0.0,
                 elastic_ms: 0.0,
                 vjp_ms: 0.0,
                 precond_ms: 0.0,
                 frame_errors: vec![err],
                 subspace_frame_errors: Vec::new(),
+                step_frame_errors: Vec::new(),
                 failure: None,
                 machine_gfma: None,
             },

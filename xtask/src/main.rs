@@ -314,7 +314,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 }
             }
             println!(
-                "\nreport: {} (also report.md, report.svg); frames: {}/<method>/series.pvd",
+                "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg); frames: {}/<method>/series.pvd",
                 out.join("report.json").display(),
                 out.display()
             );

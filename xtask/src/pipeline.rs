@@ -626,6 +626,7 @@ impl TrainedModel {
                 .map(|r| (r.epoch as f64, r.train_loss))
                 .collect(),
             line: true,
+            ..Default::default()
         }];
         if self.history.iter().any(|r| r.validation_loss.is_some()) {
             series.push(crate::plot::Series {
@@ -636,6 +637,7 @@ impl TrainedModel {
                     .filter_map(|r| Some((r.epoch as f64, r.validation_loss?)))
                     .collect(),
                 line: true,
+                ..Default::default()
             });
         }
         let plot = crate::plot::Plot {
@@ -688,6 +690,7 @@ impl FittedCubature {
                     .map(|&(n, e)| (n as f64, e))
                     .collect(),
                 line: true,
+                ..Default::default()
             },
             crate::plot::Series {
                 name: "held-out trajectory".into(),
@@ -697,6 +700,7 @@ impl FittedCubature {
                     .map(|&(n, e)| (n as f64, e))
                     .collect(),
                 line: true,
+                ..Default::default()
             },
         ];
         let plot = crate::plot::Plot {

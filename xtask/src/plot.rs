@@ -4,12 +4,17 @@
 use std::fmt::Write;
 
 /// One named series of (x, y) points.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Series {
     pub name: String,
     pub points: Vec<(f64, f64)>,
     /// Draw as a polyline (true) or as markers.
     pub line: bool,
+    /// A dashed polyline (with `line`).
+    pub dashed: bool,
+    /// Index into the palette; by default the series' position, so that a series can share its
+    /// colour with another (the same method measured two ways, say).
+    pub color: Option<usize>,
 }
 
 /// Axis scaling.
@@ -165,7 +170,12 @@ pub fn svg(plot: &Plot, series: &[Series]) -> String {
         escape(&plot.y_label)
     );
     for (i, (ser, p)) in series.iter().zip(&pts).enumerate() {
-        let color = COLORS[i % COLORS.len()];
+        let color = COLORS[ser.color.unwrap_or(i) % COLORS.len()];
+        let dash = if ser.dashed {
+            r#" stroke-dasharray="6,4""#
+        } else {
+            ""
+        };
         if ser.line && p.len() > 1 {
             let path: Vec<String> = p
                 .iter()
@@ -173,7 +183,7 @@ pub fn svg(plot: &Plot, series: &[Series]) -> String {
                 .collect();
             let _ = writeln!(
                 s,
-                r#"<polyline fill="none" stroke="{color}" stroke-width="1.5" points="{}"/>"#,
+                r#"<polyline fill="none" stroke="{color}" stroke-width="1.5"{dash} points="{}"/>"#,
                 path.join(" ")
             );
         } else {
@@ -188,10 +198,24 @@ pub fn svg(plot: &Plot, series: &[Series]) -> String {
         }
         let ly = TOP + 14.0 + 20.0 * i as f64;
         let lx = W - RIGHT + 12.0;
+        if ser.line {
+            let _ = writeln!(
+                s,
+                r#"<line x1="{lx}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{color}" stroke-width="2"{dash}/>"#,
+                ly - 4.0,
+                lx + 14.0,
+                ly - 4.0
+            );
+        } else {
+            let _ = writeln!(
+                s,
+                r#"<rect x="{lx}" y="{:.1}" width="12" height="12" fill="{color}"/>"#,
+                ly - 10.0
+            );
+        }
         let _ = writeln!(
             s,
-            r#"<rect x="{lx}" y="{:.1}" width="12" height="12" fill="{color}"/><text x="{:.1}" y="{ly:.1}">{}</text>"#,
-            ly - 10.0,
+            r#"<text x="{:.1}" y="{ly:.1}">{}</text>"#,
             lx + 18.0,
             escape(&ser.name)
         );
@@ -231,6 +255,7 @@ mod tests {
                     (5.0, 0.01),
                 ],
                 line: true,
+                ..Default::default()
             }],
         );
         assert!(s.starts_with("<svg") && s.ends_with("</svg>\n"));
@@ -238,5 +263,38 @@ mod tests {
         let poly = s.lines().find(|l| l.starts_with("<polyline")).unwrap();
         assert_eq!(poly.matches(',').count(), 3, "{poly}");
         assert!(s.contains(">1e-2<") && s.contains(">1e0<"));
+    }
+
+    #[test]
+    fn a_dashed_series_can_share_a_colour() {
+        let plot = Plot {
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            x_scale: Scale::Linear,
+            y_scale: Scale::Linear,
+        };
+        let line = |name: &str, dashed, color| Series {
+            name: name.into(),
+            points: vec![(0.0, 1.0), (1.0, 2.0)],
+            line: true,
+            dashed,
+            color,
+        };
+        let s = svg(
+            &plot,
+            &[
+                line("a", false, None),
+                line("b", false, None),
+                line("a, dashed", true, Some(0)),
+            ],
+        );
+        let polys: Vec<&str> = s.lines().filter(|l| l.starts_with("<polyline")).collect();
+        assert_eq!(polys.len(), 3);
+        assert!(polys[0].contains(COLORS[0]) && !polys[0].contains("dasharray"));
+        assert!(polys[1].contains(COLORS[1]));
+        assert!(polys[2].contains(COLORS[0]) && polys[2].contains("stroke-dasharray"));
+        // Legend entries of lines are line samples, dashed where the series is.
+        assert_eq!(s.matches("stroke-dasharray").count(), 2);
     }
 }

@@ -58,6 +58,11 @@ pub struct MethodReport {
     /// method's subspace (u_full projected and, for neural methods, encoded and decoded): the part
     /// of the error the subspace itself causes, whatever the dynamics do.
     pub subspace_error: f64,
+    /// Mean over frames of the relative error of one step started from the reference: the
+    /// method put in its subspace's representation of the reference at the two steps before
+    /// the frame ([`Runner::set_state`]), then stepped once. The error a step adds; where it is
+    /// small and `mean_rel_error` large, the trajectory drifts away one small step at a time.
+    pub step_error: f64,
     /// Where a reduced step's time goes, mean ms per step (zero for full space).
     pub decode_ms: f64,
     pub elastic_ms: f64,
@@ -69,6 +74,9 @@ pub struct MethodReport {
     /// The subspace error frame by frame, on the same frames (empty for full space): where it is
     /// small and `frame_errors` large, the dynamics, not the subspace, lose the trajectory.
     pub subspace_frame_errors: Vec<f64>,
+    /// The one-step error frame by frame (empty for full space; shorter when a step from the
+    /// reference failed).
+    pub step_frame_errors: Vec<f64>,
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
@@ -146,6 +154,15 @@ pub fn run(
     fem_core::io::write_atomic(
         &opts.out.join("report.svg"),
         error_plot(&pipeline.scene.name, &rows).as_bytes(),
+    )?;
+    let h = pipeline.scene.time.step;
+    fem_core::io::write_atomic(
+        &opts.out.join("errors.csv"),
+        errors_csv(&rows, h).as_bytes(),
+    )?;
+    fem_core::io::write_atomic(
+        &opts.out.join("errors.svg"),
+        frame_error_plot(&pipeline.scene.name, &rows, h).as_bytes(),
     )?;
     Ok(rows)
 }
@@ -243,8 +260,10 @@ pub fn measure(
             max_vertex_error: 0.0,
             iterations: mean_usize(&reference.iterations),
             subspace_error: 0.0,
+            step_error: 0.0,
             frame_errors: vec![0.0; reference.frames.len()],
             subspace_frame_errors: Vec::new(),
+            step_frame_errors: Vec::new(),
             decode_ms: 0.0,
             elastic_ms: 0.0,
             vjp_ms: 0.0,
@@ -331,6 +350,7 @@ pub fn measure(
     let per_step_ms = |seconds: f64| seconds * 1e3 / done as f64;
     let subspace_frame_errors =
         subspace_errors(pipeline, method, &model, &reference.frames, stage_progress)?;
+    let step_frame_errors = step_errors(pipeline, &sim_opts, &reference.frames, stage_progress)?;
     Ok(MethodReport {
         method: method.name().into(),
         dim,
@@ -346,12 +366,14 @@ pub fn measure(
         max_vertex_error: errors.max_vertex,
         iterations: mean_usize(&iterations),
         subspace_error: mean(&subspace_frame_errors),
+        step_error: mean(&step_frame_errors),
         decode_ms: per_step_ms(parts.decode),
         elastic_ms: per_step_ms(parts.elastic),
         vjp_ms: per_step_ms(parts.vjp),
         precond_ms: per_step_ms(parts.precond),
         frame_errors: errors.rel,
         subspace_frame_errors,
+        step_frame_errors,
         failure,
         machine_gfma,
     })
@@ -395,6 +417,49 @@ fn subspace_errors(
     Ok(errors.rel)
 }
 
+/// The relative error of one step of a reduced method from each frame's two predecessors in
+/// the reference (rest before the first step), frame by frame; empty for full space. A failed
+/// step ends the list there (logged): the trajectory's own failure is reported with its row.
+fn step_errors(
+    pipeline: &mut Pipeline<'_>,
+    opts: &SimulateOptions,
+    frames: &[Vec<f64>],
+    progress: Progress<'_>,
+) -> Result<Vec<f64>> {
+    if opts.method.is_full() {
+        return Ok(Vec::new());
+    }
+    let fit = pipeline.pca(progress)?;
+    let basis = &fit.basis;
+    let (model, time, solver) = setup(pipeline, opts)?;
+    let mut runner = Runner::new(pipeline, opts.method, model, time, solver, progress)?;
+    let k = basis.k();
+    let rest = vec![0.0; k];
+    // Coefficients of the reference at steps 0 (rest), 1, …: frame j is the state after step j + 1.
+    let mut states = Vec::with_capacity(frames.len() + 1);
+    states.push(rest.clone());
+    for f in frames {
+        let mut q = vec![0.0; k];
+        basis.project(f, &mut q);
+        states.push(q);
+    }
+    let mut errors = ErrorAccumulator::default();
+    for (j, f) in frames.iter().enumerate() {
+        let before = if j == 0 { &rest } else { &states[j - 1] };
+        runner.set_state(j, &states[j], before)?;
+        if let Err(e) = runner.step() {
+            tracing::warn!(
+                "{}: the step to frame {} from the reference failed: {e:#}",
+                opts.method.name(),
+                j + 1
+            );
+            break;
+        }
+        errors.add(runner.model(), &runner.displacement(), f);
+    }
+    Ok(errors.rel)
+}
+
 /// The mean of `v` (0 when empty: an empty float sum is −0, which the tables would print).
 fn mean(v: &[f64]) -> f64 {
     if v.is_empty() {
@@ -422,6 +487,7 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
             name: format!("{} (dim {}, {} el.)", r.method, r.dim, r.cubature_elements),
             points: vec![(r.ms_per_step, r.mean_rel_error)],
             line: false,
+            ..Default::default()
         })
         .collect();
     let plot = Plot {
@@ -429,6 +495,82 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
         x_label: "median ms per step".into(),
         y_label: "mean relative error".into(),
         x_scale: Scale::Log,
+        y_scale: Scale::Log,
+    };
+    crate::plot::svg(&plot, &series)
+}
+
+/// The reduced rows (full space has no error against itself).
+fn reduced_rows(rows: &[MethodReport]) -> impl Iterator<Item = &MethodReport> {
+    rows.iter().filter(|r| {
+        ![Method::Full, Method::FullLbfgs, Method::FullNewton]
+            .iter()
+            .any(|m| r.method == m.name())
+    })
+}
+
+/// The errors frame by frame as CSV: frame, time, then for every reduced method its trajectory
+/// error and its one-step error (empty cells past a failure).
+pub fn errors_csv(rows: &[MethodReport], h: f64) -> String {
+    let reduced: Vec<&MethodReport> = reduced_rows(rows).collect();
+    let mut s = String::from("frame,time");
+    for r in &reduced {
+        s.push_str(&format!(",{0},{0} one-step", r.method));
+    }
+    s.push('\n');
+    let frames = reduced
+        .iter()
+        .map(|r| r.frame_errors.len().max(r.step_frame_errors.len()))
+        .max()
+        .unwrap_or(0);
+    let cell = |v: &[f64], j: usize| v.get(j).map(|e| e.to_string()).unwrap_or_default();
+    for j in 0..frames {
+        s.push_str(&format!("{},{}", j + 1, (j + 1) as f64 * h));
+        for r in &reduced {
+            s.push_str(&format!(
+                ",{},{}",
+                cell(&r.frame_errors, j),
+                cell(&r.step_frame_errors, j)
+            ));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Relative error against time, one colour per reduced method: the trajectory's error (solid)
+/// and the error of one step from the reference (dashed). A solid line far above its dashed
+/// one is a trajectory that drifts away in small steps.
+pub fn frame_error_plot(scene: &str, rows: &[MethodReport], h: f64) -> String {
+    let over_time = |v: &[f64]| -> Vec<(f64, f64)> {
+        v.iter()
+            .enumerate()
+            .map(|(j, &e)| ((j + 1) as f64 * h, e))
+            .collect()
+    };
+    let mut series = Vec::new();
+    for (i, r) in reduced_rows(rows).enumerate() {
+        series.push(Series {
+            name: r.method.clone(),
+            points: over_time(&r.frame_errors),
+            line: true,
+            dashed: false,
+            color: Some(i),
+        });
+        series.push(Series {
+            // Listed under its method, in its colour, dashed: the name can stay short.
+            name: "one step".into(),
+            points: over_time(&r.step_frame_errors),
+            line: true,
+            dashed: true,
+            color: Some(i),
+        });
+    }
+    let plot = Plot {
+        title: format!("{scene}: error along the test trajectory"),
+        x_label: "time (s)".into(),
+        y_label: "relative error ‖u − u_full‖_M / ‖u_full‖_M".into(),
+        x_scale: Scale::Linear,
         y_scale: Scale::Log,
     };
     crate::plot::svg(&plot, &series)
@@ -442,11 +584,11 @@ pub(crate) fn gfma_cell(rate: Option<f64>) -> String {
 /// The report as a markdown table.
 pub fn markdown(rows: &[MethodReport]) -> String {
     let mut s = String::from(
-        "| method | dim | elements | ms/step | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| method | dim | elements | ms/step | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | one-step error | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
                 None => r.method.clone(),
@@ -461,6 +603,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             r.max_rel_error,
             r.max_vertex_error,
             r.subspace_error,
+            r.step_error,
             r.iterations,
             gfma_cell(r.machine_gfma),
         ));

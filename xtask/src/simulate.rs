@@ -269,6 +269,21 @@ impl Runner {
         })
     }
 
+    /// Puts a reduced runner at step `step` in the states its subspace gives to the PCA
+    /// coefficients `q_now` and `q_before` (of steps `step` and `step − 1`), nothing of its
+    /// earlier solves kept (see [`latent_sim::ReducedSimulator::set_state`]).
+    ///
+    /// # Errors
+    /// For a full-space runner, which has no coefficients.
+    pub fn set_state(&mut self, step: usize, q_now: &[f64], q_before: &[f64]) -> Result<()> {
+        match self {
+            Runner::Full(_) => anyhow::bail!("a full-space runner has no subspace state"),
+            Runner::Pca(s) => s.set_state(step, q_now, q_before)?,
+            Runner::Neural(s) => s.set_state(step, q_now, q_before)?,
+        }
+        Ok(())
+    }
+
     /// The full displacement of the current state (reconstructed for reduced methods).
     pub fn displacement(&self) -> Vec<f64> {
         match self {

@@ -33,6 +33,9 @@ pub enum ReducedError {
     /// The basis does not fit the model.
     #[error("basis has {rows} rows but the model has {free} free DOFs; rebuild the PCA stage")]
     BasisShape { rows: usize, free: usize },
+    /// A state vector given from outside does not have the subspace's length.
+    #[error("a state of {got} coefficients was given to a subspace of {expected}")]
+    StateShape { expected: usize, got: usize },
     /// A reduced matrix that must be positive definite is not.
     #[error("the reduced {what} matrix is not positive definite")]
     NotPositiveDefinite { what: &'static str },

@@ -359,6 +359,53 @@ impl<S: Subspace> ReducedSimulator<S> {
         Ok(sim)
     }
 
+    /// Puts the simulator at step `step` (time `step · h`) in the states its subspace gives to
+    /// the PCA coefficients `q_now` (at that step) and `q_before` (one step earlier): z =
+    /// encode(q), q = decode(z), the velocities their differences over h (zero when
+    /// quasi-static). Nothing of the previous solves is kept (warm-start history, L-BFGS pairs,
+    /// preconditioner), so the next [`step`](Self::step) depends on these two states only: what
+    /// a one-step error measures, started from a reference trajectory.
+    ///
+    /// # Errors
+    /// [`ReducedError::StateShape`] when a vector's length is not the subspace's k.
+    pub fn set_state(
+        &mut self,
+        step: usize,
+        q_now: &[f64],
+        q_before: &[f64],
+    ) -> Result<(), ReducedError> {
+        let (k, d) = (self.space.k, self.subspace.latent_dim());
+        for q in [q_now, q_before] {
+            if q.len() != k {
+                return Err(ReducedError::StateShape {
+                    expected: k,
+                    got: q.len(),
+                });
+            }
+        }
+        let (mut z_before, mut q_b) = (vec![0.0; d], vec![0.0; k]);
+        self.subspace.encode(q_before, &mut z_before);
+        self.subspace.decode(&z_before, &mut q_b);
+        self.subspace.encode(q_now, &mut self.state.z);
+        self.subspace.decode(&self.state.z, &mut self.state.q);
+        let h = self.time.step;
+        let rate = if self.time.quasi_static { 0.0 } else { 1.0 / h };
+        for ((v, now), before) in self.state.qdot.iter_mut().zip(&self.state.q).zip(&q_b) {
+            *v = (now - before) * rate;
+        }
+        for ((v, now), before) in self.state.zdot.iter_mut().zip(&self.state.z).zip(&z_before) {
+            *v = (now - before) * rate;
+        }
+        self.state.step = step;
+        self.state.time = step as f64 * h;
+        self.zddot_step = None;
+        self.zddot.fill(0.0);
+        self.lbfgs.reset();
+        self.precond_active = None;
+        self.precond_use.restart();
+        Ok(())
+    }
+
     /// Jᵀ (UᵀK₀U + UᵀMU/h² + Σ k_s/n U_vᵀU_v) J at z (d×d, column-major, into
     /// `work.hz`): every constant quadratic term of the step energy, including the springs
     /// active at time `t` (a stiff spring left out of the preconditioner stalls L-BFGS along its

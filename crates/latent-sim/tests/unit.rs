@@ -569,3 +569,94 @@ fn every_preconditioner_and_newton_follow_the_same_neural_trajectory() {
         }
     }
 }
+
+/// A simulator put at step j in the states of another one's steps j and j − 1 takes the same
+/// next step (the same minimisation from another warm start, so to the solver's tolerance), for
+/// a linear and a neural subspace, and refuses states of the wrong length. The neural subspace
+/// needs encode(decode(z)) = z for that: a skip autoencoder whose encoder is the truncation
+/// q ↦ q₁..d and whose decoder z ↦ (z, g(z)) adds a nonlinear g in the trailing coefficients.
+#[test]
+fn a_simulator_restarted_from_two_states_takes_the_same_next_step() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let mut ae = nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 5)
+        .unwrap()
+        .with_skip()
+        .unwrap();
+    {
+        let (_, decoder) = ae.networks_mut();
+        let last = decoder.num_layers() - 1;
+        let w = decoder.weights_mut(last);
+        let n_in = w.len() / k;
+        for (i, row) in w.chunks_exact_mut(n_in).enumerate().skip(3) {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = 0.3 * ((i * n_in + j) as f64).sin();
+            }
+        }
+    }
+    let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+    fn check<S: Subspace + Clone>(
+        m: &FullSpaceModel,
+        space: &ReducedSpace,
+        subspace: S,
+        what: &str,
+    ) {
+        let frames = 8;
+        let mut run = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            subspace.clone(),
+            time(frames),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap();
+        let mut states = vec![run.state.q.clone()];
+        for _ in 0..frames {
+            run.step().unwrap();
+            states.push(run.state.q.clone());
+        }
+        let mut restarted = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            subspace,
+            time(frames),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap();
+        // Steps out of order: nothing of the previous restart may carry over.
+        for j in [5, 1, 7, 3] {
+            restarted.set_state(j, &states[j], &states[j - 1]).unwrap();
+            assert_eq!(restarted.state.step, j);
+            restarted.step().unwrap();
+            let size = states[j + 1].iter().map(|a| a * a).sum::<f64>().sqrt();
+            let diff = states[j + 1]
+                .iter()
+                .zip(&restarted.state.q)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            assert!(
+                diff <= 1e-6 * size,
+                "{what}, step {}: {:.2e} of {size:.2e}",
+                j + 1,
+                diff
+            );
+        }
+        let err = restarted
+            .set_state(2, &states[2][..5], &states[1])
+            .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                latent_sim::ReducedError::StateShape {
+                    expected: 6,
+                    got: 5
+                }
+            ),
+            "{err}"
+        );
+    }
+    check(&m, &space, LinearSubspace::new(k), "linear");
+    check(&m, &space, NeuralSubspace::new(ae), "neural");
+}
