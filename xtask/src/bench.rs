@@ -257,12 +257,12 @@ fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
 /// The sweep as a markdown table (Pareto-optimal variants marked with ★).
 pub fn markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(
-        "| variant | dim | elements | ms/step (median) | spread | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | subspace error | iterations | offline s | machine G FMA/s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
+        "| variant | dim | elements | ms/step (median) | spread | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | subspace error | one-step error | iterations | offline s | machine G FMA/s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
     );
     for r in rows {
         let m = &r.report;
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
             match &m.failure {
                 Some(f) => format!("{} (failed at {f})", r.variant),
                 None => r.variant.clone(),
@@ -278,6 +278,7 @@ pub fn markdown(rows: &[BenchRow]) -> String {
             m.mean_rel_error,
             m.max_rel_error,
             m.subspace_error,
+            m.step_error,
             m.iterations,
             r.offline_seconds,
             crate::run::gfma_cell(m.machine_gfma),
