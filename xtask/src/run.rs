@@ -510,7 +510,9 @@ fn reduced_rows(rows: &[MethodReport]) -> impl Iterator<Item = &MethodReport> {
 }
 
 /// The errors frame by frame as CSV: frame, time, then for every reduced method its trajectory
-/// error and its one-step error (empty cells past a failure).
+/// error and its one-step error (empty cells past a failure). Frames where the reference is at
+/// rest have no relative error and are left out of both lists, so on a scene that starts at
+/// rest without gravity the rows count the frames that moved.
 pub fn errors_csv(rows: &[MethodReport], h: f64) -> String {
     let reduced: Vec<&MethodReport> = reduced_rows(rows).collect();
     let mut s = String::from("frame,time");
