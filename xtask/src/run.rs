@@ -171,11 +171,7 @@ pub fn run(
 pub fn set_speedups(rows: &mut [MethodReport]) {
     let fastest_full = rows
         .iter()
-        .filter(|r| {
-            [Method::Full, Method::FullLbfgs, Method::FullNewton]
-                .iter()
-                .any(|m| r.method == m.name())
-        })
+        .filter(|r| is_full_row(r))
         .map(|r| r.ms_per_step)
         .fold(f64::INFINITY, f64::min);
     if fastest_full.is_finite() {
@@ -500,13 +496,16 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     crate::plot::svg(&plot, &series)
 }
 
+/// Whether `r` is a full-space row (any solver).
+fn is_full_row(r: &MethodReport) -> bool {
+    [Method::Full, Method::FullLbfgs, Method::FullNewton]
+        .iter()
+        .any(|m| r.method == m.name())
+}
+
 /// The reduced rows (full space has no error against itself).
 fn reduced_rows(rows: &[MethodReport]) -> impl Iterator<Item = &MethodReport> {
-    rows.iter().filter(|r| {
-        ![Method::Full, Method::FullLbfgs, Method::FullNewton]
-            .iter()
-            .any(|m| r.method == m.name())
-    })
+    rows.iter().filter(|r| !is_full_row(r))
 }
 
 /// The errors frame by frame as CSV: frame, time, then for every reduced method its trajectory
