@@ -239,3 +239,27 @@ fn a_tiny_scene_runs_end_to_end() {
         assert_eq!(pvd.matches("<DataSet").count(), 4, "{m}: {pvd}");
     }
 }
+
+/// `[reduced] onset_directions` reaches the neural methods: with gravity, their dimension grows
+/// by the directions kept (here both: 2 latent coordinates of 6 coefficients leave room), and
+/// the trajectory stays finite.
+#[test]
+fn onset_directions_reach_the_neural_methods() {
+    let text = format!(
+        "{TINY}[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[reduced]\nonset_directions = 2\n"
+    );
+    let s = scene(&text);
+    let out = scratch_dir("pipeline-onset");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: vec![Method::Neural, Method::NeuralCubature],
+        trajectory: 0,
+    };
+    let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    for r in &rows {
+        assert_eq!(r.dim, 4, "{r:?}");
+        assert!(r.failure.is_none() && r.mean_rel_error.is_finite(), "{r:?}");
+    }
+}

@@ -77,6 +77,11 @@ pub struct ReducedSolverConfig {
     /// L-BFGS's preconditioner: `current-state` (the Gauss–Newton matrix at the step's start,
     /// kept for a few steps), `rest` (the stiffness at rest, AutoDef's) or `auto` (the first).
     pub preconditioner: latent_sim::Preconditioning,
+    /// Linear gravity-onset directions beside the autoencoder's latent coordinates
+    /// ([`latent_sim::Augmented`]): the first m steps of the reduced linear response to gravity
+    /// from rest, minus what the decoder spans at rest. 0 (the default) adds none; the neural
+    /// methods' dimension grows by the directions kept.
+    pub onset_directions: usize,
 }
 
 impl Default for ReducedSolverConfig {
@@ -85,6 +90,7 @@ impl Default for ReducedSolverConfig {
             method: SolverMethod::Lbfgs,
             tolerance: 1e-4,
             preconditioner: latent_sim::Preconditioning::default(),
+            onset_directions: 0,
         }
     }
 }
@@ -98,8 +104,20 @@ impl ReducedSolverConfig {
                 reason: format!("must be in (0, 1), got {t}"),
             });
         }
+        if self.onset_directions > MAX_ONSET_DIRECTIONS {
+            errors.push(FemError::InvalidConfig {
+                field: "reduced.onset_directions".into(),
+                reason: format!(
+                    "at most {MAX_ONSET_DIRECTIONS} (each costs a latent coordinate in every step), got {}",
+                    self.onset_directions
+                ),
+            });
+        }
     }
 }
+
+/// The most gravity-onset directions a scene may ask for.
+const MAX_ONSET_DIRECTIONS: usize = 32;
 
 impl Scene {
     /// Reads and checks a scene file.
@@ -542,6 +560,18 @@ mod tests {
         assert!(err.contains("bad.toml"), "{err}");
         assert!(err.contains("material.poisson_ratio"), "{err}");
         assert!(err.contains("time.step"), "{err}");
+    }
+
+    #[test]
+    fn onset_directions_default_to_none_and_are_bounded() {
+        assert_eq!(Scene::builtin().reduced.onset_directions, 0);
+        let with = |m: usize| format!("{DEFAULT_SCENE}\n[reduced]\nonset_directions = {m}\n");
+        let s = Scene::from_str(&with(2), Path::new("."), "ok.toml").unwrap();
+        assert_eq!(s.reduced.onset_directions, 2);
+        let err = Scene::from_str(&with(33), Path::new("."), "bad.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("reduced.onset_directions"), "{err}");
     }
 
     #[test]

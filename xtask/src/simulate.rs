@@ -9,7 +9,8 @@ use fem_core::integrator::{FullSpaceModel, Simulator, StepReport, TimeConfig};
 use fem_core::io::write_atomic;
 use fem_core::optim::{SolverConfig, SolverMethod};
 use latent_sim::{
-    LinearSubspace, NeuralSubspace, ReducedSimulator, ReducedSpace, ReducedStepReport, Subspace,
+    Augmented, LinearSubspace, NeuralSubspace, ReducedSimulator, ReducedSpace, ReducedStepReport,
+    Subspace,
 };
 
 use crate::output::FrameWriter;
@@ -134,7 +135,7 @@ pub struct SimulationResult {
 pub enum Runner {
     Full(Simulator),
     Pca(ReducedSimulator<LinearSubspace>),
-    Neural(ReducedSimulator<NeuralSubspace>),
+    Neural(ReducedSimulator<Augmented<NeuralSubspace>>),
 }
 
 impl std::fmt::Debug for Runner {
@@ -227,13 +228,13 @@ impl Runner {
                     None
                 };
                 let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
-                let mut sim = ReducedSimulator::new(
-                    model,
-                    space,
+                let subspace = Augmented::with_gravity_onset(
                     NeuralSubspace::new(trained.model),
-                    time,
-                    solver,
+                    &space,
+                    &time,
+                    pipeline.scene.reduced.onset_directions,
                 )?;
+                let mut sim = ReducedSimulator::new(model, space, subspace, time, solver)?;
                 sim.preconditioning = pipeline.scene.reduced.preconditioner;
                 Runner::Neural(sim)
             }

@@ -13,11 +13,13 @@
 //! displacement u = Uq is formed only when a frame is written out.
 
 mod neural;
+mod onset;
 mod reduced;
 mod simulator;
 mod subspace;
 
 pub use neural::NeuralSubspace;
+pub use onset::Augmented;
 pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
 pub use simulator::{
     PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,

@@ -78,7 +78,7 @@ struct Timers {
 /// Dense Cholesky factor L (lower, column-major) of a symmetric d×d matrix, reused between
 /// factorisations so that refactorising allocates nothing. Also the preconditioner z = P⁻¹ r.
 #[derive(Debug, Default)]
-struct DenseFactor {
+pub(crate) struct DenseFactor {
     n: usize,
     l: Vec<f64>,
 }
@@ -120,7 +120,12 @@ impl DenseFactor {
     }
 
     /// Factorises, adding a growing diagonal shift when `a` is only semidefinite.
-    fn factor(&mut self, a: &[f64], d: usize, what: &'static str) -> Result<(), ReducedError> {
+    pub(crate) fn factor(
+        &mut self,
+        a: &[f64],
+        d: usize,
+        what: &'static str,
+    ) -> Result<(), ReducedError> {
         let mean = (0..d).map(|i| a[i * d + i].abs()).sum::<f64>() / d.max(1) as f64;
         let mut shift = 0.0;
         for _ in 0..12 {
@@ -137,7 +142,7 @@ impl DenseFactor {
     }
 
     /// x ← (LLᵀ)⁻¹ x.
-    fn solve_in_place(&self, x: &mut [f64]) {
+    pub(crate) fn solve_in_place(&self, x: &mut [f64]) {
         let (n, l) = (self.n, &self.l);
         for j in 0..n {
             x[j] /= l[j * n + j];

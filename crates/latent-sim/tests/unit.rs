@@ -8,8 +8,8 @@ use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use fem_core::optim::{SolverConfig, SolverMethod};
 use latent_sim::{
-    ElasticPath, LinearSubspace, NeuralSubspace, Preconditioning, ReducedSimulator, ReducedSpace,
-    Subspace,
+    Augmented, ElasticPath, LinearSubspace, NeuralSubspace, Preconditioning, ReducedSimulator,
+    ReducedSpace, Subspace,
 };
 
 /// A 1 m bar of 4 × 1 × 1 cells.
@@ -659,4 +659,178 @@ fn a_simulator_restarted_from_two_states_takes_the_same_next_step() {
     }
     check(&m, &space, LinearSubspace::new(k), "linear");
     check(&m, &space, NeuralSubspace::new(ae), "neural");
+}
+
+/// A skip autoencoder k → d whose output layers are zero: exactly the truncation to the leading
+/// d coefficients, z = q₁..d, q = (z, 0).
+fn truncation(k: usize, d: usize) -> NeuralSubspace {
+    NeuralSubspace::new(
+        nn::Autoencoder::with_architecture(k, d, &[8], nn::Activation::Elu, None, 3)
+            .unwrap()
+            .with_skip()
+            .unwrap(),
+    )
+}
+
+fn gravity_only(g: f64) -> FullSpaceModel {
+    let mesh = bar();
+    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
+        .select(&mesh, "pin")
+        .unwrap();
+    FullSpaceModel::new(mesh, &material(), pinned, Vec3::new(0.0, g, 0.0), vec![]).unwrap()
+}
+
+/// In the linear regime (a tiny gravity) the first m steps from rest lie in the span of the m
+/// onset directions, so a one-coordinate subspace with them follows the k-coefficient trajectory
+/// for m steps, where the subspace alone is far off.
+#[test]
+fn onset_directions_reproduce_the_first_steps_of_a_release_under_gravity() {
+    let m = gravity_only(-1e-3);
+    let k = 6;
+    let space = ReducedSpace::new(&m, &small_basis(&m, k), k, None).unwrap();
+    let steps = 3;
+    let mut reference = ReducedSimulator::new(
+        m.clone(),
+        space.clone(),
+        LinearSubspace::new(k),
+        time(steps),
+        solver(SolverMethod::Lbfgs),
+    )
+    .unwrap();
+    let run = |onset: usize| {
+        let sub =
+            Augmented::with_gravity_onset(truncation(k, 1), &space, &time(steps), onset).unwrap();
+        assert_eq!(
+            sub.latent_dim(),
+            1 + onset,
+            "all {onset} directions are new"
+        );
+        ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            sub,
+            time(steps),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap()
+    };
+    let (mut with, mut without) = (run(steps), run(0));
+    for step in 1..=steps {
+        reference.step().unwrap();
+        with.step().unwrap();
+        without.step().unwrap();
+        let q = &reference.state.q;
+        let size = q.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let off = |p: &[f64]| {
+            q.iter()
+                .zip(p)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+                / size
+        };
+        let (e_with, e_without) = (off(&with.state.q), off(&without.state.q));
+        assert!(
+            e_with <= 1e-6,
+            "step {step}: {e_with:.2e} with the directions"
+        );
+        assert!(e_without >= 1e-2, "step {step}: {e_without:.2e} without");
+    }
+}
+
+/// The directions are A-orthogonal (A = UᵀMU/h² + UᵀK₀U) to the tangent at rest and to each
+/// other, J = [J_f | V] and q is linear in w; none are added without gravity, for m = 0, or
+/// where the subspace already spans every coefficient; the reduced gradient through them
+/// matches finite differences, with and without cubature.
+#[test]
+fn onset_directions_are_new_and_the_gradient_through_them_is_exact() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let h = time(1).step;
+    let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+    let a: Vec<f64> = space
+        .mass
+        .iter()
+        .zip(&space.rest_stiffness)
+        .map(|(m, k0)| m / (h * h) + k0)
+        .collect();
+    let a_dot = |x: &[f64], y: &[f64]| -> f64 {
+        (0..k)
+            .map(|i| (0..k).map(|j| x[i] * a[j * k + i] * y[j]).sum::<f64>())
+            .sum()
+    };
+    let ae =
+        nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    let mut sub =
+        Augmented::with_gravity_onset(NeuralSubspace::new(ae.clone()), &space, &time(1), 3)
+            .unwrap();
+    assert_eq!(sub.directions(), 3);
+    let d = sub.latent_dim();
+    let mut z0 = vec![0.0; d];
+    sub.encode(&vec![0.0; k], &mut z0);
+    assert!(
+        z0[2..].iter().all(|w| w.abs() <= 1e-12),
+        "rest is at w = 0: {z0:?}"
+    );
+    let mut jac = vec![0.0; k * d];
+    sub.jacobian(&z0, &mut jac);
+    let cols: Vec<&[f64]> = jac.chunks_exact(k).collect();
+    for i in 2..d {
+        for (j, c) in cols.iter().enumerate().take(i) {
+            let (aij, aii, ajj) = (a_dot(cols[i], c), a_dot(cols[i], cols[i]), a_dot(c, c));
+            assert!(
+                aij.abs() <= 1e-9 * (aii * ajj).sqrt(),
+                "columns {i}, {j}: {aij:.3e}"
+            );
+        }
+    }
+    // q is linear in w, along V.
+    let (mut q1, mut q2) = (vec![0.0; k], vec![0.0; k]);
+    let mut z = z0.clone();
+    z[0] += 0.1;
+    sub.decode(&z, &mut q1);
+    z[3] += 0.5;
+    sub.decode(&z, &mut q2);
+    for i in 0..k {
+        assert!((q2[i] - q1[i] - 0.5 * cols[3][i]).abs() <= 1e-12 * (1.0 + q1[i].abs()));
+    }
+    for cubature in [
+        None,
+        Some((vec![1usize, 4, 9, 15], vec![1.5, 0.5, 2.0, 1.0])),
+    ] {
+        let space_c = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+        let sub =
+            Augmented::with_gravity_onset(NeuralSubspace::new(ae.clone()), &space_c, &time(10), 3)
+                .unwrap();
+        let mut sim = ReducedSimulator::new(
+            m.clone(),
+            space_c,
+            sub,
+            time(10),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap();
+        for _ in 0..2 {
+            sim.step().unwrap();
+        }
+        let z: Vec<f64> = sim
+            .state
+            .z
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
+            .collect();
+        let what = format!("augmented neural, cubature {}", cubature.is_some());
+        assert_gradient_matches_fd(&mut sim, &z, &what);
+    }
+    // Nothing to add: no gravity, m = 0, or a subspace that spans all k coefficients at rest.
+    let still = gravity_only(0.0);
+    let space0 = ReducedSpace::new(&still, &small_basis(&still, k), k, None).unwrap();
+    let none = Augmented::with_gravity_onset(truncation(k, 2), &space0, &time(1), 3).unwrap();
+    assert_eq!(none.directions(), 0);
+    let none = Augmented::with_gravity_onset(truncation(k, 2), &space, &time(1), 0).unwrap();
+    assert_eq!(none.directions(), 0);
+    let none = Augmented::with_gravity_onset(LinearSubspace::new(k), &space, &time(1), 3).unwrap();
+    assert_eq!(none.directions(), 0);
 }
