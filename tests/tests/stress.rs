@@ -135,6 +135,28 @@ fn long_free_runs_never_gain_energy() {
     }
 }
 
+/// The free run's energy check does not depend on the scene's solver tolerance: with the
+/// reduced solves stopped at a loose 5e-2, their energies alone would rise and fall from step to
+/// step by more than the check's slack; the free run solves to at most 1e-6 instead.
+#[test]
+fn a_loose_reduced_tolerance_does_not_fake_an_energy_gain() {
+    let s = scene(&format!("{TINY}[reduced]\ntolerance = 5.0e-2\n"));
+    let cache = scratch_dir("stress-free-run-loose");
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let results = stress(
+        &mut p,
+        &[Method::PcaCubature, Method::NeuralCubature],
+        &[Condition::FreeRun(2_000)],
+        0,
+        &no_progress,
+        &mut |_| {},
+    )
+    .unwrap();
+    for r in &results {
+        assert!(r.outcome.is_ok(), "{}: {:?}", r.method, r.outcome);
+    }
+}
+
 /// A 20 cm cube on the floor: a spring pulls its top face down through the pinned bottom face
 /// (every element inverts), then lets go.
 fn inversion_scene(model: &str) -> Scene {
