@@ -11,7 +11,8 @@
 
 use fem_core::integrator::TimeConfig;
 
-use crate::simulator::DenseFactor;
+use crate::reduced::{axpy, dot};
+use crate::simulator::{DenseFactor, sandwich};
 use crate::{ReducedError, ReducedSpace, Subspace};
 
 /// An iterate is kept when at least this fraction of its A-norm is new.
@@ -70,11 +71,7 @@ impl<S: Subspace> Augmented<S> {
             .zip(&space.rest_stiffness)
             .map(|(m, k0)| m * inv_h2 + k0)
             .collect();
-        let apply_a = |x: &[f64], out: &mut [f64]| {
-            for (i, o) in out.iter_mut().enumerate() {
-                *o = (0..k).map(|j| a[j * k + i] * x[j]).sum();
-            }
-        };
+        let apply_a = |x: &[f64], out: &mut [f64]| mat_vec(&a, x, out);
         let mut factor = DenseFactor::default();
         factor.factor(&a, k, "onset step")?;
         // The tangent at rest, J₀ = J(encode(0)), and its reduced matrix J₀ᵀAJ₀.
@@ -82,16 +79,8 @@ impl<S: Subspace> Augmented<S> {
         inner.encode(&vec![0.0; k], &mut z0);
         let mut j0 = vec![0.0; k * d];
         inner.jacobian(&z0, &mut j0);
-        let mut aj0 = vec![0.0; k * d];
-        for (col, out) in j0.chunks_exact(k).zip(aj0.chunks_exact_mut(k)) {
-            apply_a(col, out);
-        }
-        let g0: Vec<f64> = (0..d * d)
-            .map(|ij| {
-                let (i, j) = (ij % d, ij / d);
-                dot(&j0[i * k..(i + 1) * k], &aj0[j * k..(j + 1) * k])
-            })
-            .collect();
+        let (mut aj0, mut g0) = (vec![0.0; k * d], vec![0.0; d * d]);
+        sandwich(&a, &j0, k, d, &mut aj0, &mut g0);
         let mut tangent = DenseFactor::default();
         tangent.factor(&g0, d, "onset tangent")?;
         // The directions get the tangent's mean column length, so that a unit of w moves q about
@@ -109,13 +98,13 @@ impl<S: Subspace> Augmented<S> {
             // The next iterate of the linear response.
             let two_now_minus_before: Vec<f64> =
                 now.iter().zip(&before).map(|(n, b)| 2.0 * n - b).collect();
-            for (i, o) in mq.iter_mut().enumerate() {
-                *o = (0..k)
-                    .map(|j| space.mass[j * k + i] * two_now_minus_before[j])
-                    .sum::<f64>()
-                    * inv_h2;
-            }
-            let mut next: Vec<f64> = space.gravity.iter().zip(&mq).map(|(g, v)| g + v).collect();
+            mat_vec(&space.mass, &two_now_minus_before, &mut mq);
+            let mut next: Vec<f64> = space
+                .gravity
+                .iter()
+                .zip(&mq)
+                .map(|(g, v)| g + inv_h2 * v)
+                .collect();
             factor.solve_in_place(&mut next);
             before = std::mem::replace(&mut now, next);
             // Without its A-projection on the tangent and on the directions kept so far.
@@ -164,12 +153,13 @@ impl<S: Subspace> Augmented<S> {
     }
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-fn axpy(a: f64, x: &[f64], y: &mut [f64]) {
-    y.iter_mut().zip(x).for_each(|(y, x)| *y += a * x);
+/// out = M x for a square M, column-major (by columns, as the simulator forms (UᵀMU) x).
+fn mat_vec(m: &[f64], x: &[f64], out: &mut [f64]) {
+    let k = out.len();
+    out.fill(0.0);
+    for (col, &xj) in m.chunks_exact(k).zip(x) {
+        axpy(xj, col, out);
+    }
 }
 
 impl<S: Subspace> Subspace for Augmented<S> {

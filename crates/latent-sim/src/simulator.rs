@@ -711,7 +711,7 @@ impl<S: Subspace> ReducedSimulator<S> {
 }
 
 /// out = Bᵀ A B for a symmetric A (k×k) and B (k×d), column-major; `ab` is k×d scratch.
-fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize, ab: &mut [f64], out: &mut [f64]) {
+pub(crate) fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize, ab: &mut [f64], out: &mut [f64]) {
     Arch::new().dispatch(Sandwich {
         a: &a[..k * k],
         b: &b[..k * d],
