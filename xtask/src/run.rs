@@ -277,6 +277,8 @@ pub fn measure(
     let mut cubature_elements = 0;
     let mut dim = 0;
     let mut failure = None;
+    // The last run's runner measures the one-step errors afterwards (set_state resets it).
+    let mut last_runner = None;
     for repeat in 0..m.repeats.max(1) {
         let (model, time, solver) = setup(pipeline, &sim_opts)?;
         let mut runner = Runner::new(pipeline, method, model, time, solver, stage_progress)?;
@@ -333,6 +335,7 @@ pub fn measure(
             Runner::Neural(s) => s.space.elements.len(),
         };
         dim = runner.dim();
+        last_runner = Some(runner);
         if failure.is_some() {
             break;
         }
@@ -346,7 +349,12 @@ pub fn measure(
     let per_step_ms = |seconds: f64| seconds * 1e3 / done as f64;
     let subspace_frame_errors =
         subspace_errors(pipeline, method, &model, &reference.frames, stage_progress)?;
-    let step_frame_errors = step_errors(pipeline, &sim_opts, &reference.frames, stage_progress)?;
+    let step_frame_errors = match last_runner.as_mut() {
+        Some(runner) if !method.is_full() => {
+            step_errors(pipeline, method, runner, &reference.frames, stage_progress)?
+        }
+        _ => Vec::new(),
+    };
     Ok(MethodReport {
         method: method.name().into(),
         dim,
@@ -413,22 +421,19 @@ fn subspace_errors(
     Ok(errors.rel)
 }
 
-/// The relative error of one step of a reduced method from each frame's two predecessors in
-/// the reference (rest before the first step), frame by frame; empty for full space. A failed
-/// step ends the list there (logged): the trajectory's own failure is reported with its row.
+/// The relative error of one step of reduced `runner` from each frame's two predecessors in
+/// the reference (rest before the first step), frame by frame; its own trajectory's state is
+/// replaced frame by frame. A failed step ends the list there (logged): the trajectory's own
+/// failure is reported with its row.
 fn step_errors(
     pipeline: &mut Pipeline<'_>,
-    opts: &SimulateOptions,
+    method: Method,
+    runner: &mut Runner,
     frames: &[Vec<f64>],
     progress: Progress<'_>,
 ) -> Result<Vec<f64>> {
-    if opts.method.is_full() {
-        return Ok(Vec::new());
-    }
     let fit = pipeline.pca(progress)?;
     let basis = &fit.basis;
-    let (model, time, solver) = setup(pipeline, opts)?;
-    let mut runner = Runner::new(pipeline, opts.method, model, time, solver, progress)?;
     let k = basis.k();
     let rest = vec![0.0; k];
     // Coefficients of the reference at steps 0 (rest), 1, …: frame j is the state after step j + 1.
@@ -446,7 +451,7 @@ fn step_errors(
         if let Err(e) = runner.step() {
             tracing::warn!(
                 "{}: the step to frame {} from the reference failed: {e:#}",
-                opts.method.name(),
+                method.name(),
                 j + 1
             );
             break;
