@@ -435,10 +435,9 @@ fn step_errors(
     let fit = pipeline.pca(progress)?;
     let basis = &fit.basis;
     let k = basis.k();
-    let rest = vec![0.0; k];
     // Coefficients of the reference at steps 0 (rest), 1, …: frame j is the state after step j + 1.
     let mut states = Vec::with_capacity(frames.len() + 1);
-    states.push(rest.clone());
+    states.push(vec![0.0; k]);
     for f in frames {
         let mut q = vec![0.0; k];
         basis.project(f, &mut q);
@@ -446,8 +445,8 @@ fn step_errors(
     }
     let mut errors = ErrorAccumulator::default();
     for (j, f) in frames.iter().enumerate() {
-        let before = if j == 0 { &rest } else { &states[j - 1] };
-        runner.set_state(j, &states[j], before)?;
+        // Before the first step the body was at rest too.
+        runner.set_state(j, &states[j], &states[j.saturating_sub(1)])?;
         if let Err(e) = runner.step() {
             tracing::warn!(
                 "{}: the step to frame {} from the reference failed: {e:#}",
