@@ -68,6 +68,16 @@ impl Decoder {
         }
     }
 
+    /// The first hidden layer's units with σ(a) ≠ a at z (ELU's a < 0).
+    fn nonlinear_units(&self) -> usize {
+        let (w, b) = (self.mlp.weights(0), self.mlp.bias(0));
+        w.chunks_exact(LATENT)
+            .zip(b)
+            .map(|(row, b)| row.iter().zip(&self.z).map(|(w, z)| w * z).sum::<f64>() + b)
+            .filter(|&a| Activation::Elu.value(a) != a)
+            .count()
+    }
+
     /// The operations, by name, as closures over their own output buffers and workspace.
     fn operations(&self) -> Vec<Operation<'_>> {
         let mlp = &self.mlp;
@@ -255,8 +265,9 @@ fn layer_products(sizes: &[usize]) -> usize {
 }
 
 /// The multiply–adds of a single-vector decoder operation on a network of `sizes` (bias
-/// additions and activations not counted): the work no implementation can skip.
-fn multiply_adds(name: &str, sizes: &[usize]) -> Option<usize> {
+/// additions and activations not counted), of which `nonlinear` first-layer units are not
+/// linear at z (ELU's a < 0).
+fn multiply_adds(name: &str, sizes: &[usize], nonlinear: usize) -> Option<usize> {
     let all = layer_products(sizes);
     let last = sizes[sizes.len() - 2] * sizes[sizes.len() - 1];
     let n0 = sizes[0];
@@ -268,10 +279,17 @@ fn multiply_adds(name: &str, sizes: &[usize]) -> Option<usize> {
         // Value and tangent side by side below the output layer, the tangent alone through it.
         "jvp" => 2 * (all - last) + last,
         // Forward mode with n₀ tangents: the first layer's tangents are its weights (only the
-        // value is a product), the hidden layers carry 1 + n₀ columns, the output layer n₀.
+        // value is a product), the hidden layers carry 1 + n₀ columns, the output layer n₀;
+        // the second layer's product over the nonlinear units only, plus W₂W₁z (as `Mlp`
+        // computes it when fewer than 3/4 of the units are nonlinear).
         "jacobian" => {
             let first = sizes[0] * sizes[1];
-            first + (all - first - last) * (1 + n0) + last * n0
+            let second = if 4 * nonlinear < 3 * sizes[1] {
+                sizes[2] * (nonlinear * (1 + n0) + n0)
+            } else {
+                sizes[2] * sizes[1] * (1 + n0)
+            };
+            first + second + (all - first - sizes[1] * sizes[2] - last) * (1 + n0) + last * n0
         }
         _ => return None,
     })
@@ -333,6 +351,8 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
             "decoder_jacobian_ns_numpy",
         ),
     ];
+    let nonlinear = decoder.nonlinear_units();
+    println!("(first hidden layer at z: {nonlinear} of 200 units nonlinear)");
     for (name, mut op) in decoder.operations() {
         let (median, best) = timings_ns(501, 20, &mut op);
         let peer_pair = |key: &str| (peer(key), peer(&format!("{key}_best")));
@@ -342,7 +362,7 @@ fn summary(decoder: &Decoder, pools: &[(usize, ThreadPool)]) {
             .map_or(((None, None), (None, None)), |(_, t, n)| {
                 (peer_pair(t), peer_pair(n))
             });
-        let share = multiply_adds(name, decoder.mlp.sizes()).map_or_else(
+        let share = multiply_adds(name, decoder.mlp.sizes(), nonlinear).map_or_else(
             || "—".into(),
             |n| format!("{n} ({:.0} %)", 100.0 * n as f64 / (best * 1e-9) / peak),
         );

@@ -503,28 +503,83 @@ pub(crate) fn pack_rows(dst: &mut [f64], w: &[f64], m: usize, n: usize, lanes: u
     }
 }
 
-/// Columns `col0..col0 + C` of one panel (V vectors of rows, from `row0`) of Y = W X, from
-/// columns `x0 + col0..` of X; X and Y row-major with leading dimensions `ldx` and `ldy`.
+/// The operands of Y[:, y0..y0 + c] = W X[:, x0..x0 + c] (+ P) for [`mat_mat_packed`].
+pub(crate) struct Product<'a> {
+    /// Y, row-major with leading dimension `ldy` and m̃ = [`padded_rows`] rows (the padding
+    /// rows get 0, or P's).
+    pub y: &'a mut [f64],
+    pub ldy: usize,
+    /// The first column of Y written.
+    pub y0: usize,
+    /// W (m × n), packed by [`pack_rows`] with this machine's [`lanes`].
+    pub packed: &'a [f64],
+    pub m: usize,
+    pub n: usize,
+    /// X (n rows, or one per entry of `support`, × ≥ x0 + c), row-major with leading dimension
+    /// `ldx`.
+    pub x: &'a [f64],
+    pub ldx: usize,
+    /// The first column of X read.
+    pub x0: usize,
+    /// The number of columns.
+    pub c: usize,
+    /// The columns of W that X's rows multiply, in order (None: all n): Y = W[:, support] X,
+    /// at c multiply–adds per row of Y and row of X.
+    pub support: Option<&'a [u32]>,
+    /// P, a matrix with Y's layout added to the product (None: nothing).
+    pub plus: Option<&'a [f64]>,
+}
+
+/// The shape of one panel's product, shared by its column groups.
+#[derive(Clone, Copy)]
+struct Block<'a> {
+    ldy: usize,
+    y0: usize,
+    row0: usize,
+    x: &'a [f64],
+    ldx: usize,
+    x0: usize,
+    support: Option<&'a [u32]>,
+    plus: Option<&'a [f64]>,
+}
+
+/// Columns `col0..col0 + C` of one panel (V vectors of rows, from `row0`) of Y = W X.
 #[inline(always)]
 fn panel_block<S: Simd, const V: usize, const C: usize>(
     simd: S,
     y: &mut [f64],
-    ldy: usize,
-    row0: usize,
     panel: &[S::f64s],
-    x: &[f64],
-    ldx: usize,
-    x0: usize,
+    b: Block<'_>,
     col0: usize,
 ) {
-    let mut acc = [[simd.splat_f64s(0.0); V]; C];
-    let first = x0 + col0;
-    for (w, xr) in panel.chunks_exact(V).zip(x.chunks_exact(ldx)) {
-        let xr = &xr[first..first + C];
+    // A function, not a closure: a closure that is not inlined is compiled without the
+    // dispatch's target features, and this loop then ran 30× slower.
+    #[inline(always)]
+    fn step<S: Simd, const V: usize, const C: usize>(
+        simd: S,
+        acc: &mut [[S::f64s; V]; C],
+        w: &[S::f64s],
+        x: &[f64],
+    ) {
         for c in 0..C {
-            let b = simd.splat_f64s(xr[c]);
+            let s = simd.splat_f64s(x[c]);
             for v in 0..V {
-                acc[c][v] = simd.mul_add_e_f64s(w[v], b, acc[c][v]);
+                acc[c][v] = simd.mul_add_e_f64s(w[v], s, acc[c][v]);
+            }
+        }
+    }
+    let mut acc = [[simd.splat_f64s(0.0); V]; C];
+    let first = b.x0 + col0;
+    match b.support {
+        None => {
+            for (w, xr) in panel.chunks_exact(V).zip(b.x.chunks_exact(b.ldx)) {
+                step::<S, V, C>(simd, &mut acc, w, &xr[first..first + C]);
+            }
+        }
+        Some(cols) => {
+            let (panel, _) = panel.as_chunks::<V>();
+            for (&j, xr) in cols.iter().zip(b.x.chunks_exact(b.ldx)) {
+                step::<S, V, C>(simd, &mut acc, &panel[j as usize], &xr[first..first + C]);
             }
         }
     }
@@ -535,7 +590,11 @@ fn panel_block<S: Simd, const V: usize, const C: usize>(
         for v in 0..V {
             simd.partial_store_f64s(&mut buf[..lanes], acc[c][v]);
             for (r, &a) in buf[..lanes].iter().enumerate() {
-                y[(row0 + v * lanes + r) * ldy + col0 + c] = a;
+                let at = (b.row0 + v * lanes + r) * b.ldy + b.y0 + col0 + c;
+                y[at] = match b.plus {
+                    Some(p) => a + p[at],
+                    None => a,
+                };
             }
         }
     }
@@ -546,12 +605,8 @@ fn panel_block<S: Simd, const V: usize, const C: usize>(
 fn panel<S: Simd, const V: usize>(
     simd: S,
     y: &mut [f64],
-    ldy: usize,
-    row0: usize,
     panel: &[S::f64s],
-    x: &[f64],
-    ldx: usize,
-    x0: usize,
+    b: Block<'_>,
     c: usize,
 ) {
     // Groups of 4 columns, but 3 + 3 for 6 and 3 + 2 for 5: a group of C columns has 3C
@@ -564,28 +619,16 @@ fn panel<S: Simd, const V: usize>(
             _ => COLS,
         };
         match group {
-            1 => panel_block::<S, V, 1>(simd, y, ldy, row0, panel, x, ldx, x0, col0),
-            2 => panel_block::<S, V, 2>(simd, y, ldy, row0, panel, x, ldx, x0, col0),
-            3 => panel_block::<S, V, 3>(simd, y, ldy, row0, panel, x, ldx, x0, col0),
-            _ => panel_block::<S, V, COLS>(simd, y, ldy, row0, panel, x, ldx, x0, col0),
+            1 => panel_block::<S, V, 1>(simd, y, panel, b, col0),
+            2 => panel_block::<S, V, 2>(simd, y, panel, b, col0),
+            3 => panel_block::<S, V, 3>(simd, y, panel, b, col0),
+            _ => panel_block::<S, V, COLS>(simd, y, panel, b, col0),
         }
         col0 += group;
     }
 }
 
-struct MatMatPacked<'a> {
-    y: &'a mut [f64],
-    ldy: usize,
-    packed: &'a [f64],
-    m: usize,
-    n: usize,
-    x: &'a [f64],
-    ldx: usize,
-    x0: usize,
-    c: usize,
-}
-
-impl WithSimd for MatMatPacked<'_> {
+impl WithSimd for Product<'_> {
     type Output = ();
 
     #[inline(always)]
@@ -593,6 +636,7 @@ impl WithSimd for MatMatPacked<'_> {
         let Self {
             y,
             ldy,
+            y0,
             packed,
             m,
             n,
@@ -600,54 +644,59 @@ impl WithSimd for MatMatPacked<'_> {
             ldx,
             x0,
             c,
+            support,
+            plus,
         } = self;
         let lanes = S::F64_LANES;
         let mp = padded_rows(m, lanes);
         let (packed, _) = S::as_simd_f64s(&packed[..mp * n]);
-        let x = &x[..n * ldx];
+        let x = &x[..support.map_or(n, <[u32]>::len) * ldx];
         let mut start = 0;
         for i0 in (0..mp).step_by(PANEL * lanes) {
             let v = PANEL.min((mp - i0) / lanes);
             let p = &packed[start..start + v * n];
+            let b = Block {
+                ldy,
+                y0,
+                row0: i0,
+                x,
+                ldx,
+                x0,
+                support,
+                plus,
+            };
             match v {
-                1 => panel::<S, 1>(simd, y, ldy, i0, p, x, ldx, x0, c),
-                2 => panel::<S, 2>(simd, y, ldy, i0, p, x, ldx, x0, c),
-                _ => panel::<S, PANEL>(simd, y, ldy, i0, p, x, ldx, x0, c),
+                1 => panel::<S, 1>(simd, y, p, b, c),
+                2 => panel::<S, 2>(simd, y, p, b, c),
+                _ => panel::<S, PANEL>(simd, y, p, b, c),
             }
             start += v * n;
         }
     }
 }
 
-/// Y = W X[:, x0..x0 + c] for a W (m × n) packed by [`pack_rows`] with this machine's
-/// [`lanes`], X (n × ≥ x0 + c) row-major with leading dimension `ldx`, and Y (m̃ × c,
-/// m̃ = [`padded_rows`]) row-major with leading dimension `ldy ≥ c` (the padding rows get 0).
-/// The rows are in SIMD lanes, so X is only broadcast and there is no horizontal sum: for the
-/// Jacobian's 200 × 200 × 7 products this runs near the fused multiply–add throughput.
-pub(crate) fn mat_mat_packed(
-    y: &mut [f64],
-    ldy: usize,
-    packed: &[f64],
-    m: usize,
-    n: usize,
-    x: &[f64],
-    ldx: usize,
-    x0: usize,
-    c: usize,
-) {
-    assert!(ldy >= c && ldx >= x0 + c, "leading dimensions");
-    assert!(y.len() >= padded_rows(m, lanes()) * ldy, "output length");
-    Arch::new().dispatch(MatMatPacked {
-        y,
-        ldy,
-        packed,
-        m,
-        n,
-        x,
-        ldx,
-        x0,
-        c,
-    });
+/// Y[:, y0..y0 + c] = W X[:, x0..x0 + c] (+ P), see [`Product`]. The rows of W are in SIMD
+/// lanes, so X is only broadcast and there is no horizontal sum: for the Jacobian's
+/// 200 × 200 × 7 products this runs near the fused multiply–add throughput.
+///
+/// # Panics
+/// If a leading dimension is too small for its columns, Y or P is too short for m̃ rows, X is
+/// too short for its rows, or a listed column of W is not below n.
+pub(crate) fn mat_mat_packed(product: Product<'_>) {
+    let rows = padded_rows(product.m, lanes()) * product.ldy;
+    assert!(
+        product.ldy >= product.y0 + product.c && product.ldx >= product.x0 + product.c,
+        "leading dimensions"
+    );
+    assert!(product.y.len() >= rows, "output length");
+    assert!(product.plus.is_none_or(|p| p.len() >= rows), "P's length");
+    assert!(
+        product
+            .support
+            .is_none_or(|s| s.iter().all(|&j| (j as usize) < product.n)),
+        "support columns"
+    );
+    Arch::new().dispatch(product);
 }
 
 #[cfg(test)]
@@ -755,15 +804,70 @@ mod tests {
                     let x = random(&mut rng, n * ldx);
                     let mp = padded_rows(m, lanes);
                     let mut y = vec![f64::NAN; mp * ldy];
-                    mat_mat_packed(&mut y, ldy, &packed, m, n, &x, ldx, x0, c);
+                    let product = |y, support, plus| Product {
+                        y,
+                        ldy,
+                        y0: 1,
+                        packed: &packed,
+                        m,
+                        n,
+                        x: &x,
+                        ldx,
+                        x0,
+                        c,
+                        support,
+                        plus,
+                    };
+                    mat_mat_packed(product(&mut y, None, None));
+                    // Every third column of W, times those rows of X gathered, plus a P.
+                    let rows: Vec<u32> = (0..n as u32).filter(|j| j % 3 == 1).collect();
+                    let gathered: Vec<f64> = rows
+                        .iter()
+                        .flat_map(|&j| &x[j as usize * ldx..(j as usize + 1) * ldx])
+                        .copied()
+                        .collect();
+                    let p = random(&mut rng, mp * ldy);
+                    let mut y_sparse = vec![f64::NAN; mp * ldy];
+                    mat_mat_packed(Product {
+                        x: &gathered,
+                        ..product(&mut y_sparse, Some(&rows), Some(&p))
+                    });
                     for k in 0..c {
-                        let plain: Vec<f64> = (0..m)
-                            .map(|i| (0..n).map(|j| w[i * n + j] * x[j * ldx + x0 + k]).sum())
+                        let plain = |j_used: &dyn Fn(usize) -> bool| -> Vec<f64> {
+                            (0..m)
+                                .map(|i| {
+                                    (0..n)
+                                        .filter(|&j| j_used(j))
+                                        .map(|j| w[i * n + j] * x[j * ldx + x0 + k])
+                                        .sum()
+                                })
+                                .collect()
+                        };
+                        let col = |y: &[f64]| -> Vec<f64> {
+                            (0..mp).map(|i| y[i * ldy + 1 + k]).collect()
+                        };
+                        let dense = col(&y);
+                        assert!(
+                            close(&dense[..m], &plain(&|_| true)),
+                            "{m} × {n} × {c}, column {k}"
+                        );
+                        assert!(dense[m..].iter().all(|&p| p == 0.0), "padding rows");
+                        let sparse: Vec<f64> = plain(&|j| j % 3 == 1)
+                            .iter()
+                            .chain(&vec![0.0; mp - m])
+                            .enumerate()
+                            .map(|(i, s)| s + p[i * ldy + 1 + k])
                             .collect();
-                        let col: Vec<f64> = (0..mp).map(|i| y[i * ldy + k]).collect();
-                        assert!(close(&col[..m], &plain), "{m} × {n} × {c}, column {k}");
-                        assert!(col[m..].iter().all(|&p| p == 0.0), "padding rows");
+                        assert!(
+                            close(&col(&y_sparse), &sparse),
+                            "{m} × {n} × {c} on rows 1, 4, …, column {k}"
+                        );
                     }
+                    assert!(
+                        y.chunks_exact(ldy)
+                            .all(|r| r[0].is_nan() && r[c + 1].is_nan()),
+                        "columns beside Y"
+                    );
                 }
             }
         }

@@ -486,6 +486,12 @@ impl Mlp {
     /// For the X decoder 6 → 200 → 200 → 49 that is 200·200·7 + 49·200·6 ≈ 340 k multiply–adds,
     /// far fewer than the 49 reverse passes of reverse mode (≈ 2 M).
     ///
+    /// The first of these products, W₂ T₁ = W₂ (σ'(a₁) ⊙ W₁), is taken as
+    /// W₂W₁ + W₂ ((σ'(a₁) − 1) ⊙ W₁) when that is cheaper: W₂W₁ is kept with the packed weights,
+    /// and the second term only reads the units whose σ' is not exactly 1, the ELU units with
+    /// a₁ < 0 (about half of them), beside a matrix–vector product for the value. See
+    /// [`Mlp::first_product`].
+    ///
     /// The products run on copies of W_2, …, W_L packed with their rows in SIMD lanes (see
     /// `kernels::pack_rows`), kept in `ws` and refreshed when the weights have changed since.
     pub fn jacobian(&self, z: &[f64], out: &mut [f64], ws: &mut MlpWorkspace) {
@@ -498,7 +504,7 @@ impl Mlp {
             "Jacobian length (n_out × n_in)"
         );
         ws.cached = false;
-        let (c, last, lanes) = (1 + n0, self.num_layers() - 1, ws.lanes);
+        let (c, last) = (1 + n0, self.num_layers() - 1);
         if last == 0 {
             // Affine: J = W.
             let w = &self.weights[0];
@@ -510,43 +516,165 @@ impl Mlp {
             return;
         }
         if ws.packed_version != self.version {
-            for l in 1..=last {
-                let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
-                kernels::pack_rows(&mut ws.packed[l - 1], &self.weights[l], n_out, n_in, lanes);
-            }
-            ws.packed_version = self.version;
+            self.pack(ws);
         }
-        // X₁ = [σ(W₁z + b₁) | σ' ⊙ W₁].
+        // X₁ = [σ(W₁z + b₁) | σ' ⊙ W₁] (or, for the units of `support`, (σ' − 1) ⊙ W₁).
         let (n1, w) = (self.sizes[1], &self.weights[0]);
         let (h, d) = (&mut ws.grad[0][..n1], &mut ws.hidden[0][..n1]);
         kernels::mat_vec(h, w, z, n1, n0);
+        ws.pre[..n1]
+            .iter_mut()
+            .zip(h.iter().zip(&self.biases[0]))
+            .for_each(|(a, (h, b))| *a = h + b);
         kernels::activate(self.activation(0), h, &self.biases[0], d);
-        tangent_rows(&mut ws.tan[0], h, d, Some(w), c);
-        for l in 1..last {
+        self.first_product(z, ws);
+        for l in 2..last {
             let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
             let (done, rest) = ws.tan.split_at_mut(l);
-            let (x, y) = (&done[l - 1], &mut rest[0]);
-            kernels::mat_mat_packed(y, c, &ws.packed[l - 1], n_out, n_in, x, c, 0, c);
-            self.activate_tangents(l, y, &mut ws.grad[l], &mut ws.hidden[l], c);
+            kernels::mat_mat_packed(kernels::Product {
+                y: &mut rest[0],
+                ldy: c,
+                y0: 0,
+                packed: &ws.packed[l - 1],
+                m: n_out,
+                n: n_in,
+                x: &done[l - 1],
+                ldx: c,
+                x0: 0,
+                c,
+                support: None,
+                plus: None,
+            });
+            self.activate_tangents(l, &mut ws.tan[l], &mut ws.grad[l], &mut ws.hidden[l], c);
         }
-        // J = W_L T_{L−1}: the tangent columns only, as J row-major into `ws.jac`.
-        let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
-        let x = &ws.tan[last - 1];
-        kernels::mat_mat_packed(
-            &mut ws.jac,
-            n0,
-            &ws.packed[last - 1],
-            n_out,
-            n_in,
-            x,
-            c,
-            1,
-            n0,
-        );
+        if last > 1 {
+            // J = W_L T_{L−1}: the tangent columns only, as J row-major into `ws.jac`.
+            let (n_in, n_out) = (self.sizes[last], self.sizes[last + 1]);
+            kernels::mat_mat_packed(kernels::Product {
+                y: &mut ws.jac,
+                ldy: n0,
+                y0: 0,
+                packed: &ws.packed[last - 1],
+                m: n_out,
+                n: n_in,
+                x: &ws.tan[last - 1],
+                ldx: c,
+                x0: 1,
+                c: n0,
+                support: None,
+                plus: None,
+            });
+        }
+        let n_out = self.output_dim();
         for (i, row) in ws.jac.chunks_exact(n0).take(n_out).enumerate() {
             for (k, &j) in row.iter().enumerate() {
                 out[k * n_out + i] = j;
             }
+        }
+    }
+
+    /// Packs W₂, …, W_L for the Jacobian's products and forms W₂W₁ and W₂b₁ for
+    /// [`Mlp::first_product`].
+    fn pack(&self, ws: &mut MlpWorkspace) {
+        let (n0, last, lanes) = (self.input_dim(), self.num_layers() - 1, ws.lanes);
+        for l in 1..=last {
+            let (n_in, n_out) = (self.sizes[l], self.sizes[l + 1]);
+            kernels::pack_rows(&mut ws.packed[l - 1], &self.weights[l], n_out, n_in, lanes);
+        }
+        let (ldy, y0) = if last == 1 { (n0, 0) } else { (1 + n0, 1) };
+        kernels::mat_mat_packed(kernels::Product {
+            y: &mut ws.first,
+            ldy,
+            y0,
+            packed: &ws.packed[0],
+            m: self.sizes[2],
+            n: self.sizes[1],
+            x: &self.weights[0],
+            ldx: n0,
+            x0: 0,
+            c: n0,
+            support: None,
+            plus: None,
+        });
+        let (n1, n2) = (self.sizes[1], self.sizes[2]);
+        kernels::mat_vec(
+            &mut ws.first_bias,
+            &self.weights[1],
+            &self.biases[0],
+            n2,
+            n1,
+        );
+        ws.packed_version = self.version;
+    }
+
+    /// The product after X₁ = [h₁ | T₁]: X₂ before its activation (or J's rows when W₂ is the
+    /// last layer), W₂ X₁, into `ws.tan[1]` (or `ws.jac`), from the first layer's
+    /// pre-activation a₁ (`ws.pre`), h₁ = σ(a₁) (`ws.grad[0]`) and σ'(a₁) (`ws.hidden[0]`).
+    ///
+    /// A unit with σ(a) = a and σ'(a) = 1 (ELU's units with a > 0, about half of them) is
+    /// linear, so with the units S that are not,
+    ///   W₂h₁ = W₂W₁z + W₂b₁ + W₂[:, S] (h₁ − a₁)[S],
+    ///   W₂T₁ = W₂W₁ + W₂[:, S] ((σ'(a₁) − 1) ⊙ W₁)[S],
+    /// exactly, one product of 1 + n₀ columns over S, with W₂W₁ and W₂b₁ kept by [`Mlp::pack`].
+    /// Taken when S has fewer than 3/4 of the units: its loop over a list of columns runs at
+    /// about 80 % of the dense one's multiply–add rate. tanh and softplus have no linear units.
+    fn first_product(&self, z: &[f64], ws: &mut MlpWorkspace) {
+        let (n0, last) = (self.input_dim(), self.num_layers() - 1);
+        let (c, n1, n2, w) = (1 + n0, self.sizes[1], self.sizes[2], &self.weights[0]);
+        let (a, h, d) = (&ws.pre[..n1], &ws.grad[0][..n1], &ws.hidden[0][..n1]);
+        ws.support.clear();
+        ws.support.extend(
+            (0..n1 as u32).filter(|&j| d[j as usize] != 1.0 || h[j as usize] != a[j as usize]),
+        );
+        let s = ws.support.len();
+        let sparse = 4 * s < 3 * n1;
+        // With one hidden layer W₂ is the last layer: J = W₂T₁, no value.
+        let (v, cols) = if last == 1 { (0, n0) } else { (1, c) };
+        let (tan0, rest) = ws.tan.split_at_mut(1);
+        let (x, ldx, x0) = if sparse {
+            // X's rows [h − a | (σ' − 1) ⊙ W₁] for the units of S, gathered.
+            let x = &mut ws.gathered[..s * cols];
+            for (row, &j) in x.chunks_exact_mut(cols).zip(&ws.support) {
+                let j = j as usize;
+                row[0] = h[j] - a[j];
+                let dj = d[j] - 1.0;
+                row[v..]
+                    .iter_mut()
+                    .zip(&w[j * n0..(j + 1) * n0])
+                    .for_each(|(t, w)| *t = dj * w);
+            }
+            if v == 1 {
+                // The value's part W₂W₁z + W₂b₁ into P's first column.
+                for (row, &q) in ws.first.chunks_exact_mut(c).zip(&ws.first_bias[..n2]) {
+                    row[0] = q + row[1..].iter().zip(z).map(|(p, z)| p * z).sum::<f64>();
+                }
+            }
+            (&ws.gathered[..s * cols], cols, 0)
+        } else {
+            tangent_rows(&mut tan0[0], h, d, Some(w), c);
+            (&tan0[0][..], c, 1 - v)
+        };
+        let (y, ldy) = if last == 1 {
+            (&mut ws.jac, n0)
+        } else {
+            (&mut rest[0], c)
+        };
+        kernels::mat_mat_packed(kernels::Product {
+            y,
+            ldy,
+            y0: 0,
+            packed: &ws.packed[0],
+            m: n2,
+            n: n1,
+            x,
+            ldx,
+            x0,
+            c: cols,
+            support: sparse.then_some(&ws.support[..]),
+            plus: sparse.then_some(&ws.first[..]),
+        });
+        if last > 1 {
+            self.activate_tangents(1, &mut ws.tan[1], &mut ws.grad[1], &mut ws.hidden[1], c);
         }
     }
 
@@ -616,7 +744,18 @@ pub struct MlpWorkspace {
     jac: Vec<f64>,
     /// W_l packed for the Jacobian's products, for l = 2, …, L.
     packed: Vec<AlignedVec>,
-    /// The [`Mlp`] version whose weights are in `packed` (0: none).
+    /// W₂W₁ in the layout of the first product's result, after a column for the value's
+    /// W₂W₁z + W₂b₁ when there is one (see `Mlp::first_product`).
+    first: Vec<f64>,
+    /// The first hidden layer's units that are not linear at z (Jacobian).
+    support: Vec<u32>,
+    /// [h₁ − a₁ | (σ' − 1) ⊙ W₁]'s rows for those units, row-major (Jacobian).
+    gathered: Vec<f64>,
+    /// The first hidden layer's pre-activation a₁ (Jacobian).
+    pre: Vec<f64>,
+    /// W₂b₁ (see `Mlp::first_product`).
+    first_bias: Vec<f64>,
+    /// The [`Mlp`] version whose weights are in `packed` and `first` (0: none).
     packed_version: u64,
     /// Whether `hidden` holds the state of the last [`Mlp::forward`] (for `vjp_cached`).
     cached: bool,
@@ -646,6 +785,15 @@ impl MlpWorkspace {
                 .windows(2)
                 .map(|w| AlignedVec::zeros(kernels::packed_len(w[1], w[0], lanes)))
                 .collect(),
+            first: match sizes.len() {
+                0..=2 => Vec::new(),
+                3 => vec![0.0; ld(sizes[2]) * n0],
+                _ => vec![0.0; ld(sizes[2]) * (1 + n0)],
+            },
+            support: Vec::with_capacity(sizes[1]),
+            gathered: vec![0.0; sizes[1] * (1 + n0)],
+            pre: vec![0.0; sizes[1]],
+            first_bias: vec![0.0; if sizes.len() > 2 { sizes[2] } else { 0 }],
             packed_version: 0,
             cached: false,
         }

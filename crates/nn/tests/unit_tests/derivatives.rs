@@ -142,36 +142,78 @@ fn workspace_reuse_leaves_no_stale_state() {
 
 #[test]
 fn jacobian_follows_weight_changes_on_a_reused_workspace() {
-    // The Jacobian keeps packed copies of the weights in the workspace; every way of changing
-    // the parameters must make it repack, and a workspace moved between two networks of the same
-    // shape must not mix them up.
-    let mut mlp = random_mlp(&[3, 9, 11, 5], Activation::Tanh, 21);
-    let other = random_mlp(&[3, 9, 11, 5], Activation::Tanh, 22);
-    let z = [0.2, -0.4, 0.7];
-    let mut ws = mlp.workspace();
-    let mut jac = vec![0.0; 15];
-    let fresh = |mlp: &nn::Mlp| {
-        let mut j = vec![0.0; 15];
-        mlp.jacobian(&z, &mut j, &mut mlp.workspace());
-        j
-    };
-    mlp.jacobian(&z, &mut jac, &mut ws);
-    other.jacobian(&z, &mut jac, &mut ws);
-    assert_eq!(jac, fresh(&other));
-    mlp.jacobian(&z, &mut jac, &mut ws);
-    let before = jac.clone();
-    mlp.weights_mut(2)[7] += 0.5;
-    mlp.jacobian(&z, &mut jac, &mut ws);
-    assert_eq!(jac, fresh(&mlp));
-    assert_ne!(jac, before);
-    for p in mlp.parameters_mut() {
-        p.iter_mut().for_each(|x| *x *= 0.9);
+    // The Jacobian keeps packed copies of the weights, W₂W₁ and W₂b₁ in the workspace; every
+    // way of changing the parameters must make it repack, and a workspace moved between two
+    // networks of the same shape must not mix them up. ELU takes the product over its nonlinear
+    // units, which reads W₂W₁ and W₂b₁; tanh the plain one.
+    for act in [Activation::Tanh, Activation::Elu] {
+        let mut mlp = random_mlp(&[3, 9, 11, 5], act, 21);
+        let other = random_mlp(&[3, 9, 11, 5], act, 22);
+        let z = [0.2, -0.4, 0.7];
+        let mut ws = mlp.workspace();
+        let mut jac = vec![0.0; 15];
+        let fresh = |mlp: &nn::Mlp| {
+            let mut j = vec![0.0; 15];
+            mlp.jacobian(&z, &mut j, &mut mlp.workspace());
+            j
+        };
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        other.jacobian(&z, &mut jac, &mut ws);
+        assert_eq!(jac, fresh(&other), "{act}");
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        let before = jac.clone();
+        mlp.weights_mut(2)[7] += 0.5;
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        assert_eq!(jac, fresh(&mlp), "{act}");
+        assert_ne!(jac, before, "{act}");
+        // b₁ moves the value a₂ and so σ'(a₂): through W₂b₁ on the ELU path.
+        let before = jac.clone();
+        mlp.bias_mut(0).iter_mut().for_each(|b| *b += 0.3);
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        assert_eq!(jac, fresh(&mlp), "{act}");
+        assert_ne!(jac, before, "{act}");
+        for p in mlp.parameters_mut() {
+            p.iter_mut().for_each(|x| *x *= 0.9);
+        }
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        assert_eq!(jac, fresh(&mlp), "{act}");
+        mlp.clone_from(&other);
+        mlp.jacobian(&z, &mut jac, &mut ws);
+        assert_eq!(jac, fresh(&other), "{act}");
     }
-    mlp.jacobian(&z, &mut jac, &mut ws);
-    assert_eq!(jac, fresh(&mlp));
-    mlp.clone_from(&other);
-    mlp.jacobian(&z, &mut jac, &mut ws);
-    assert_eq!(jac, fresh(&other));
+}
+
+#[test]
+fn jacobian_matches_the_jvp_whichever_units_have_a_unit_derivative() {
+    // The Jacobian takes the product after the first hidden layer as W₂W₁ plus a correction
+    // over the units whose σ' is not 1 when few are (ELU's a₁ ≤ 0 units), and as the plain
+    // product otherwise. First-layer biases of +5 make (almost) every ELU unit linear, −5 none,
+    // 0 about half; each case, with one hidden layer and with two, must give the columns of the
+    // JVP (an independent forward pass per column).
+    for sizes in [[4, 9, 6].as_slice(), &[4, 9, 11, 6], &[4, 30, 8, 5, 6]] {
+        for (case, bias) in [5.0, 0.0, -5.0].into_iter().enumerate() {
+            let mut mlp = random_mlp(sizes, Activation::Elu, 60 + case as u64);
+            mlp.bias_mut(0).iter_mut().for_each(|b| *b += bias);
+            let (n_in, n_out) = (sizes[0], sizes[sizes.len() - 1]);
+            let mut rng = Rng::new(70 + case as u64);
+            let z: Vec<f64> = rng.vec(n_in).iter().map(|x| 0.3 * x).collect();
+            let mut ws = mlp.workspace();
+            let mut jac = vec![f64::NAN; n_in * n_out];
+            // Twice on one workspace: the second call reuses W₂W₁ and the support buffer.
+            for _ in 0..2 {
+                mlp.jacobian(&z, &mut jac, &mut ws);
+                let mut jw = vec![0.0; n_out];
+                for j in 0..n_in {
+                    let mut e = vec![0.0; n_in];
+                    e[j] = 1.0;
+                    mlp.jvp(&z, &e, &mut jw, &mut mlp.workspace());
+                    let col = &jac[j * n_out..(j + 1) * n_out];
+                    let err = rel_err(col, &jw);
+                    assert!(err <= 1e-13, "{sizes:?}, bias {bias}, column {j}: {err:e}");
+                }
+            }
+        }
+    }
 }
 
 #[test]
