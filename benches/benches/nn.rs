@@ -266,30 +266,42 @@ fn layer_products(sizes: &[usize]) -> usize {
 
 /// The multiply–adds of a single-vector decoder operation on a network of `sizes` (bias
 /// additions and activations not counted), of which `nonlinear` first-layer units are not
-/// linear at z (ELU's a < 0).
+/// linear at z (ELU's a < 0): `Mlp` runs the second layer over those units only when they are
+/// few enough, and counts here follow it.
 fn multiply_adds(name: &str, sizes: &[usize], nonlinear: usize) -> Option<usize> {
     let all = layer_products(sizes);
     let last = sizes[sizes.len() - 2] * sizes[sizes.len() - 1];
-    let n0 = sizes[0];
+    let (n0, n1, n2, s) = (sizes[0], sizes[1], sizes[2], nonlinear);
+    let (first, second) = (n0 * n1, n1 * n2);
+    // The second layer forward (W₂W₁z plus the nonlinear units' columns of W₂), and the
+    // backward step through it and the first ((W₂W₁)ᵀg plus those columns and W₁'s rows).
+    let sparse = sizes.len() > 3 && 4 * (s + n0) < 3 * n1;
+    let (forward_second, backward_low) = if sparse {
+        (n2 * (n0 + s), s * n2 + n0 * n2 + s * n0)
+    } else {
+        (second, second + first)
+    };
+    let forward = all - second + forward_second;
+    let backward = all - second - first + backward_low;
     Some(match name {
-        "forward" | "vjp_cached" => all,
+        "forward" => forward,
+        "vjp_cached" => backward,
         // The forward pass up to the last hidden layer, then the reverse sweep.
-        "vjp" => all - last + all,
-        "forward+vjp_cached" => 2 * all,
+        "vjp" => forward - last + backward,
+        "forward+vjp_cached" => forward + backward,
         // Value and tangent side by side below the output layer, the tangent alone through it.
         "jvp" => 2 * (all - last) + last,
         // Forward mode with n₀ tangents: the first layer's tangents are its weights (only the
         // value is a product), the hidden layers carry 1 + n₀ columns, the output layer n₀;
-        // the second layer's product over the nonlinear units only, plus W₂W₁z (as `Mlp`
-        // computes it when fewer than 3/4 of the units are nonlinear).
+        // the second layer's product over the nonlinear units only, plus W₂W₁z (when fewer
+        // than 3/4 of the units are nonlinear).
         "jacobian" => {
-            let first = sizes[0] * sizes[1];
-            let second = if 4 * nonlinear < 3 * sizes[1] {
-                sizes[2] * (nonlinear * (1 + n0) + n0)
+            let second = if 4 * s < 3 * n1 {
+                n2 * (s * (1 + n0) + n0)
             } else {
-                sizes[2] * sizes[1] * (1 + n0)
+                n2 * n1 * (1 + n0)
             };
-            first + second + (all - first - sizes[1] * sizes[2] - last) * (1 + n0) + last * n0
+            first + second + (all - first - n1 * n2 - last) * (1 + n0) + last * n0
         }
         _ => return None,
     })

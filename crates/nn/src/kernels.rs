@@ -180,6 +180,7 @@ pub(crate) fn mat_vec(y: &mut [f64], w: &[f64], x: &[f64], m: usize, n: usize) {
 struct DenseLayer<'a> {
     act: Activation,
     h: &'a mut [f64],
+    pre: Option<&'a mut [f64]>,
     w: &'a [f64],
     b: &'a [f64],
     x: &'a [f64],
@@ -190,19 +191,40 @@ impl WithSimd for DenseLayer<'_> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
-        let Self { act, h, w, b, x } = self;
+        let Self {
+            act,
+            h,
+            pre,
+            w,
+            b,
+            x,
+        } = self;
         MatVec { y: h, w, x }.with_simd(simd);
+        if let Some(pre) = pre {
+            pre.iter_mut()
+                .zip(h.iter().zip(b))
+                .for_each(|(a, (h, b))| *a = h + b);
+        }
         act.apply_biased(h, b);
     }
 }
 
 /// h (m) = σ(W x + b) with W (m × n, row-major): [`mat_vec`] and [`Activation::apply_biased`]
-/// in one dispatch, so that σ is compiled with the SIMD target features too.
-pub(crate) fn dense_layer(act: Activation, h: &mut [f64], w: &[f64], b: &[f64], x: &[f64]) {
+/// in one dispatch, so that σ is compiled with the SIMD target features too; also the
+/// pre-activation W x + b into `pre` when given.
+pub(crate) fn dense_layer(
+    act: Activation,
+    h: &mut [f64],
+    pre: Option<&mut [f64]>,
+    w: &[f64],
+    b: &[f64],
+    x: &[f64],
+) {
     let (m, n) = (b.len(), x.len());
     Arch::new().dispatch(DenseLayer {
         act,
         h: &mut h[..m],
+        pre: pre.map(|p| &mut p[..m]),
         w: &w[..m * n],
         b,
         x,
@@ -365,6 +387,88 @@ pub(crate) fn mat_t_vec(y: &mut [f64], w: &[f64], g: &[f64], m: usize, n: usize)
         y: &mut y[..n],
         w: &w[..m * n],
         g: &g[..m],
+    });
+}
+
+/// The rows `rows` of a row-major W with rows of length `n`.
+#[inline(always)]
+fn listed<'a, const R: usize>(w: &'a [f64], n: usize, rows: &[u32]) -> [&'a [f64]; R] {
+    std::array::from_fn(|r| {
+        let i = rows[r] as usize;
+        &w[i * n..(i + 1) * n]
+    })
+}
+
+struct ListedRowsVec<'a> {
+    t: &'a mut [f64],
+    w: &'a [f64],
+    rows: &'a [u32],
+    x: &'a [f64],
+}
+
+impl WithSimd for ListedRowsVec<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { t, w, rows, x } = self;
+        let n = x.len();
+        let mut blocks = rows.chunks_exact(ROWS);
+        for (rows, t) in (&mut blocks).zip(t.chunks_exact_mut(ROWS)) {
+            t.copy_from_slice(&simd::dot_rows(simd, listed::<ROWS>(w, n, rows), x));
+        }
+        let done = rows.len() - blocks.remainder().len();
+        for (r, t) in rows[done..].iter().zip(&mut t[done..]) {
+            *t = simd::dot_rows(simd, listed::<1>(w, n, &[*r]), x)[0];
+        }
+    }
+}
+
+/// t_r = W[rows_r, :] · x for every listed row of W (row-major, rows of length `x.len()`),
+/// each computed as [`mat_vec`] computes a row.
+pub(crate) fn listed_rows_vec(t: &mut [f64], w: &[f64], rows: &[u32], x: &[f64]) {
+    Arch::new().dispatch(ListedRowsVec {
+        t: &mut t[..rows.len()],
+        w,
+        rows,
+        x,
+    });
+}
+
+struct AddListedRows<'a> {
+    y: &'a mut [f64],
+    w: &'a [f64],
+    rows: &'a [u32],
+    g: &'a [f64],
+}
+
+impl WithSimd for AddListedRows<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { y, w, rows, g } = self;
+        let n = y.len();
+        let mut blocks = rows.chunks_exact(ROWS_T);
+        for (rows, g) in (&mut blocks).zip(g.chunks_exact(ROWS_T)) {
+            let g: [f64; ROWS_T] = g.try_into().expect("a block of ROWS_T coefficients");
+            simd::add_combination(simd, y, g, listed::<ROWS_T>(w, n, rows));
+        }
+        let done = rows.len() - blocks.remainder().len();
+        for (r, &g) in rows[done..].iter().zip(&g[done..]) {
+            simd::add_combination(simd, y, [g], listed::<1>(w, n, &[*r]));
+        }
+    }
+}
+
+/// y += Σ_r g_r W[rows_r, :] over the listed rows of W (row-major, rows of length `y.len()`),
+/// in list order.
+pub(crate) fn add_listed_rows(y: &mut [f64], w: &[f64], rows: &[u32], g: &[f64]) {
+    Arch::new().dispatch(AddListedRows {
+        y,
+        w,
+        rows,
+        g: &g[..rows.len()],
     });
 }
 
@@ -776,7 +880,7 @@ mod tests {
                         .collect();
                     assert!(close(&gx, &plain), "{act} {m} × {n}");
                     let mut h1 = vec![f64::NAN; m];
-                    dense_layer(act, &mut h1, &w, &b, &x);
+                    dense_layer(act, &mut h1, None, &w, &b, &x);
                     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                     assert_eq!(bits(&h1), bits(&h), "{act} dense layer, {m} × {n}");
                     let (mut h2, mut gx2) = (vec![f64::NAN; m], vec![f64::NAN; n]);

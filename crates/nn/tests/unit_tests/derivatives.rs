@@ -216,6 +216,83 @@ fn jacobian_matches_the_jvp_whichever_units_have_a_unit_derivative() {
     }
 }
 
+/// f(z) by plain loops over the layers (the definition, no kernels).
+fn plain_forward(mlp: &Mlp, z: &[f64]) -> Vec<f64> {
+    let sizes = mlp.sizes();
+    let mut x = z.to_vec();
+    for l in 0..sizes.len() - 1 {
+        let (w, b) = (mlp.weights(l), mlp.bias(l));
+        let mut y: Vec<f64> = (0..sizes[l + 1])
+            .map(|i| {
+                b[i] + (0..sizes[l])
+                    .map(|j| w[i * sizes[l] + j] * x[j])
+                    .sum::<f64>()
+            })
+            .collect();
+        if l + 2 < sizes.len() {
+            y.iter_mut()
+                .for_each(|y| *y = mlp.activations()[l].value(*y));
+        }
+        x = y;
+    }
+    x
+}
+
+#[test]
+fn forward_and_vjp_match_plain_evaluations_whichever_units_are_linear() {
+    // With a wide first layer, the second one runs over the first's nonlinear units only
+    // (W₂h₁ = W₂W₁z + W₂b₁ + W₂[:, S](h₁ − a₁)[S], and the VJP likewise) when few enough are
+    // nonlinear: first-layer biases of +5 make (almost) all ELU units linear, 0 about half, −5
+    // none (the plain products). Each must give the plain forward pass, the VJP must be the
+    // transpose of the JVP (a dense forward-mode pass), and `vjp` must equal `forward` then
+    // `vjp_cached` bit for bit, with two and three hidden layers.
+    for sizes in [[3, 40, 11, 5].as_slice(), &[3, 40, 9, 8, 5]] {
+        for (case, bias) in [5.0, 0.0, -5.0].into_iter().enumerate() {
+            let mut mlp = random_mlp(sizes, Activation::Elu, 80 + case as u64);
+            mlp.bias_mut(0).iter_mut().for_each(|b| *b += bias);
+            let (n_in, n_out) = (sizes[0], sizes[sizes.len() - 1]);
+            let mut rng = Rng::new(90 + case as u64);
+            let v = rng.vec(n_out);
+            let mut ws = mlp.workspace();
+            for trial in 0..3 {
+                let z: Vec<f64> = rng.vec(n_in).iter().map(|x| 0.5 * x).collect();
+                let what = format!("{sizes:?}, bias {bias}, trial {trial}");
+                let mut y = vec![f64::NAN; n_out];
+                mlp.forward(&z, &mut y, &mut ws);
+                let err = rel_err(&y, &plain_forward(&mlp, &z));
+                assert!(err <= 1e-13, "{what}: forward {err:e}");
+                let mut cached = vec![f64::NAN; n_in];
+                mlp.vjp_cached(&v, &mut cached, &mut ws);
+                let mut direct = vec![f64::NAN; n_in];
+                mlp.vjp(&z, &v, &mut direct, &mut ws);
+                assert_eq!(cached, direct, "{what}: vjp against forward + vjp_cached");
+                let jtv: Vec<f64> = (0..n_in)
+                    .map(|j| {
+                        let mut e = vec![0.0; n_in];
+                        e[j] = 1.0;
+                        let mut jw = vec![0.0; n_out];
+                        mlp.jvp(&z, &e, &mut jw, &mut mlp.workspace());
+                        dot(&jw, &v)
+                    })
+                    .collect();
+                let err = rel_err(&direct, &jtv);
+                assert!(err <= 1e-13, "{what}: VJP against the JVP {err:e}");
+            }
+            // New weights on the same workspace: W₂W₁, W₂b₁ and W₂ᵀ must follow.
+            mlp.weights_mut(1).iter_mut().for_each(|w| *w *= -0.8);
+            mlp.bias_mut(0)[0] += 0.1;
+            let z = vec![0.1; n_in];
+            let mut y = vec![f64::NAN; n_out];
+            mlp.forward(&z, &mut y, &mut ws);
+            let err = rel_err(&y, &plain_forward(&mlp, &z));
+            assert!(
+                err <= 1e-13,
+                "{sizes:?}, bias {bias}: forward after new weights {err:e}"
+            );
+        }
+    }
+}
+
 #[test]
 #[should_panic(expected = "vjp_cached needs a forward pass")]
 fn cached_vjp_without_forward_panics() {
