@@ -313,11 +313,11 @@ impl Mlp {
     /// h_l = σ(W_l h_{l−1} + b_l) for the hidden layers l = 0..end into `ws.hidden`, from
     /// h₋₁ = x = `z`. With two hidden layers or more, also decides from the first layer
     /// whether the second, forward and backward, runs over the first layer's nonlinear units
-    /// only (`ws.sparse`, see [`Mlp::sparse_layer`]), even when `end` stops before it.
+    /// only (`ws.sparse`, see [`Mlp::sparse_layer`]), even when `end` = 1 stops before it.
     fn forward_hidden(&self, z: &[f64], end: usize, ws: &mut MlpWorkspace) {
         let deep = self.num_layers() > 2;
         ws.sparse = false;
-        for l in 0..end.max(usize::from(deep)) {
+        for l in 0..end {
             if l == 1 && ws.sparse {
                 self.sparse_layer(z, ws);
                 continue;
@@ -567,9 +567,8 @@ impl Mlp {
     ///
     /// The first of these products, W₂ T₁ = W₂ (σ'(a₁) ⊙ W₁), is taken as
     /// W₂W₁ + W₂ ((σ'(a₁) − 1) ⊙ W₁) when that is cheaper: W₂W₁ is kept with the packed weights,
-    /// and the second term only reads the units whose σ' is not exactly 1, the ELU units with
-    /// a₁ < 0 (about half of them), beside a matrix–vector product for the value. See
-    /// [`Mlp::first_product`].
+    /// and the second term only reads the units that are not linear, the ELU units with a₁ < 0
+    /// (about half of them); the value W₂h₁ likewise. See [`Mlp::first_product`].
     ///
     /// The products run on copies of W_2, …, W_L packed with their rows in SIMD lanes (see
     /// `kernels::pack_rows`), kept in `ws` and refreshed when the weights have changed since.
@@ -853,11 +852,12 @@ pub struct MlpWorkspace {
     /// W₂W₁ in the layout of the first product's result, after a column for the value's
     /// W₂W₁z + W₂b₁ when there is one (see `Mlp::first_product`).
     first: Vec<f64>,
-    /// The first hidden layer's units that are not linear at z (Jacobian).
+    /// The first hidden layer's units that are not linear at z.
     support: Vec<u32>,
-    /// [h₁ − a₁ | (σ' − 1) ⊙ W₁]'s rows for those units, row-major (Jacobian).
+    /// Per unit of `support`: the Jacobian's rows [h₁ − a₁ | (σ' − 1) ⊙ W₁], the forward
+    /// pass's h₁ − a₁ or the VJP's (σ' − 1) ⊙ W₂ᵀg₂.
     gathered: Vec<f64>,
-    /// The first hidden layer's pre-activation a₁ (Jacobian).
+    /// The first hidden layer's pre-activation a₁.
     pre: Vec<f64>,
     /// W₂b₁ (see `Mlp::first_product` and `Mlp::sparse_layer`).
     first_bias: Vec<f64>,
