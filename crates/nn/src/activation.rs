@@ -55,8 +55,9 @@ impl Activation {
     }
 
     /// σ'(a), given also h = σ(a). Every activation's derivative is a function of its output
-    /// alone (ELU: min(h, 0) + 1, tanh: 1 − h², softplus: 1 − e⁻ʰ, ReLU: [h > 0]), which is what
-    /// this evaluates, so backpropagation need not keep the pre-activations; `a` is not read.
+    /// alone (ELU: min(h, 0) + 1, tanh: 1 − h², softplus: 1 − e⁻ʰ, ReLU: 1 if h > 0 else 0),
+    /// which is what this evaluates, so backpropagation need not keep the pre-activations; `a`
+    /// is not read.
     #[inline]
     pub fn derivative(self, _a: f64, h: f64) -> f64 {
         self.derivative_from_output(h)

@@ -1,7 +1,8 @@
 //! Single-input dense kernels with explicit SIMD, for the per-call operations of [`crate::Mlp`]:
 //! y = W x, y = Wᵀ g, the pair (W x, W t), one hidden layer's forward and backward step fused
-//! into a single pass over W (VJP), and Y = W X for the Jacobian's few columns on a packed copy
-//! of W. Also the dispatch that compiles the elementwise loops of training (σ, σ', Adam) for the
+//! into a single pass over W (VJP), Y = W X (+ P) for the Jacobian's few columns on a packed
+//! copy of W (all of W's columns or a list of them), and dot products with and combinations of
+//! a list of W's rows. Also the dispatch that compiles the elementwise loops of training (σ, σ', Adam) for the
 //! same instruction set.
 //!
 //! W is row-major `m × n`. The matrix–vector products are bound by reading W (a 200 × 200 layer

@@ -4,10 +4,13 @@
 //! linear output). At one input it evaluates y, the vector–Jacobian product Jᵀv (reverse mode),
 //! the Jacobian–vector product Jw and the full Jacobian J (forward mode with n₀ tangents), each at
 //! the cost of a few forward passes and without allocating: scratch lives in an [`MlpWorkspace`].
+//! With two hidden layers or more, all four skip the first layer's linear units (ELU's units
+//! with a > 0) in the second layer's product, through W₂W₁ kept in the workspace: exact, and
+//! about half the work of that product.
 //!
 //! An [`Autoencoder`] on PCA coefficients q ∈ Rᵏ pairs an encoder k → d with a decoder d → k and
 //! an optional per-feature [`InputScaling`]; its decoder derivatives are in original units. It is
-//! trained by [`train`] (Adam on the mean squared reconstruction error, shuffled mini-batches
+//! trained by [`train()`] (Adam on the mean squared reconstruction error, shuffled mini-batches
 //! evaluated in parallel, a seeded validation split, early stopping, bit-reproducible for a seed)
 //! and serialised with serde as the model artifact (validated on load, see
 //! [`Autoencoder::FORMAT_VERSION`]). [`train_search`] picks the smallest latent dimension meeting

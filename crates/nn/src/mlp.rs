@@ -12,8 +12,8 @@
 //!   tangent columns at once). For a decoder n₀ = d is small (≈ 6), so this costs a few forward
 //!   passes, far less than n_L reverse passes.
 //!
-//! The products are the explicit-SIMD kernels of [`crate::kernels`]; the weights start on a
-//! cache line so that no SIMD load of a row splits.
+//! The products are the explicit-SIMD kernels of the crate's `kernels` module; the weights start
+//! on a cache line so that no SIMD load of a row splits.
 //! None of them allocate: scratch lives in an [`MlpWorkspace`] made once by [`Mlp::workspace`].
 //! Batched evaluation and backpropagation for training are in [`crate::batch`].
 
@@ -568,7 +568,7 @@ impl Mlp {
     /// The first of these products, W₂ T₁ = W₂ (σ'(a₁) ⊙ W₁), is taken as
     /// W₂W₁ + W₂ ((σ'(a₁) − 1) ⊙ W₁) when that is cheaper: W₂W₁ is kept with the packed weights,
     /// and the second term only reads the units that are not linear, the ELU units with a₁ < 0
-    /// (about half of them); the value W₂h₁ likewise. See [`Mlp::first_product`].
+    /// (about half of them); the value W₂h₁ likewise. See `Mlp::first_product`.
     ///
     /// The products run on copies of W_2, …, W_L packed with their rows in SIMD lanes (see
     /// `kernels::pack_rows`), kept in `ws` and refreshed when the weights have changed since.
