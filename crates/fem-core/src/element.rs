@@ -5,7 +5,7 @@
 //! F = I + [u₁−u₀, u₂−u₀, u₃−u₀] Bm (computed from displacements, not positions, so small
 //! deformations keep their relative precision). The shape gradient of vertex b ≥ 1 is gᵦ = row
 //! b−1 of Bm and g₀ = −(g₁+g₂+g₃), so ∂V/∂u_b = W P g_b and
-//! ∂²V/∂u_{a,i}∂u_{b,k} = W Σ_{j,l} (∂P/∂F)_{ij,kl} g_a[j] g_b[l].
+//! ∂²V/∂u_{a,i}∂u_{b,k} = W Σ_{j,l} (∂P/∂F)_{ij,kl} g_{a,j} g_{b,l}.
 
 use crate::material::{Mat9, Material};
 use crate::{Mat3, TetMesh};

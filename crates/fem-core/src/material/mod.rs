@@ -170,7 +170,7 @@ impl MaterialConfig {
     }
 }
 
-/// One of the concrete materials; dispatch once per assembly with [`with_material!`].
+/// One of the concrete materials; dispatch once per assembly with `with_material!`.
 #[derive(Debug, Clone, Copy)]
 pub enum AnyMaterial {
     Linear(LinearElastic),

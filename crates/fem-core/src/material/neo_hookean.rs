@@ -119,7 +119,7 @@ impl Material for NeoHookean {
         m
     }
 
-    /// The analytic projection of [`super::cofactor_tangent`] (ψ = μ/2 I₁ + h(J) with
+    /// The analytic projection of `super::cofactor_tangent` (ψ = μ/2 I₁ + h(J) with
     /// h = −μ ln J + λ/2 (ln J)², so a = h'' = (μ + λ − λ ln J)/J², c = h' = (λ ln J − μ)/J);
     /// NaN-filled for J ≤ 0.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
