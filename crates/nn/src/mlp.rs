@@ -349,7 +349,7 @@ impl Mlp {
     /// n₂ (n₀ + |S|) multiply–adds instead of n₂ n₁. Taken when n₀ + |S| < 3/4 n₁ (the listed
     /// rows run a little slower than the plain product).
     fn sparse_layer(&self, z: &[f64], ws: &mut MlpWorkspace) {
-        let (n0, n1, n2) = (self.sizes[0], self.sizes[1], self.sizes[2]);
+        let (n1, n2) = (self.sizes[1], self.sizes[2]);
         let (first, rest) = ws.hidden.split_at_mut(1);
         let (a, h) = (&ws.pre[..n1], &first[0][..n1]);
         let s = ws.support.len();
@@ -358,13 +358,8 @@ impl Mlp {
             *g = h[j as usize] - a[j as usize];
         }
         let h2 = &mut rest[0][..n2];
-        // W₂W₁z as a combination of its n₀ columns: n₀ passes over h₂ rather than n₂ short
-        // dot products with their horizontal sums.
-        kernels::mat_t_vec(h2, &ws.w21t, z, n0, n2);
+        through_linear_units(&ws.w21t, &ws.first_bias, z, h2);
         kernels::add_listed_rows(h2, &ws.w2t, &ws.support, g);
-        h2.iter_mut()
-            .zip(&ws.first_bias[..n2])
-            .for_each(|(h, q)| *h += q);
         kernels::vectorized(kernels::ApplyBiased(
             self.activation(1),
             h2,
@@ -731,9 +726,12 @@ impl Mlp {
                     .for_each(|(t, w)| *t = dj * w);
             }
             if v == 1 {
-                // The value's part W₂W₁z + W₂b₁ into P's first column.
-                for (row, &q) in ws.first.chunks_exact_mut(c).zip(&ws.first_bias[..n2]) {
-                    row[0] = q + row[1..].iter().zip(z).map(|(p, z)| p * z).sum::<f64>();
+                // The value's part W₂W₁z + W₂b₁ into P's first column (`grad[1]` is scratch
+                // until `activate_tangents` below).
+                let part = &mut ws.grad[1][..n2];
+                through_linear_units(&ws.w21t, &ws.first_bias, z, part);
+                for (row, &p) in ws.first.chunks_exact_mut(c).zip(part.iter()) {
+                    row[0] = p;
                 }
             }
             (&ws.gathered[..s * cols], cols, 0)
@@ -780,6 +778,16 @@ impl Mlp {
         kernels::activate(act, h, &self.biases[l], d);
         tangent_rows(x, h, d, None, c);
     }
+}
+
+/// out = W₂W₁z + W₂b₁ (length n₂) from (W₂W₁)ᵀ (n₀ × n₂, row-major) and W₂b₁: the second
+/// layer's pre-activation without b₂ when every first-layer unit is linear. As a combination of
+/// the n₀ rows of (W₂W₁)ᵀ: n₀ passes over `out` rather than n₂ short dot products with their
+/// horizontal sums.
+fn through_linear_units(w21t: &[f64], w2b1: &[f64], z: &[f64], out: &mut [f64]) {
+    let (n0, n2) = (z.len(), out.len());
+    kernels::mat_t_vec(out, w21t, z, n0, n2);
+    out.iter_mut().zip(&w2b1[..n2]).for_each(|(o, q)| *o += q);
 }
 
 /// The units j whose activation is not linear at a_j (σ(a_j) ≠ a_j or σ'(a_j) ≠ 1, given
