@@ -171,7 +171,7 @@ pub fn run(
 pub fn set_speedups(rows: &mut [MethodReport]) {
     let fastest_full = rows
         .iter()
-        .filter(|r| is_full_row(r))
+        .filter(|r| is_full_method(&r.method))
         .map(|r| r.ms_per_step)
         .fold(f64::INFINITY, f64::min);
     if fastest_full.is_finite() {
@@ -500,16 +500,19 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     crate::plot::svg(&plot, &series)
 }
 
-/// Whether `r` is a full-space row (any solver).
-fn is_full_row(r: &MethodReport) -> bool {
-    [Method::Full, Method::FullLbfgs, Method::FullNewton]
-        .iter()
-        .any(|m| r.method == m.name())
+/// Whether a report row's method name is a full-space method (any solver): the method read
+/// back from the serde name that [`Method::name`] also gives, then [`Method::is_full`].
+fn is_full_method(name: &str) -> bool {
+    use serde::Deserialize;
+    use serde::de::IntoDeserializer;
+    use serde::de::value::{Error, StrDeserializer};
+    let name: StrDeserializer<'_, Error> = name.into_deserializer();
+    Method::deserialize(name).is_ok_and(Method::is_full)
 }
 
 /// The reduced rows (full space has no error against itself).
 fn reduced_rows(rows: &[MethodReport]) -> impl Iterator<Item = &MethodReport> {
-    rows.iter().filter(|r| !is_full_row(r))
+    rows.iter().filter(|r| !is_full_method(&r.method))
 }
 
 /// The errors frame by frame as CSV: frame, time, then for every reduced method its trajectory
@@ -623,7 +626,24 @@ pub fn markdown(rows: &[MethodReport]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::mean;
+    use super::{Method, is_full_method, mean};
+
+    /// Report rows name their method by `Method::name`; reading it back must find the method.
+    #[test]
+    fn full_space_rows_are_recognised_by_name() {
+        for m in [
+            Method::Full,
+            Method::FullLbfgs,
+            Method::FullNewton,
+            Method::Pca,
+            Method::PcaCubature,
+            Method::Neural,
+            Method::NeuralCubature,
+        ] {
+            assert_eq!(is_full_method(m.name()), m.is_full(), "{}", m.name());
+        }
+        assert!(!is_full_method("full lbfgs"));
+    }
 
     /// Full space has no subspace error: its mean must print as 0, not −0.
     #[test]
