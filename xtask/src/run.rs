@@ -347,13 +347,25 @@ pub fn measure(
     let ms = median(&medians);
     let done = iterations.len().max(1);
     let per_step_ms = |seconds: f64| seconds * 1e3 / done as f64;
-    let subspace_frame_errors =
-        subspace_errors(pipeline, method, &model, &reference.frames, stage_progress)?;
-    let step_frame_errors = match last_runner.as_mut() {
-        Some(runner) if !method.is_full() => {
-            step_errors(pipeline, method, runner, &reference.frames, stage_progress)?
-        }
-        _ => Vec::new(),
+    let (subspace_frame_errors, step_frame_errors) = if method.is_full() {
+        (Vec::new(), Vec::new())
+    } else {
+        let fit = pipeline.pca(stage_progress)?;
+        let states = reference_states(&fit.basis, &reference.frames);
+        let subspace = subspace_errors(
+            pipeline,
+            method,
+            &model,
+            &fit.basis,
+            &states,
+            &reference.frames,
+            stage_progress,
+        )?;
+        let step = match last_runner.as_mut() {
+            Some(runner) => step_errors(method, runner, &states, &reference.frames)?,
+            None => Vec::new(),
+        };
+        (subspace, step)
     };
     Ok(MethodReport {
         method: method.name().into(),
@@ -383,35 +395,45 @@ pub fn measure(
     })
 }
 
-/// Relative error, frame by frame, of the reference frames' best representation in `method`'s
-/// subspace: u ↦ U UᵀM u for PCA, u ↦ U decode(encode(UᵀM u)) for the autoencoder (none for
-/// full space).
+/// The reference's PCA coefficients at steps 0 (rest), 1, …, n: frame j is the state after
+/// step j + 1.
+fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let k = basis.k();
+    let mut states = Vec::with_capacity(frames.len() + 1);
+    states.push(vec![0.0; k]);
+    for f in frames {
+        let mut q = vec![0.0; k];
+        basis.project(f, &mut q);
+        states.push(q);
+    }
+    states
+}
+
+/// Relative error, frame by frame, of the reference frames' best representation in reduced
+/// `method`'s subspace: u ↦ U UᵀM u for PCA, u ↦ U decode(encode(UᵀM u)) for the autoencoder,
+/// from the frames' coefficients `states` ([`reference_states`]).
 fn subspace_errors(
     pipeline: &mut Pipeline<'_>,
     method: Method,
     model: &FullSpaceModel,
+    basis: &pca::PcaBasis,
+    states: &[Vec<f64>],
     frames: &[Vec<f64>],
     progress: Progress<'_>,
 ) -> Result<Vec<f64>> {
-    if method.is_full() {
-        return Ok(Vec::new());
-    }
-    let fit = pipeline.pca(progress)?;
-    let basis = &fit.basis;
     let trained = match method {
         Method::Neural | Method::NeuralCubature => Some(pipeline.train(progress)?),
         _ => None,
     };
     let mut ws = trained.as_ref().map(|t| t.model.workspace());
-    let (mut q, mut qh) = (vec![0.0; basis.k()], vec![0.0; basis.k()]);
+    let mut qh = vec![0.0; basis.k()];
     let mut free = vec![0.0; basis.n()];
     let (mut u, mut r) = (vec![0.0; model.num_full()], vec![0.0; model.num_full()]);
     let mut errors = ErrorAccumulator::default();
-    for f in frames {
-        basis.project(f, &mut q);
+    for (q, f) in states[1..].iter().zip(frames) {
         match (&trained, ws.as_mut()) {
-            (Some(t), Some(ws)) => t.model.reconstruct(&q, &mut qh, ws),
-            _ => qh.copy_from_slice(&q),
+            (Some(t), Some(ws)) => t.model.reconstruct(q, &mut qh, ws),
+            _ => qh.copy_from_slice(q),
         }
         basis.reconstruct(&qh, &mut free);
         model.dofs.scatter(&free, &mut u);
@@ -422,27 +444,15 @@ fn subspace_errors(
 }
 
 /// The relative error of one step of reduced `runner` from each frame's two predecessors in
-/// the reference (rest before the first step), frame by frame; its own trajectory's state is
-/// replaced frame by frame. A failed step ends the list there (logged): the trajectory's own
-/// failure is reported with its row.
+/// the reference (`states`, [`reference_states`]; rest before the first step), frame by frame;
+/// its own trajectory's state is replaced frame by frame. A failed step ends the list there
+/// (logged): the trajectory's own failure is reported with its row.
 fn step_errors(
-    pipeline: &mut Pipeline<'_>,
     method: Method,
     runner: &mut Runner,
+    states: &[Vec<f64>],
     frames: &[Vec<f64>],
-    progress: Progress<'_>,
 ) -> Result<Vec<f64>> {
-    let fit = pipeline.pca(progress)?;
-    let basis = &fit.basis;
-    let k = basis.k();
-    // Coefficients of the reference at steps 0 (rest), 1, …: frame j is the state after step j + 1.
-    let mut states = Vec::with_capacity(frames.len() + 1);
-    states.push(vec![0.0; k]);
-    for f in frames {
-        let mut q = vec![0.0; k];
-        basis.project(f, &mut q);
-        states.push(q);
-    }
     let mut errors = ErrorAccumulator::default();
     for (j, f) in frames.iter().enumerate() {
         // Before the first step the body was at rest too.
