@@ -118,6 +118,15 @@ fn solver(method: SolverMethod) -> SolverConfig {
     }
 }
 
+/// A latent point near a simulated state z but off it (by up to 0.05 per coordinate), where
+/// no derivative vanishes by symmetry.
+fn moved_off(z: &[f64]) -> Vec<f64> {
+    z.iter()
+        .enumerate()
+        .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
+        .collect()
+}
+
 /// Checks `sim.objective`'s gradient at `z` against central differences, component by component.
 fn assert_gradient_matches_fd<S: Subspace>(sim: &mut ReducedSimulator<S>, z: &[f64], what: &str) {
     let d = z.len();
@@ -287,13 +296,7 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
                 sim.step().unwrap();
             }
             assert_eq!(sim.subspace.latent_dim(), 3 + kept);
-            let z: Vec<f64> = sim
-                .state
-                .z
-                .iter()
-                .enumerate()
-                .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
-                .collect();
+            let z = moved_off(&sim.state.z);
             let what = format!(
                 "neural, {onset} onset directions, cubature {}",
                 cubature.is_some()
@@ -485,13 +488,7 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
         neural.step().unwrap();
     }
     let d = 3;
-    let z: Vec<f64> = neural
-        .state
-        .z
-        .iter()
-        .enumerate()
-        .map(|(i, v)| v + 0.05 * (i as f64 + 1.0).sin())
-        .collect();
+    let z = moved_off(&neural.state.z);
     let mut hz = vec![0.0; d * d];
     neural.newton_matrix(&z, false, &mut hz);
     lin.state = latent_sim::ReducedState {
