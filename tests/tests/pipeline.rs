@@ -263,3 +263,82 @@ fn onset_directions_reach_the_neural_methods() {
         assert!(r.failure.is_none() && r.mean_rel_error.is_finite(), "{r:?}");
     }
 }
+
+/// `[reduced] complement_directions`: stage `complement` is the SVD of the autoencoder's
+/// residuals over the snapshots (orthonormal directions, singular values in order whose squares
+/// sum to ‖Q − decode(encode(Q))‖²_F), all its directions complete every reconstruction exactly,
+/// and the neural methods get the directions kept beside their latent coordinates, which brings
+/// them closer to the reference frames. Asking for more directions than there are is an error
+/// naming the scene and the field.
+#[test]
+fn complement_directions_complete_the_autoencoder() {
+    let text = format!("{TINY}[reduced]\ncomplement_directions = 2\n");
+    let s = scene(&text);
+    let out = scratch_dir("pipeline-complement");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let c = p.complement(&no_progress).unwrap();
+    let (k, r) = (c.k, c.singular_values.len());
+    assert_eq!((k, r), (6, 6), "k = 6 coefficients, 32 snapshots");
+    let cols: Vec<&[f64]> = c.directions.chunks_exact(k).collect();
+    for i in 0..r {
+        for j in 0..r {
+            let dot: f64 = cols[i].iter().zip(cols[j]).map(|(a, b)| a * b).sum();
+            let want = if i == j { 1.0 } else { 0.0 };
+            assert!((dot - want).abs() <= 1e-12, "columns {i}, {j}: {dot}");
+        }
+    }
+    assert!(c.singular_values.windows(2).all(|w| w[0] >= w[1]));
+
+    let snaps = p.snapshots(&no_progress).unwrap();
+    let fit = p.pca(&no_progress).unwrap();
+    let trained = p.train(&no_progress).unwrap();
+    let mut ws = trained.model.workspace();
+    let (mut q, mut qh) = (vec![0.0; k], vec![0.0; k]);
+    let mut residual = 0.0;
+    for u in snaps.data.chunks_exact(snaps.dim) {
+        fit.basis.project(u, &mut q);
+        trained.model.reconstruct(&q, &mut qh, &mut ws);
+        residual += q.iter().zip(&qh).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        xtask::pipeline::complete(&c.directions, &q, &mut qh);
+        let size = q.iter().map(|a| a * a).sum::<f64>().sqrt();
+        for (a, b) in q.iter().zip(&qh) {
+            assert!((a - b).abs() <= 1e-12 * size, "{a} against {b}");
+        }
+    }
+    let sigma2: f64 = c.singular_values.iter().map(|s| s * s).sum();
+    assert!(
+        (residual - sigma2).abs() <= 1e-9 * residual,
+        "{residual:e} against {sigma2:e}"
+    );
+
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: vec![Method::Neural],
+        trajectory: 0,
+    };
+    let with = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let plain = scene(TINY);
+    let mut p0 = Pipeline::new(&plain, &out.join("cache")).unwrap();
+    let without = run(&mut p0, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let (with, without) = (&with[0], &without[0]);
+    assert!(
+        with.failure.is_none() && with.mean_rel_error.is_finite(),
+        "{with:?}"
+    );
+    assert_eq!((without.dim, with.dim), (2, 4), "both directions are new");
+    assert!(
+        with.subspace_error < 0.9 * without.subspace_error,
+        "{} against {}",
+        with.subspace_error,
+        without.subspace_error
+    );
+
+    let too_many = scene(&format!("{TINY}[reduced]\ncomplement_directions = 7\n"));
+    let mut p = Pipeline::new(&too_many, &out.join("cache")).unwrap();
+    let err = p.complement_columns(&no_progress).unwrap_err().to_string();
+    assert!(
+        err.contains("tiny.toml") && err.contains("reduced.complement_directions = 7"),
+        "{err}"
+    );
+}

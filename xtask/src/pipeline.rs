@@ -77,6 +77,30 @@ fn relative_error(data: &cubature::TrainingMatrix, selected: &[usize], weights: 
     norm(&r) / norm(data.b()).max(f64::MIN_POSITIVE)
 }
 
+/// What the autoencoder misses in the training data (stage `complement`): the left singular
+/// vectors of the reconstruction residuals R = Q − decode(encode(Q)) over the snapshots' PCA
+/// coefficients Q, in order, for `[reduced] complement_directions`.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct Complement {
+    /// The PCA dimension k (each direction's length).
+    pub k: usize,
+    /// k × r column-major, orthonormal (r = min(k, snapshots)).
+    pub directions: Vec<f64>,
+    /// The residuals' singular values, largest first (‖R‖_F² = their sum of squares).
+    pub singular_values: Vec<f64>,
+}
+
+/// q̂ ← q̂ + V Vᵀ(q − q̂) for orthonormal columns V (k × c, column-major): the autoencoder's
+/// reconstruction q̂ of q completed by the mass-orthogonal projection of what it missed on the
+/// complement directions ([`Complement`]).
+pub fn complete(v: &[f64], q: &[f64], qh: &mut [f64]) {
+    let r: Vec<f64> = q.iter().zip(qh.iter()).map(|(a, b)| a - b).collect();
+    for col in v.chunks_exact(q.len()) {
+        let c: f64 = col.iter().zip(&r).map(|(a, b)| a * b).sum();
+        qh.iter_mut().zip(col).for_each(|(x, vi)| *x += c * vi);
+    }
+}
+
 /// The trained autoencoder and how it compares with PCA on the snapshots (stage `train`).
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct TrainedModel {
@@ -379,6 +403,9 @@ impl<'a> Pipeline<'a> {
     /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
     /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
     pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+        // The complement directions are left out: fitted with them, their forces (stiff
+        // directions, large for small displacements) dominate the relative error and the rule
+        // neglects the decoder's tangent.
         let key = KeyBuilder::new("cubature-neural")
             .mix_key(self.cubature_key())
             .mix_key(self.train_key())
@@ -395,6 +422,7 @@ impl<'a> Pipeline<'a> {
         } else {
             None
         };
+
         let basis = &fit.basis;
         let k = basis.k();
         let columns = basis_columns(basis);
@@ -524,6 +552,65 @@ impl<'a> Pipeline<'a> {
                 train_seconds,
             })
         })
+    }
+
+    /// Stage `complement`: the directions the trained autoencoder misses in the snapshots
+    /// ([`Complement`]), for the neural methods' `[reduced] complement_directions`.
+    pub fn complement(&mut self, progress: Progress<'_>) -> Result<Complement> {
+        let key = KeyBuilder::new("complement")
+            .mix_key(self.train_key())
+            .finish();
+        self.stage("complement", key, |p| {
+            let snaps = p.snapshots(progress)?;
+            let fit = p.pca(progress)?;
+            let trained = p.train(progress)?;
+            let s =
+                faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+            let q = fit.basis.project_matrix(s);
+            let qh = trained
+                .model
+                .reconstruct_batch(q.as_ref())
+                .map_err(|e| anyhow::anyhow!("{}: stage complement: {e}", p.scene.source))?;
+            let residual = &q - &qh;
+            let svd = residual.thin_svd().map_err(|_| {
+                anyhow::anyhow!(
+                    "{}: stage complement: the SVD of the autoencoder's residuals did not converge",
+                    p.scene.source
+                )
+            })?;
+            let u = svd.U();
+            let k = q.nrows();
+            Ok(Complement {
+                k,
+                directions: (0..u.ncols())
+                    .flat_map(|j| (0..k).map(move |i| u[(i, j)]))
+                    .collect(),
+                singular_values: svd.S().column_vector().iter().copied().collect(),
+            })
+        })
+    }
+
+    /// The scene's `[reduced] complement_directions` leading [`Complement`] directions, k × c
+    /// column-major (empty, and no stage run, for c = 0).
+    ///
+    /// # Errors
+    /// When the residuals have fewer directions than asked for, or a stage fails.
+    pub fn complement_columns(&mut self, progress: Progress<'_>) -> Result<Vec<f64>> {
+        let count = self.scene.reduced.complement_directions;
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        let c = self.complement(progress)?;
+        let available = c.singular_values.len();
+        if count > available {
+            bail!(
+                "{}: reduced.complement_directions = {count}, but the autoencoder's residuals \
+                 have only {available} directions (the PCA dimension or the number of \
+                 snapshots); use at most {available}",
+                self.scene.source
+            );
+        }
+        Ok(c.directions[..c.k * count].to_vec())
     }
 
     /// The full-space simulation of test trajectory `trajectory` (cached stage `reference`).

@@ -410,8 +410,9 @@ fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>>
 }
 
 /// Relative error, frame by frame, of the reference frames' best representation in reduced
-/// `method`'s subspace: u ↦ U UᵀM u for PCA, u ↦ U decode(encode(UᵀM u)) for the autoencoder,
-/// from the frames' coefficients `states` ([`reference_states`]).
+/// `method`'s subspace: u ↦ U UᵀM u for PCA, u ↦ U(f + VVᵀ(q − f)) with f = decode(encode(q))
+/// for the autoencoder (q = UᵀM u, V its complement directions, none by default; the onset
+/// directions are left out), from the frames' coefficients `states` ([`reference_states`]).
 fn subspace_errors(
     pipeline: &mut Pipeline<'_>,
     method: Method,
@@ -421,9 +422,12 @@ fn subspace_errors(
     frames: &[Vec<f64>],
     progress: Progress<'_>,
 ) -> Result<Vec<f64>> {
-    let trained = match method {
-        Method::Neural | Method::NeuralCubature => Some(pipeline.train(progress)?),
-        _ => None,
+    let (trained, complement) = match method {
+        Method::Neural | Method::NeuralCubature => (
+            Some(pipeline.train(progress)?),
+            pipeline.complement_columns(progress)?,
+        ),
+        _ => (None, Vec::new()),
     };
     let mut ws = trained.as_ref().map(|t| t.model.workspace());
     let mut qh = vec![0.0; basis.k()];
@@ -432,7 +436,10 @@ fn subspace_errors(
     let mut errors = ErrorAccumulator::default();
     for (q, f) in states[1..].iter().zip(frames) {
         match (&trained, ws.as_mut()) {
-            (Some(t), Some(ws)) => t.model.reconstruct(q, &mut qh, ws),
+            (Some(t), Some(ws)) => {
+                t.model.reconstruct(q, &mut qh, ws);
+                crate::pipeline::complete(&complement, q, &mut qh);
+            }
             _ => qh.copy_from_slice(q),
         }
         basis.reconstruct(&qh, &mut free);

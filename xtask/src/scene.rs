@@ -82,6 +82,12 @@ pub struct ReducedSolverConfig {
     /// from rest, minus what the decoder spans at rest. 0 (the default) adds none; the neural
     /// methods' dimension grows by the directions kept.
     pub onset_directions: usize,
+    /// Linear directions beside the autoencoder's latent coordinates after the onset ones: the
+    /// leading left singular vectors of what the autoencoder misses in the snapshots, q −
+    /// decode(encode(q)) (stage `complement`), minus what the decoder spans at rest. Each costs
+    /// a latent coordinate in every step and brings the neural methods closer to the whole PCA
+    /// basis's accuracy, without retraining. 0 (the default) adds none.
+    pub complement_directions: usize,
 }
 
 impl Default for ReducedSolverConfig {
@@ -91,6 +97,7 @@ impl Default for ReducedSolverConfig {
             tolerance: 1e-4,
             preconditioner: latent_sim::Preconditioning::default(),
             onset_directions: 0,
+            complement_directions: 0,
         }
     }
 }
@@ -113,11 +120,23 @@ impl ReducedSolverConfig {
                 ),
             });
         }
+        if self.complement_directions > MAX_COMPLEMENT_DIRECTIONS {
+            errors.push(FemError::InvalidConfig {
+                field: "reduced.complement_directions".into(),
+                reason: format!(
+                    "at most {MAX_COMPLEMENT_DIRECTIONS} (each costs a latent coordinate in every step), got {}",
+                    self.complement_directions
+                ),
+            });
+        }
     }
 }
 
 /// The most gravity-onset directions a scene may ask for.
 const MAX_ONSET_DIRECTIONS: usize = 32;
+
+/// The most complement directions a scene may ask for (the PCA dimension bounds it too).
+const MAX_COMPLEMENT_DIRECTIONS: usize = 256;
 
 impl Scene {
     /// Reads and checks a scene file.
@@ -563,15 +582,22 @@ mod tests {
     }
 
     #[test]
-    fn onset_directions_default_to_none_and_are_bounded() {
-        assert_eq!(Scene::builtin().reduced.onset_directions, 0);
-        let with = |m: usize| format!("{DEFAULT_SCENE}\n[reduced]\nonset_directions = {m}\n");
-        let s = Scene::from_str(&with(2), Path::new("."), "ok.toml").unwrap();
-        assert_eq!(s.reduced.onset_directions, 2);
-        let err = Scene::from_str(&with(33), Path::new("."), "bad.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("reduced.onset_directions"), "{err}");
+    fn linear_directions_default_to_none_and_are_bounded() {
+        let reduced = Scene::builtin().reduced;
+        assert_eq!(
+            (reduced.onset_directions, reduced.complement_directions),
+            (0, 0)
+        );
+        for (field, max) in [("onset_directions", 32), ("complement_directions", 256)] {
+            let with = |m: usize| format!("{DEFAULT_SCENE}\n[reduced]\n{field} = {m}\n");
+            let s = Scene::from_str(&with(max), Path::new("."), "ok.toml").unwrap();
+            let got = (s.reduced.onset_directions, s.reduced.complement_directions);
+            assert!(got == (max, 0) || got == (0, max), "{field}: {got:?}");
+            let err = Scene::from_str(&with(max + 1), Path::new("."), "bad.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(&format!("reduced.{field}")), "{err}");
+        }
     }
 
     #[test]

@@ -228,11 +228,12 @@ impl Runner {
                     None
                 };
                 let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
-                let subspace = Augmented::with_gravity_onset(
+                let subspace = Augmented::with_directions(
                     NeuralSubspace::new(trained.model),
                     &space,
                     &time,
                     pipeline.scene.reduced.onset_directions,
+                    &pipeline.complement_columns(progress)?,
                 )?;
                 let mut sim = ReducedSimulator::new(model, space, subspace, time, solver)?;
                 sim.preconditioning = pipeline.scene.reduced.preconditioner;

@@ -1,4 +1,5 @@
-//! Gravity-onset directions beside a subspace: q = f(z) + V w.
+//! Linear directions beside a subspace, q = f(z) + V w: gravity-onset directions and a
+//! complement.
 //!
 //! A body released at rest under gravity first moves along the reduced linear implicit-Euler
 //! response (A q₁ = g, A q_{n+1} = g + (M/h²)(2q_n − q_{n−1}), A = UᵀMU/h² + UᵀK₀U, g = Uᵀf_g),
@@ -8,6 +9,12 @@
 //! A-orthogonal to the subspace's tangent at rest (what f already spans there is not repeated,
 //! so the reduced matrices stay well conditioned) and to each other; iterates that are nearly
 //! spanned already are dropped.
+//!
+//! The same coordinates can hold a linear complement of the subspace: the leading directions of
+//! what f misses on the training data (the pipeline's `[reduced] complement_directions`, the left
+//! singular vectors of the reconstruction residuals q − f(encode(q))). They trade the latent
+//! step's speed for the accuracy of the PCA basis f lives in, a little at a time, without
+//! retraining f.
 
 use fem_core::integrator::TimeConfig;
 
@@ -51,13 +58,43 @@ impl<S: Subspace> Augmented<S> {
     /// [`ReducedError::NotPositiveDefinite`] when UᵀMU/h² + UᵀK₀U or the tangent's reduced
     /// matrix cannot be factorised.
     pub fn with_gravity_onset(
-        mut inner: S,
+        inner: S,
         space: &ReducedSpace,
         time: &TimeConfig,
         m: usize,
     ) -> Result<Self, ReducedError> {
+        Self::with_directions(inner, space, time, m, &[])
+    }
+
+    /// `inner` with up to `onset` gravity-onset directions (as [`Self::with_gravity_onset`]),
+    /// then the columns of `complement` (k × c, column-major; e.g. the leading directions of
+    /// what `inner` misses in the training data), each made A-orthogonal to the tangent at rest
+    /// and to the directions before it, and dropped when less than a thousandth of its A-norm is
+    /// new.
+    ///
+    /// # Errors
+    /// [`ReducedError::StateShape`] when `complement`'s length is not a multiple of k;
+    /// [`ReducedError::NotPositiveDefinite`] as [`Self::with_gravity_onset`].
+    pub fn with_directions(
+        inner: S,
+        space: &ReducedSpace,
+        time: &TimeConfig,
+        onset: usize,
+        complement: &[f64],
+    ) -> Result<Self, ReducedError> {
         let (k, d) = (space.k, inner.latent_dim());
-        if m == 0 || space.gravity.iter().all(|&g| g == 0.0) {
+        if !complement.len().is_multiple_of(k) {
+            return Err(ReducedError::StateShape {
+                expected: k * complement.len().div_ceil(k),
+                got: complement.len(),
+            });
+        }
+        let onset = if space.gravity.iter().all(|&g| g == 0.0) {
+            0
+        } else {
+            onset
+        };
+        if onset == 0 && complement.is_empty() {
             return Ok(Self::plain(inner));
         }
         let inv_h2 = if time.quasi_static {
@@ -71,10 +108,10 @@ impl<S: Subspace> Augmented<S> {
             .zip(&space.rest_stiffness)
             .map(|(m, k0)| m * inv_h2 + k0)
             .collect();
-        let apply_a = |x: &[f64], out: &mut [f64]| mat_vec(&a, x, out);
         let mut factor = DenseFactor::default();
         factor.factor(&a, k, "onset step")?;
         // The tangent at rest, J₀ = J(encode(0)), and its reduced matrix J₀ᵀAJ₀.
+        let mut inner = inner;
         let mut z0 = vec![0.0; d];
         inner.encode(&vec![0.0; k], &mut z0);
         let mut j0 = vec![0.0; k * d];
@@ -94,22 +131,27 @@ impl<S: Subspace> Augmented<S> {
         let (mut before, mut now) = (vec![0.0; k], vec![0.0; k]);
         let (mut mq, mut c, mut ac) = (vec![0.0; k], vec![0.0; k], vec![0.0; k]);
         let mut coef = vec![0.0; d];
-        for _ in 0..m {
-            // The next iterate of the linear response.
-            let two_now_minus_before: Vec<f64> =
-                now.iter().zip(&before).map(|(n, b)| 2.0 * n - b).collect();
-            mat_vec(&space.mass, &two_now_minus_before, &mut mq);
-            let mut next: Vec<f64> = space
-                .gravity
-                .iter()
-                .zip(&mq)
-                .map(|(g, v)| g + inv_h2 * v)
-                .collect();
-            factor.solve_in_place(&mut next);
-            before = std::mem::replace(&mut now, next);
+        for candidate in 0..onset + complement.len() / k {
+            if candidate < onset {
+                // The next iterate of the linear response.
+                let two_now_minus_before: Vec<f64> =
+                    now.iter().zip(&before).map(|(n, b)| 2.0 * n - b).collect();
+                mat_vec(&space.mass, &two_now_minus_before, &mut mq);
+                let mut next: Vec<f64> = space
+                    .gravity
+                    .iter()
+                    .zip(&mq)
+                    .map(|(g, v)| g + inv_h2 * v)
+                    .collect();
+                factor.solve_in_place(&mut next);
+                before = std::mem::replace(&mut now, next);
+                c.copy_from_slice(&now);
+            } else {
+                let j = candidate - onset;
+                c.copy_from_slice(&complement[j * k..(j + 1) * k]);
+            }
             // Without its A-projection on the tangent and on the directions kept so far.
-            c.copy_from_slice(&now);
-            apply_a(&c, &mut ac);
+            mat_vec(&a, &c, &mut ac);
             let full_norm = dot(&c, &ac).sqrt();
             for (cf, aj) in coef.iter_mut().zip(aj0.chunks_exact(k)) {
                 *cf = dot(aj, &c);
@@ -126,7 +168,7 @@ impl<S: Subspace> Augmented<S> {
                 let p = dot(av, &c) / n;
                 axpy(-p, v, &mut c);
             }
-            apply_a(&c, &mut ac);
+            mat_vec(&a, &c, &mut ac);
             let new_norm = dot(&c, &ac).sqrt();
             if new_norm.is_nan() || new_norm <= NEW_FRACTION * full_norm {
                 continue;

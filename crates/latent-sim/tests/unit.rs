@@ -263,7 +263,8 @@ fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
     }
 }
 
-/// Also through three gravity-onset directions beside the latent coordinates.
+/// Also through three gravity-onset directions beside the latent coordinates, and through two
+/// onset and one complement direction.
 #[test]
 fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature() {
     let m = model();
@@ -271,23 +272,26 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
     let basis = small_basis(&m, k);
     let ae =
         nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
-    for onset in [0, 3] {
+    let extra: Vec<f64> = (0..k).map(|i| (1.7 * i as f64 + 0.4).cos()).collect();
+    for (onset, complement) in [(0, &[][..]), (3, &[][..]), (2, &extra[..])] {
         for cubature in [
             None,
             Some((vec![1usize, 4, 9, 15], vec![1.5, 0.5, 2.0, 1.0])),
         ] {
             let space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
-            let sub = Augmented::with_gravity_onset(
+            let sub = Augmented::with_directions(
                 NeuralSubspace::new(ae.clone()),
                 &space,
                 &time(10),
                 onset,
+                complement,
             )
             .unwrap();
             let kept = sub.directions();
+            let asked = onset + complement.len() / k;
             assert!(
-                kept <= onset && (onset == 0 || kept >= 2),
-                "{kept} of {onset}"
+                kept <= asked && (asked == 0 || kept >= 2),
+                "{kept} of {asked}"
             );
             let mut sim =
                 ReducedSimulator::new(m.clone(), space, sub, time(10), solver(SolverMethod::Lbfgs))
@@ -298,7 +302,8 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
             assert_eq!(sim.subspace.latent_dim(), 3 + kept);
             let z = moved_off(&sim.state.z);
             let what = format!(
-                "neural, {onset} onset directions, cubature {}",
+                "neural, {onset} onset and {} complement directions, cubature {}",
+                complement.len() / k,
                 cubature.is_some()
             );
             assert_gradient_matches_fd(&mut sim, &z, &what);
@@ -814,4 +819,76 @@ fn onset_directions_are_new_and_linear() {
     assert_eq!(none.directions(), 0);
     let none = Augmented::with_gravity_onset(LinearSubspace::new(k), &space, &time(1), 3).unwrap();
     assert_eq!(none.directions(), 0);
+}
+
+/// Complement directions join the subspace where they are new: one already in the tangent at
+/// rest, or a repeat, is dropped; the kept ones are A-orthogonal to the tangent and to the onset
+/// directions before them; they are added without gravity too; a column of the wrong length is a
+/// typed error.
+#[test]
+fn complement_directions_are_kept_where_new() {
+    let m = model();
+    let k = 6;
+    let h = time(1).step;
+    let space = ReducedSpace::new(&m, &small_basis(&m, k), k, None).unwrap();
+    let a: Vec<f64> = space
+        .mass
+        .iter()
+        .zip(&space.rest_stiffness)
+        .map(|(m, k0)| m / (h * h) + k0)
+        .collect();
+    let a_dot = |x: &[f64], y: &[f64]| -> f64 {
+        (0..k)
+            .map(|i| (0..k).map(|j| x[i] * a[j * k + i] * y[j]).sum::<f64>())
+            .sum()
+    };
+    let ae =
+        nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    let mut inner = NeuralSubspace::new(ae.clone());
+    let (mut z0, mut j0) = (vec![0.0; 2], vec![0.0; 2 * k]);
+    inner.encode(&vec![0.0; k], &mut z0);
+    inner.jacobian(&z0, &mut j0);
+    // In the tangent, new, the same again, new.
+    let new1: Vec<f64> = (0..k).map(|i| (0.9 * i as f64 + 0.2).sin()).collect();
+    let new2: Vec<f64> = (0..k).map(|i| (i as f64 - 2.5).powi(2)).collect();
+    let in_tangent: Vec<f64> = (0..k).map(|i| 2.0 * j0[i] - 0.5 * j0[k + i]).collect();
+    let candidates = [&in_tangent[..], &new1, &new1, &new2].concat();
+    let mut sub = Augmented::with_directions(
+        NeuralSubspace::new(ae.clone()),
+        &space,
+        &time(1),
+        1,
+        &candidates,
+    )
+    .unwrap();
+    assert_eq!(sub.directions(), 3, "the onset direction, new1 and new2");
+    let d = sub.latent_dim();
+    let mut jac = vec![0.0; k * d];
+    sub.jacobian(
+        &z0.iter().copied().chain([0.0; 3]).collect::<Vec<_>>(),
+        &mut jac,
+    );
+    let cols: Vec<&[f64]> = jac.chunks_exact(k).collect();
+    for i in 2..d {
+        for (j, c) in cols.iter().enumerate().take(i) {
+            let (aij, aii, ajj) = (a_dot(cols[i], c), a_dot(cols[i], cols[i]), a_dot(c, c));
+            assert!(
+                aij.abs() <= 1e-9 * (aii * ajj).sqrt(),
+                "columns {i}, {j}: {aij:.3e}"
+            );
+        }
+    }
+    // Without gravity only the onset directions go.
+    let still = gravity_only(0.0);
+    let space0 = ReducedSpace::new(&still, &small_basis(&still, k), k, None).unwrap();
+    let sub0 =
+        Augmented::with_directions(NeuralSubspace::new(ae.clone()), &space0, &time(1), 2, &new1)
+            .unwrap();
+    assert_eq!(sub0.directions(), 1);
+    let err = Augmented::with_directions(NeuralSubspace::new(ae), &space, &time(1), 0, &new1[1..])
+        .unwrap_err();
+    assert!(
+        matches!(err, latent_sim::ReducedError::StateShape { .. }),
+        "{err}"
+    );
 }
