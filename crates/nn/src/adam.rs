@@ -79,6 +79,11 @@ impl Adam {
         assert_eq!(count, self.m.len(), "fewer parameter arrays than the state");
     }
 
+    /// Sets the learning rate of the steps from now on (a schedule's).
+    pub(crate) fn set_learning_rate(&mut self, learning_rate: f64) {
+        self.params.learning_rate = learning_rate;
+    }
+
     /// Counts a step and returns its update rule, for callers that update the arrays (or parts
     /// of them, in parallel) themselves with [`Adam::moments_mut`].
     pub(crate) fn begin_step(&mut self) -> AdamUpdate {

@@ -151,6 +151,8 @@ pub struct Trainer {
     model: Autoencoder,
     epochs: usize,
     epoch: usize,
+    /// The configuration's learning-rate schedule ([`AutoencoderConfig::learning_rate_at`]).
+    schedule: AutoencoderConfig,
     engine: GradientEngine,
     adam: Adam,
     rng: SplitMix64,
@@ -268,6 +270,7 @@ impl Trainer {
             model,
             epochs: config.epochs,
             epoch: 0,
+            schedule: config.clone(),
             engine,
             adam,
             rng: SplitMix64::for_item(init_seed, 3),
@@ -292,6 +295,8 @@ impl Trainer {
         let k = self.model.input_dim();
         let n_train = self.order.len();
         self.rng.shuffle(&mut self.order);
+        self.adam
+            .set_learning_rate(self.schedule.learning_rate_at(epoch));
         let mut sum = 0.0;
         for ids in self.order.chunks(self.batch) {
             let b = ids.len();

@@ -134,6 +134,20 @@ fn invalid_values_name_their_field() {
         ),
         (
             AutoencoderConfig {
+                final_learning_rate: Some(-1e-5),
+                ..d()
+            },
+            "autoencoder.final_learning_rate",
+        ),
+        (
+            AutoencoderConfig {
+                final_learning_rate: Some(2e-3),
+                ..d()
+            },
+            "autoencoder.final_learning_rate",
+        ),
+        (
+            AutoencoderConfig {
                 learning_rate: f64::NAN,
                 ..d()
             },
@@ -188,4 +202,33 @@ fn several_errors_are_reported_together_and_unknown_fields_rejected() {
     assert!(err.to_string().contains("epoch"), "{err}");
     let err = serde_json::from_str::<AutoencoderConfig>(r#"{"activation": "gelu"}"#).unwrap_err();
     assert!(err.to_string().contains("gelu"), "{err}");
+}
+
+/// The learning rate stays constant by default; with `final_learning_rate` it falls along a half
+/// cosine from the first epoch's `learning_rate` to the last epoch's final rate.
+#[test]
+fn the_learning_rate_decays_along_a_half_cosine() {
+    let constant = AutoencoderConfig {
+        epochs: 101,
+        ..AutoencoderConfig::default()
+    };
+    assert!((1..=101).all(|e| constant.learning_rate_at(e) == 1e-3));
+    let c = AutoencoderConfig {
+        final_learning_rate: Some(1e-5),
+        ..constant
+    };
+    c.validate().unwrap();
+    assert_eq!(c.learning_rate_at(1), 1e-3);
+    assert!((c.learning_rate_at(101) - 1e-5).abs() <= 1e-18);
+    assert!((c.learning_rate_at(51) - 0.5 * (1e-3 + 1e-5)).abs() <= 1e-15);
+    // A quarter of the way: f + (lr − f)(1 + cos(π/4))/2.
+    let quarter = 1e-5 + (1e-3 - 1e-5) * (1.0 + std::f64::consts::FRAC_1_SQRT_2) / 2.0;
+    assert!((c.learning_rate_at(26) - quarter).abs() <= 1e-15);
+    assert!((1..101).all(|e| c.learning_rate_at(e + 1) < c.learning_rate_at(e)));
+    let one = AutoencoderConfig { epochs: 1, ..c };
+    assert_eq!(
+        one.learning_rate_at(1),
+        1e-3,
+        "a single epoch runs at the first rate"
+    );
 }

@@ -362,6 +362,57 @@ fn a_training_step_is_adam_on_the_loss_gradient() {
     assert!(moved > 20_000, "only {moved} parameters moved");
 }
 
+/// The trainer follows the schedule: with a final rate 100 times smaller, the first epoch is the
+/// constant-rate one bit for bit, and the last moves the weights about 100 times less.
+#[test]
+fn the_trainer_follows_the_learning_rate_schedule() {
+    let data = manifold_data(150, 4);
+    let config = AutoencoderConfig {
+        hidden: vec![20, 20],
+        epochs: 2,
+        batch_size: 150,
+        learning_rate: 1e-2,
+        validation_fraction: 0.0,
+        patience: 0,
+        seed: 3,
+        skip: false,
+        ..AutoencoderConfig::default()
+    };
+    let largest_move = |config: &AutoencoderConfig| {
+        let mut trainer = Trainer::new(data.as_ref(), 2, config).unwrap();
+        trainer.run_epoch().unwrap();
+        let first = trainer.model().clone();
+        trainer.run_epoch().unwrap();
+        let mut second = trainer.model().clone();
+        let largest = first
+            .clone()
+            .parameters_mut()
+            .zip(second.parameters_mut())
+            .flat_map(|(a, b)| {
+                a.iter()
+                    .zip(b.iter())
+                    .map(|(a, b)| (a - b).abs())
+                    .collect::<Vec<_>>()
+            })
+            .fold(0.0, f64::max);
+        (first, largest)
+    };
+    let (first_constant, constant) = largest_move(&config);
+    let decayed = AutoencoderConfig {
+        final_learning_rate: Some(1e-4),
+        ..config
+    };
+    let (first_decayed, decayed) = largest_move(&decayed);
+    assert_eq!(
+        first_constant, first_decayed,
+        "the first epoch runs at learning_rate"
+    );
+    assert!(
+        constant > 5e-3 && decayed < 1e-3,
+        "largest move in the last epoch: {constant:e} at a constant rate, {decayed:e} decayed"
+    );
+}
+
 /// With the linear skip on PCA coefficients, training starts exactly at the truncation to the
 /// leading d coefficients and ends far below it; with `anchor_origin` the origin round-trips.
 #[test]
