@@ -451,7 +451,8 @@ fn assert_close(a: &[f64], b: &[f64], rel: f64, what: &str) {
     assert!(diff <= rel * size, "{what}: {:.2e} relative", diff / size);
 }
 
-/// The Newton matrix is formed in z directly (Σ_e (U_eJ)ᵀH_e(U_eJ) + Jᵀ(M/h² + springs)J). For a
+/// The Newton matrix is formed in z (Σ_e (U_eJ)ᵀH_e(U_eJ) + Jᵀ(M/h² + springs)J), or in q then
+/// sandwiched when d is close to k. For a
 /// linear subspace it is the exact Hessian of the objective; for the decoder it is Jᵀ H_q J with
 /// H_q the exact Hessian in q, which a linear subspace at the same state measures.
 #[test]
@@ -459,7 +460,11 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
     let m = model();
     let k = 6;
     let basis = small_basis(&m, k);
-    let cubature = Some((vec![1usize, 4, 9, 15], vec![1.5, 0.5, 2.0, 1.0]));
+    // Eight scattered elements: the element-basis path, in z at d = 3 and in q at d = 6.
+    let cubature = Some((
+        vec![1usize, 4, 7, 10, 13, 16, 19, 22],
+        vec![1.5, 0.5, 2.0, 1.0, 0.8, 1.2, 0.6, 1.1],
+    ));
     let space = ReducedSpace::new(&m, &basis, k, cubature).unwrap();
     let mut lin = ReducedSimulator::new(
         m.clone(),
@@ -478,56 +483,68 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
     lin.newton_matrix(&z, false, &mut h);
     assert_close(&h, &fd_hessian(&mut lin, &z), 1e-6, "linear");
 
-    // Neural: Jᵀ H_q J, H_q by differences of the linear objective at the same state.
-    let ae =
-        nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
-    let mut neural = ReducedSimulator::new(
-        m.clone(),
-        space,
-        NeuralSubspace::new(ae),
-        time(10),
-        solver(SolverMethod::Newton),
-    )
-    .unwrap();
-    for _ in 0..2 {
-        neural.step().unwrap();
-    }
-    let d = 3;
-    let z = moved_off(&neural.state.z);
-    let mut hz = vec![0.0; d * d];
-    neural.newton_matrix(&z, false, &mut hz);
-    lin.state = latent_sim::ReducedState {
-        z: neural.state.q.clone(),
-        ..neural.state.clone()
-    };
-    let mut q = vec![0.0; k];
-    neural.subspace.decode(&z, &mut q);
-    let hq = fd_hessian(&mut lin, &q);
-    let mut jac = vec![0.0; k * d];
-    neural.subspace.jacobian(&z, &mut jac);
-    let mut reference = vec![0.0; d * d];
-    for a in 0..d {
-        for b in 0..d {
-            for i in 0..k {
-                for j in 0..k {
-                    reference[b * d + a] += jac[a * k + i] * hq[j * k + i] * jac[b * k + j];
+    // Neural: Jᵀ H_q J, H_q by differences of the linear objective at the same state. With 3
+    // latent coordinates of 6 the element terms are summed in z; with 6 in q, then sandwiched.
+    for d in [3, 6] {
+        let ae = nn::Autoencoder::with_architecture(k, d, &[12, 10], nn::Activation::Elu, None, 5)
+            .unwrap();
+        let mut neural = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            NeuralSubspace::new(ae),
+            time(10),
+            solver(SolverMethod::Newton),
+        )
+        .unwrap();
+        for _ in 0..2 {
+            neural.step().unwrap();
+        }
+        let z = moved_off(&neural.state.z);
+        let mut hz = vec![0.0; d * d];
+        neural.newton_matrix(&z, false, &mut hz);
+        lin.state = latent_sim::ReducedState {
+            z: neural.state.q.clone(),
+            ..neural.state.clone()
+        };
+        let mut q = vec![0.0; k];
+        neural.subspace.decode(&z, &mut q);
+        let hq = fd_hessian(&mut lin, &q);
+        let mut jac = vec![0.0; k * d];
+        neural.subspace.jacobian(&z, &mut jac);
+        let mut reference = vec![0.0; d * d];
+        for a in 0..d {
+            for b in 0..d {
+                for i in 0..k {
+                    for j in 0..k {
+                        reference[b * d + a] += jac[a * k + i] * hq[j * k + i] * jac[b * k + j];
+                    }
                 }
             }
         }
+        let what = format!("neural, d = {d}");
+        assert_close(&hz, &reference, 1e-6, &what);
+        assert!(
+            (0..d).all(|a| (0..d).all(|b| hz[a * d + b] == hz[b * d + a])),
+            "{what}: not exactly symmetric"
+        );
+        // Projected tangents: positive semidefinite elastic part, so the matrix is SPD here.
+        neural.newton_matrix(&z, true, &mut hz);
+        assert!((0..d).all(|i| hz[i * d + i] > 0.0));
+        // The cubature rule takes the element basis (F = I + B_e q, G B = B_e J); the vertex
+        // path (decoded vertices, U J) forms the same matrix to rounding.
+        assert_eq!(neural.space.elastic_path(), ElasticPath::ElementBasis);
+        neural
+            .space
+            .set_elastic_path(&neural.model, ElasticPath::Vertices);
+        let mut by_vertices = vec![0.0; d * d];
+        neural.newton_matrix(&z, true, &mut by_vertices);
+        assert_close(
+            &hz,
+            &by_vertices,
+            1e-12,
+            &format!("{what}: element basis against vertices"),
+        );
     }
-    assert_close(&hz, &reference, 1e-6, "neural");
-    // Projected tangents: positive semidefinite elastic part, so the matrix is SPD here.
-    neural.newton_matrix(&z, true, &mut hz);
-    assert!((0..d).all(|i| hz[i * d + i] > 0.0));
-    // The cubature rule takes the element basis (F = I + B_e q, G B = B_e J); the vertex path
-    // (decoded vertices, U J) forms the same matrix to rounding.
-    assert_eq!(neural.space.elastic_path(), ElasticPath::ElementBasis);
-    neural
-        .space
-        .set_elastic_path(&neural.model, ElasticPath::Vertices);
-    let mut by_vertices = vec![0.0; d * d];
-    neural.newton_matrix(&z, true, &mut by_vertices);
-    assert_close(&hz, &by_vertices, 1e-12, "element basis against vertices");
 }
 
 /// The preconditioner changes how L-BFGS gets there, not where: with cubature, a neural subspace
