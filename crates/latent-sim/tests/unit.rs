@@ -770,17 +770,10 @@ fn onset_directions_reproduce_the_first_steps_of_a_release_under_gravity() {
     }
 }
 
-/// The directions are A-orthogonal (A = UᵀMU/h² + UᵀK₀U) to the tangent at rest and to each
-/// other, J = [J_f | V] and q is linear in w; none are added without gravity, for m = 0, or
-/// where the subspace already spans every coefficient. (The reduced gradient through them is
-/// checked with the neural subspace's.)
-#[test]
-fn onset_directions_are_new_and_linear() {
-    let m = model();
-    let k = 6;
-    let basis = small_basis(&m, k);
-    let h = time(1).step;
-    let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+/// Columns `from..` of the Jacobian `jac` (k × d) are A-orthogonal to every column before them,
+/// A = UᵀMU/h² + UᵀK₀U.
+fn assert_linear_columns_a_orthogonal(space: &ReducedSpace, h: f64, jac: &[f64], from: usize) {
+    let k = space.k;
     let a: Vec<f64> = space
         .mass
         .iter()
@@ -792,6 +785,29 @@ fn onset_directions_are_new_and_linear() {
             .map(|i| (0..k).map(|j| x[i] * a[j * k + i] * y[j]).sum::<f64>())
             .sum()
     };
+    let cols: Vec<&[f64]> = jac.chunks_exact(k).collect();
+    for i in from..cols.len() {
+        for (j, c) in cols.iter().enumerate().take(i) {
+            let (aij, aii, ajj) = (a_dot(cols[i], c), a_dot(cols[i], cols[i]), a_dot(c, c));
+            assert!(
+                aij.abs() <= 1e-9 * (aii * ajj).sqrt(),
+                "columns {i}, {j}: {aij:.3e}"
+            );
+        }
+    }
+}
+
+/// The directions are A-orthogonal (A = UᵀMU/h² + UᵀK₀U) to the tangent at rest and to each
+/// other, J = [J_f | V] and q is linear in w; none are added without gravity, for m = 0, or
+/// where the subspace already spans every coefficient. (The reduced gradient through them is
+/// checked with the neural subspace's.)
+#[test]
+fn onset_directions_are_new_and_linear() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let h = time(1).step;
+    let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
     let ae =
         nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
     let mut sub =
@@ -807,16 +823,8 @@ fn onset_directions_are_new_and_linear() {
     );
     let mut jac = vec![0.0; k * d];
     sub.jacobian(&z0, &mut jac);
+    assert_linear_columns_a_orthogonal(&space, h, &jac, 2);
     let cols: Vec<&[f64]> = jac.chunks_exact(k).collect();
-    for i in 2..d {
-        for (j, c) in cols.iter().enumerate().take(i) {
-            let (aij, aii, ajj) = (a_dot(cols[i], c), a_dot(cols[i], cols[i]), a_dot(c, c));
-            assert!(
-                aij.abs() <= 1e-9 * (aii * ajj).sqrt(),
-                "columns {i}, {j}: {aij:.3e}"
-            );
-        }
-    }
     // q is linear in w, along V.
     let (mut q1, mut q2) = (vec![0.0; k], vec![0.0; k]);
     let mut z = z0.clone();
@@ -848,17 +856,6 @@ fn complement_directions_are_kept_where_new() {
     let k = 6;
     let h = time(1).step;
     let space = ReducedSpace::new(&m, &small_basis(&m, k), k, None).unwrap();
-    let a: Vec<f64> = space
-        .mass
-        .iter()
-        .zip(&space.rest_stiffness)
-        .map(|(m, k0)| m / (h * h) + k0)
-        .collect();
-    let a_dot = |x: &[f64], y: &[f64]| -> f64 {
-        (0..k)
-            .map(|i| (0..k).map(|j| x[i] * a[j * k + i] * y[j]).sum::<f64>())
-            .sum()
-    };
     let ae =
         nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
     let mut inner = NeuralSubspace::new(ae.clone());
@@ -885,16 +882,7 @@ fn complement_directions_are_kept_where_new() {
         &z0.iter().copied().chain([0.0; 3]).collect::<Vec<_>>(),
         &mut jac,
     );
-    let cols: Vec<&[f64]> = jac.chunks_exact(k).collect();
-    for i in 2..d {
-        for (j, c) in cols.iter().enumerate().take(i) {
-            let (aij, aii, ajj) = (a_dot(cols[i], c), a_dot(cols[i], cols[i]), a_dot(c, c));
-            assert!(
-                aij.abs() <= 1e-9 * (aii * ajj).sqrt(),
-                "columns {i}, {j}: {aij:.3e}"
-            );
-        }
-    }
+    assert_linear_columns_a_orthogonal(&space, h, &jac, 2);
     // Without gravity only the onset directions go.
     let still = gravity_only(0.0);
     let space0 = ReducedSpace::new(&still, &small_basis(&still, k), k, None).unwrap();

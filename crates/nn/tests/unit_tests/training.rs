@@ -3,7 +3,7 @@
 //! step is exactly Adam on the loss gradient.
 
 use faer::Mat;
-use nn::{Adam, AutoencoderConfig, NnError, Trainer, train, train_search};
+use nn::{Adam, Autoencoder, AutoencoderConfig, NnError, Trainer, train, train_search};
 
 use super::{Rng, manifold_data};
 
@@ -300,24 +300,43 @@ fn bad_data_is_an_error() {
     ));
 }
 
-#[test]
-fn a_training_step_is_adam_on_the_loss_gradient() {
-    // 130 × 100 layers (13,000 weights) are split into row blocks for the parallel weight
-    // gradient and the fused Adam update; every row must get its own gradient and update.
-    let data = manifold_data(150, 4);
-    let config = AutoencoderConfig {
-        hidden: vec![130, 100],
-        epochs: 1,
+/// Adam at a rate of 1e-2 on 150 samples in one batch, no validation split, seed 3.
+fn one_batch_config(hidden: Vec<usize>, epochs: usize) -> AutoencoderConfig {
+    AutoencoderConfig {
+        hidden,
+        epochs,
         batch_size: 150,
         learning_rate: 1e-2,
         validation_fraction: 0.0,
         patience: 0,
         seed: 3,
         // Zero-initialised output layers (the skip) give gradients at rounding level, which
-        // Adam's normalisation amplifies: this test is about the update rule on real gradients.
+        // Adam's normalisation amplifies: these tests are about updates from real gradients.
         skip: false,
         ..AutoencoderConfig::default()
-    };
+    }
+}
+
+/// |b − a| for every parameter of two networks of the same architecture, in order.
+fn parameter_changes(a: &Autoencoder, b: &Autoencoder) -> Vec<f64> {
+    let (mut a, mut b) = (a.clone(), b.clone());
+    a.parameters_mut()
+        .zip(b.parameters_mut())
+        .flat_map(|(a, b)| {
+            a.iter()
+                .zip(b.iter())
+                .map(|(a, b)| (b - a).abs())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+#[test]
+fn a_training_step_is_adam_on_the_loss_gradient() {
+    // 130 × 100 layers (13,000 weights) are split into row blocks for the parallel weight
+    // gradient and the fused Adam update; every row must get its own gradient and update.
+    let data = manifold_data(150, 4);
+    let config = one_batch_config(vec![130, 100], 1);
     let step = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -347,16 +366,8 @@ fn a_training_step_is_adam_on_the_loss_gradient() {
         }
     }
     // Adam's first step moves every parameter with a nonzero gradient by about the rate.
-    let moved = before
-        .clone()
-        .parameters_mut()
-        .zip(after.parameters_mut())
-        .flat_map(|(b, a)| {
-            b.iter()
-                .zip(a.iter())
-                .map(|(b, a)| (a - b).abs())
-                .collect::<Vec<_>>()
-        })
+    let moved = parameter_changes(&before, &after)
+        .into_iter()
         .filter(|d| *d > 0.5e-2)
         .count();
     assert!(moved > 20_000, "only {moved} parameters moved");
@@ -367,33 +378,14 @@ fn a_training_step_is_adam_on_the_loss_gradient() {
 #[test]
 fn the_trainer_follows_the_learning_rate_schedule() {
     let data = manifold_data(150, 4);
-    let config = AutoencoderConfig {
-        hidden: vec![20, 20],
-        epochs: 2,
-        batch_size: 150,
-        learning_rate: 1e-2,
-        validation_fraction: 0.0,
-        patience: 0,
-        seed: 3,
-        skip: false,
-        ..AutoencoderConfig::default()
-    };
+    let config = one_batch_config(vec![20, 20], 2);
     let largest_move = |config: &AutoencoderConfig| {
         let mut trainer = Trainer::new(data.as_ref(), 2, config).unwrap();
         trainer.run_epoch().unwrap();
         let first = trainer.model().clone();
         trainer.run_epoch().unwrap();
-        let mut second = trainer.model().clone();
-        let largest = first
-            .clone()
-            .parameters_mut()
-            .zip(second.parameters_mut())
-            .flat_map(|(a, b)| {
-                a.iter()
-                    .zip(b.iter())
-                    .map(|(a, b)| (a - b).abs())
-                    .collect::<Vec<_>>()
-            })
+        let largest = parameter_changes(&first, trainer.model())
+            .into_iter()
             .fold(0.0, f64::max);
         (first, largest)
     };
