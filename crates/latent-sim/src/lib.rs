@@ -38,6 +38,9 @@ pub enum ReducedError {
     /// A state vector given from outside does not have the subspace's length.
     #[error("a state of {got} coefficients was given to a subspace of {expected}")]
     StateShape { expected: usize, got: usize },
+    /// A cubature rule that does not fit the model.
+    #[error("cubature rule: {reason}; refit the cubature stage")]
+    Cubature { reason: String },
     /// A reduced matrix that must be positive definite is not.
     #[error("the reduced {what} matrix is not positive definite")]
     NotPositiveDefinite { what: &'static str },

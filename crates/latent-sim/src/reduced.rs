@@ -277,6 +277,9 @@ impl ReducedSpace {
                 }
             }
         }
+        if let Some((elements, weights)) = &cubature {
+            check_rule(elements, weights, model.elements.len())?;
+        }
         let (elements, weights) = cubature.unwrap_or_else(|| {
             (
                 (0..model.elements.len()).collect(),
@@ -678,6 +681,26 @@ impl ReducedSpace {
         }
         out
     }
+}
+
+/// A rule's elements exist (`count` of them) and its weights are as many, finite and not
+/// negative.
+fn check_rule(elements: &[usize], weights: &[f64], count: usize) -> Result<(), ReducedError> {
+    let bad = |reason: String| Err(ReducedError::Cubature { reason });
+    if elements.len() != weights.len() {
+        return bad(format!(
+            "{} elements but {} weights",
+            elements.len(),
+            weights.len()
+        ));
+    }
+    if let Some(&e) = elements.iter().find(|&&e| e >= count) {
+        return bad(format!("element {e} does not exist (the mesh has {count})"));
+    }
+    if let Some(w) = weights.iter().find(|w| !(w.is_finite() && **w >= 0.0)) {
+        return bad(format!("weight {w} is not a finite, non-negative number"));
+    }
+    Ok(())
 }
 
 /// aᵀb with eight independent accumulators (vectorisable; the order of the sum differs from

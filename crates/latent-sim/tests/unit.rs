@@ -370,6 +370,34 @@ fn elastic_path_follows_the_element_set() {
     assert_eq!(rule.elastic_path(), ElasticPath::ElementBasis);
 }
 
+/// A rule that does not fit the mesh is a typed error naming what is wrong, not a panic.
+#[test]
+fn a_cubature_rule_that_does_not_fit_is_an_error() {
+    let m = model();
+    let k = 4;
+    let basis = small_basis(&m, k);
+    let n = m.elements.len();
+    for (rule, want) in [
+        (
+            (vec![0, n], vec![1.0; 2]),
+            format!("element {n} does not exist"),
+        ),
+        (
+            (vec![0, 3], vec![1.0]),
+            "2 elements but 1 weights".to_string(),
+        ),
+        ((vec![0, 3], vec![1.0, -0.5]), "weight -0.5".to_string()),
+        ((vec![0, 3], vec![f64::NAN, 1.0]), "weight NaN".to_string()),
+    ] {
+        let err = ReducedSpace::new(&m, &basis, k, Some(rule)).unwrap_err();
+        assert!(
+            matches!(err, latent_sim::ReducedError::Cubature { .. })
+                && err.to_string().contains(&want),
+            "{err}"
+        );
+    }
+}
+
 /// Springs and point loads evaluated in q (through Σ U_vᵀU_v and Σ U_vᵀ) equal the full-space
 /// force energy at the decoded displacement, and their gradient is its projection Uᵀ∇Φ.
 #[test]
