@@ -32,6 +32,9 @@ pub struct BenchOptions {
     pub latent_dims: Vec<usize>,
     /// Cubature tolerances for both cubature methods.
     pub tolerances: Vec<f64>,
+    /// `[reduced] complement_directions` counts to run the neural methods with, at the scene's
+    /// latent dimension (none by default).
+    pub complement_dims: Vec<usize>,
 }
 
 /// Default cubature tolerances swept.
@@ -165,6 +168,21 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             scene: s,
             solver: None,
         });
+    }
+    let mut complement_dims = opts.complement_dims.clone();
+    complement_dims.sort_unstable();
+    complement_dims.dedup();
+    for c in complement_dims {
+        let mut s = scene.clone();
+        s.reduced.complement_directions = c;
+        for method in [Method::Neural, Method::NeuralCubature] {
+            v.push(Variant {
+                method,
+                label: format!("{} c={c}", method.name()),
+                scene: s.clone(),
+                solver: None,
+            });
+        }
     }
     v
 }
@@ -363,6 +381,48 @@ mod tests {
             offline_seconds: 0.0,
             pareto: false,
         }
+    }
+
+    /// `--complement-dims` adds both neural methods per count, each with its scene's
+    /// `[reduced] complement_directions` set, after the latent sizes.
+    #[test]
+    fn complement_counts_become_neural_variants() {
+        let scene = Scene::builtin();
+        let opts = BenchOptions {
+            out: PathBuf::new(),
+            cache: PathBuf::new(),
+            trajectory: 0,
+            repeats: 1,
+            pca_dims: vec![4],
+            latent_dims: vec![2],
+            tolerances: vec![0.1],
+            complement_dims: vec![8, 0, 8],
+        };
+        let found: Vec<(String, usize)> = variants(&scene, 10, &opts)
+            .into_iter()
+            .map(|v| (v.label, v.scene.reduced.complement_directions))
+            .filter(|(label, _)| label.contains(" c="))
+            .collect();
+        let want = [
+            ("neural c=0", 0),
+            ("neural-cubature c=0", 0),
+            ("neural c=8", 8),
+            ("neural-cubature c=8", 8),
+        ];
+        assert_eq!(
+            found,
+            want.map(|(l, c)| (l.to_string(), c)).to_vec(),
+            "sorted, without repeats"
+        );
+        let none = BenchOptions {
+            complement_dims: Vec::new(),
+            ..opts
+        };
+        assert!(
+            variants(&scene, 10, &none)
+                .iter()
+                .all(|v| !v.label.contains(" c="))
+        );
     }
 
     #[test]

@@ -119,6 +119,10 @@ enum Command {
         /// Cubature tolerances (default: 0.1, 0.05, 0.02).
         #[arg(long, value_delimiter = ',')]
         tolerances: Vec<f64>,
+        /// Complement-direction counts for the neural methods at the scene's latent dimension
+        /// (default: none; see `[reduced] complement_directions`).
+        #[arg(long, value_delimiter = ',')]
+        complement_dims: Vec<usize>,
         /// Held-out test trajectory to simulate.
         #[arg(long, default_value_t = 0)]
         trajectory: usize,
@@ -327,6 +331,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             pca_dims,
             latent_dims,
             tolerances,
+            complement_dims,
             trajectory,
         } => {
             let scene = load_scene(common.scene.as_ref())?;
@@ -342,6 +347,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 pca_dims,
                 latent_dims,
                 tolerances,
+                complement_dims,
             };
             let method_bar = bar(0, "");
             let rows = bench(
