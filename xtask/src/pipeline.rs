@@ -422,7 +422,6 @@ impl<'a> Pipeline<'a> {
         } else {
             None
         };
-
         let basis = &fit.basis;
         let k = basis.k();
         let columns = basis_columns(basis);
