@@ -111,23 +111,26 @@ impl ReducedSolverConfig {
                 reason: format!("must be in (0, 1), got {t}"),
             });
         }
-        if self.onset_directions > MAX_ONSET_DIRECTIONS {
-            errors.push(FemError::InvalidConfig {
-                field: "reduced.onset_directions".into(),
-                reason: format!(
-                    "at most {MAX_ONSET_DIRECTIONS} (each costs a latent coordinate in every step), got {}",
-                    self.onset_directions
-                ),
-            });
-        }
-        if self.complement_directions > MAX_COMPLEMENT_DIRECTIONS {
-            errors.push(FemError::InvalidConfig {
-                field: "reduced.complement_directions".into(),
-                reason: format!(
-                    "at most {MAX_COMPLEMENT_DIRECTIONS} (each costs a latent coordinate in every step), got {}",
-                    self.complement_directions
-                ),
-            });
+        for (field, count, max) in [
+            (
+                "onset_directions",
+                self.onset_directions,
+                MAX_ONSET_DIRECTIONS,
+            ),
+            (
+                "complement_directions",
+                self.complement_directions,
+                MAX_COMPLEMENT_DIRECTIONS,
+            ),
+        ] {
+            if count > max {
+                errors.push(FemError::InvalidConfig {
+                    field: format!("reduced.{field}"),
+                    reason: format!(
+                        "at most {max} (each costs a latent coordinate in every step), got {count}"
+                    ),
+                });
+            }
         }
     }
 }
