@@ -675,19 +675,11 @@ impl Mlp {
             for (row, p) in ws.first.chunks_exact_mut(1 + n0).zip(p.chunks_exact(n0)) {
                 row[1..].copy_from_slice(p);
             }
-            for (k, col) in ws.w21t.chunks_exact_mut(n2).enumerate() {
-                for (i, t) in col.iter_mut().enumerate() {
-                    *t = p[i * n0 + k];
-                }
-            }
+            transpose(&mut ws.w21t, p, n2, n0);
         }
         let w2 = &self.weights[1];
         kernels::mat_vec(&mut ws.first_bias, w2, &self.biases[0], n2, n1);
-        for (j, col) in ws.w2t.chunks_exact_mut(n2).enumerate() {
-            for (i, t) in col.iter_mut().enumerate() {
-                *t = w2[i * n1 + j];
-            }
-        }
+        transpose(&mut ws.w2t, w2, n2, n1);
         ws.packed_version = self.version;
     }
 
@@ -788,6 +780,15 @@ fn through_linear_units(w21t: &[f64], w2b1: &[f64], z: &[f64], out: &mut [f64]) 
     let (n0, n2) = (z.len(), out.len());
     kernels::mat_t_vec(out, w21t, z, n0, n2);
     out.iter_mut().zip(&w2b1[..n2]).for_each(|(o, q)| *o += q);
+}
+
+/// dst (n × m, row-major) = srcᵀ for src (m × n, row-major).
+fn transpose(dst: &mut [f64], src: &[f64], m: usize, n: usize) {
+    for (j, row) in dst.chunks_exact_mut(m).take(n).enumerate() {
+        for (i, t) in row.iter_mut().enumerate() {
+            *t = src[i * n + j];
+        }
+    }
 }
 
 /// The units j whose activation is not linear at a_j (σ(a_j) ≠ a_j or σ'(a_j) ≠ 1, given
