@@ -439,6 +439,13 @@ impl ReducedSpace {
         &self.element_basis[i * n..(i + 1) * n]
     }
 
+    /// All the element bases, element after element: 9 rows of [`Self::basis_stride`] entries
+    /// per element, row-major (empty off the [`ElasticPath::ElementBasis`] path).
+    #[inline]
+    pub(crate) fn element_bases(&self) -> &[f64] {
+        &self.element_basis
+    }
+
     /// Length of an element basis row (k padded to the SIMD width).
     #[inline]
     pub(crate) fn basis_stride(&self) -> usize {

@@ -289,6 +289,11 @@ struct Work {
     uj_e: Vec<f64>,
     fj_e: Vec<f64>,
     afj_e: Vec<f64>,
+    /// On the element-basis path, over the whole element set (m elements, row-major): the
+    /// element bases times J (9m × d, the sum in z only) and the stress derivatives times those
+    /// rows (9m × n, n = k or d).
+    stacked_bj: Vec<f64>,
+    stacked_abj: Vec<f64>,
     newton: DenseFactor,
     timers: Timers,
 }
@@ -347,8 +352,10 @@ impl<S: Subspace> ReducedSimulator<S> {
                 hz_elastic: vec![0.0; d * d],
                 uj: Vec::new(),
                 uj_e: vec![0.0; 12 * d],
-                fj_e: vec![0.0; 9 * d.max(k)],
-                afj_e: vec![0.0; 9 * d.max(k)],
+                fj_e: vec![0.0; 9 * d],
+                afj_e: vec![0.0; 9 * d],
+                stacked_bj: Vec::new(),
+                stacked_abj: Vec::new(),
                 newton: DenseFactor::default(),
                 timers: Timers::default(),
             },
@@ -923,82 +930,34 @@ impl<S: Subspace> StepObjective<'_, S> {
         factor.factor(&self.work.hz, d, what)
     }
 
-    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J), formed in z directly, or on the
-    /// element-basis path as Jᵀ(Σ_e w_e U_eᵀ H_e U_e)J when that is cheaper
-    /// ([`sum_in_q_is_cheaper`]).
+    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J): on the element-basis path as
+    /// two matrix products over the whole element set ([`Self::stacked_element_terms`]), in z
+    /// or, when that is cheaper ([`sum_in_q_is_cheaper`]), as Jᵀ(Σ_e w_e U_eᵀ H_e U_e)J; on the
+    /// vertex path element by element.
     ///
     /// H_e = W Gᵀ A G with A = ∂P/∂F (9×9) and G = ∂vec(F)/∂x_e (9×12), so with B = U_e J
     /// (12×d) the element's term is W (G B)ᵀ A (G B): G B costs 36·d (row 3j + i of it is
     /// Σ_a g_a[j] B[3a + i], g_a the shape gradients), A (G B) 81·d and the product 9·d², instead
     /// of forming the 12×12 H_e (about 2,300) and B ᵀ H_e B (144·d + 12·d²).
     fn newton_matrix(&mut self, projected: bool) {
-        let (model, space) = (self.model, self.space);
-        let (k, d) = (space.k, self.subspace.latent_dim());
-        let basis = space.elastic_path() == ElasticPath::ElementBasis;
+        let (k, d) = (self.space.k, self.subspace.latent_dim());
+        let basis = self.space.elastic_path() == ElasticPath::ElementBasis;
         let identity = self.subspace.is_linear();
-        let in_q = basis && !identity && sum_in_q_is_cheaper(space.elements.len(), k, d);
+        let in_q = basis && !identity && sum_in_q_is_cheaper(self.space.elements.len(), k, d);
         // The element terms go into a matrix of this size: d×d, or k×k in q.
         let n = if in_q { k } else { d };
         let w = &mut *self.work;
         w.hz.copy_from_slice(&w.hz_const);
         if in_q {
             w.hq.resize(k * k, 0.0);
-            w.hq.fill(0.0);
         }
-        let (u, q, uj, jac) = (&w.u, &w.q, &w.uj, &w.jac);
-        let (b, fb, afb) = (&mut w.uj_e, &mut w.fj_e[..9 * n], &mut w.afj_e[..9 * n]);
+        if basis {
+            self.stacked_element_terms(projected, in_q, identity);
+        } else {
+            self.vertex_element_terms(projected);
+        }
+        let w = &mut *self.work;
         let sum = if in_q { &mut w.hq } else { &mut w.hz };
-        with_material!(&model.material, |material| {
-            for (i, ((&e, &weight), at)) in space
-                .elements
-                .iter()
-                .zip(&space.weights)
-                .zip(space.element_touched())
-                .enumerate()
-            {
-                // F and G B: on the element-basis path from B_e (F = I + B_e q, G B = B_e J, or
-                // B_e itself in q), else from the decoded vertices and U J's rows.
-                let f = if basis {
-                    let df = Arch::new().dispatch(BasisTimesJacobian {
-                        basis: space.element_basis(i),
-                        stride: space.basis_stride(),
-                        jac: (!identity && !in_q).then_some(&jac[..]),
-                        q,
-                        k,
-                        d: n,
-                        fb,
-                    });
-                    Mat3::identity() + Mat3::from_column_slice(&df)
-                } else {
-                    for (v, &p) in at.iter().enumerate() {
-                        let p = p as usize;
-                        b[3 * v * d..3 * (v + 1) * d]
-                            .copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
-                    }
-                    Arch::new().dispatch(VertexRowsToF {
-                        b,
-                        g: model.elements.shape_gradients(e),
-                        d,
-                        fb,
-                    });
-                    model.elements.deformation_gradient(e, u)
-                };
-                let a = if projected {
-                    material.dpdf_projected(&f)
-                } else {
-                    material.dpdf(&f)
-                };
-                let scale = model.elements.volume[e] * weight;
-                let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
-                Arch::new().dispatch(ElementGaussNewton {
-                    a: &a,
-                    d: n,
-                    fb,
-                    afb,
-                    hz: sum,
-                });
-            }
-        });
         // The elements added to the lower triangle only (and a few entries above it).
         for m in 0..n {
             for i in m + 1..n {
@@ -1013,20 +972,145 @@ impl<S: Subspace> StepObjective<'_, S> {
             }
         }
     }
+
+    /// The element-basis path's element terms, lower triangle: with the element bases B_e
+    /// (9×k, ∂vec(F)/∂q) stacked into B (9m × k, m elements), C = B J (9m × d, one product) in z,
+    /// or C = B in q and for a linear subspace (`identity`, J = I), and Y the stacked rows
+    /// A_e C_e (81·n per element), the sum Σ_e C_eᵀ A_e C_e is the one product Cᵀ Y: into
+    /// work.hz (on top of its constant part) in z and for J = I, into work.hq in q.
+    /// Products over all elements at once run several times faster than element by element
+    /// (on the catapult, 144 elements and k = 47: 48 against 7.5 G multiply–adds/s).
+    fn stacked_element_terms(&mut self, projected: bool, in_q: bool, identity: bool) {
+        use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
+        use faer::{Accum, MatMut, MatRef, Par};
+        let (model, space) = (self.model, self.space);
+        let (k, d) = (space.k, self.subspace.latent_dim());
+        let bases_only = in_q || identity;
+        let n = if bases_only { k } else { d };
+        let (m, stride) = (space.elements.len(), space.basis_stride());
+        let w = &mut *self.work;
+        let bases =
+            MatRef::from_row_major_slice_with_stride(space.element_bases(), 9 * m, k, stride);
+        if !bases_only {
+            w.stacked_bj.resize(9 * m * d, 0.0);
+            faer::linalg::matmul::matmul(
+                MatMut::from_row_major_slice_mut(&mut w.stacked_bj, 9 * m, d),
+                Accum::Replace,
+                bases,
+                MatRef::from_column_major_slice(&w.jac, k, d),
+                1.0,
+                Par::Seq,
+            );
+        }
+        w.stacked_abj.resize(9 * m * n, 0.0);
+        let (c, c_stride) = if bases_only {
+            (space.element_bases(), stride)
+        } else {
+            (&w.stacked_bj[..], d)
+        };
+        let q = &w.q;
+        with_material!(&model.material, |material| {
+            for (i, (&e, &weight)) in space.elements.iter().zip(&space.weights).enumerate() {
+                let df = Arch::new().dispatch(BasisTimesQ {
+                    basis: space.element_basis(i),
+                    stride,
+                    q,
+                });
+                let f = Mat3::identity() + Mat3::from_column_slice(&df);
+                let a = if projected {
+                    material.dpdf_projected(&f)
+                } else {
+                    material.dpdf(&f)
+                };
+                let scale = model.elements.volume[e] * weight;
+                let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
+                let rows = &c[9 * i * c_stride..];
+                Arch::new().dispatch(StressTimesRows {
+                    a: &a,
+                    rows: std::array::from_fn(|r| &rows[r * c_stride..r * c_stride + n]),
+                    out: &mut w.stacked_abj[9 * i * n..9 * (i + 1) * n],
+                });
+            }
+        });
+        let c = MatRef::from_row_major_slice_with_stride(c, 9 * m, n, c_stride);
+        let (sum, accum) = if in_q {
+            (&mut w.hq, Accum::Replace)
+        } else {
+            (&mut w.hz, Accum::Add)
+        };
+        triangular_matmul(
+            MatMut::from_column_major_slice_mut(sum, n, n),
+            BlockStructure::TriangularLower,
+            accum,
+            c.transpose(),
+            BlockStructure::Rectangular,
+            MatRef::from_row_major_slice(&w.stacked_abj, 9 * m, n),
+            BlockStructure::Rectangular,
+            1.0,
+            Par::Seq,
+        );
+    }
+
+    /// The vertex path's element terms in z, element by element, on and below the diagonal of
+    /// work.hz: G B from the decoded rows U J of the element's vertices.
+    fn vertex_element_terms(&mut self, projected: bool) {
+        let (model, space) = (self.model, self.space);
+        let d = self.subspace.latent_dim();
+        let w = &mut *self.work;
+        let (u, uj) = (&w.u, &w.uj);
+        let (b, fb, afb) = (&mut w.uj_e, &mut w.fj_e[..9 * d], &mut w.afj_e[..9 * d]);
+        with_material!(&model.material, |material| {
+            for ((&e, &weight), at) in space
+                .elements
+                .iter()
+                .zip(&space.weights)
+                .zip(space.element_touched())
+            {
+                for (v, &p) in at.iter().enumerate() {
+                    let p = p as usize;
+                    b[3 * v * d..3 * (v + 1) * d].copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
+                }
+                Arch::new().dispatch(VertexRowsToF {
+                    b,
+                    g: model.elements.shape_gradients(e),
+                    d,
+                    fb,
+                });
+                let f = model.elements.deformation_gradient(e, u);
+                let a = if projected {
+                    material.dpdf_projected(&f)
+                } else {
+                    material.dpdf(&f)
+                };
+                let scale = model.elements.volume[e] * weight;
+                let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
+                Arch::new().dispatch(ElementGaussNewton {
+                    a: &a,
+                    d,
+                    fb,
+                    afb,
+                    hz: &mut w.hz,
+                });
+            }
+        });
+    }
 }
 
 /// Whether the element-basis path forms the cubature's Gauss–Newton term cheaper in q, as
-/// Jᵀ(Σ_e B_eᵀ A_e B_e)J (per element 81k for A B_e and 9k²/2 for the product, then one k×k by
-/// k×d sandwich), than in z (per element 9kd for B_e J, 81d and 9d²/2): when d is not much
-/// smaller than k, as with linear directions beside the latent coordinates. The q sum runs at
-/// about 3/4 of the z sum's rate (on the catapult, k = 47 and 144 elements: 7.5 against 9.9 G
-/// multiply–adds/s), so it is taken when it needs fewer than 3/4 as many: at d = 42 (291 instead
-/// of 436 µs), not at d = 26 (280 against 245 µs).
+/// Jᵀ(Σ_e B_eᵀ A_e B_e)J (per element 81k for A B_e, then the product's k²/2 per row of B, and
+/// one k×k by k×d sandwich), than in z (the product B J, then per element 81d and d²/2 per
+/// row): when d is not much smaller than k, as with linear directions beside the latent
+/// coordinates. The multiply–adds are weighted by their measured rates: the element kernels
+/// and the sandwich run at about 10 G/s, the lower-triangle product at 34 and the full one at
+/// 50 (one thread, 35 G/s peak). On the catapult (k = 47, 144 elements) z wins at d = 26 (140
+/// against 148 µs) and q at d = 42 (158 against 185 µs); with k = 89, 315 elements and d = 66,
+/// q (654 against 745 µs).
 fn sum_in_q_is_cheaper(elements: usize, k: usize, d: usize) -> bool {
-    let (e, k, d) = (elements as f64, k as f64, d as f64);
-    let in_q = e * (81.0 * k + 4.5 * k * k) + k * k * d + 0.5 * k * d * d;
-    let in_z = e * (9.0 * k * d + 81.0 * d + 4.5 * d * d);
-    4.0 * in_q < 3.0 * in_z
+    let (rows, k, d) = (9.0 * elements as f64, k as f64, d as f64);
+    let (kernel, lower, full) = (1.0 / 10.0, 1.0 / 34.0, 1.0 / 50.0);
+    let in_q = kernel * (rows * 9.0 * k + k * k * d + 0.5 * k * d * d) + lower * rows * 0.5 * k * k;
+    let in_z = full * rows * k * d + kernel * rows * 9.0 * d + lower * rows * 0.5 * d * d;
+    in_q < in_z
 }
 
 /// U J on the rows of the element vertices (3·n × d, row-major) from the packed rows of U (panels
@@ -1128,49 +1212,45 @@ impl WithSimd for VertexRowsToF<'_> {
     }
 }
 
-/// On the element-basis path: dF = B_e q (returned) and G B = B_e J (9×d, row-major: column m
-/// is B_e times column m of J, nine dot products), with J k×d column-major, or J = I (d = k)
-/// when `jac` is None.
-struct BasisTimesJacobian<'a> {
+/// vec(F − I) = B_e q on the element-basis path, from the element's 9 basis rows (of `stride`
+/// entries, k of them used).
+struct BasisTimesQ<'a> {
     basis: &'a [f64],
     stride: usize,
-    jac: Option<&'a [f64]>,
     q: &'a [f64],
-    k: usize,
-    d: usize,
-    fb: &'a mut [f64],
 }
 
-impl WithSimd for BasisTimesJacobian<'_> {
+impl WithSimd for BasisTimesQ<'_> {
     type Output = [f64; 9];
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) -> [f64; 9] {
-        let Self {
-            basis,
-            stride,
-            jac,
-            q,
-            k,
-            d,
-            fb,
-        } = self;
+        let Self { basis, stride, q } = self;
+        let k = q.len();
         let rows: [&[f64]; 9] = std::array::from_fn(|r| &basis[r * stride..r * stride + k]);
-        match jac {
-            None => {
-                for (r, row) in rows.iter().enumerate() {
-                    fb[r * d..(r + 1) * d].copy_from_slice(row);
-                }
-            }
-            Some(jac) => {
-                for (m, column) in jac.chunks_exact(k).enumerate() {
-                    for (r, x) in dot_rows(simd, rows, column).into_iter().enumerate() {
-                        fb[r * d + m] = x;
-                    }
-                }
-            }
-        }
         dot_rows(simd, rows, q)
+    }
+}
+
+/// The 9 rows of A R into `out` (9 × n, row-major), A a 9×9 stress derivative (column-major)
+/// and R 9 rows of length n: each row one fused linear combination of the rows of R.
+struct StressTimesRows<'a> {
+    a: &'a [f64; 81],
+    rows: [&'a [f64]; 9],
+    out: &'a mut [f64],
+}
+
+impl WithSimd for StressTimesRows<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Self { a, rows, out } = self;
+        let n = rows[0].len();
+        for (r, out) in out.chunks_exact_mut(n).enumerate() {
+            out.fill(0.0);
+            add_combination(simd, out, std::array::from_fn(|c| a[c * 9 + r]), rows);
+        }
     }
 }
 
@@ -1193,11 +1273,12 @@ impl WithSimd for ElementGaussNewton<'_> {
     fn with_simd<S: Simd>(self, simd: S) {
         let Self { a, d, fb, afb, hz } = self;
         let fb_rows: [&[f64]; 9] = std::array::from_fn(|c| &fb[c * d..(c + 1) * d]);
-        for r in 0..9 {
-            let out = &mut afb[r * d..(r + 1) * d];
-            out.fill(0.0);
-            add_combination(simd, out, std::array::from_fn(|c| a[c * 9 + r]), fb_rows);
+        StressTimesRows {
+            a,
+            rows: fb_rows,
+            out: afb,
         }
+        .with_simd(simd);
         let afb: &[f64] = afb;
         // hz is symmetric: column m from row m on (rounded down to a whole SIMD vector, so the
         // rows stay vectors) is enough, and the caller mirrors the lower triangle.
