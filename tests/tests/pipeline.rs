@@ -94,6 +94,43 @@ fn unchanged_scenes_do_no_work_and_pca_changes_reuse_snapshots() {
     );
 }
 
+/// `[cubature] neural_tolerance` refits the neural rule only, to that tolerance; the PCA rule
+/// keeps its cached artifact.
+#[test]
+fn the_neural_tolerance_refits_the_neural_rule_only() {
+    let cache = scratch_dir("pipeline-neural-tolerance");
+    let s = scene(&format!("{TINY}[cubature]\ntolerance = 0.2\n"));
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let linear = p.cubature(&no_progress).unwrap();
+    let loose = p.cubature_neural(&no_progress).unwrap();
+    assert!(
+        loose.rule.training_error <= 0.2,
+        "{}",
+        loose.rule.training_error
+    );
+    let s2 = scene(&format!(
+        "{TINY}[cubature]\ntolerance = 0.2\nneural_tolerance = 0.01\n"
+    ));
+    let mut p = Pipeline::new(&s2, &cache).unwrap();
+    assert_eq!(p.cubature(&no_progress).unwrap().rule, linear.rule);
+    let tight = p.cubature_neural(&no_progress).unwrap();
+    let computed: Vec<(String, bool)> = stages(&p)
+        .into_iter()
+        .filter(|(stage, _)| stage.starts_with("cubature"))
+        .collect();
+    assert_eq!(
+        computed,
+        [("cubature".into(), true), ("cubature-neural".into(), false)]
+    );
+    assert!(
+        tight.rule.training_error <= 0.01 || !tight.rule.tolerance_met,
+        "{:?}",
+        tight.rule
+    );
+    assert!(tight.rule.training_error < loose.rule.training_error);
+    assert!(tight.rule.len() > loose.rule.len());
+}
+
 #[test]
 fn a_corrupt_artifact_is_recomputed_not_used() {
     let cache = scratch_dir("pipeline-corrupt");

@@ -135,6 +135,7 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         for &tol in &tolerances {
             let mut s = scene.clone();
             s.cubature.tolerance = tol;
+            s.cubature.neural_tolerance = None;
             v.push(Variant {
                 method,
                 label: format!("{} tol={tol}", method.name()),
@@ -143,10 +144,14 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             });
         }
         // Newton in the latent space (d×d Gauss–Newton) against the default L-BFGS, at the
-        // scene's own tolerance.
+        // scene's own tolerance for the method's rule.
+        let own = match method {
+            Method::NeuralCubature => scene.cubature.for_neural().tolerance,
+            _ => scene.cubature.tolerance,
+        };
         v.push(Variant {
             method,
-            label: format!("{} tol={} newton", method.name(), scene.cubature.tolerance),
+            label: format!("{} tol={own} newton", method.name()),
             scene: scene.clone(),
             solver: Some(SolverMethod::Newton),
         });

@@ -215,7 +215,7 @@ impl<'a> Pipeline<'a> {
         KeyBuilder::new("cubature")
             .mix_key(self.pca_key())
             .mix_key(self.reference_key(0))
-            .mix(&self.scene.cubature)
+            .mix(&self.scene.cubature.for_linear())
             .finish()
     }
 
@@ -406,10 +406,14 @@ impl<'a> Pipeline<'a> {
         // The complement directions are left out: fitted with them, their forces (stiff
         // directions, large for small displacements) dominate the relative error and the rule
         // neglects the decoder's tangent.
-        let key = KeyBuilder::new("cubature-neural")
+        let mut key = KeyBuilder::new("cubature-neural")
             .mix_key(self.cubature_key())
-            .mix_key(self.train_key())
-            .finish();
+            .mix_key(self.train_key());
+        // Mixed in only when given, so that the keys of scenes without it stay as they were.
+        if let Some(t) = self.scene.cubature.neural_tolerance {
+            key = key.mix(&t);
+        }
+        let key = key.finish();
         self.stage("cubature-neural", key, |p| p.fit_cubature(true, progress))
     }
 
@@ -425,7 +429,11 @@ impl<'a> Pipeline<'a> {
         let basis = &fit.basis;
         let k = basis.k();
         let columns = basis_columns(basis);
-        let cfg = &self.scene.cubature;
+        let cfg = &if neural {
+            self.scene.cubature.for_neural()
+        } else {
+            self.scene.cubature.for_linear()
+        };
         let err = |e: cubature::CubatureError| {
             anyhow::anyhow!("{}: stage cubature: {e}", self.scene.source)
         };

@@ -4,6 +4,7 @@
 //! ```toml
 //! [cubature]
 //! tolerance = 0.02        # relative force error ‖A_S w − b‖ / ‖b‖ to reach
+//! neural_tolerance = 0.005 # optional: the neural subspace's rule to this instead
 //! max_elements = 500      # element budget |S|
 //! candidates = 200        # random unselected elements scored per greedy step
 //! max_poses = 150         # training poses kept (seeded subsample when more are given)
@@ -35,6 +36,12 @@ pub struct CubatureConfig {
     /// visibly off in large deformations, below 0.01 the element count (and so the run-time cost)
     /// grows quickly for little gain in trajectory accuracy.
     pub tolerance: f64,
+    /// With a value, the rule of the neural subspace is fitted to this tolerance instead of
+    /// `tolerance`, which then sets the linear subspace's only. The neural rule is smaller for
+    /// the same tolerance (its forces have the latent dimension, not the PCA one), so a scene
+    /// can buy accuracy there without the PCA rule growing to its element budget.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub neural_tolerance: Option<f64>,
     /// Stop once this many elements are selected (AutoDef: 400–1000). Capped by the mesh size.
     pub max_elements: usize,
     /// Number of random unselected elements scored against the residual per greedy step.
@@ -52,6 +59,7 @@ impl Default for CubatureConfig {
     fn default() -> Self {
         Self {
             tolerance: DEFAULT_TOLERANCE,
+            neural_tolerance: None,
             max_elements: DEFAULT_MAX_ELEMENTS,
             candidates: DEFAULT_CANDIDATES,
             max_poses: DEFAULT_MAX_POSES,
@@ -70,11 +78,17 @@ impl CubatureConfig {
                 reason,
             })
         };
-        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
-            bad(
-                "tolerance",
-                format!("must be a relative error in (0, 1), got {}", self.tolerance),
-            );
+        let tolerances = [
+            ("tolerance", Some(self.tolerance)),
+            ("neural_tolerance", self.neural_tolerance),
+        ];
+        for (field, value) in tolerances {
+            if let Some(t) = value.filter(|t| !(t.is_finite() && *t > 0.0 && *t < 1.0)) {
+                bad(
+                    field,
+                    format!("must be a relative error in (0, 1), got {t}"),
+                );
+            }
         }
         for (field, value) in [
             ("max_elements", self.max_elements),
@@ -87,6 +101,24 @@ impl CubatureConfig {
         }
         if self.memory_limit_mb == 0 {
             bad("memory_limit_mb", "must be at least 1, got 0".into());
+        }
+    }
+
+    /// The settings of the neural subspace's rule: `neural_tolerance`, when given, in place of
+    /// `tolerance`.
+    pub fn for_neural(&self) -> Self {
+        Self {
+            tolerance: self.neural_tolerance.unwrap_or(self.tolerance),
+            neural_tolerance: None,
+            ..self.clone()
+        }
+    }
+
+    /// The settings the linear subspace's rule depends on (`neural_tolerance` left out).
+    pub fn for_linear(&self) -> Self {
+        Self {
+            neural_tolerance: None,
+            ..self.clone()
         }
     }
 

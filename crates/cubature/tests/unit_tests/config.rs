@@ -33,6 +33,35 @@ fn defaults() {
     assert_eq!(parsed, c);
 }
 
+/// `neural_tolerance` replaces `tolerance` in the neural rule's settings only, and is absent
+/// from the linear rule's (whose cache key must not move with it).
+#[test]
+fn the_neural_tolerance_sets_the_neural_rule_only() {
+    let c = CubatureConfig {
+        neural_tolerance: Some(0.005),
+        max_elements: 800,
+        ..CubatureConfig::default()
+    };
+    assert!(c.validate().is_ok());
+    let neural = c.for_neural();
+    assert_eq!((neural.tolerance, neural.neural_tolerance), (0.005, None));
+    assert_eq!(neural.max_elements, 800);
+    let linear = c.for_linear();
+    assert_eq!(
+        linear,
+        CubatureConfig {
+            max_elements: 800,
+            ..CubatureConfig::default()
+        }
+    );
+    // Without it both rules take `tolerance`, and the serialised section is unchanged.
+    let plain = CubatureConfig::default();
+    assert_eq!(plain.for_neural(), plain);
+    assert!(!serde_json::to_string(&plain).unwrap().contains("neural"));
+    let parsed: CubatureConfig = serde_json::from_str(r#"{"neural_tolerance": 0.005}"#).unwrap();
+    assert_eq!(parsed.neural_tolerance, Some(0.005));
+}
+
 #[test]
 fn invalid_values_name_their_field() {
     let d = CubatureConfig::default;
@@ -64,6 +93,20 @@ fn invalid_values_name_their_field() {
                 ..d()
             },
             "cubature.tolerance",
+        ),
+        (
+            CubatureConfig {
+                neural_tolerance: Some(0.0),
+                ..d()
+            },
+            "cubature.neural_tolerance",
+        ),
+        (
+            CubatureConfig {
+                neural_tolerance: Some(f64::INFINITY),
+                ..d()
+            },
+            "cubature.neural_tolerance",
         ),
         (
             CubatureConfig {
@@ -118,6 +161,7 @@ fn several_errors_are_reported_together() {
 fn config_round_trip_and_unknown_fields() {
     let c = CubatureConfig {
         tolerance: 0.013,
+        neural_tolerance: Some(0.004),
         max_elements: 321,
         candidates: 64,
         max_poses: 80,
