@@ -979,7 +979,8 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// A_e C_e (81·n per element), the sum Σ_e C_eᵀ A_e C_e is the one product Cᵀ Y: into
     /// work.hz (on top of its constant part) in z and for J = I, into work.hq in q.
     /// Products over all elements at once run several times faster than element by element
-    /// (on the catapult, 144 elements and k = 47: 48 against 7.5 G multiply–adds/s).
+    /// (the lower-triangle product at 34 G multiply–adds/s against 7.5 for the rank-9 updates it
+    /// replaces): on the catapult, 144 elements and k = 47, 150 instead of 235 µs per matrix.
     fn stacked_element_terms(&mut self, projected: bool, in_q: bool, identity: bool) {
         use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
         use faer::{Accum, MatMut, MatRef, Par};
