@@ -1018,13 +1018,7 @@ impl<S: Subspace> StepObjective<'_, S> {
                     q,
                 });
                 let f = Mat3::identity() + Mat3::from_column_slice(&df);
-                let a = if projected {
-                    material.dpdf_projected(&f)
-                } else {
-                    material.dpdf(&f)
-                };
-                let scale = model.elements.volume[e] * weight;
-                let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
+                let a = scaled_tangent(material, &f, projected, model.elements.volume[e] * weight);
                 let rows = &c[9 * i * c_stride..];
                 Arch::new().dispatch(StressTimesRows {
                     a: &a,
@@ -1078,13 +1072,7 @@ impl<S: Subspace> StepObjective<'_, S> {
                     fb,
                 });
                 let f = model.elements.deformation_gradient(e, u);
-                let a = if projected {
-                    material.dpdf_projected(&f)
-                } else {
-                    material.dpdf(&f)
-                };
-                let scale = model.elements.volume[e] * weight;
-                let a: [f64; 81] = std::array::from_fn(|i| scale * a[i]);
+                let a = scaled_tangent(material, &f, projected, model.elements.volume[e] * weight);
                 Arch::new().dispatch(ElementGaussNewton {
                     a: &a,
                     d,
@@ -1095,6 +1083,17 @@ impl<S: Subspace> StepObjective<'_, S> {
             }
         });
     }
+}
+
+/// An element's stress derivative ∂P/∂F at F (9×9, column-major), projected to be positive
+/// semidefinite when `projected`, times `scale` (its volume and cubature weight).
+fn scaled_tangent<M: Material>(material: &M, f: &Mat3, projected: bool, scale: f64) -> [f64; 81] {
+    let a = if projected {
+        material.dpdf_projected(f)
+    } else {
+        material.dpdf(f)
+    };
+    std::array::from_fn(|i| scale * a[i])
 }
 
 /// Whether the element-basis path forms the cubature's Gauss–Newton term cheaper in q, as
