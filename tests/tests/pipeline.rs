@@ -3,11 +3,11 @@
 
 use std::path::Path;
 
+use pipeline::pipeline::Pipeline;
+use pipeline::run::{RunOptions, run};
+use pipeline::scene::Scene;
+use pipeline::simulate::Method;
 use tests::scratch_dir;
-use xtask::pipeline::Pipeline;
-use xtask::run::{RunOptions, run};
-use xtask::scene::Scene;
-use xtask::simulate::Method;
 
 const TINY: &str = r#"
 name = "tiny"
@@ -336,7 +336,7 @@ fn complement_directions_complete_the_autoencoder() {
         fit.basis.project(u, &mut q);
         trained.model.reconstruct(&q, &mut qh, &mut ws);
         residual += q.iter().zip(&qh).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
-        xtask::pipeline::complete(&c.directions, &q, &mut qh);
+        pipeline::pipeline::complete(&c.directions, &q, &mut qh);
         let size = q.iter().map(|a| a * a).sum::<f64>().sqrt();
         for (a, b) in q.iter().zip(&qh) {
             assert!((a - b).abs() <= 1e-12 * size, "{a} against {b}");

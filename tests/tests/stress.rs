@@ -5,11 +5,11 @@ use std::path::Path;
 
 use fem_core::assembly::{ElementSet, find_inverted};
 use fem_core::integrator::Simulator;
+use pipeline::pipeline::Pipeline;
+use pipeline::scene::Scene;
+use pipeline::simulate::Method;
+use pipeline::stress::{Condition, Outcome, stress};
 use tests::scratch_dir;
-use xtask::pipeline::Pipeline;
-use xtask::scene::Scene;
-use xtask::simulate::Method;
-use xtask::stress::{Condition, Outcome, stress};
 
 /// A 6×1×1-cell beam with every stage small enough to run in seconds.
 const TINY: &str = r#"
@@ -70,7 +70,7 @@ fn every_method_survives_every_condition_or_reports_an_error() {
         .filter(|c| !matches!(c, Condition::FreeRun(_)))
         .collect();
     let results = stress(&mut p, &ALL, &conditions, 0, &no_progress, &mut |_| {}).unwrap();
-    println!("{}", xtask::stress::markdown(&results));
+    println!("{}", pipeline::stress::markdown(&results));
     assert_eq!(results.len(), ALL.len() * conditions.len());
     for r in &results {
         match &r.outcome {
@@ -290,15 +290,15 @@ end = 1.0
     let cache = scratch_dir("stress-failed-run-cache");
     let out = scratch_dir("stress-failed-run-out");
     let mut p = Pipeline::new(&s, &cache).unwrap();
-    let opts = xtask::simulate::SimulateOptions {
+    let opts = pipeline::simulate::SimulateOptions {
         method: Method::Full,
-        trajectory: xtask::simulate::Trajectory::Scene,
+        trajectory: pipeline::simulate::Trajectory::Scene,
         out: out.clone(),
         frames: Some(10),
         every: 4,
         solver: None,
     };
-    let e = xtask::simulate::simulate(&mut p, &opts, &no_progress, &mut |_, _| {})
+    let e = pipeline::simulate::simulate(&mut p, &opts, &no_progress, &mut |_, _| {})
         .expect_err("two Newton iterations cannot reach 1e-8");
     let message = format!("{e:#}");
     println!("{message}");

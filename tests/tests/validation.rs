@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
+use pipeline::pipeline::Pipeline;
+use pipeline::scene::Scene;
+use pipeline::simulate::{Method, SimulateOptions, SimulationResult, Trajectory, simulate};
 use serde_json::Value;
 use tests::{relative_difference, scratch_dir, shared_dir};
-use xtask::pipeline::Pipeline;
-use xtask::scene::Scene;
-use xtask::simulate::{Method, SimulateOptions, SimulationResult, Trajectory, simulate};
 
 fn beam_scene(mesh: &Path, model: &str, g: f64, mass: &str, time: &str) -> Scene {
     let text = format!(

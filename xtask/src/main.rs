@@ -5,12 +5,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use xtask::bench::{BenchOptions, bench};
-use xtask::pipeline::{Pipeline, StageOutcome};
-use xtask::run::{RunOptions, markdown, run};
-use xtask::scene::Scene;
-use xtask::simulate::{Method, SimulateOptions, Trajectory, simulate};
-use xtask::stress::{Condition, Outcome, stress};
+use pipeline::bench::{BenchOptions, bench};
+use pipeline::pipeline::{Pipeline, StageOutcome};
+use pipeline::run::{RunOptions, markdown, run};
+use pipeline::scene::Scene;
+use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
+use pipeline::stress::{Condition, Outcome, stress};
 
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
@@ -254,7 +254,7 @@ fn pipeline<'a>(scene: &'a Scene, cache: Option<&PathBuf>, root: &Path) -> Resul
 }
 
 fn dispatch(cli: Cli) -> Result<()> {
-    let root = xtask::project_root();
+    let root = pipeline::project_root();
     // One bar for long stages (schedules or frames); hidden until a stage reports progress.
     let stage_bar = bar(0, "stage");
     stage_bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
@@ -367,7 +367,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 "\n{} — held-out test trajectory {trajectory}, {repeats} timed runs per variant\n",
                 scene.name
             );
-            print!("{}", xtask::bench::markdown(&rows));
+            print!("{}", pipeline::bench::markdown(&rows));
             println!(
                 "\nbench: {} (also bench.md, bench.svg)",
                 out.join("bench.json").display()
@@ -415,8 +415,8 @@ fn dispatch(cli: Cli) -> Result<()> {
                     );
                 },
             )?;
-            xtask::stress::write(&out, &results)?;
-            println!("\n{}", xtask::stress::markdown(&results));
+            pipeline::stress::write(&out, &results)?;
+            println!("\n{}", pipeline::stress::markdown(&results));
             println!(
                 "stress: {} (also stress.md)",
                 out.join("stress.json").display()
@@ -596,7 +596,7 @@ fn write_pca_curves(dir: &Path, fit: &pca::PcaFit) -> Result<()> {
     Ok(())
 }
 
-fn print_training(t: &xtask::pipeline::TrainedModel) {
+fn print_training(t: &pipeline::pipeline::TrainedModel) {
     println!(
         "autoencoder {k} → {d} → {k}: best epoch {} of {}{}, {:.1} s",
         t.best_epoch,

@@ -16,9 +16,9 @@ use anyhow::{Context, Result, bail};
 
 use fem_core::integrator::FullSpaceModel;
 use latent_sim::{ElasticPath, ReducedSimulator, ReducedSpace, Subspace};
-use xtask::pipeline::Pipeline;
-use xtask::scene::Scene;
-use xtask::simulate::{Method, Runner, SimulateOptions, Trajectory, setup};
+use pipeline::pipeline::Pipeline;
+use pipeline::scene::Scene;
+use pipeline::simulate::{Method, Runner, SimulateOptions, Trajectory, setup};
 
 /// Mean time of one elastic energy-and-gradient evaluation by each serial path, at a fixed q,
 /// over about 2.5 million element evaluations (20,000 of a 128-element rule, 185 of the whole

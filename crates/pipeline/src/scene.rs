@@ -16,7 +16,7 @@ use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
 use pca::PcaConfig;
 
 /// The built-in default scene, also shipped as `data/cantilever.toml`.
-pub const DEFAULT_SCENE: &str = include_str!("../../data/cantilever.toml");
+pub const DEFAULT_SCENE: &str = include_str!("../../../data/cantilever.toml");
 
 /// A scene: the mesh, its material and supports, the loads and how to integrate.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

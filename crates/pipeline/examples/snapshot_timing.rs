@@ -15,7 +15,7 @@ use anyhow::{Context, Result, bail};
 use fem_core::integrator::{Simulator, TimeConfig};
 use fem_core::optim::{LbfgsPreconditioner, SolverMethod};
 use fem_core::snapshots::StiffnessProbe;
-use xtask::scene::Scene;
+use pipeline::scene::Scene;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -15,10 +15,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use pipeline::artifact::{self, ArtifactError, Expect, FORMAT_VERSION, fnv1a, rebuild_command};
+use pipeline::pipeline::{FittedCubature, Pipeline, Reference, TrainedModel};
+use pipeline::scene::Scene;
 use serde::de::DeserializeOwned;
-use xtask::artifact::{self, ArtifactError, Expect, FORMAT_VERSION, fnv1a, rebuild_command};
-use xtask::pipeline::{FittedCubature, Pipeline, Reference, TrainedModel};
-use xtask::scene::Scene;
 
 const TINY: &str = r#"
 name = "artifacts"
@@ -484,7 +484,7 @@ fn opening_the_cache_removes_temporaries_of_killed_writers() {
     for p in [&stale, &fresh, &artifact] {
         std::fs::write(p, b"partial").unwrap();
     }
-    let old = std::time::SystemTime::now() - 2 * xtask::pipeline::STALE_TEMPORARY_AGE;
+    let old = std::time::SystemTime::now() - 2 * pipeline::pipeline::STALE_TEMPORARY_AGE;
     std::fs::File::options()
         .write(true)
         .open(&stale)

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use fem_core::TetMesh;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
-use xtask::scene::Scene;
+use pipeline::scene::Scene;
 
 /// A small valid scene; each test edits one part of it.
 const BASE: &str = r#"name = "beam"
@@ -486,7 +486,7 @@ fn errors_from_files_name_the_file() {
 /// also build their model (the others need `../shared`, skipped with a printed reason).
 #[test]
 fn every_shipped_scene_reads_and_builds() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data");
     let mut scenes: Vec<PathBuf> = std::fs::read_dir(&dir)
         .expect("data/ is in the repository")
         .map(|e| e.expect("data/ lists").path())
