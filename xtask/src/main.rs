@@ -241,6 +241,7 @@ fn print_stage(o: &StageOutcome) {
             o.path.display()
         );
     }
+    println!("{:>10}  {}", "", o.summary);
 }
 
 /// A pipeline for the scene, printing a line per stage.
@@ -315,6 +316,13 @@ fn dispatch(cli: Cli) -> Result<()> {
                         "| {} | {:.3} | {:.3} | {:.3} | {:.3} |",
                         r.method, r.decode_ms, r.elastic_ms, r.vjp_ms, r.precond_ms
                     );
+                }
+            }
+            let warnings = pipeline::trust::warnings(&rows);
+            if !warnings.is_empty() {
+                println!("\nnot to be trusted:");
+                for w in &warnings {
+                    println!("- {w}");
                 }
             }
             println!(

@@ -37,11 +37,12 @@ pub enum CubatureError {
     /// Every pose has a zero target force, so there is nothing to fit (e.g. only the rest pose).
     #[error("every training pose has a zero reduced force (all {poses} poses are at rest?)")]
     ZeroTarget { poses: usize },
-    /// The training matrix would not fit in the configured memory budget.
+    /// Not even [`crate::training::MIN_POSES`] poses' training matrix fits the memory budget.
     #[error(
-        "the cubature training data needs {needed_mb} MiB ({poses} poses × {dim} reduced \
-         coordinates × {elements} elements), above `cubature.memory_limit_mb` = {limit_mb}; \
-         lower `cubature.max_poses` or raise the limit"
+        "the cubature training data needs {needed_mb} MiB for the fewest poses a fit uses \
+         ({poses} poses × {dim} reduced coordinates × {elements} elements), above \
+         `cubature.memory_limit_mb` = {limit_mb}; set `cubature.memory_limit_mb` to at least \
+         {needed_mb}"
     )]
     MemoryLimit {
         needed_mb: u64,

@@ -13,8 +13,11 @@
 //!
 //! Memory: A takes 8·P·d·m bytes (m elements) plus 8·P·3n for the pose displacements; 150 poses of
 //! a 49-dimensional basis on 30,000 elements is 1.8 GB. [`CubatureConfig::max_poses`] caps P (a
-//! seeded subsample, as AutoDef fitted on a subset of poses) and [`CubatureConfig::memory_limit_mb`]
-//! turns a larger request into [`CubatureError::MemoryLimit`] instead of an allocation failure.
+//! seeded subsample, as AutoDef fitted on a subset of poses); when those do not fit
+//! [`CubatureConfig::memory_limit_mb`], the subsample shrinks to what does (a warning says so),
+//! and only below [`MIN_POSES`] poses is it [`CubatureError::MemoryLimit`], never an allocation
+//! failure. Poses where an element's force is not finite (inverted under a material undefined
+//! there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
 
 use faer::MatRef;
 use fem_core::constraints::FIXED;
@@ -28,6 +31,9 @@ use crate::{CubatureConfig, CubatureError};
 
 /// Poses whose target norm is below this fraction of the largest are treated as at rest.
 pub const ZERO_POSE_TOLERANCE: f64 = 1e-10;
+
+/// The fewest training poses the memory budget may cut a fit down to.
+pub const MIN_POSES: usize = 16;
 
 /// Salt of the pose-subsample stream, so it differs from the candidate stream of the same seed.
 const POSE_SALT: u64 = 0x7053_4D50_4C45_0001;
@@ -68,6 +74,7 @@ pub struct TrainingMatrix {
     pose_indices: Vec<usize>,
     pose_scales: Vec<f64>,
     skipped_poses: Vec<usize>,
+    invalid_poses: Vec<usize>,
 }
 
 impl TrainingMatrix {
@@ -143,21 +150,38 @@ impl TrainingMatrix {
             )?;
         }
 
-        let chosen = subsample(num_poses, config.max_poses, config.seed);
-        let np = chosen.len();
+        // Poses beyond what the memory budget holds are left out of the subsample (with a
+        // warning), down to MIN_POSES: a large mesh then fits the default budget instead of
+        // stopping the stage. Below that the fit would be too thin to trust, and that is an error
+        // naming the settings that would work.
+        let m128 = m as u128;
         let n_full = model.num_full();
-        let rows = np * dim;
-        let bytes = 8u128 * (rows as u128 * m as u128 + np as u128 * n_full as u128);
+        let per_pose = 8 * (dim as u128 * m128 + n_full as u128);
         let limit = config.memory_limit_mb as u128 * (1 << 20);
-        if bytes > limit {
+        let wanted = num_poses.min(config.max_poses);
+        let fit = (limit / per_pose).min(wanted as u128) as usize;
+        if fit < wanted.min(MIN_POSES) {
+            let needed = per_pose * wanted.min(MIN_POSES) as u128;
             return Err(CubatureError::MemoryLimit {
-                needed_mb: bytes.div_ceil(1 << 20).min(u64::MAX as u128) as u64,
+                needed_mb: needed.div_ceil(1 << 20).min(u64::MAX as u128) as u64,
                 limit_mb: config.memory_limit_mb,
-                poses: np,
+                poses: wanted.min(MIN_POSES),
                 dim,
                 elements: m,
             });
         }
+        if fit < wanted {
+            tracing::warn!(
+                "cubature: {fit} of {wanted} training poses fit `cubature.memory_limit_mb` = {} \
+                 ({dim} reduced coordinates × {m} elements, {} MiB a pose); fitting on those",
+                config.memory_limit_mb,
+                per_pose.div_ceil(1 << 20)
+            );
+        }
+        let chosen = subsample(num_poses, fit, config.seed);
+        let np = chosen.len();
+        let rows = np * dim;
+        let bytes = per_pose * np as u128;
         tracing::debug!(
             poses = np,
             dim,
@@ -232,14 +256,40 @@ impl TrainingMatrix {
             );
         });
         drop(displacements);
-        // Reported in element order, so the error names the same element on every run.
-        if let Some(idx) = a.iter().position(|x| !x.is_finite()) {
+        // A pose where some element's force is not finite (an element that a reconstructed or
+        // decoded pose inverts, under a material undefined there) is left out of the fit like a
+        // pose at rest; only when every pose is, the stage fails, naming the first such element.
+        let mut invalid = vec![false; np];
+        for column in a.chunks(rows) {
+            for (p, block) in column.chunks(dim).enumerate() {
+                if !invalid[p] && block.iter().any(|x| !x.is_finite()) {
+                    invalid[p] = true;
+                }
+            }
+        }
+        if invalid.iter().all(|&bad| bad) {
+            let idx = a.iter().position(|x| !x.is_finite()).unwrap_or(0);
             return Err(CubatureError::NonFiniteForce {
                 element: idx / rows,
                 pose: chosen[(idx % rows) / dim],
             });
         }
-
+        let invalid_poses: Vec<usize> =
+            (0..np).filter(|&p| invalid[p]).map(|p| chosen[p]).collect();
+        if !invalid_poses.is_empty() {
+            tracing::warn!(
+                "cubature: {} of {np} training poses have an element whose force is not finite \
+                 there (inverted under the material) and are left out of the fit",
+                invalid_poses.len()
+            );
+            for column in a.chunks_mut(rows) {
+                for (p, block) in column.chunks_mut(dim).enumerate() {
+                    if invalid[p] {
+                        block.fill(0.0);
+                    }
+                }
+            }
+        }
         let b = column_sum(&a, rows, m);
         let scales: Vec<f64> = b.chunks(dim).map(norm).collect();
         let largest = scales.iter().copied().fold(0.0, f64::max);
@@ -250,7 +300,7 @@ impl TrainingMatrix {
             .filter(|&p| scales[p] > ZERO_POSE_TOLERANCE * largest)
             .collect();
         let skipped_poses: Vec<usize> = (0..np)
-            .filter(|p| !keep.contains(p))
+            .filter(|&p| !keep.contains(&p) && !invalid[p])
             .map(|p| chosen[p])
             .collect();
         if !skipped_poses.is_empty() {
@@ -283,6 +333,7 @@ impl TrainingMatrix {
             pose_indices: keep.iter().map(|&p| chosen[p]).collect(),
             pose_scales: keep.iter().map(|&p| scales[p]).collect(),
             skipped_poses,
+            invalid_poses,
         })
     }
 
@@ -322,6 +373,7 @@ impl TrainingMatrix {
             pose_indices: (0..rows / dim).collect(),
             pose_scales: vec![1.0; rows / dim],
             skipped_poses: Vec::new(),
+            invalid_poses: Vec::new(),
         })
     }
 
@@ -374,6 +426,12 @@ impl TrainingMatrix {
     /// Chosen poses left out because their target force was (numerically) zero.
     pub fn skipped_poses(&self) -> &[usize] {
         &self.skipped_poses
+    }
+
+    /// Chosen poses left out because some element's force was not finite there (an element
+    /// inverted under a material that is undefined for inverted elements).
+    pub fn invalid_poses(&self) -> &[usize] {
+        &self.invalid_poses
     }
 }
 

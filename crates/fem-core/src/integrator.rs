@@ -37,18 +37,23 @@ use crate::{FemError, TetMesh, Vec3, with_material};
 pub struct TimeConfig {
     /// Time step h in seconds.
     pub step: f64,
-    /// Number of steps to simulate.
+    /// Number of steps `simulate` takes with the scene's own forces (200 when not given).
+    #[serde(default = "default_frames")]
     pub frames: usize,
     /// Solve for static equilibrium at each frame's loads instead of dynamics.
     #[serde(default)]
     pub quasi_static: bool,
 }
 
+fn default_frames() -> usize {
+    200
+}
+
 impl Default for TimeConfig {
     fn default() -> Self {
         Self {
             step: 0.01,
-            frames: 200,
+            frames: default_frames(),
             quasi_static: false,
         }
     }
@@ -710,104 +715,143 @@ impl Simulator {
         } else {
             1.0 / (self.time.step * self.time.step)
         };
-        match self.solver.method {
+        let start = x.to_vec();
+        let first = match self.solver.method {
+            SolverMethod::Newton => self.solve_newton(x, t, inv_h2, predicted, load, params),
+            SolverMethod::Lbfgs => self.solve_lbfgs(x, t, inv_h2, predicted, load, params),
+        };
+        let spent = match first {
+            Err(FemError::NotConverged { iterations, .. }) => iterations,
+            Err(FemError::LineSearchFailed { iteration, .. }) => iteration + 1,
+            other => return other,
+        };
+        // Each solver crawls where the other does not: L-BFGS where the energy curves far more
+        // than its preconditioner says (strongly compressed elements), Newton with projected
+        // Hessians through large rotations of the whole body, where the projection drops the
+        // curvature that would turn it. Redo the step from its start with the other one,
+        // counting the iterations spent.
+        let e = first.expect_err("errors only reach here");
+        x.copy_from_slice(&start);
+        let retry = match self.solver.method {
             SolverMethod::Newton => {
-                self.ensure_newton()?;
-                let mut obj = StepObjective::new(
-                    &self.model,
-                    &mut self.buffers,
-                    self.newton.as_mut(),
-                    t,
-                    inv_h2,
-                    predicted,
-                    load,
-                );
-                newton(&mut obj, x, params)
+                tracing::info!("{e}; retrying the step with L-BFGS");
+                self.solve_lbfgs(x, t, inv_h2, predicted, load, params)
             }
             SolverMethod::Lbfgs => {
-                let start = x.to_vec();
-                let current = self.solver.preconditioner == LbfgsPreconditioner::CurrentState;
-                // Iterations of cut-short attempts, counted into the step's total.
-                let mut spent = 0;
-                let mut refresh = false;
-                let result = loop {
-                    self.ensure_lbfgs(x, t, refresh)?;
-                    let parts = self.lbfgs.as_mut().expect("built above");
-                    let fresh = parts.usage.solves() == 0;
-                    // An aged factor gets the iterations a fresh one needed, twice over: past
-                    // that it has drifted from the curvature and a refactorisation at the
-                    // current iterate pays (L-BFGS goes on from there, nothing is lost).
-                    let cap = if fresh || !current {
-                        params.max_iterations
-                    } else {
-                        params
-                            .max_iterations
-                            .min(2 * parts.usage.fresh_iterations() + 4)
+                tracing::info!("{e}; retrying the step with Newton");
+                self.solve_newton(x, t, inv_h2, predicted, load, params)
+            }
+        };
+        retry.map(|mut s| {
+            s.iterations += spent;
+            s
+        })
+    }
+
+    /// One minimisation by Newton with projected Hessians.
+    fn solve_newton(
+        &mut self,
+        x: &mut [f64],
+        t: f64,
+        inv_h2: f64,
+        predicted: &[f64],
+        load: f64,
+        params: SolveParams,
+    ) -> Result<crate::optim::SolveStats, FemError> {
+        self.ensure_newton()?;
+        let mut obj = StepObjective::new(
+            &self.model,
+            &mut self.buffers,
+            self.newton.as_mut(),
+            t,
+            inv_h2,
+            predicted,
+            load,
+        );
+        newton(&mut obj, x, params)
+    }
+
+    /// One minimisation by preconditioned L-BFGS; an aged preconditioner is refreshed once when
+    /// the solve with it fails.
+    fn solve_lbfgs(
+        &mut self,
+        x: &mut [f64],
+        t: f64,
+        inv_h2: f64,
+        predicted: &[f64],
+        load: f64,
+        params: SolveParams,
+    ) -> Result<crate::optim::SolveStats, FemError> {
+        let current = self.solver.preconditioner == LbfgsPreconditioner::CurrentState;
+        // Iterations of cut-short attempts, counted into the step's total.
+        let mut spent = 0;
+        let mut refresh = false;
+        loop {
+            self.ensure_lbfgs(x, t, refresh)?;
+            let parts = self.lbfgs.as_mut().expect("built above");
+            let fresh = parts.usage.solves() == 0;
+            // An aged factor gets the iterations a fresh one needed, twice over: past
+            // that it has drifted from the curvature and a refactorisation at the
+            // current iterate pays (L-BFGS goes on from there, nothing is lost).
+            let cap = if fresh || !current {
+                params.max_iterations
+            } else {
+                params
+                    .max_iterations
+                    .min(2 * parts.usage.fresh_iterations() + 4)
+            };
+            let mut obj = StepObjective::new(
+                &self.model,
+                &mut self.buffers,
+                None,
+                t,
+                inv_h2,
+                predicted,
+                load,
+            );
+            let attempt = SolveParams {
+                max_iterations: cap,
+                ..params
+            };
+            let mut result = parts.lbfgs.minimize(&mut obj, &mut parts.pre, x, attempt);
+            match &mut result {
+                Ok(s) => {
+                    parts.usage.record(s.iterations);
+                    s.iterations += spent;
+                }
+                Err(e) => {
+                    parts.failed = true;
+                    spent += match *e {
+                        FemError::NotConverged { iterations, .. } => iterations,
+                        FemError::LineSearchFailed { iteration, .. } => iteration + 1,
+                        _ => 0,
                     };
-                    let mut obj = StepObjective::new(
-                        &self.model,
-                        &mut self.buffers,
-                        None,
-                        t,
-                        inv_h2,
-                        predicted,
-                        load,
-                    );
-                    let attempt = SolveParams {
-                        max_iterations: cap,
-                        ..params
-                    };
-                    let mut result = parts.lbfgs.minimize(&mut obj, &mut parts.pre, x, attempt);
-                    match &mut result {
-                        Ok(s) => {
-                            parts.usage.record(s.iterations);
-                            s.iterations += spent;
-                        }
-                        Err(e) => {
-                            parts.failed = true;
-                            spent += match *e {
-                                FemError::NotConverged { iterations, .. } => iterations,
-                                FemError::LineSearchFailed { iteration, .. } => iteration + 1,
-                                _ => 0,
-                            };
-                        }
-                    }
-                    let retry = matches!(
-                        result,
-                        Err(FemError::NotConverged { .. } | FemError::LineSearchFailed { .. })
-                    ) && current
-                        && !fresh;
-                    if !retry {
-                        break result;
-                    }
-                    refresh = true;
-                };
-                match result {
-                    // Where the energy curves far more than the preconditioner says (large
-                    // rotations, strongly compressed elements), L-BFGS crawls: redo the step
-                    // with Newton, counting the spent iterations.
-                    Err(
-                        e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
-                    ) => {
-                        tracing::info!("{e}; retrying the step with Newton");
-                        x.copy_from_slice(&start);
-                        self.ensure_newton()?;
-                        let mut obj = StepObjective::new(
-                            &self.model,
-                            &mut self.buffers,
-                            self.newton.as_mut(),
-                            t,
-                            inv_h2,
-                            predicted,
-                            load,
-                        );
-                        let mut s = newton(&mut obj, x, params)?;
-                        s.iterations += spent;
-                        Ok(s)
-                    }
-                    other => other,
                 }
             }
+            let retry = matches!(
+                result,
+                Err(FemError::NotConverged { .. } | FemError::LineSearchFailed { .. })
+            ) && current
+                && !fresh;
+            if !retry {
+                return match result {
+                    Err(FemError::NotConverged {
+                        solver,
+                        step,
+                        residual,
+                        tolerance,
+                        ..
+                    }) => Err(FemError::NotConverged {
+                        solver,
+                        step,
+                        iterations: spent,
+                        residual,
+                        tolerance,
+                    }),
+                    other => other,
+                };
+            }
+            refresh = true;
         }
     }
 

@@ -28,7 +28,8 @@ pub fn stage_version(stage: &str) -> u32 {
     match stage {
         // 2: inputs centred with one common scale instead of per-feature standardisation.
         // 3: the training gradient sums in a different (still fixed) order.
-        "train" => 4,
+        // 5: without `[autoencoder] latent_dim`, d is half the PCA dimension (was 6).
+        "train" => 5,
         // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
         // 3: sequential sparse factorisation on small pools (round-off), current-state L-BFGS
         //    preconditioner (iterates within tolerance).

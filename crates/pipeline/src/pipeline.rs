@@ -37,6 +37,102 @@ pub struct StageOutcome {
     /// computation had to load or compute first (each of those has its own outcome).
     pub seconds: f64,
     pub path: PathBuf,
+    /// What the stage chose and why, in one line (sizes, dimensions, rule sizes and errors).
+    pub summary: String,
+}
+
+/// One line saying what a stage's artifact holds and why, for [`StageOutcome::summary`].
+pub trait StageSummary {
+    fn summary(&self) -> String;
+}
+
+impl StageSummary for SnapshotSet {
+    fn summary(&self) -> String {
+        format!(
+            "{} schedules × {} frames = {} training poses",
+            self.schedules.len(),
+            self.frames_per_schedule,
+            self.num_frames()
+        )
+    }
+}
+
+impl StageSummary for PcaFit {
+    fn summary(&self) -> String {
+        let why = match self.rule {
+            pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
+            pca::DimensionRule::ExplainedEnergy(f) => format!(
+                "the smallest basis holding {:.4} % of the snapshots' energy (`[pca] explained_energy`)",
+                100.0 * f
+            ),
+            pca::DimensionRule::MaxVertexError(t) => format!(
+                "the smallest basis whose worst vertex error over the snapshots is at most {t} \
+                 (`[pca] max_vertex_error`)"
+            ),
+        };
+        let met = if self.tolerance_met {
+            ""
+        } else {
+            " (not reached within `[pca] max_dimension`)"
+        };
+        format!("k = {}: {why}{met}", self.basis.k())
+    }
+}
+
+impl StageSummary for FittedCubature {
+    fn summary(&self) -> String {
+        format!(
+            "{} elements, relative force error {:.2} % on the training poses{} and {:.2} % on \
+             the test trajectory's",
+            self.rule.len(),
+            100.0 * self.rule.training_error,
+            if self.rule.tolerance_met {
+                ""
+            } else {
+                " (the element budget stopped it before the tolerance)"
+            },
+            100.0 * self.held_out_error
+        )
+    }
+}
+
+impl StageSummary for TrainedModel {
+    fn summary(&self) -> String {
+        format!(
+            "d = {} of k = {}{}; worst vertex error over the snapshots {:.3e} (PCA with {} \
+             coefficients: {:.3e}); {} epochs",
+            self.latent_dim,
+            self.pca_k,
+            match &self.latent_choice {
+                Some(why) => format!(" ({why})"),
+                None => String::new(),
+            },
+            self.max_vertex_error,
+            self.latent_dim,
+            self.pca_error_at_latent_dim,
+            self.history.len()
+        )
+    }
+}
+
+impl StageSummary for Complement {
+    fn summary(&self) -> String {
+        format!(
+            "{} directions of what the autoencoder misses",
+            self.singular_values.len()
+        )
+    }
+}
+
+impl StageSummary for Reference {
+    fn summary(&self) -> String {
+        let n = self.step_seconds.len().max(1) as f64;
+        format!(
+            "{} frames of the full-space test trajectory, {:.1} ms a step",
+            self.frames.len(),
+            1e3 * self.step_seconds.iter().sum::<f64>() / n
+        )
+    }
 }
 
 /// Progress of a long stage: `(done, total)`.
@@ -120,6 +216,19 @@ pub struct TrainedModel {
     /// The smallest PCA dimension whose error is at most the autoencoder's, if any up to k.
     pub pca_k_matching: Option<usize>,
     pub train_seconds: f64,
+    /// Why the latent dimension is what it is, when the scene did not name it.
+    #[serde(default)]
+    pub latent_choice: Option<String>,
+}
+
+/// The latent dimension when `[autoencoder]` names no rule: half the PCA dimension, at least
+/// [`nn::DEFAULT_LATENT_DIM`] and at most k (the linear skip needs d ≤ k). On the shipped
+/// scenes the autoencoder with about k/2 latent coordinates came within a few tenths of a
+/// percent of the whole PCA basis on the test trajectory (cantilever k = 22, d = 10–20;
+/// catapult k = 47, d = 24), where a fixed small d (AutoDef's 6) was 20–80 % off on meshes it
+/// was not chosen for.
+pub fn default_latent_dim(k: usize) -> usize {
+    k.div_ceil(2).max(nn::DEFAULT_LATENT_DIM).min(k)
 }
 
 /// A scene's pipeline with its cache folder and the model every stage shares.
@@ -238,7 +347,7 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Loads the artifact of `stage` under `key`, or computes and stores it.
-    fn stage<T: Serialize + DeserializeOwned + Clone + 'static>(
+    fn stage<T: Serialize + DeserializeOwned + Clone + StageSummary + 'static>(
         &mut self,
         stage: &str,
         key: u64,
@@ -253,7 +362,7 @@ impl<'a> Pipeline<'a> {
         Ok(value)
     }
 
-    fn load_or_compute<T: Serialize + DeserializeOwned>(
+    fn load_or_compute<T: Serialize + DeserializeOwned + StageSummary>(
         &mut self,
         stage: &str,
         key: u64,
@@ -269,7 +378,7 @@ impl<'a> Pipeline<'a> {
             };
             match artifact::load::<T>(&path, expect) {
                 Ok(v) => {
-                    self.record(stage, true, start, path);
+                    self.record(stage, true, start, path, v.summary());
                     return Ok(v);
                 }
                 Err(e) => tracing::warn!("{e}; recomputing"),
@@ -278,12 +387,19 @@ impl<'a> Pipeline<'a> {
         let value = compute(self)?;
         artifact::save(&path, stage, key, self.mesh_hash, &value)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        self.record(stage, false, start, path);
+        self.record(stage, false, start, path, value.summary());
         Ok(value)
     }
 
     /// Records a finished stage; `start` is its start time and the recorded seconds then.
-    fn record(&mut self, stage: &str, cached: bool, start: (Instant, f64), path: PathBuf) {
+    fn record(
+        &mut self,
+        stage: &str,
+        cached: bool,
+        start: (Instant, f64),
+        path: PathBuf,
+        summary: String,
+    ) {
         let nested = self.recorded_seconds - start.1;
         let seconds = (start.0.elapsed().as_secs_f64() - nested).max(0.0);
         self.recorded_seconds += seconds;
@@ -292,6 +408,7 @@ impl<'a> Pipeline<'a> {
             cached,
             seconds,
             path,
+            summary,
         };
         (self.on_stage)(&o);
         self.outcomes.push(o);
@@ -517,8 +634,35 @@ impl<'a> Pipeline<'a> {
                 }
             };
             let start = Instant::now();
-            let cfg = &p.scene.autoencoder;
-            let search = nn::train_search(q.as_ref(), cfg, error_of, |_, r| {
+            let k = basis.k();
+            let source = &p.scene.source;
+            let mut cfg = p.scene.autoencoder.clone();
+            let mut latent_choice = None;
+            match (cfg.latent_dim, cfg.latent_dims) {
+                (None, None) => {
+                    let d = default_latent_dim(k);
+                    latent_choice = Some(format!(
+                        "the default, half the PCA dimension within [{}, k]; \
+                         `[autoencoder] latent_dim` sets it",
+                        nn::DEFAULT_LATENT_DIM.min(k)
+                    ));
+                    cfg.latent_dim = Some(d);
+                }
+                (Some(d), _) if d > k && cfg.skip => bail!(
+                    "{source}: `autoencoder.latent_dim` = {d} is larger than the PCA basis (k = \
+                     {k}), and the linear skip needs d ≤ k: set `latent_dim` to at most {k}, or \
+                     keep more PCA coefficients (`[pca] dimension` or a smaller \
+                     `max_vertex_error`)"
+                ),
+                (None, Some([lo, hi])) if hi > k && cfg.skip => bail!(
+                    "{source}: `autoencoder.latent_dims` = [{lo}, {hi}] reaches past the PCA \
+                     basis (k = {k}), and the linear skip needs d ≤ k: set the range to at most \
+                     [{}, {k}], or keep more PCA coefficients",
+                    lo.min(k)
+                ),
+                _ => {}
+            }
+            let search = nn::train_search(q.as_ref(), &cfg, error_of, |_, r| {
                 progress(r.epoch, r.epochs)
             })
             .map_err(|e| anyhow::anyhow!("{}: stage train: {e}", p.scene.source))?;
@@ -557,6 +701,7 @@ impl<'a> Pipeline<'a> {
                 pca_error_at_latent_dim,
                 pca_k_matching,
                 train_seconds,
+                latent_choice,
             })
         })
     }

@@ -29,7 +29,7 @@ pub struct RunOptions {
 }
 
 /// One row of the report.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct MethodReport {
     pub method: String,
     /// Simulated dimension (free DOFs for full).

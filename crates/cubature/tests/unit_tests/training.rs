@@ -180,31 +180,47 @@ fn pose_subsample_is_seeded_and_consistent() {
 }
 
 #[test]
-fn memory_limit_is_enforced() {
+fn the_memory_limit_shrinks_the_pose_subsample_and_below_the_minimum_is_an_error() {
     let model = beam([20, 4, 4]);
     let (basis, k, lambda) = modal_basis(&model);
     let q = random_poses(&model, &basis, &lambda, 40, 1);
     // 40 poses × 10 × 1920 elements × 8 bytes plus 40 displacements ≈ 6.3 MiB.
-    let bytes = 8 * (40 * k * model.elements.len() + 40 * model.num_full());
-    let expected_mb = bytes.div_ceil(1 << 20) as u64;
-    assert_eq!(expected_mb, 7);
+    let per_pose = 8 * (k * model.elements.len() + model.num_full());
+    assert_eq!((40 * per_pose).div_ceil(1 << 20), 7);
+    let all = TrainingMatrix::build(
+        &model,
+        &basis,
+        k,
+        Poses::linear(q.as_ref()),
+        &CubatureConfig::default(),
+    )
+    .unwrap();
+    assert_eq!(all.num_poses(), 40);
     let config = CubatureConfig {
         memory_limit_mb: 5,
         ..Default::default()
     };
-    match TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config) {
+    let fitted = TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config)
+        .expect("the subsample shrinks to what 5 MiB holds");
+    assert_eq!(fitted.num_poses(), (5 << 20) / per_pose);
+    assert!(fitted.num_poses() < 40);
+    let tiny = CubatureConfig {
+        memory_limit_mb: 1,
+        ..Default::default()
+    };
+    assert!((1 << 20) / per_pose < cubature::training::MIN_POSES);
+    let needed = (cubature::training::MIN_POSES * per_pose).div_ceil(1 << 20) as u64;
+    match TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &tiny) {
         Err(e @ CubatureError::MemoryLimit { needed_mb, .. }) => {
-            assert_eq!(needed_mb, expected_mb);
-            assert!(e.to_string().contains("cubature.memory_limit_mb"), "{e}")
+            assert_eq!(needed_mb, needed);
+            assert!(
+                e.to_string()
+                    .contains(&format!("`cubature.memory_limit_mb` to at least {needed}")),
+                "{e}"
+            )
         }
         other => panic!("expected a memory-limit error, got {other:?}"),
     }
-    let fits = CubatureConfig {
-        memory_limit_mb: 5,
-        max_poses: 30,
-        ..Default::default()
-    };
-    assert!(TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &fits).is_ok());
 }
 
 #[test]
@@ -268,5 +284,54 @@ fn from_matrix_checks_its_input() {
     assert!(matches!(
         TrainingMatrix::from_matrix(a.as_ref(), &[0.0; 4], 2),
         Err(CubatureError::ZeroTarget { .. })
+    ));
+}
+
+/// Classic Neo-Hookean is undefined where an element inverts. A pose that inverts elements (a
+/// PCA-reconstructed or decoded pose the full simulation never produced) is left out of the fit
+/// and listed, the others give exactly the matrix they give alone; only when every pose is
+/// invalid is the stage an error.
+#[test]
+fn poses_that_invert_an_element_under_classic_neo_hookean_are_left_out() {
+    let fixture = beam([8, 2, 2]);
+    let material = fem_core::material::MaterialConfig {
+        model: fem_core::material::MaterialModel::NeoHookean,
+        ..Default::default()
+    };
+    let model = FullSpaceModel::new(
+        fixture.mesh.clone(),
+        &material,
+        fixture.pinned.clone(),
+        [0.0, 0.0, 0.0].into(),
+        vec![],
+    )
+    .unwrap();
+    let (modes, k0, lambda) = modal_basis(&model);
+    let good0 = random_poses(&model, &modes, &lambda, 6, 5);
+    // One more column moves the last free vertex (a tip corner) along x: a coefficient of −1
+    // pushes it a whole beam length back, through the opposite faces of its elements.
+    let nf = model.dofs.num_free();
+    let k = k0 + 1;
+    let mut basis = modes.clone();
+    basis.extend((0..nf).map(|r| if r == nf - 3 { 1.0 } else { 0.0 }));
+    let good = Mat::from_fn(k, 6, |i, j| if i < k0 { good0[(i, j)] } else { 0.0 });
+    let q = Mat::from_fn(k, 7, |i, j| match (i, j) {
+        (i, 6) if i == k0 => -1.0,
+        (i, 6) => good[(i, 0)],
+        _ => good[(i, j)],
+    });
+    let config = CubatureConfig::default();
+    let with_bad =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+    assert_eq!(with_bad.invalid_poses(), &[6]);
+    assert_eq!(with_bad.pose_indices(), &[0, 1, 2, 3, 4, 5]);
+    let alone =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(good.as_ref()), &config).unwrap();
+    assert!(alone.invalid_poses().is_empty());
+    assert_eq!(with_bad.b(), alone.b());
+    let only_bad = Mat::from_fn(k, 1, |i, _| q[(i, 6)]);
+    assert!(matches!(
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(only_bad.as_ref()), &config),
+        Err(CubatureError::NonFiniteForce { pose: 0, .. })
     ));
 }

@@ -96,11 +96,16 @@ pub struct MaterialConfig {
     pub youngs_modulus: f64,
     /// Poisson ratio ν in [0, 0.5).
     pub poisson_ratio: f64,
-    /// Density ρ in kg/m³.
+    /// Density ρ in kg/m³; water's (1000) when not given.
+    #[serde(default = "default_density")]
     pub density: f64,
     /// Lumped (default) or consistent mass matrix.
     #[serde(default)]
     pub mass: crate::mass::MassKind,
+}
+
+fn default_density() -> f64 {
+    1000.0
 }
 
 impl Default for MaterialConfig {
@@ -109,7 +114,7 @@ impl Default for MaterialConfig {
             model: MaterialModel::default(),
             youngs_modulus: 1.0e5,
             poisson_ratio: 0.45,
-            density: 1000.0,
+            density: default_density(),
             mass: crate::mass::MassKind::Lumped,
         }
     }

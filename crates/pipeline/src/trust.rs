@@ -1,0 +1,99 @@
+//! When a run's result is not to be trusted: plain warnings from a run's report rows, each
+//! naming the method, what was measured and what to change.
+
+use crate::run::MethodReport;
+
+/// A reduced method whose trajectory is further than this from the full one (mean M-norm
+/// relative error) is not a usable stand-in for it.
+pub const UNTRUSTED_ERROR: f64 = 0.2;
+
+/// A subspace whose best representation of the test trajectory is further than this from it
+/// does not hold the test's motion: the training data missed it.
+pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
+
+/// Warnings for the reduced methods of a run, in row order; empty when every one is within
+/// [`UNTRUSTED_ERROR`] and its subspace within [`UNCOVERED_SUBSPACE_ERROR`].
+pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
+    let mut out = Vec::new();
+    for r in rows.iter().filter(|r| !r.method.starts_with("full")) {
+        let pct = |x: f64| 100.0 * x;
+        if let Some(f) = &r.failure {
+            out.push(format!(
+                "{}: stopped before the last frame ({f}); its figures cover the frames before",
+                r.method
+            ));
+        }
+        if r.subspace_error > UNCOVERED_SUBSPACE_ERROR {
+            out.push(format!(
+                "{}: its subspace alone is {:.1} % from the test trajectory, so the training \
+                 data does not cover the test's motion: add schedules or the test's kinds \
+                 (`[training] schedules`, `kinds`), or keep more PCA coefficients (`[pca]`)",
+                r.method,
+                pct(r.subspace_error)
+            ));
+        }
+        if r.mean_rel_error > UNTRUSTED_ERROR {
+            let why = if r.subspace_error <= r.mean_rel_error / 4.0 {
+                format!(
+                    "its subspace holds the test trajectory to {:.1} % and a single step from \
+                     it is {:.1} % off, so the reduced dynamics drift away from the full ones \
+                     (large rotations in a linear subspace, a decoder trained on too little): \
+                     try the neural methods with a larger `[autoencoder] latent_dim` or \
+                     `[reduced] complement_directions`, or more training schedules",
+                    pct(r.subspace_error),
+                    pct(r.step_error)
+                )
+            } else {
+                "the subspace misses the motion (above)".to_string()
+            };
+            out.push(format!(
+                "{}: {:.0} % from the full trajectory on average, not a stand-in for it; {why}",
+                r.method,
+                pct(r.mean_rel_error)
+            ));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(method: &str, mean: f64, subspace: f64) -> MethodReport {
+        MethodReport {
+            method: method.into(),
+            mean_rel_error: mean,
+            subspace_error: subspace,
+            step_error: 0.07,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn each_untrusted_figure_gets_a_warning_naming_the_method_and_what_to_change() {
+        let rows = [
+            row("full", 0.0, 0.0),
+            row("full-lbfgs", 0.9, 0.9),
+            row("pca", 0.01, 0.004),
+            row("pca-cubature", 0.92, 0.023),
+            row("neural", 0.3, 0.22),
+        ];
+        let w = warnings(&rows);
+        assert_eq!(w.len(), 3, "{w:#?}");
+        assert!(w[0].starts_with("pca-cubature: 92 %"), "{}", w[0]);
+        assert!(w[0].contains("drift") && w[0].contains("2.3 %"), "{}", w[0]);
+        assert!(
+            w[1].starts_with("neural: its subspace alone is 22.0 %"),
+            "{}",
+            w[1]
+        );
+        assert!(w[1].contains("`[training] schedules`"), "{}", w[1]);
+        assert!(
+            w[2].starts_with("neural: 30 %") && w[2].contains("misses"),
+            "{}",
+            w[2]
+        );
+        assert!(warnings(&rows[..3]).is_empty());
+    }
+}
