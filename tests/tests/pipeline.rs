@@ -379,3 +379,32 @@ fn complement_directions_complete_the_autoencoder() {
         "{err}"
     );
 }
+
+/// Without `[autoencoder] latent_dim` the latent dimension is half the PCA dimension within
+/// [6, k], and the stage says so; a latent dimension above k is an error that names the field
+/// and the values that work, before any training.
+#[test]
+fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
+    let defaulted = TINY
+        .replace("dimension = 6", "dimension = 5")
+        .replace("latent_dim = 2\n", "epochs = 20\n")
+        .replace("epochs = 150\n", "");
+    let s = scene(&defaulted);
+    let mut p = Pipeline::new(&s, &scratch_dir("pipeline-latent-default")).unwrap();
+    let trained = p.train(&no_progress).unwrap();
+    assert_eq!((trained.pca_k, trained.latent_dim), (5, 5));
+    assert_eq!(pipeline::pipeline::default_latent_dim(5), 5);
+    assert_eq!(pipeline::pipeline::default_latent_dim(22), 11);
+    assert_eq!(pipeline::pipeline::default_latent_dim(9), 6);
+    let line = &p.outcomes.last().unwrap().summary;
+    assert!(line.starts_with("d = 5 of k = 5 (the default"), "{line}");
+
+    let too_wide = TINY.replace("latent_dim = 2", "latent_dim = 8");
+    let s = scene(&too_wide);
+    let mut p = Pipeline::new(&s, &scratch_dir("pipeline-latent-too-wide")).unwrap();
+    let e = p.train(&no_progress).unwrap_err().to_string();
+    assert!(
+        e.contains("`autoencoder.latent_dim` = 8") && e.contains("at most 6"),
+        "{e}"
+    );
+}
