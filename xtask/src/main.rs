@@ -72,6 +72,23 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// The mesh suite: a minimal scene (mesh, material, bottom pinned, gravity, time step) on
+    /// every .mesh file of a folder, each run from an empty cache; one table of every method's
+    /// error and speed-up and the pipeline's time.
+    Suite {
+        /// Folder of MEDIT meshes (default: the shared/ folder's meshes beside the repository).
+        #[arg(long)]
+        meshes: Option<PathBuf>,
+        /// Leave out meshes with more vertices than this.
+        #[arg(long)]
+        max_vertices: Option<usize>,
+        /// Young's modulus of every scene, Pa.
+        #[arg(long, default_value_t = 1.0e5)]
+        youngs_modulus: f64,
+        /// Output folder (default: out/suite).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Stage `snapshots`: simulate the training schedules.
     Snapshots {
         #[command(flatten)]
@@ -330,6 +347,51 @@ fn dispatch(cli: Cli) -> Result<()> {
                 out.join("report.json").display(),
                 out.display()
             );
+            Ok(())
+        }
+        Command::Suite {
+            meshes,
+            max_vertices,
+            youngs_modulus,
+            out,
+        } => {
+            let dir = meshes.unwrap_or_else(|| root.join("../shared/meshes"));
+            let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+                .map_err(|e| anyhow::anyhow!("cannot read mesh folder {}: {e}", dir.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "mesh"))
+                .collect();
+            files.sort();
+            if let Some(max) = max_vertices {
+                let mut kept = Vec::new();
+                for f in files {
+                    let (m, _) = fem_core::io::read_mesh(&f)?;
+                    if m.num_vertices() <= max {
+                        kept.push(f);
+                    }
+                }
+                files = kept;
+            }
+            if files.is_empty() {
+                bail!("no .mesh files to run in {}", dir.display());
+            }
+            let out = out.unwrap_or_else(|| root.join("out").join("suite"));
+            let rows = pipeline::suite::run_suite(
+                &files,
+                youngs_modulus,
+                &out,
+                &stage_progress,
+                &mut |name| println!("{name}"),
+            )?;
+            let table = pipeline::suite::markdown(&rows);
+            print!("\n{table}");
+            std::fs::create_dir_all(&out)?;
+            fem_core::io::write_atomic(&out.join("suite.md"), table.as_bytes())?;
+            fem_core::io::write_atomic(
+                &out.join("suite.json"),
+                serde_json::to_string_pretty(&rows)?.as_bytes(),
+            )?;
+            println!("table: {}", out.join("suite.md").display());
             Ok(())
         }
         Command::Bench {

@@ -13,6 +13,7 @@ pub mod run;
 pub mod scene;
 pub mod simulate;
 pub mod stress;
+pub mod suite;
 pub mod trust;
 
 use std::path::PathBuf;

@@ -1,0 +1,155 @@
+//! The mesh suite: a minimal scene (mesh, material, pins, gravity, time step and nothing else)
+//! on each mesh of a folder, every method run from an empty cache, one table of the outcomes.
+//! What a user who arrives with their own mesh gets from the defaults, measured.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use fem_core::material::MaterialModel;
+
+use crate::pipeline::{Pipeline, Progress};
+use crate::run::{MethodReport, RunOptions, run};
+use crate::scene::Scene;
+use crate::simulate::Method;
+
+/// The materials a suite cycles through, one per mesh in turn, so that every material runs on
+/// some mesh.
+pub const MATERIALS: [MaterialModel; 5] = [
+    MaterialModel::StableNeoHookean,
+    MaterialModel::NeoHookean,
+    MaterialModel::Corotated,
+    MaterialModel::Stvk,
+    MaterialModel::Linear,
+];
+
+/// The fraction of the mesh's height pinned at its bottom (AutoDef pinned the vertices within
+/// a tolerance of the lowest plane; 2 % is the dinosaur's 5 mm of 25 cm).
+pub const PIN_FRACTION: f64 = 0.02;
+
+/// The minimal scene of a mesh file: its material, Young's modulus `youngs_modulus`, the bottom
+/// [`PIN_FRACTION`] of its height pinned, gravity along −y, h = 0.01 s; every other section at
+/// its default.
+pub fn minimal_scene(mesh: &Path, material: MaterialModel, youngs_modulus: f64) -> Result<Scene> {
+    let (m, _) = fem_core::io::read_mesh(mesh)
+        .with_context(|| format!("cannot read mesh {}", mesh.display()))?;
+    let (lo, hi) = m.bounding_box();
+    let name = mesh
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "mesh".into());
+    let model = serde_json::to_value(material)?;
+    let model = model.as_str().unwrap_or("stable-neo-hookean");
+    let text = format!(
+        "name = {name:?}\n\
+         [mesh]\npath = {path:?}\n\
+         [material]\nmodel = {model:?}\nyoungs_modulus = {youngs_modulus:e}\npoisson_ratio = 0.45\n\
+         [[pin]]\nplane = {{ axis = \"y\", side = \"min\", tolerance = {tol:e} }}\n\
+         [gravity]\nacceleration = [0.0, -9.81, 0.0]\n\
+         [time]\nstep = 0.01\n",
+        name = format!("{name}-{model}"),
+        path = mesh.display().to_string(),
+        tol = PIN_FRACTION * (hi[1] - lo[1]),
+    );
+    Scene::from_str(&text, Path::new("."), &format!("minimal scene of {}", mesh.display()))
+}
+
+/// One mesh's outcome.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SuiteRow {
+    pub scene: String,
+    pub vertices: usize,
+    pub tets: usize,
+    /// The pipeline's wall time from an empty cache, every stage and every method's run.
+    pub pipeline_seconds: f64,
+    /// Every method's report row, or why the pipeline stopped.
+    pub methods: Vec<MethodReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure: Option<String>,
+}
+
+/// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`) from an empty cache under
+/// `out/<scene>/`, returning one row a mesh; a scene whose pipeline fails gets a row saying why.
+pub fn run_suite(
+    meshes: &[PathBuf],
+    youngs_modulus: f64,
+    out: &Path,
+    progress: Progress<'_>,
+    on_mesh: &mut dyn FnMut(&str),
+) -> Result<Vec<SuiteRow>> {
+    let mut rows = Vec::new();
+    for (i, mesh) in meshes.iter().enumerate() {
+        let scene = minimal_scene(mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
+        on_mesh(&scene.name);
+        let dir = out.join(&scene.name);
+        let cache = dir.join("cache");
+        if cache.exists() {
+            std::fs::remove_dir_all(&cache)
+                .with_context(|| format!("cannot empty {}", cache.display()))?;
+        }
+        let (model, _) = scene.build_model()?;
+        let start = Instant::now();
+        let outcome = Pipeline::new(&scene, &cache).and_then(|mut p| {
+            let opts = RunOptions {
+                out: dir.clone(),
+                every: 0,
+                methods: vec![
+                    Method::Full,
+                    Method::FullLbfgs,
+                    Method::Pca,
+                    Method::PcaCubature,
+                    Method::Neural,
+                    Method::NeuralCubature,
+                ],
+                trajectory: 0,
+            };
+            run(&mut p, &opts, progress, &mut |_, _, _| {})
+        });
+        let pipeline_seconds = start.elapsed().as_secs_f64();
+        let (methods, failure) = match outcome {
+            Ok(m) => (m, None),
+            Err(e) => (Vec::new(), Some(format!("{e:#}"))),
+        };
+        rows.push(SuiteRow {
+            scene: scene.name.clone(),
+            vertices: model.mesh.num_vertices(),
+            tets: model.mesh.num_tets(),
+            pipeline_seconds,
+            methods,
+            failure,
+        });
+    }
+    Ok(rows)
+}
+
+/// The suite's table: per mesh, every reduced method's mean error and speed-up, and the
+/// pipeline's time from an empty cache.
+pub fn markdown(rows: &[SuiteRow]) -> String {
+    let reduced = ["pca", "pca-cubature", "neural", "neural-cubature"];
+    let mut s = String::from("| scene | vertices | tets | pipeline s |");
+    for m in reduced {
+        s += &format!(" {m} error | {m} speed-up |");
+    }
+    s += "\n|---|---:|---:|---:|";
+    s += &"---:|---:|".repeat(reduced.len());
+    s += "\n";
+    for r in rows {
+        s += &format!(
+            "| {} | {} | {} | {:.0} |",
+            r.scene, r.vertices, r.tets, r.pipeline_seconds
+        );
+        for m in reduced {
+            match r.methods.iter().find(|x| x.method == m) {
+                Some(x) => {
+                    s += &format!(" {:.1} % | {:.0}× |", 100.0 * x.mean_rel_error, x.speedup)
+                }
+                None => s += " — | — |",
+            }
+        }
+        s += "\n";
+        if let Some(f) = &r.failure {
+            s += &format!("\n{}: stopped: {f}\n\n", r.scene);
+        }
+    }
+    s
+}
