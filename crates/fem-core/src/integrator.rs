@@ -31,6 +31,10 @@ use crate::sparse::{HessianPattern, NO_SLOT};
 use crate::sparse_cholesky::SparseCholesky;
 use crate::{FemError, TetMesh, Vec3, with_material};
 
+/// The iteration cap of a step's retry with the other solver, in multiples of
+/// `[solver] max_iterations`.
+pub const RETRY_BUDGET: usize = 4;
+
 /// The `[time]` section of a scene.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -698,6 +702,7 @@ impl Simulator {
     }
 
     /// Solves one minimisation at time `t` and load factor `load`, from `x` (free DOFs).
+    /// A step the scene's solver cannot finish is redone with the other one.
     fn solve(
         &mut self,
         x: &mut [f64],
@@ -730,8 +735,14 @@ impl Simulator {
         // Hessians through large rotations of the whole body, where the projection drops the
         // curvature that would turn it. Redo the step from its start with the other one,
         // counting the iterations spent.
+        // The retry gets RETRY_BUDGET times the iteration cap: a step that needs it is a rare
+        // one (a body toppling, a patch dragged far), and failing it ends the whole trajectory.
         let e = first.expect_err("errors only reach here");
         x.copy_from_slice(&start);
+        let params = SolveParams {
+            max_iterations: RETRY_BUDGET * params.max_iterations,
+            ..params
+        };
         let retry = match self.solver.method {
             SolverMethod::Newton => {
                 tracing::info!("{e}; retrying the step with L-BFGS");

@@ -51,7 +51,11 @@ pub fn minimal_scene(mesh: &Path, material: MaterialModel, youngs_modulus: f64) 
         path = mesh.display().to_string(),
         tol = PIN_FRACTION * (hi[1] - lo[1]),
     );
-    Scene::from_str(&text, Path::new("."), &format!("minimal scene of {}", mesh.display()))
+    Scene::from_str(
+        &text,
+        Path::new("."),
+        &format!("minimal scene of {}", mesh.display()),
+    )
 }
 
 /// One mesh's outcome.
