@@ -32,6 +32,7 @@ pub mod rng;
 pub mod snapshots;
 pub mod sparse;
 pub mod sparse_cholesky;
+pub mod step_norm;
 
 pub use error::{FemError, MeshError};
 pub use mesh::TetMesh;

@@ -36,6 +36,28 @@ pub struct PcaConfig {
     pub max_vertex_error: Option<f64>,
     /// Upper bound on k for every rule.
     pub max_dimension: usize,
+    /// The norm the k columns are chosen in, once the rule has chosen k: `mass` (PCA, the best
+    /// k-dimensional representation of the snapshots' displacements) or `step` (the k leading
+    /// modes in the norm of the implicit step's operator at rest, K₀ + M/h², in which a Galerkin
+    /// step is best; see [`crate::PcaBasis::refit_in_norm`]). Left out of the serialised section
+    /// at its default.
+    #[serde(skip_serializing_if = "is_default")]
+    pub norm: BasisNorm,
+}
+
+/// The norm a basis is chosen in (`[pca] norm`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BasisNorm {
+    /// The mass-weighted displacement norm (PCA).
+    #[default]
+    Mass,
+    /// The norm of the implicit step's operator at rest, K₀ + M/h².
+    Step,
+}
+
+fn is_default<T: Default + PartialEq>(v: &T) -> bool {
+    *v == T::default()
 }
 
 impl Default for PcaConfig {
@@ -45,6 +67,7 @@ impl Default for PcaConfig {
             explained_energy: None,
             max_vertex_error: None,
             max_dimension: DEFAULT_MAX_DIMENSION,
+            norm: BasisNorm::default(),
         }
     }
 }

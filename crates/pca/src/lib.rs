@@ -44,10 +44,13 @@ pub mod basis;
 pub mod config;
 pub mod error;
 pub mod fit;
+pub mod norm;
 mod svd;
 mod vertex_error;
 
 pub use basis::PcaBasis;
-pub use config::{DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DimensionRule, PcaConfig};
+pub use config::{
+    BasisNorm, DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DimensionRule, PcaConfig,
+};
 pub use error::PcaError;
 pub use fit::PcaFit;

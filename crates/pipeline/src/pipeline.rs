@@ -14,6 +14,7 @@ use anyhow::{Context, Result, bail};
 use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
 use fem_core::snapshots::{self, ScheduleConfig, SnapshotSet, StiffnessProbe};
 use pca::{PcaBasis, PcaFit};
+use rayon::prelude::*;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -505,8 +506,33 @@ impl<'a> Pipeline<'a> {
                 .collect();
             let mat =
                 faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
-            PcaBasis::fit(mat, Some(&mass), &p.scene.pca, 3)
-                .map_err(|e| anyhow::anyhow!("{}: stage pca: {e}", p.scene.source))
+            let err = |e: pca::PcaError| anyhow::anyhow!("{}: stage pca: {e}", p.scene.source);
+            let mut fit = PcaBasis::fit(mat, Some(&mass), &p.scene.pca, 3).map_err(err)?;
+            if p.scene.pca.norm == pca::BasisNorm::Step {
+                let op = fem_core::step_norm::StepOperator::new(&p.model, p.scene.time.step)?;
+                fit.basis = fit
+                    .basis
+                    .refit_in_norm(mat, |s| {
+                        let mut out = faer::Mat::<f64>::zeros(s.nrows(), s.ncols());
+                        let cols: Vec<Vec<f64>> = (0..s.ncols())
+                            .into_par_iter()
+                            .map(|j| {
+                                let x: Vec<f64> = s.col(j).iter().copied().collect();
+                                let mut y = vec![0.0; x.len()];
+                                op.apply(&x, &mut y);
+                                y
+                            })
+                            .collect();
+                        for (j, c) in cols.iter().enumerate() {
+                            for (i, v) in c.iter().enumerate() {
+                                out[(i, j)] = *v;
+                            }
+                        }
+                        out
+                    })
+                    .map_err(err)?;
+            }
+            Ok(fit)
         })
     }
 

@@ -3,6 +3,7 @@
 
 mod config;
 mod inputs;
+mod norm;
 mod properties;
 mod reference;
 mod selection;
