@@ -36,15 +36,16 @@ pub struct PcaConfig {
     pub max_vertex_error: Option<f64>,
     /// Upper bound on k for every rule.
     pub max_dimension: usize,
-    /// The norm the k columns are chosen in, once the rule has chosen k: `step` (the default:
-    /// the k leading modes in the norm of the implicit step's operator at rest, K₀ + M/h², in
-    /// which a Galerkin step is the orthogonal projection; see
-    /// [`crate::PcaBasis::refit_in_norm`]) or `mass` (plain PCA, the best k-dimensional
-    /// representation of the snapshots' displacements). Measured on the default cantilever,
-    /// `step` took every reduced method closer to the full trajectory (neural-cubature 1.27 →
-    /// 0.98 %, pca-cubature 0.80 → 0.77 %) though its subspace holds the frames less well in
-    /// displacement (0.12 → 0.20 %); on the AutoDef dinosaur, PCA 92 → 64 %. Left out of the
-    /// serialised section at its default.
+    /// The norm the k columns are chosen in, once the rule has chosen k: `mass` (the default,
+    /// plain PCA: the best k-dimensional representation of the snapshots' displacements) or
+    /// `step` (the k leading modes in the norm of the implicit step's operator at rest,
+    /// K₀ + M/h², in which a Galerkin step is the orthogonal projection; see
+    /// [`crate::PcaBasis::refit_in_norm`]). Measured: `step` takes the methods without cubature
+    /// closer to the full trajectory (cantilever neural 1.00 → 0.81 %, catapult pca 3.53 →
+    /// 3.44 %, AutoDef dinosaur pca 92 → 64 %), but the cubature rules fitted on its stiffer
+    /// columns lose more than that on two of three scenes (catapult neural-cubature 4.22 →
+    /// 5.98 %, pca-cubature 3.74 → 4.72 %; AutoDef X pca-cubature 7.0 → 12.1 %), so it is not
+    /// the default. Left out of the serialised section at its default.
     #[serde(skip_serializing_if = "is_default")]
     pub norm: BasisNorm,
 }
@@ -54,9 +55,9 @@ pub struct PcaConfig {
 #[serde(rename_all = "kebab-case")]
 pub enum BasisNorm {
     /// The mass-weighted displacement norm (PCA).
+    #[default]
     Mass,
     /// The norm of the implicit step's operator at rest, K₀ + M/h².
-    #[default]
     Step,
 }
 

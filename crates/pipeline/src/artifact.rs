@@ -48,8 +48,6 @@ pub fn stage_version(stage: &str) -> u32 {
         "cubature" => 2,
         // 3: the decoder's Jacobian from SIMD kernels (round-off).
         "cubature-neural" => 3,
-        // 2: the columns chosen in the step norm by default (`[pca] norm`).
-        "pca" => 2,
         _ => 1,
     }
 }
