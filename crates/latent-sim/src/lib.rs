@@ -12,12 +12,16 @@
 //! functions of q through Σ_v U_vᵀU_v and Σ_v U_vᵀ: their vertices are never decoded. The full
 //! displacement u = Uq is formed only when a frame is written out.
 
+mod config;
 mod neural;
 mod onset;
 mod reduced;
 mod simulator;
 mod subspace;
 
+pub use config::{
+    MAX_COMPLEMENT_DIRECTIONS, MAX_ONSET_DIRECTIONS, REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
+};
 pub use neural::NeuralSubspace;
 pub use onset::Augmented;
 pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};

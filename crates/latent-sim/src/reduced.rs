@@ -6,6 +6,7 @@
 //! products with independent accumulators: both vectorise, where a dot per row is one dependent
 //! chain of adds.
 
+use cubature::CubatureRule;
 use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::FIXED;
 use fem_core::forces::ForceKind;
@@ -13,6 +14,7 @@ use fem_core::integrator::FullSpaceModel;
 use fem_core::material::Material;
 use fem_core::{Mat3, with_material};
 use nn::simd::{add_combination, dot_rows};
+use pca::PcaBasis;
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::ReducedError;
@@ -250,21 +252,26 @@ pub struct ReducedSpace {
 }
 
 impl ReducedSpace {
-    /// `basis` is U, n_free × k column-major, on the model's free DOFs. `cubature` restricts the
-    /// elastic energy to weighted elements (None: every element, weight 1).
+    /// The space of `basis` (U on the model's free DOFs), with the elastic energy restricted to
+    /// the elements of `cubature` and their weights (None: every element, weight 1).
+    ///
+    /// # Errors
+    /// [`ReducedError::BasisShape`] when U's rows are not the model's free DOFs,
+    /// [`ReducedError::Cubature`] when the rule does not fit the mesh.
     pub fn new(
         model: &FullSpaceModel,
-        basis: &[f64],
-        k: usize,
-        cubature: Option<(Vec<usize>, Vec<f64>)>,
+        basis: &PcaBasis,
+        cubature: Option<&CubatureRule>,
     ) -> Result<Self, ReducedError> {
         let nf = model.dofs.num_free();
-        if k == 0 || basis.len() != nf * k {
+        let k = basis.k();
+        if basis.n() != nf {
             return Err(ReducedError::BasisShape {
-                rows: basis.len() / k.max(1),
+                rows: basis.n(),
                 free: nf,
             });
         }
+        let columns: Vec<&[f64]> = (0..k).map(|j| basis.column(j)).collect();
         let nv = model.mesh.num_vertices();
         let mut rows = vec![0.0; nv * 3 * k];
         for v in 0..nv {
@@ -272,20 +279,21 @@ impl ReducedSpace {
                 let r = model.dofs.index[3 * v + c];
                 if r != FIXED {
                     for j in 0..k {
-                        rows[(v * 3 + c) * k + j] = basis[j * nf + r];
+                        rows[(v * 3 + c) * k + j] = columns[j][r];
                     }
                 }
             }
         }
-        if let Some((elements, weights)) = &cubature {
-            check_rule(elements, weights, model.elements.len())?;
+        if let Some(rule) = cubature {
+            check_rule(&rule.elements, &rule.weights, model.elements.len())?;
         }
-        let (elements, weights) = cubature.unwrap_or_else(|| {
-            (
+        let (elements, weights) = match cubature {
+            Some(rule) => (rule.elements.clone(), rule.weights.clone()),
+            None => (
                 (0..model.elements.len()).collect(),
                 vec![1.0; model.elements.len()],
-            )
-        });
+            ),
+        };
         let mut touched: Vec<usize> = elements
             .iter()
             .flat_map(|&e| model.elements.tets[e])
@@ -346,8 +354,8 @@ impl ReducedSpace {
         let n = model.num_full();
         let (mut col, mut mcol) = (vec![0.0; n], vec![0.0; n]);
         let mut cols = Vec::with_capacity(k);
-        for j in 0..k {
-            model.dofs.scatter(&basis[j * nf..(j + 1) * nf], &mut col);
+        for column in &columns {
+            model.dofs.scatter(column, &mut col);
             cols.push(col.clone());
         }
         for j in 0..k {

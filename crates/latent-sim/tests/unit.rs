@@ -1,5 +1,6 @@
 //! Reduced implicit Euler: derivative checks and the full-rank limit.
 
+use cubature::CubatureRule;
 use fem_core::Vec3;
 use fem_core::constraints::{Axis, Side, VertexSelection};
 use fem_core::forces::{ExternalForce, ForceKind};
@@ -8,9 +9,30 @@ use fem_core::material::MaterialConfig;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use fem_core::optim::{SolverConfig, SolverMethod};
 use latent_sim::{
-    Augmented, ElasticPath, LinearSubspace, NeuralSubspace, Preconditioning, ReducedSimulator,
-    ReducedSpace, Subspace,
+    Augmented, ElasticPath, LinearSubspace, NeuralSubspace, Preconditioning, ReducedError,
+    ReducedSimulator, ReducedSpace, Subspace,
 };
+
+/// The space of U (`basis`, n_free × k column-major) and the rule of `cubature`'s elements and
+/// weights, built as the pca and cubature crates hand them over (the rule unchecked, so that
+/// bad rules reach the space's own checks).
+fn reduced_space(
+    m: &FullSpaceModel,
+    basis: &[f64],
+    k: usize,
+    cubature: Option<(Vec<usize>, Vec<f64>)>,
+) -> Result<ReducedSpace, ReducedError> {
+    let n = m.dofs.num_free();
+    let basis = pca::PcaBasis::new(n, k, basis.to_vec(), None, vec![1.0; k]).unwrap();
+    let rule = cubature.map(|(elements, weights)| CubatureRule {
+        elements,
+        weights,
+        training_error: 0.0,
+        tolerance_met: true,
+        error_curve: Vec::new(),
+    });
+    ReducedSpace::new(m, &basis, rule.as_ref())
+}
 
 /// A 1 m bar of 4 × 1 × 1 cells.
 fn bar() -> fem_core::TetMesh {
@@ -159,7 +181,7 @@ fn reduced_gradient_matches_finite_differences_with_and_without_cubature() {
         Some((vec![0usize, 3, 7, 11, 20], vec![2.0, 0.5, 1.5, 3.0, 0.7])),
     ];
     for cubature in subsets {
-        let space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+        let space = reduced_space(&m, &basis, k, cubature.clone()).unwrap();
         let mut sim = ReducedSimulator::new(
             m.clone(),
             space,
@@ -193,7 +215,7 @@ fn free_fall_in_the_subspace_starts_at_the_solution_after_the_first_step() {
     let m =
         FullSpaceModel::new(bar(), &material(), vec![], Vec3::new(0.0, g, 0.0), vec![]).unwrap();
     let n = m.dofs.num_free();
-    let space = ReducedSpace::new(&m, &full_rank_basis(&m), n, None).unwrap();
+    let space = reduced_space(&m, &full_rank_basis(&m), n, None).unwrap();
     for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
         let mut red = ReducedSimulator::new(
             m.clone(),
@@ -226,7 +248,7 @@ fn full_rank_linear_subspace_reproduces_the_full_trajectory() {
     let m = model();
     let n = m.dofs.num_free();
     let frames = 15;
-    let space = ReducedSpace::new(&m, &full_rank_basis(&m), n, None).unwrap();
+    let space = reduced_space(&m, &full_rank_basis(&m), n, None).unwrap();
     for (method, preconditioning) in [
         (SolverMethod::Newton, Preconditioning::Auto),
         (SolverMethod::Lbfgs, Preconditioning::Rest),
@@ -278,7 +300,7 @@ fn neural_reduced_gradient_matches_finite_differences_with_and_without_cubature(
             None,
             Some((vec![1usize, 4, 9, 15], vec![1.5, 0.5, 2.0, 1.0])),
         ] {
-            let space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+            let space = reduced_space(&m, &basis, k, cubature.clone()).unwrap();
             let sub = Augmented::with_directions(
                 NeuralSubspace::new(ae.clone()),
                 &space,
@@ -330,7 +352,7 @@ fn elastic_paths_agree() {
             ElasticPath::Parallel,
             ElasticPath::ElementBasis,
         ] {
-            let mut space = ReducedSpace::new(&m, &basis, k, cubature.clone()).unwrap();
+            let mut space = reduced_space(&m, &basis, k, cubature.clone()).unwrap();
             space.set_elastic_path(&m, path);
             assert_eq!(space.elastic_path(), path);
             let mut buf = space.buffers();
@@ -364,9 +386,9 @@ fn elastic_path_follows_the_element_set() {
     let m = model();
     let k = 4;
     let basis = small_basis(&m, k);
-    let all = ReducedSpace::new(&m, &basis, k, None).unwrap();
+    let all = reduced_space(&m, &basis, k, None).unwrap();
     assert_eq!(all.elastic_path(), ElasticPath::Vertices);
-    let rule = ReducedSpace::new(&m, &basis, k, Some((vec![0, 9, 20], vec![1.0; 3]))).unwrap();
+    let rule = reduced_space(&m, &basis, k, Some((vec![0, 9, 20], vec![1.0; 3]))).unwrap();
     assert_eq!(rule.elastic_path(), ElasticPath::ElementBasis);
 }
 
@@ -389,7 +411,7 @@ fn a_cubature_rule_that_does_not_fit_is_an_error() {
         ((vec![0, 3], vec![1.0, -0.5]), "weight -0.5".to_string()),
         ((vec![0, 3], vec![f64::NAN, 1.0]), "weight NaN".to_string()),
     ] {
-        let err = ReducedSpace::new(&m, &basis, k, Some(rule)).unwrap_err();
+        let err = reduced_space(&m, &basis, k, Some(rule)).unwrap_err();
         assert!(
             matches!(err, latent_sim::ReducedError::Cubature { .. })
                 && err.to_string().contains(&want),
@@ -416,7 +438,7 @@ fn forces_in_q_match_the_full_space_forces() {
             start: 0.0,
             end: 1.0,
         }];
-        let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+        let space = reduced_space(&m, &basis, k, None).unwrap();
         let mut buf = space.buffers();
         let q: Vec<f64> = (0..k).map(|i| 0.02 * (i as f64 + 0.7).cos()).collect();
         let mut u = vec![0.0; n];
@@ -493,7 +515,7 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
         vec![1usize, 4, 7, 10, 13, 16, 19, 22],
         vec![1.5, 0.5, 2.0, 1.0, 0.8, 1.2, 0.6, 1.1],
     ));
-    let space = ReducedSpace::new(&m, &basis, k, cubature).unwrap();
+    let space = reduced_space(&m, &basis, k, cubature).unwrap();
     let mut lin = ReducedSimulator::new(
         m.clone(),
         space.clone(),
@@ -586,7 +608,7 @@ fn every_preconditioner_and_newton_follow_the_same_neural_trajectory() {
     let ae =
         nn::Autoencoder::with_architecture(k, 3, &[12, 10], nn::Activation::Elu, None, 7).unwrap();
     let cubature = Some((vec![1usize, 4, 9, 15, 22], vec![1.5, 0.5, 2.0, 1.0, 3.0]));
-    let space = ReducedSpace::new(&m, &basis, k, cubature).unwrap();
+    let space = reduced_space(&m, &basis, k, cubature).unwrap();
     let frames = 30;
     let run = |method: SolverMethod, preconditioning: Preconditioning| {
         let mut sim = ReducedSimulator::new(
@@ -655,7 +677,7 @@ fn a_simulator_restarted_from_two_states_takes_the_same_next_step() {
             }
         }
     }
-    let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+    let space = reduced_space(&m, &basis, k, None).unwrap();
     fn check<S: Subspace + Clone>(
         m: &FullSpaceModel,
         space: &ReducedSpace,
@@ -747,7 +769,7 @@ fn gravity_only(g: f64) -> FullSpaceModel {
 fn onset_directions_reproduce_the_first_steps_of_a_release_under_gravity() {
     let m = gravity_only(-1e-3);
     let k = 6;
-    let space = ReducedSpace::new(&m, &small_basis(&m, k), k, None).unwrap();
+    let space = reduced_space(&m, &small_basis(&m, k), k, None).unwrap();
     let steps = 3;
     let mut reference = ReducedSimulator::new(
         m.clone(),
@@ -835,7 +857,7 @@ fn onset_directions_are_new_and_linear() {
     let k = 6;
     let basis = small_basis(&m, k);
     let h = time(1).step;
-    let space = ReducedSpace::new(&m, &basis, k, None).unwrap();
+    let space = reduced_space(&m, &basis, k, None).unwrap();
     let ae =
         nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
     let mut sub =
@@ -865,7 +887,7 @@ fn onset_directions_are_new_and_linear() {
     }
     // Nothing to add: no gravity, m = 0, or a subspace that spans all k coefficients at rest.
     let still = gravity_only(0.0);
-    let space0 = ReducedSpace::new(&still, &small_basis(&still, k), k, None).unwrap();
+    let space0 = reduced_space(&still, &small_basis(&still, k), k, None).unwrap();
     let none = Augmented::with_gravity_onset(truncation(k, 2), &space0, &time(1), 3).unwrap();
     assert_eq!(none.directions(), 0);
     let none = Augmented::with_gravity_onset(truncation(k, 2), &space, &time(1), 0).unwrap();
@@ -883,7 +905,7 @@ fn complement_directions_are_kept_where_new() {
     let m = model();
     let k = 6;
     let h = time(1).step;
-    let space = ReducedSpace::new(&m, &small_basis(&m, k), k, None).unwrap();
+    let space = reduced_space(&m, &small_basis(&m, k), k, None).unwrap();
     let ae =
         nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
     let mut inner = NeuralSubspace::new(ae.clone());
@@ -913,7 +935,7 @@ fn complement_directions_are_kept_where_new() {
     assert_linear_columns_a_orthogonal(&space, h, &jac, 2);
     // Without gravity only the onset directions go.
     let still = gravity_only(0.0);
-    let space0 = ReducedSpace::new(&still, &small_basis(&still, k), k, None).unwrap();
+    let space0 = reduced_space(&still, &small_basis(&still, k), k, None).unwrap();
     let sub0 =
         Augmented::with_directions(NeuralSubspace::new(ae.clone()), &space0, &time(1), 2, &new1)
             .unwrap();

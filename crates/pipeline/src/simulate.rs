@@ -68,12 +68,7 @@ impl Method {
     }
 }
 
-/// Smallest iteration cap of the reduced methods' L-BFGS (AutoDef used 500). A step that needs
-/// more is redone with reduced Newton: on the catapult, where large rotations make the rest-state
-/// preconditioner poor, capping at 100 instead of 500 halved pca-cubature's median step (629 →
-/// 290 ms under load) without changing any step that converges normally (5–17 iterations on the
-/// cantilever).
-pub const REDUCED_MIN_ITERATIONS: usize = 100;
+pub use latent_sim::REDUCED_MIN_ITERATIONS;
 
 /// Which forces drive the simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -198,14 +193,12 @@ impl Runner {
             Method::Pca | Method::PcaCubature => {
                 let fit = pipeline.pca(progress)?;
                 let basis = &fit.basis;
-                let columns = crate::pipeline::basis_columns(basis);
                 let cubature = if method == Method::PcaCubature {
-                    let c = pipeline.cubature(progress)?;
-                    Some((c.rule.elements, c.rule.weights))
+                    Some(pipeline.cubature(progress)?.rule)
                 } else {
                     None
                 };
-                let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
+                let space = ReducedSpace::new(&model, basis, cubature.as_ref())?;
                 let mut sim = ReducedSimulator::new(
                     model,
                     space,
@@ -220,14 +213,12 @@ impl Runner {
                 let fit = pipeline.pca(progress)?;
                 let trained = pipeline.train(progress)?;
                 let basis = &fit.basis;
-                let columns = crate::pipeline::basis_columns(basis);
                 let cubature = if method == Method::NeuralCubature {
-                    let c = pipeline.cubature_neural(progress)?;
-                    Some((c.rule.elements, c.rule.weights))
+                    Some(pipeline.cubature_neural(progress)?.rule)
                 } else {
                     None
                 };
-                let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
+                let space = ReducedSpace::new(&model, basis, cubature.as_ref())?;
                 let subspace = Augmented::with_directions(
                     NeuralSubspace::new(trained.model),
                     &space,
@@ -366,9 +357,7 @@ pub fn solver_for(scene: &Scene, method: Method) -> SolverConfig {
             solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
         }
         Method::Pca | Method::PcaCubature | Method::Neural | Method::NeuralCubature => {
-            solver.method = scene.reduced.method;
-            solver.tolerance = scene.reduced.tolerance;
-            solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
+            solver = scene.reduced.solver(&scene.solver);
         }
     }
     solver
