@@ -13,18 +13,26 @@
 //! displacement u = Uq is formed only when a frame is written out.
 
 mod config;
+pub mod model;
 mod neural;
 mod onset;
 mod reduced;
+pub mod runtime;
 mod simulator;
 mod subspace;
 
 pub use config::{
     MAX_COMPLEMENT_DIRECTIONS, MAX_ONSET_DIRECTIONS, REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
 };
+
+pub use model::{ModelFileError, ModelFormatError, ReducedModel};
 pub use neural::NeuralSubspace;
-pub use onset::Augmented;
-pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
+pub use onset::{Augmented, DirectionParts};
+pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers, SpaceParts};
+pub use runtime::{
+    AnyReducedSimulator, FullRuntime, Handle, Interactive, Real, ReducedRuntime, RuntimeError,
+    StepStats, Surface,
+};
 pub use simulator::{
     PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
     ReducedStepReport,
@@ -48,4 +56,23 @@ pub enum ReducedError {
     /// A reduced matrix that must be positive definite is not.
     #[error("the reduced {what} matrix is not positive definite")]
     NotPositiveDefinite { what: &'static str },
+    /// The parts of a reduced space do not fit together or the mesh.
+    #[error("reduced space: {reason}")]
+    Parts { reason: String },
+    /// A force or handle on a vertex whose basis rows the space does not hold (or that does not
+    /// exist).
+    #[error(
+        "vertex {vertex} has no basis rows in this model (it holds those of the surface and of the \
+         elements it evaluates; export with all rows to reach the others)"
+    )]
+    NoBasisRows { vertex: usize },
+    /// A force index past the forces there are.
+    #[error("there is no force {index} (there are {count})")]
+    NoSuchForce { index: usize, count: usize },
+    /// Keyframes that are empty, not finite or not in time order.
+    #[error("keyframes must be finite [t, x, y, z] rows in time order, at least one")]
+    Keyframes,
+    /// A model that does not hold together ([`ReducedModel::check`]).
+    #[error("invalid model: {reason}")]
+    InvalidModel { reason: String },
 }
