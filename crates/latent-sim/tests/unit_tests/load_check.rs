@@ -1,6 +1,6 @@
-//! The model loader's property, checked by the mutation test: every input ends in a model or
-//! a typed error, never a panic, and a model that loads builds a simulator (or a typed error)
-//! that steps (or fails typed).
+//! The model loader's property, shared by the mutation test and the cargo-fuzz target
+//! `fuzz/fuzz_targets/model.rs`: every input ends in a model or a typed error, never a panic,
+//! and a model that loads builds a simulator (or a typed error) that steps (or fails typed).
 //!
 //! The first byte chooses what the rest is: even, a whole file; odd, a payload behind an intact
 //! header ([`ReducedModel::from_payload`]): a fuzzer cannot forge the checksums that stand in

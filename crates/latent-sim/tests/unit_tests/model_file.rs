@@ -269,7 +269,8 @@ fn every_kind_of_damage_is_refused_with_its_own_error() {
     assert!(e.to_string().contains("damaged.ldm"), "{e}");
 }
 
-/// Cases of [`mutated_files_never_panic`]: 48, or `PROPTEST_CASES` for a longer campaign.
+/// Cases of [`mutated_files_never_panic`]: 48, or `PROPTEST_CASES` (`scripts/fuzz.sh model`
+/// runs a long campaign this way where cargo-fuzz is missing).
 fn mutation_cases() -> u32 {
     std::env::var("PROPTEST_CASES")
         .ok()
@@ -305,5 +306,25 @@ proptest! {
         let mode = u8::from(behind_header);
         let input: Vec<u8> = std::iter::once(mode).chain(data).collect();
         super::load_check::check(&input);
+    }
+}
+
+/// Writes the cargo-fuzz seeds of the `model` target (a whole file of each method's model and
+/// a payload of the smallest) to `fuzz/seeds/model/`.
+#[test]
+#[ignore]
+fn write_fuzz_seeds() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/model");
+    std::fs::create_dir_all(&dir).unwrap();
+    let m = bar([2, 1, 1], -9.81);
+    let basis = snapshot_basis(&m, 3);
+    for kind in KINDS {
+        let file = build(kind, &m, &basis, Rows::Used).to_bytes();
+        let seed: Vec<u8> = std::iter::once(0).chain(file.iter().copied()).collect();
+        std::fs::write(dir.join(format!("{}.seed", kind.name())), seed).unwrap();
+        if kind == Kind::Pca {
+            let payload = std::iter::once(1).chain(file[HEADER_LEN..].iter().copied());
+            std::fs::write(dir.join("pca-payload.seed"), payload.collect::<Vec<u8>>()).unwrap();
+        }
     }
 }
