@@ -428,8 +428,7 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// Back at rest at time 0, as [`ReducedSimulator::new`] left it: the next steps are those of
     /// a new simulator with the same forces, bit for bit.
     pub fn reset(&mut self) {
-        let (k, d) = (self.space.k, self.subspace.latent_dim());
-        let zero = vec![0.0; k];
+        let zero = vec![0.0; self.space.k];
         self.subspace.encode(&zero, &mut self.state.z);
         self.subspace.decode(&self.state.z, &mut self.state.q);
         self.state.qdot.fill(0.0);
@@ -438,7 +437,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         self.state.time = 0.0;
         self.zddot.fill(0.0);
         self.zddot_step = None;
-        self.lbfgs = Lbfgs::new(d, self.solver.lbfgs_memory);
+        self.lbfgs.reset();
         self.precond_use.restart();
         self.forces_changed();
     }
