@@ -80,7 +80,7 @@ fn model() -> FullSpaceModel {
 }
 
 /// k smooth columns (low-order bending and stretching shapes), mass-orthonormalised.
-fn basis(model: &FullSpaceModel) -> Vec<f64> {
+fn basis(model: &FullSpaceModel) -> pca::PcaBasis {
     let n = model.dofs.num_free();
     let mut u = vec![0.0; n * K];
     for j in 0..K {
@@ -113,7 +113,7 @@ fn basis(model: &FullSpaceModel) -> Vec<f64> {
             u[j * n + r] /= norm;
         }
     }
-    u
+    pca::PcaBasis::new(n, K, u, Some(m), vec![1.0; K]).expect("a valid basis")
 }
 
 /// The X-shaped decoder: linear skip on the leading d coefficients plus a random ELU network
@@ -139,9 +139,14 @@ fn simulator(elements: usize) -> ReducedSimulator<NeuralSubspace> {
     let m = model();
     let total = m.elements.len();
     let chosen: Vec<usize> = (0..elements).map(|i| i * total / elements).collect();
-    let weights = vec![total as f64 / elements as f64; elements];
-    let space =
-        ReducedSpace::new(&m, &basis(&m), K, Some((chosen, weights))).expect("a valid space");
+    let rule = cubature::CubatureRule {
+        elements: chosen,
+        weights: vec![total as f64 / elements as f64; elements],
+        training_error: 0.0,
+        tolerance_met: true,
+        error_curve: Vec::new(),
+    };
+    let space = ReducedSpace::new(&m, &basis(&m), Some(&rule)).expect("a valid space");
     let solver = SolverConfig {
         method: SolverMethod::Lbfgs,
         tolerance: 1e-4,

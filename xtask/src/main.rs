@@ -162,6 +162,22 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         trajectory: usize,
     },
+    /// Write one reduced method's trained model as a self-contained file (running the stages it
+    /// needs, cached as always), for latent-sim's runtime: `ReducedModel::load(path)?.simulator()`.
+    Export {
+        #[command(flatten)]
+        common: Common,
+        /// The reduced method whose model to write.
+        #[arg(long, value_enum, default_value_t = MethodArg::NeuralCubature)]
+        method: MethodArg,
+        /// Model file (default: out/<scene name>/<method>.ldm).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Keep the basis rows of every vertex (the whole displacement can be read back, interior
+        /// vertices grabbed), not only those of the surface and the evaluated elements.
+        #[arg(long)]
+        all_rows: bool,
+    },
     /// Run the stages in order, skipping cached ones.
     Pipeline {
         #[command(flatten)]
@@ -346,6 +362,47 @@ fn dispatch(cli: Cli) -> Result<()> {
                 "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg); frames: {}/<method>/series.pvd",
                 out.join("report.json").display(),
                 out.display()
+            );
+            if let Some(m) = pipeline::export::run_method(&opts.methods) {
+                println!("model: {}", pipeline::export::model_path(&out, m).display());
+            }
+            Ok(())
+        }
+        Command::Export {
+            common,
+            method,
+            out,
+            all_rows,
+        } => {
+            let scene = load_scene(common.scene.as_ref())?;
+            let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            let method = Method::from(method);
+            let path = out.unwrap_or_else(|| {
+                pipeline::export::model_path(&root.join("out").join(&scene.name), method)
+            });
+            let rows = if all_rows {
+                latent_sim::model::Rows::All
+            } else {
+                latent_sim::model::Rows::Used
+            };
+            let model = pipeline::export::scene_model(&mut p, method, rows, &stage_progress)?;
+            model.save(&path)?;
+            let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+            println!(
+                "{}: {} model, {} vertices ({} with basis rows), {} tets, k = {}, latent dimension {}, {} elements evaluated → {} ({:.2} MB)",
+                scene.name,
+                method.name(),
+                model.mesh.num_vertices(),
+                model.space.vertices.len(),
+                model.mesh.num_tets(),
+                model.space.k,
+                model.latent_dim(),
+                model
+                    .cubature
+                    .as_ref()
+                    .map_or(model.mesh.num_tets(), |c| c.len()),
+                path.display(),
+                bytes as f64 / 1e6
             );
             Ok(())
         }

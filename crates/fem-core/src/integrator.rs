@@ -696,6 +696,27 @@ impl Simulator {
         Ok(())
     }
 
+    /// Back at rest at time 0. The symbolic factorisation is kept; L-BFGS's pairs are dropped
+    /// and a preconditioner that depends on the state is refactorised by the next step.
+    pub fn reset(&mut self) {
+        self.state.step = 0;
+        self.state.time = 0.0;
+        self.state.u.fill(0.0);
+        self.state.v.fill(0.0);
+        self.acceleration = None;
+        self.forces_changed();
+    }
+
+    /// Tells the simulator that `model.forces` changed (a force added, removed or given another
+    /// stiffness): L-BFGS's current-state preconditioner, which holds the springs' stiffness, is
+    /// refactorised by the next step, and its pairs are dropped.
+    pub fn forces_changed(&mut self) {
+        if let Some(p) = &mut self.lbfgs {
+            p.lbfgs.reset();
+            p.failed = true;
+        }
+    }
+
     /// How many times L-BFGS's preconditioner has been assembled and factorised.
     pub fn lbfgs_factorizations(&self) -> usize {
         self.lbfgs_factorizations

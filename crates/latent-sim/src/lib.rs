@@ -11,16 +11,112 @@
 //! displacement at all. Springs and point loads are quadratic and linear in u, hence exact
 //! functions of q through Σ_v U_vᵀU_v and Σ_v U_vᵀ: their vertices are never decoded. The full
 //! displacement u = Uq is formed only when a frame is written out.
+//!
+//! # A trained model in any program
+//!
+//! The pipeline's product is one file (`cargo xtask export`, or `cargo xtask run`'s
+//! `<method>.ldm`): a [`ReducedModel`] ([`model`]). Its [`ReducedRuntime`] steps it with the
+//! solver settings `cargo xtask run` measures, behind the [`Interactive`] API that
+//! [`FullRuntime`] offers for the same mesh in full space ([`runtime`]). Dragging a vertex for a
+//! second and letting go (`cargo run --release -p latent-sim --example drag -- MODEL` does the
+//! same on a model file):
+//!
+//! ```
+//! use latent_sim::{Interactive, ReducedModel};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # let path = std::env::temp_dir().join(format!("latent-sim-doc-{}.ldm", std::process::id()));
+//! # doc_model::bar().save(&path)?;
+//!
+//! let model = ReducedModel::load(&path)?; // a typed error on any damaged file
+//! let mut sim = model.simulator()?;
+//! // The surface vertex farthest along x (the bar's free end), grabbed with a 5 kN/m spring.
+//! let surface = sim.surface().vertices().to_vec();
+//! let rest = sim.rest_positions().to_vec();
+//! let tip = *surface.iter().max_by(|&&a, &&b| rest[a].x.total_cmp(&rest[b].x)).unwrap();
+//! let start = rest[tip];
+//! let handle = sim.grab_near(start.into(), 0.01, 5000.0)?;
+//! let mut frame = vec![0.0f32; 3 * surface.len()]; // what a renderer uploads
+//! for step in 1..=100 {
+//!     // Up 10 cm over the second.
+//!     sim.move_handle(handle, [start.x, start.y + 0.1 * step as f64 / 100.0, start.z])?;
+//!     sim.step()?;
+//!     sim.surface_positions_into(&mut frame)?; // decodes the surface rows only
+//! }
+//! let at = surface.iter().position(|&v| v == tip).unwrap();
+//! let lifted = frame[3 * at + 1] as f64 - start.y;
+//! assert!(lifted > 0.005, "the tip rose {lifted} m against gravity");
+//! sim.release(handle)?;
+//! assert!(sim.release(handle).is_err()); // released already
+//! sim.step()?;
+//! # std::fs::remove_file(&path)?;
+//! # Ok(())
+//! # }
+//! # mod doc_model {
+//! #     use fem_core::{Vec3, constraints::{Axis, Side, VertexSelection}};
+//! #     use fem_core::{integrator::{FullSpaceModel, TimeConfig}, material::MaterialConfig};
+//! #     use latent_sim::model::{ModelSource, ReducedModel, Rows, SubspaceSource};
+//! #     /// A 1 m bar clamped at x = 0, PCA on smooth bending shapes (no pipeline needed).
+//! #     pub fn bar() -> ReducedModel {
+//! #         let spec = fem_core::mesh::generate::BoxSpec {
+//! #             size: [1.0, 0.2, 0.2], cells: [8, 2, 2], ..Default::default()
+//! #         };
+//! #         let mesh = fem_core::mesh::generate::box_mesh(&spec).unwrap();
+//! #         let pinned = VertexSelection::plane(Axis::X, Side::Min, None).select(&mesh, "pin").unwrap();
+//! #         let material = MaterialConfig { youngs_modulus: 1e7, ..Default::default() };
+//! #         let g = Vec3::new(0.0, -9.81, 0.0);
+//! #         let model = FullSpaceModel::new(mesh, &material, pinned, g, vec![]).unwrap();
+//! #         // Beam shapes: bending (x², x³) in y and z with their rotations, stretch, torsion.
+//! #         let shape = |j: usize, p: Vec3| -> [f64; 3] {
+//! #             let (x, y, z) = (p.x, p.y - 0.1, p.z - 0.1);
+//! #             match j {
+//! #                 0 => [-2.0 * x * y, x * x, 0.0],
+//! #                 1 => [-2.0 * x * z, 0.0, x * x],
+//! #                 2 => [-3.0 * x * x * y, x * x * x, 0.0],
+//! #                 3 => [-3.0 * x * x * z, 0.0, x * x * x],
+//! #                 4 => [x, 0.0, 0.0],
+//! #                 _ => [0.0, -x * z, x * y],
+//! #             }
+//! #         };
+//! #         let (n, k) = (model.dofs.num_free(), 6);
+//! #         let mut u = vec![0.0; n * k];
+//! #         for j in 0..k {
+//! #             for (r, &d) in model.dofs.free.iter().enumerate() {
+//! #                 u[j * n + r] = shape(j, model.mesh.vertices[d / 3])[d % 3];
+//! #             }
+//! #         }
+//! #         let basis = pca::PcaBasis::new(n, k, u, None, vec![1.0; k]).unwrap();
+//! #         let time = TimeConfig { step: 0.01, frames: 1, quasi_static: false };
+//! #         ReducedModel::build(ModelSource {
+//! #             model: &model, material: &material, time: &time, basis: &basis, cubature: None,
+//! #             subspace: SubspaceSource::Linear, solver: Default::default(),
+//! #             preconditioning: Default::default(), full_solver: Default::default(),
+//! #             rows: Rows::Used, provenance: Default::default(),
+//! #         }).unwrap()
+//! #     }
+//! # }
+//! ```
 
+mod config;
+pub mod model;
 mod neural;
 mod onset;
 mod reduced;
+pub mod runtime;
 mod simulator;
 mod subspace;
 
+pub use config::{
+    MAX_COMPLEMENT_DIRECTIONS, MAX_ONSET_DIRECTIONS, REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
+};
+
+pub use model::{ModelFileError, ModelFormatError, ReducedModel};
 pub use neural::NeuralSubspace;
-pub use onset::Augmented;
-pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers};
+pub use onset::{Augmented, DirectionParts};
+pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers, SpaceParts};
+pub use runtime::{
+    AnyReducedSimulator, FullRuntime, Handle, Interactive, Real, ReducedRuntime, RuntimeError,
+    StepStats, Surface,
+};
 pub use simulator::{
     PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
     ReducedStepReport,
@@ -44,4 +140,23 @@ pub enum ReducedError {
     /// A reduced matrix that must be positive definite is not.
     #[error("the reduced {what} matrix is not positive definite")]
     NotPositiveDefinite { what: &'static str },
+    /// The parts of a reduced space do not fit together or the mesh.
+    #[error("reduced space: {reason}")]
+    Parts { reason: String },
+    /// A force or handle on a vertex whose basis rows the space does not hold (or that does not
+    /// exist).
+    #[error(
+        "vertex {vertex} has no basis rows in this model (it holds those of the surface and of the \
+         elements it evaluates; export with all rows to reach the others)"
+    )]
+    NoBasisRows { vertex: usize },
+    /// A force index past the forces there are.
+    #[error("there is no force {index} (there are {count})")]
+    NoSuchForce { index: usize, count: usize },
+    /// Keyframes that are empty, not finite or not in time order.
+    #[error("keyframes must be finite [t, x, y, z] rows in time order, at least one")]
+    Keyframes,
+    /// A model that does not hold together ([`ReducedModel::check`]).
+    #[error("invalid model: {reason}")]
+    InvalidModel { reason: String },
 }

@@ -184,6 +184,52 @@ impl<S: Subspace> Augmented<S> {
         Ok(out)
     }
 
+    /// The directions as a model file keeps them ([`Augmented::from_parts`] rebuilds them bit
+    /// for bit without the reduced matrices they were made with).
+    pub fn parts(&self) -> DirectionParts {
+        DirectionParts {
+            directions: self.directions.clone(),
+            a_directions: self.a_directions.clone(),
+            a_norms: self.a_norms.clone(),
+        }
+    }
+
+    /// `inner` with the directions of `parts` (k = `inner`'s coefficient count).
+    ///
+    /// # Errors
+    /// [`ReducedError::Parts`] when the lengths do not fit k and each other, or a value is not
+    /// finite (a norm not positive).
+    pub fn from_parts(inner: S, parts: &DirectionParts) -> Result<Self, ReducedError> {
+        let k = inner.coeff_dim();
+        let m = parts.a_norms.len();
+        let bad = |reason: String| Err(ReducedError::Parts { reason });
+        if Some(parts.directions.len()) != m.checked_mul(k)
+            || parts.a_directions.len() != parts.directions.len()
+        {
+            return bad(format!(
+                "{m} linear directions of {k} coefficients, but {} and {} values",
+                parts.directions.len(),
+                parts.a_directions.len()
+            ));
+        }
+        if parts
+            .directions
+            .iter()
+            .chain(&parts.a_directions)
+            .any(|x| !x.is_finite())
+            || parts.a_norms.iter().any(|n| !(n.is_finite() && *n > 0.0))
+        {
+            return bad("a linear direction is not finite (or its norm not positive)".into());
+        }
+        Ok(Self {
+            inner,
+            directions: parts.directions.clone(),
+            a_directions: parts.a_directions.clone(),
+            a_norms: parts.a_norms.clone(),
+            residual: vec![0.0; if m > 0 { k } else { 0 }],
+        })
+    }
+
     /// m, the number of directions beside the subspace.
     pub fn directions(&self) -> usize {
         self.a_norms.len()
@@ -193,6 +239,15 @@ impl<S: Subspace> Augmented<S> {
     pub fn inner(&self) -> &S {
         &self.inner
     }
+}
+
+/// The linear directions of an [`Augmented`] subspace: V (k × m), A V and the diagonal of VᵀAV
+/// (A = UᵀMU/h² + UᵀK₀U), all column-major.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DirectionParts {
+    pub directions: Vec<f64>,
+    pub a_directions: Vec<f64>,
+    pub a_norms: Vec<f64>,
 }
 
 /// out = M x for a square M, column-major (by columns, as the simulator forms (UᵀMU) x).

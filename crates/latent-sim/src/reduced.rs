@@ -6,13 +6,15 @@
 //! products with independent accumulators: both vectorise, where a dot per row is one dependent
 //! chain of adds.
 
+use cubature::CubatureRule;
 use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::FIXED;
-use fem_core::forces::ForceKind;
+use fem_core::forces::{ExternalForce, ForceKind};
 use fem_core::integrator::FullSpaceModel;
 use fem_core::material::Material;
 use fem_core::{Mat3, with_material};
 use nn::simd::{add_combination, dot_rows};
+use pca::PcaBasis;
 use pulp::{Arch, Simd, WithSimd};
 
 use crate::ReducedError;
@@ -53,12 +55,14 @@ pub(crate) struct PackedRows {
 }
 
 impl PackedRows {
-    fn new(vertex_rows: &[f64], k: usize, vertices: &[usize]) -> Self {
-        let rows = 3 * vertices.len();
+    /// The rows of `vertices` from `space`.
+    pub(crate) fn new(space: &ReducedSpace, vertices: &[usize]) -> Self {
+        let (rows, k) = (3 * vertices.len(), space.k);
         let mut data = vec![0.0; rows.div_ceil(PANEL) * PANEL * k];
         for (i, &v) in vertices.iter().enumerate() {
+            let block = space.rows_of(v);
             for c in 0..3 {
-                let r = &vertex_rows[(3 * v + c) * k..(3 * v + c + 1) * k];
+                let r = &block[c * k..(c + 1) * k];
                 let row = 3 * i + c;
                 for (j, &x) in r.iter().enumerate() {
                     data[(row / PANEL) * PANEL * k + j * PANEL + row % PANEL] = x;
@@ -75,7 +79,7 @@ impl PackedRows {
     }
 
     /// out = P q (out has `rows` entries); each entry is the sequential sum over j.
-    fn apply(&self, q: &[f64], out: &mut [f64]) {
+    pub(crate) fn apply(&self, q: &[f64], out: &mut [f64]) {
         Arch::new().dispatch(Apply {
             data: &self.data,
             k: self.k,
@@ -217,8 +221,13 @@ pub struct SpaceBuffers {
 pub struct ReducedSpace {
     /// Number of basis vectors k.
     pub k: usize,
-    /// Row-major 3×k block of U for each vertex (zero for fixed vertices).
+    /// For each vertex, the place of its block in `rows`, or [`NO_ROWS`] when the space does not
+    /// hold its rows (a space built from a model file keeps those of the vertices it uses).
+    slot: Vec<u32>,
+    /// Row-major 3×k block of U for each vertex held (zero for fixed vertices).
     rows: Vec<f64>,
+    /// A block of zeros, the rows of a vertex not held.
+    zero_block: Vec<f64>,
     /// UᵀMU, k×k column-major (the identity for a mass-orthonormal basis and the same mass).
     pub mass: Vec<f64>,
     /// UᵀK₀U, k×k column-major, K₀ the stiffness at rest.
@@ -250,21 +259,26 @@ pub struct ReducedSpace {
 }
 
 impl ReducedSpace {
-    /// `basis` is U, n_free × k column-major, on the model's free DOFs. `cubature` restricts the
-    /// elastic energy to weighted elements (None: every element, weight 1).
+    /// The space of `basis` (U on the model's free DOFs), with the elastic energy restricted to
+    /// the elements of `cubature` and their weights (None: every element, weight 1).
+    ///
+    /// # Errors
+    /// [`ReducedError::BasisShape`] when U's rows are not the model's free DOFs,
+    /// [`ReducedError::Cubature`] when the rule does not fit the mesh.
     pub fn new(
         model: &FullSpaceModel,
-        basis: &[f64],
-        k: usize,
-        cubature: Option<(Vec<usize>, Vec<f64>)>,
+        basis: &PcaBasis,
+        cubature: Option<&CubatureRule>,
     ) -> Result<Self, ReducedError> {
         let nf = model.dofs.num_free();
-        if k == 0 || basis.len() != nf * k {
+        let k = basis.k();
+        if basis.n() != nf {
             return Err(ReducedError::BasisShape {
-                rows: basis.len() / k.max(1),
+                rows: basis.n(),
                 free: nf,
             });
         }
+        let columns: Vec<&[f64]> = (0..k).map(|j| basis.column(j)).collect();
         let nv = model.mesh.num_vertices();
         let mut rows = vec![0.0; nv * 3 * k];
         for v in 0..nv {
@@ -272,82 +286,25 @@ impl ReducedSpace {
                 let r = model.dofs.index[3 * v + c];
                 if r != FIXED {
                     for j in 0..k {
-                        rows[(v * 3 + c) * k + j] = basis[j * nf + r];
+                        rows[(v * 3 + c) * k + j] = columns[j][r];
                     }
                 }
             }
         }
-        if let Some((elements, weights)) = &cubature {
-            check_rule(elements, weights, model.elements.len())?;
-        }
-        let (elements, weights) = cubature.unwrap_or_else(|| {
-            (
-                (0..model.elements.len()).collect(),
-                vec![1.0; model.elements.len()],
-            )
-        });
-        let mut touched: Vec<usize> = elements
-            .iter()
-            .flat_map(|&e| model.elements.tets[e])
-            .collect();
-        touched.sort_unstable();
-        touched.dedup();
-        let mut position = vec![u32::MAX; nv];
-        for (i, &v) in touched.iter().enumerate() {
-            position[v] = i as u32;
-        }
-        let element_touched = elements
-            .iter()
-            .map(|&e| model.elements.tets[e].map(|v| position[v]))
-            .collect();
-        let packed = PackedRows::new(&rows, k, &touched);
-        let mut force_gram = Vec::with_capacity(model.forces.len());
-        let mut force_sums = Vec::with_capacity(model.forces.len());
-        for f in &model.forces {
-            let (mut gram, mut sums) = (vec![0.0; k * k], vec![0.0; 3 * k]);
-            for &v in &f.vertices {
-                for c in 0..3 {
-                    let r = &rows[(3 * v + c) * k..(3 * v + c + 1) * k];
-                    axpy(1.0, r, &mut sums[c * k..(c + 1) * k]);
-                    for (b, &rb) in r.iter().enumerate() {
-                        axpy(rb, r, &mut gram[b * k..(b + 1) * k]);
-                    }
-                }
-            }
-            force_gram.push(gram);
-            force_sums.push(sums);
-        }
-        let path = if elements.len() > SERIAL_MAX_ELEMENTS {
-            ElasticPath::Parallel
-        } else if 9 * elements.len() <= 6 * touched.len() {
-            ElasticPath::ElementBasis
-        } else {
-            ElasticPath::Vertices
-        };
-        let mut space = Self {
+        let slot = (0..nv as u32).collect();
+        let mut space = Self::assemble(
+            model,
             k,
+            slot,
             rows,
-            mass: vec![0.0; k * k],
-            rest_stiffness: vec![0.0; k * k],
-            gravity: vec![0.0; k],
-            elements,
-            weights,
-            touched,
-            element_touched,
-            packed,
-            element_basis: Vec::new(),
-            element_scales: Vec::new(),
-            force_gram,
-            force_sums,
-            elastic_path: ElasticPath::Vertices,
-        };
-        space.set_elastic_path(model, path);
+            cubature.map(|r| (&r.elements[..], &r.weights[..])),
+        )?;
         // UᵀMU and Uᵀf_g from the full mass matrix, one basis column at a time.
         let n = model.num_full();
         let (mut col, mut mcol) = (vec![0.0; n], vec![0.0; n]);
         let mut cols = Vec::with_capacity(k);
-        for j in 0..k {
-            model.dofs.scatter(&basis[j * nf..(j + 1) * nf], &mut col);
+        for column in &columns {
+            model.dofs.scatter(column, &mut col);
             cols.push(col.clone());
         }
         for j in 0..k {
@@ -367,6 +324,238 @@ impl ReducedSpace {
         });
         space.rest_stiffness = k0;
         Ok(space)
+    }
+
+    /// A space from the parts a model file keeps ([`ReducedSpace::parts`]): the basis rows of
+    /// some vertices and the reduced matrices computed from the whole basis. The same numbers
+    /// as the space the parts came from, bit for bit, wherever the rows are held.
+    ///
+    /// # Errors
+    /// [`ReducedError::Parts`] when the parts do not fit together or the model (shapes, vertex
+    /// indices, an element of the set whose rows are missing), [`ReducedError::Cubature`] as
+    /// [`ReducedSpace::new`].
+    pub fn from_parts(
+        model: &FullSpaceModel,
+        parts: &SpaceParts,
+        cubature: Option<&CubatureRule>,
+    ) -> Result<Self, ReducedError> {
+        let bad = |reason: String| Err(ReducedError::Parts { reason });
+        let SpaceParts {
+            k,
+            vertices,
+            rows,
+            mass,
+            rest_stiffness,
+            gravity,
+        } = parts;
+        let (k, nv) = (*k, model.mesh.num_vertices());
+        if k == 0 {
+            return bad("the basis has no column".into());
+        }
+        for (what, v, len) in [
+            ("reduced mass", mass, k * k),
+            ("reduced rest stiffness", rest_stiffness, k * k),
+            ("reduced gravity", gravity, k),
+        ] {
+            if v.len() != len {
+                return bad(format!(
+                    "the {what} has {} entries, expected {len}",
+                    v.len()
+                ));
+            }
+            if v.iter().any(|x| !x.is_finite()) {
+                return bad(format!("the {what} is not finite"));
+            }
+        }
+        if Some(rows.len()) != vertices.len().checked_mul(3 * k) {
+            return bad(format!(
+                "{} basis values for {} vertices of 3 × {k} rows",
+                rows.len(),
+                vertices.len()
+            ));
+        }
+        if rows.iter().any(|x| !x.is_finite()) {
+            return bad("a basis row is not finite".into());
+        }
+        if let Some(w) = vertices.windows(2).find(|w| w[0] >= w[1]) {
+            return bad(format!(
+                "the vertices with rows must increase, found {} before {}",
+                w[0], w[1]
+            ));
+        }
+        if let Some(&v) = vertices.last().filter(|&&v| v >= nv) {
+            return bad(format!(
+                "vertex {v} has rows but the mesh has {nv} vertices"
+            ));
+        }
+        let mut slot = vec![NO_ROWS; nv];
+        for (i, &v) in vertices.iter().enumerate() {
+            slot[v] = i as u32;
+        }
+        let mut space = Self::assemble(
+            model,
+            k,
+            slot,
+            rows.clone(),
+            cubature.map(|r| (&r.elements[..], &r.weights[..])),
+        )?;
+        space.mass.copy_from_slice(mass);
+        space.rest_stiffness.copy_from_slice(rest_stiffness);
+        space.gravity.copy_from_slice(gravity);
+        Ok(space)
+    }
+
+    /// What [`ReducedSpace::from_parts`] needs, with the rows of `vertices` (sorted, unique; the
+    /// vertices of the element set are always added, since stepping reads them).
+    pub fn parts(&self, vertices: &[usize]) -> SpaceParts {
+        let mut keep: Vec<usize> = vertices
+            .iter()
+            .chain(&self.touched)
+            .copied()
+            .filter(|&v| self.has_rows(v))
+            .collect();
+        keep.sort_unstable();
+        keep.dedup();
+        let mut rows = Vec::with_capacity(keep.len() * 3 * self.k);
+        for &v in &keep {
+            rows.extend_from_slice(self.rows_of(v));
+        }
+        SpaceParts {
+            k: self.k,
+            vertices: keep,
+            rows,
+            mass: self.mass.clone(),
+            rest_stiffness: self.rest_stiffness.clone(),
+            gravity: self.gravity.clone(),
+        }
+    }
+
+    /// Everything but the reduced matrices, which are left zero: the element set, its vertices
+    /// (whose rows must be held), the packed rows and the terms of the model's forces.
+    fn assemble(
+        model: &FullSpaceModel,
+        k: usize,
+        slot: Vec<u32>,
+        rows: Vec<f64>,
+        cubature: Option<(&[usize], &[f64])>,
+    ) -> Result<Self, ReducedError> {
+        let nv = model.mesh.num_vertices();
+        if let Some((elements, weights)) = cubature {
+            check_rule(elements, weights, model.elements.len())?;
+        }
+        let (elements, weights) = match cubature {
+            Some((e, w)) => (e.to_vec(), w.to_vec()),
+            None => (
+                (0..model.elements.len()).collect(),
+                vec![1.0; model.elements.len()],
+            ),
+        };
+        let mut touched: Vec<usize> = elements
+            .iter()
+            .flat_map(|&e| model.elements.tets[e])
+            .collect();
+        touched.sort_unstable();
+        touched.dedup();
+        if let Some(&v) = touched.iter().find(|&&v| slot[v] == NO_ROWS) {
+            return Err(ReducedError::Parts {
+                reason: format!(
+                    "vertex {v} of the elastic element set has no basis rows; export the model \
+                     with the rows of every vertex the elements use"
+                ),
+            });
+        }
+        let mut position = vec![u32::MAX; nv];
+        for (i, &v) in touched.iter().enumerate() {
+            position[v] = i as u32;
+        }
+        let element_touched = elements
+            .iter()
+            .map(|&e| model.elements.tets[e].map(|v| position[v]))
+            .collect();
+        let path = if elements.len() > SERIAL_MAX_ELEMENTS {
+            ElasticPath::Parallel
+        } else if 9 * elements.len() <= 6 * touched.len() {
+            ElasticPath::ElementBasis
+        } else {
+            ElasticPath::Vertices
+        };
+        let mut space = Self {
+            k,
+            slot,
+            rows,
+            zero_block: vec![0.0; 3 * k],
+            mass: vec![0.0; k * k],
+            rest_stiffness: vec![0.0; k * k],
+            gravity: vec![0.0; k],
+            elements,
+            weights,
+            touched,
+            element_touched,
+            packed: PackedRows {
+                rows: 0,
+                k,
+                data: Vec::new(),
+            },
+            element_basis: Vec::new(),
+            element_scales: Vec::new(),
+            force_gram: Vec::with_capacity(model.forces.len()),
+            force_sums: Vec::with_capacity(model.forces.len()),
+            elastic_path: ElasticPath::Vertices,
+        };
+        space.packed = PackedRows::new(&space, &space.touched);
+        for f in &model.forces {
+            space.push_force(f)?;
+        }
+        space.set_elastic_path(model, path);
+        Ok(space)
+    }
+
+    /// Adds the terms of force `f`, which goes after the model's forces
+    /// ([`crate::ReducedSimulator::add_force`] keeps both lists in step).
+    ///
+    /// # Errors
+    /// [`ReducedError::NoBasisRows`] when a vertex of `f` has no rows in this space (or does
+    /// not exist).
+    pub fn push_force(&mut self, f: &ExternalForce) -> Result<(), ReducedError> {
+        let k = self.k;
+        if let Some(&vertex) = f.vertices.iter().find(|&&v| !self.has_rows(v)) {
+            return Err(ReducedError::NoBasisRows { vertex });
+        }
+        let (mut gram, mut sums) = (vec![0.0; k * k], vec![0.0; 3 * k]);
+        for &v in &f.vertices {
+            let block = self.rows_of(v);
+            for c in 0..3 {
+                let r = &block[c * k..(c + 1) * k];
+                axpy(1.0, r, &mut sums[c * k..(c + 1) * k]);
+                for (b, &rb) in r.iter().enumerate() {
+                    axpy(rb, r, &mut gram[b * k..(b + 1) * k]);
+                }
+            }
+        }
+        self.force_gram.push(gram);
+        self.force_sums.push(sums);
+        Ok(())
+    }
+
+    /// Removes the terms of force `index` (the later ones move down by one). Does nothing when
+    /// there is no such force.
+    pub fn remove_force(&mut self, index: usize) {
+        if index < self.force_gram.len() {
+            self.force_gram.remove(index);
+            self.force_sums.remove(index);
+        }
+    }
+
+    /// Whether the space holds the rows of vertex `v`.
+    #[inline]
+    pub fn has_rows(&self, v: usize) -> bool {
+        self.slot.get(v).is_some_and(|&s| s != NO_ROWS)
+    }
+
+    /// Whether the space holds the rows of every vertex (so that [`Self::reconstruct`] gives
+    /// the whole displacement).
+    pub fn has_all_rows(&self) -> bool {
+        self.slot.iter().all(|&s| s != NO_ROWS)
     }
 
     /// Work buffers for [`Self::decode_touched`], [`Self::elastic_energy_gradient`] and
@@ -407,9 +596,10 @@ impl ReducedSpace {
             // F_ij = δ_ij + Σ_a u_a[i] g_a[j] with u_a[i] = (row 3v_a + i of U) q.
             let g = model.elements.shape_gradients(e);
             for (a, &v) in model.elements.tets[e].iter().enumerate() {
+                let block = self.rows_of(v);
                 for j in 0..3 {
                     for i in 0..3 {
-                        let r = &self.rows[(3 * v + i) * k..(3 * v + i + 1) * k];
+                        let r = &block[i * k..(i + 1) * k];
                         let row = 3 * j + i;
                         axpy(g[a][j], r, &mut b[row * kp..row * kp + k]);
                     }
@@ -419,10 +609,21 @@ impl ReducedSpace {
         self.element_basis = basis;
     }
 
-    /// The 3×k rows of U for vertex `v`, row-major.
+    /// The 3×k rows of U for vertex `v`, row-major, when the space holds them.
     #[inline]
-    pub fn vertex_rows(&self, v: usize) -> &[f64] {
-        &self.rows[v * 3 * self.k..(v + 1) * 3 * self.k]
+    pub fn vertex_rows(&self, v: usize) -> Option<&[f64]> {
+        self.has_rows(v).then(|| self.rows_of(v))
+    }
+
+    /// The 3×k rows of vertex `v`, zeros when the space does not hold them (every caller has
+    /// checked that it does where it matters: the element set's vertices and forces').
+    #[inline]
+    fn rows_of(&self, v: usize) -> &[f64] {
+        let n = 3 * self.k;
+        match self.slot.get(v) {
+            Some(&s) if s != NO_ROWS => &self.rows[s as usize * n..(s as usize + 1) * n],
+            _ => &self.zero_block,
+        }
     }
 
     /// Rows of the element vertices in the packed order (3 per vertex).
@@ -467,11 +668,12 @@ impl ReducedSpace {
         }
     }
 
-    /// The full displacement u = Uq (for output frames).
+    /// The full displacement u = Uq (for output frames); zero at the vertices whose rows the
+    /// space does not hold (see [`Self::has_all_rows`]).
     pub fn reconstruct(&self, q: &[f64], u: &mut [f64]) {
         let k = self.k;
         for v in 0..u.len() / 3 {
-            let r = self.vertex_rows(v);
+            let r = self.rows_of(v);
             for c in 0..3 {
                 u[3 * v + c] = dot(&r[c * k..(c + 1) * k], q);
             }
@@ -661,7 +863,7 @@ impl ReducedSpace {
             let h = model.elements.local_hessian(e, &a, w);
             let tet = model.elements.tets[e];
             for (a_local, &v) in tet.iter().enumerate() {
-                let r = self.vertex_rows(v);
+                let r = self.rows_of(v);
                 ue[a_local * 3 * k..(a_local + 1) * 3 * k].copy_from_slice(r);
             }
             // hu = H U_e (12×k, row-major), then out += U_eᵀ hu.
@@ -688,6 +890,27 @@ impl ReducedSpace {
         }
         out
     }
+}
+
+/// [`ReducedSpace`]'s slot of a vertex whose rows it does not hold.
+const NO_ROWS: u32 = u32::MAX;
+
+/// The data a [`ReducedSpace`] is rebuilt from ([`ReducedSpace::parts`],
+/// [`ReducedSpace::from_parts`]): the basis rows of some vertices and the reduced matrices
+/// computed from the whole basis.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpaceParts {
+    /// Number of basis vectors.
+    pub k: usize,
+    /// Vertices whose rows are kept, increasing.
+    pub vertices: Vec<usize>,
+    /// Their rows: a row-major 3×k block per vertex.
+    pub rows: Vec<f64>,
+    /// UᵀMU and UᵀK₀U (k×k, column-major), K₀ the stiffness at rest over every element.
+    pub mass: Vec<f64>,
+    pub rest_stiffness: Vec<f64>,
+    /// Uᵀf_g, the reduced gravity load.
+    pub gravity: Vec<f64>,
 }
 
 /// A rule's elements exist (`count` of them) and its weights are as many, finite and not

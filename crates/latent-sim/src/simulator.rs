@@ -3,6 +3,7 @@
 use std::time::Instant;
 
 use fem_core::FemError;
+use fem_core::forces::ExternalForce;
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
 use fem_core::material::Material;
 use fem_core::optim::{
@@ -422,6 +423,87 @@ impl<S: Subspace> ReducedSimulator<S> {
         self.precond_active = None;
         self.precond_use.restart();
         Ok(())
+    }
+
+    /// Back at rest at time 0, as [`ReducedSimulator::new`] left it: the next steps are those of
+    /// a new simulator with the same forces, bit for bit.
+    pub fn reset(&mut self) {
+        let zero = vec![0.0; self.space.k];
+        self.subspace.encode(&zero, &mut self.state.z);
+        self.subspace.decode(&self.state.z, &mut self.state.q);
+        self.state.qdot.fill(0.0);
+        self.state.zdot.fill(0.0);
+        self.state.step = 0;
+        self.state.time = 0.0;
+        self.zddot.fill(0.0);
+        self.zddot_step = None;
+        self.lbfgs.reset();
+        self.precond_use.restart();
+        self.forces_changed();
+    }
+
+    /// Adds an external force (its vertices must have basis rows in the space), acting from
+    /// the next step; its index is the number of forces before it.
+    ///
+    /// # Errors
+    /// [`ReducedError::NoBasisRows`] as [`ReducedSpace::push_force`].
+    pub fn add_force(&mut self, force: ExternalForce) -> Result<usize, ReducedError> {
+        self.space.push_force(&force)?;
+        self.model.forces.push(force);
+        self.forces_changed();
+        Ok(self.model.forces.len() - 1)
+    }
+
+    /// Removes force `index` (the later ones move down by one) and returns it.
+    ///
+    /// # Errors
+    /// [`ReducedError::NoSuchForce`] when there is no such force.
+    pub fn remove_force(&mut self, index: usize) -> Result<ExternalForce, ReducedError> {
+        if index >= self.model.forces.len() {
+            return Err(ReducedError::NoSuchForce {
+                index,
+                count: self.model.forces.len(),
+            });
+        }
+        self.space.remove_force(index);
+        self.forces_changed();
+        Ok(self.model.forces.remove(index))
+    }
+
+    /// Replaces force `index`'s keyframes (a spring's offset, a load's value): what moving a
+    /// spring's target changes. The springs' constant Hessian does not depend on them, so the
+    /// preconditioner is kept.
+    ///
+    /// # Errors
+    /// [`ReducedError::NoSuchForce`] when there is no such force; [`ReducedError::Keyframes`]
+    /// when the keyframes are empty, not finite or not in time order.
+    pub fn set_force_keyframes(
+        &mut self,
+        index: usize,
+        keyframes: &[[f64; 4]],
+    ) -> Result<(), ReducedError> {
+        let count = self.model.forces.len();
+        let force = self
+            .model
+            .forces
+            .get_mut(index)
+            .ok_or(ReducedError::NoSuchForce { index, count })?;
+        if keyframes.is_empty()
+            || keyframes.iter().flatten().any(|x| !x.is_finite())
+            || keyframes.windows(2).any(|w| w[1][0] < w[0][0])
+        {
+            return Err(ReducedError::Keyframes);
+        }
+        force.keyframes.clear();
+        force.keyframes.extend_from_slice(keyframes);
+        Ok(())
+    }
+
+    /// After forces were added or removed: the springs' Hessian and the preconditioner that
+    /// includes it are rebuilt by the next step.
+    fn forces_changed(&mut self) {
+        self.work.springs.valid = false;
+        self.precond_active = None;
     }
 
     /// Jᵀ (UᵀK₀U + UᵀMU/h² + Σ k_s/n U_vᵀU_v) J at z (d×d, column-major, into

@@ -110,6 +110,29 @@ pub(crate) fn check_mass(mass: &[f64], n: usize) -> Result<(), PcaError> {
 }
 
 impl PcaBasis {
+    /// A basis from its columns U (`n × k`, column-major), the mass diagonal it is orthonormal
+    /// in (`None`: M = I) and the spectrum to report (at least k non-increasing values), checked
+    /// like a deserialised one. For bases made elsewhere; [`PcaBasis::fit`] makes its own.
+    ///
+    /// # Errors
+    /// [`PcaError::InvalidBasis`] (shape, non-finite entries, spectrum),
+    /// [`PcaError::MassLength`] or [`PcaError::InvalidMass`].
+    pub fn new(
+        n: usize,
+        k: usize,
+        basis: Vec<f64>,
+        mass: Option<Vec<f64>>,
+        singular_values: Vec<f64>,
+    ) -> Result<Self, PcaError> {
+        Self::try_from(BasisData {
+            n,
+            k,
+            basis,
+            mass,
+            singular_values,
+        })
+    }
+
     /// Assembles a basis from parts the fit has already validated.
     pub(crate) fn from_parts(
         n: usize,

@@ -15,7 +15,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 
 use fem_core::integrator::FullSpaceModel;
-use latent_sim::{ElasticPath, ReducedSimulator, ReducedSpace, Subspace};
+use latent_sim::{AnyReducedSimulator, ElasticPath, ReducedSimulator, ReducedSpace, Subspace};
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
 use pipeline::simulate::{Method, Runner, SimulateOptions, Trajectory, setup};
@@ -114,7 +114,15 @@ fn main() -> Result<()> {
         let (model, time, solver) = setup(&pipeline, &opts)?;
         let frames = time.frames;
         runners.push((
-            Runner::new(&mut pipeline, method, model, time, solver, &quiet)?,
+            Runner::new(
+                &mut pipeline,
+                method,
+                model,
+                &scene.material,
+                time,
+                solver,
+                &quiet,
+            )?,
             frames,
         ));
     }
@@ -125,11 +133,11 @@ fn main() -> Result<()> {
     );
     for (repeat, (mut runner, frames)) in runners.into_iter().enumerate() {
         if repeat == 0 {
-            let (space, forces, d) = match &runner {
-                Runner::Pca(s) => (&s.space, &s.model.forces, s.space.k),
-                Runner::Neural(s) => (&s.space, &s.model.forces, s.subspace.latent_dim()),
-                Runner::Full(_) => unreachable!("full methods were refused above"),
+            let Runner::Reduced(r) = &runner else {
+                unreachable!("full methods were refused above")
             };
+            let sim = r.simulator();
+            let (space, forces, d) = (sim.space(), &sim.model().forces, sim.latent_dim());
             let force_vertices: Vec<usize> = forces.iter().map(|f| f.vertices.len()).collect();
             println!(
                 "k = {}, d = {d}, elements = {}, touched vertices = {}, force vertices = {force_vertices:?}",
@@ -138,17 +146,17 @@ fn main() -> Result<()> {
                 space.touched.len(),
             );
             time_elastic_paths(space, runner.model());
-            match &mut runner {
-                Runner::Pca(s) => time_newton_matrix(s),
-                Runner::Neural(s) => time_newton_matrix(s),
-                Runner::Full(_) => unreachable!("full methods were refused above"),
+            if let Runner::Reduced(r) = &mut runner {
+                match r.simulator_mut() {
+                    AnyReducedSimulator::Linear(s) => time_newton_matrix(s),
+                    AnyReducedSimulator::Neural(s) => time_newton_matrix(s),
+                }
             }
         }
         let mut total = 0.0;
         for _ in 0..frames {
             let r = match &mut runner {
-                Runner::Pca(s) => s.step()?,
-                Runner::Neural(s) => s.step()?,
+                Runner::Reduced(r) => r.step_report()?,
                 Runner::Full(_) => unreachable!("full methods were refused above"),
             };
             total += r.wall_seconds;

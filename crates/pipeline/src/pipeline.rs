@@ -546,6 +546,11 @@ impl<'a> Pipeline<'a> {
     /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
     /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
     pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+        let key = self.cubature_neural_key();
+        self.stage("cubature-neural", key, |p| p.fit_cubature(true, progress))
+    }
+
+    pub fn cubature_neural_key(&self) -> u64 {
         // The complement directions are left out: fitted with them, their forces (stiff
         // directions, large for small displacements) dominate the relative error and the rule
         // neglects the decoder's tangent.
@@ -556,8 +561,7 @@ impl<'a> Pipeline<'a> {
         if let Some(t) = self.scene.cubature.neural_tolerance {
             key = key.mix(&t);
         }
-        let key = key.finish();
-        self.stage("cubature-neural", key, |p| p.fit_cubature(true, progress))
+        key.finish()
     }
 
     fn fit_cubature(&mut self, neural: bool, progress: Progress<'_>) -> Result<FittedCubature> {
@@ -735,9 +739,7 @@ impl<'a> Pipeline<'a> {
     /// Stage `complement`: the directions the trained autoencoder misses in the snapshots
     /// ([`Complement`]), for the neural methods' `[reduced] complement_directions`.
     pub fn complement(&mut self, progress: Progress<'_>) -> Result<Complement> {
-        let key = KeyBuilder::new("complement")
-            .mix_key(self.train_key())
-            .finish();
+        let key = self.complement_key();
         self.stage("complement", key, |p| {
             let snaps = p.snapshots(progress)?;
             let fit = p.pca(progress)?;
@@ -766,6 +768,12 @@ impl<'a> Pipeline<'a> {
                 singular_values: svd.S().column_vector().iter().copied().collect(),
             })
         })
+    }
+
+    pub fn complement_key(&self) -> u64 {
+        KeyBuilder::new("complement")
+            .mix_key(self.train_key())
+            .finish()
     }
 
     /// The scene's `[reduced] complement_directions` leading [`Complement`] directions, k × c

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use fem_core::integrator::FullSpaceModel;
 use fem_core::optim::SolverMethod;
+use latent_sim::model::{MeasuredError, Rows};
 
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
@@ -150,6 +151,24 @@ pub fn run(
     }
     set_speedups(&mut rows);
     write_json(&opts.out.join("report.json"), &rows)?;
+    if let Some(method) = crate::export::run_method(&opts.methods) {
+        let mut model = crate::export::scene_model(pipeline, method, Rows::Used, stage_progress)?;
+        if let Some(row) = rows
+            .iter()
+            .find(|r| r.method == method.name() && r.failure.is_none())
+        {
+            model.provenance.errors.push(MeasuredError {
+                name: format!(
+                    "mean relative displacement error ‖u − u_full‖_M / ‖u_full‖_M on held-out \
+                     test trajectory {}",
+                    opts.trajectory
+                ),
+                held_out: true,
+                value: row.mean_rel_error,
+            });
+        }
+        model.save(&crate::export::model_path(&opts.out, method))?;
+    }
     fem_core::io::write_atomic(&opts.out.join("report.md"), markdown(&rows).as_bytes())?;
     fem_core::io::write_atomic(
         &opts.out.join("report.svg"),
@@ -281,7 +300,16 @@ pub fn measure(
     let mut last_runner = None;
     for repeat in 0..m.repeats.max(1) {
         let (model, time, solver) = setup(pipeline, &sim_opts)?;
-        let mut runner = Runner::new(pipeline, method, model, time, solver, stage_progress)?;
+        let material = pipeline.scene.material.clone();
+        let mut runner = Runner::new(
+            pipeline,
+            method,
+            model,
+            &material,
+            time,
+            solver,
+            stage_progress,
+        )?;
         let first = repeat == 0;
         if first && let Some(w) = writer.as_mut() {
             w.write(&runner.model().mesh, 0, 0.0, &runner.displacement())?;
@@ -329,11 +357,7 @@ pub fn measure(
         }
         medians.push(median(&times) * 1e3);
         means.push(mean(&times) * 1e3);
-        cubature_elements = match &runner {
-            Runner::Full(s) => s.model.elements.len(),
-            Runner::Pca(s) => s.space.elements.len(),
-            Runner::Neural(s) => s.space.elements.len(),
-        };
+        cubature_elements = runner.elements();
         dim = runner.dim();
         last_runner = Some(runner);
         if failure.is_some() {

@@ -11,7 +11,7 @@ use fem_core::forces::{ForceConfig, ForceKind};
 use fem_core::integrator::{FullSpaceModel, GravityConfig, TimeConfig};
 use fem_core::material::MaterialConfig;
 use fem_core::mesh::{MeshConfig, ValidationReport};
-use fem_core::optim::{SolverConfig, SolverMethod};
+use fem_core::optim::SolverConfig;
 use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
 use pca::PcaConfig;
 
@@ -62,84 +62,8 @@ pub struct Scene {
     pub source: String,
 }
 
-/// The `[reduced]` section: how the reduced methods solve each step. `[solver]` is the full-space
-/// solver's (the reference's); the reduced iteration cap is `[solver] max_iterations`, at least
-/// 100.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ReducedSolverConfig {
-    /// `lbfgs` (preconditioned L-BFGS, the paper's solver) or `newton` (Gauss–Newton in z).
-    pub method: SolverMethod,
-    /// Relative gradient tolerance of each step's solve. A reduced trajectory is already a few
-    /// tenths of a percent to a few percent away from the full one, so solving each step to 1e-4
-    /// changes it far less than that while taking fewer iterations than the full solver's 1e-6.
-    pub tolerance: f64,
-    /// L-BFGS's preconditioner: `current-state` (the Gauss–Newton matrix at the step's start,
-    /// kept for a few steps), `rest` (the stiffness at rest, AutoDef's) or `auto` (the first).
-    pub preconditioner: latent_sim::Preconditioning,
-    /// Linear gravity-onset directions beside the autoencoder's latent coordinates
-    /// ([`latent_sim::Augmented`]): the first m steps of the reduced linear response to gravity
-    /// from rest, minus what the decoder spans at rest. 0 (the default) adds none; the neural
-    /// methods' dimension grows by the directions kept.
-    pub onset_directions: usize,
-    /// Linear directions beside the autoencoder's latent coordinates after the onset ones: the
-    /// leading left singular vectors of what the autoencoder misses in the snapshots, q −
-    /// decode(encode(q)) (stage `complement`), minus what the decoder spans at rest. Each costs
-    /// a latent coordinate in every step and brings the neural methods closer to the whole PCA
-    /// basis's accuracy, without retraining. 0 (the default) adds none.
-    pub complement_directions: usize,
-}
-
-impl Default for ReducedSolverConfig {
-    fn default() -> Self {
-        Self {
-            method: SolverMethod::Lbfgs,
-            tolerance: 1e-4,
-            preconditioner: latent_sim::Preconditioning::default(),
-            onset_directions: 0,
-            complement_directions: 0,
-        }
-    }
-}
-
-impl ReducedSolverConfig {
-    fn check(&self, errors: &mut Vec<FemError>) {
-        let t = self.tolerance;
-        if !(t.is_finite() && t > 0.0 && t < 1.0) {
-            errors.push(FemError::InvalidConfig {
-                field: "reduced.tolerance".into(),
-                reason: format!("must be in (0, 1), got {t}"),
-            });
-        }
-        for (field, count, max) in [
-            (
-                "onset_directions",
-                self.onset_directions,
-                MAX_ONSET_DIRECTIONS,
-            ),
-            (
-                "complement_directions",
-                self.complement_directions,
-                MAX_COMPLEMENT_DIRECTIONS,
-            ),
-        ] {
-            if count > max {
-                errors.push(FemError::InvalidConfig {
-                    field: format!("reduced.{field}"),
-                    reason: format!(
-                        "at most {max} (each costs a latent coordinate in every step), got {count}"
-                    ),
-                });
-            }
-        }
-    }
-}
-
-/// The most gravity-onset directions a scene may ask for.
-const MAX_ONSET_DIRECTIONS: usize = 32;
-
-/// The most complement directions a scene may ask for (the PCA dimension bounds it too).
-const MAX_COMPLEMENT_DIRECTIONS: usize = 256;
+/// The `[reduced]` section belongs to latent-sim, which steps the reduced methods.
+pub use latent_sim::ReducedSolverConfig;
 
 impl Scene {
     /// Reads and checks a scene file.

@@ -7,11 +7,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use fem_core::integrator::{FullSpaceModel, Simulator, StepReport, TimeConfig};
 use fem_core::io::write_atomic;
+use fem_core::material::MaterialConfig;
 use fem_core::optim::{SolverConfig, SolverMethod};
-use latent_sim::{
-    Augmented, LinearSubspace, NeuralSubspace, ReducedSimulator, ReducedSpace, ReducedStepReport,
-    Subspace,
-};
+use latent_sim::model::Rows;
+use latent_sim::{Interactive, ReducedRuntime, ReducedStepReport};
 
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
@@ -68,12 +67,7 @@ impl Method {
     }
 }
 
-/// Smallest iteration cap of the reduced methods' L-BFGS (AutoDef used 500). A step that needs
-/// more is redone with reduced Newton: on the catapult, where large rotations make the rest-state
-/// preconditioner poor, capping at 100 instead of 500 halved pca-cubature's median step (629 →
-/// 290 ms under load) without changing any step that converges normally (5–17 iterations on the
-/// cantilever).
-pub const REDUCED_MIN_ITERATIONS: usize = 100;
+pub use latent_sim::REDUCED_MIN_ITERATIONS;
 
 /// Which forces drive the simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -130,20 +124,19 @@ pub struct SimulationResult {
     pub final_displacement: Vec<f64>,
 }
 
-/// One method, stepping.
+/// One method, stepping: full space, or a reduced method's trained model through latent-sim's
+/// runtime (the API any other program steps an exported model with).
 #[allow(clippy::large_enum_variant)]
 pub enum Runner {
     Full(Simulator),
-    Pca(ReducedSimulator<LinearSubspace>),
-    Neural(ReducedSimulator<Augmented<NeuralSubspace>>),
+    Reduced(ReducedRuntime),
 }
 
 impl std::fmt::Debug for Runner {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Runner::Full(_) => "Runner::Full",
-            Runner::Pca(_) => "Runner::Pca",
-            Runner::Neural(_) => "Runner::Neural",
+            Runner::Reduced(_) => "Runner::Reduced",
         })
     }
 }
@@ -171,7 +164,7 @@ pub struct StepParts {
 }
 
 impl StepParts {
-    fn of(r: &latent_sim::ReducedStepReport) -> Self {
+    fn of(r: &ReducedStepReport) -> Self {
         Self {
             decode: r.decode_seconds,
             elastic: r.elastic_seconds,
@@ -182,64 +175,37 @@ impl StepParts {
 }
 
 impl Runner {
-    /// Builds the runner of `method` on `model` (forces already in place).
+    /// Builds the runner of `method` on `model` (forces already in place; `material` is the
+    /// one it was built with). A reduced method's model is built from the cached stages with
+    /// every basis row ([`crate::export::reduced_model`]) and its forces are added to the
+    /// runtime in order, so that it steps as the same model loaded from a file would.
     pub fn new(
         pipeline: &mut Pipeline<'_>,
         method: Method,
         model: FullSpaceModel,
+        material: &MaterialConfig,
         time: TimeConfig,
         solver: SolverConfig,
         progress: Progress<'_>,
     ) -> Result<Self> {
-        Ok(match method {
-            Method::Full | Method::FullLbfgs | Method::FullNewton => {
-                Runner::Full(Simulator::new(model, time, solver)?)
-            }
-            Method::Pca | Method::PcaCubature => {
-                let fit = pipeline.pca(progress)?;
-                let basis = &fit.basis;
-                let columns = crate::pipeline::basis_columns(basis);
-                let cubature = if method == Method::PcaCubature {
-                    let c = pipeline.cubature(progress)?;
-                    Some((c.rule.elements, c.rule.weights))
-                } else {
-                    None
-                };
-                let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
-                let mut sim = ReducedSimulator::new(
-                    model,
-                    space,
-                    LinearSubspace::new(basis.k()),
-                    time,
-                    solver,
-                )?;
-                sim.preconditioning = pipeline.scene.reduced.preconditioner;
-                Runner::Pca(sim)
-            }
-            Method::Neural | Method::NeuralCubature => {
-                let fit = pipeline.pca(progress)?;
-                let trained = pipeline.train(progress)?;
-                let basis = &fit.basis;
-                let columns = crate::pipeline::basis_columns(basis);
-                let cubature = if method == Method::NeuralCubature {
-                    let c = pipeline.cubature_neural(progress)?;
-                    Some((c.rule.elements, c.rule.weights))
-                } else {
-                    None
-                };
-                let space = ReducedSpace::new(&model, &columns, basis.k(), cubature)?;
-                let subspace = Augmented::with_directions(
-                    NeuralSubspace::new(trained.model),
-                    &space,
-                    &time,
-                    pipeline.scene.reduced.onset_directions,
-                    &pipeline.complement_columns(progress)?,
-                )?;
-                let mut sim = ReducedSimulator::new(model, space, subspace, time, solver)?;
-                sim.preconditioning = pipeline.scene.reduced.preconditioner;
-                Runner::Neural(sim)
-            }
-        })
+        if method.is_full() {
+            return Ok(Runner::Full(Simulator::new(model, time, solver)?));
+        }
+        let reduced = crate::export::reduced_model(
+            pipeline,
+            method,
+            &model,
+            material,
+            &time,
+            solver,
+            Rows::All,
+            progress,
+        )?;
+        let mut runtime = reduced.simulator()?;
+        for f in model.forces {
+            runtime.add_force(f)?;
+        }
+        Ok(Runner::Reduced(runtime))
     }
 
     pub fn step(&mut self) -> Result<StepInfo> {
@@ -252,16 +218,8 @@ impl Runner {
                     parts: StepParts::default(),
                 }
             }
-            Runner::Pca(s) => {
-                let r = s.step()?;
-                StepInfo {
-                    seconds: r.wall_seconds,
-                    iterations: r.iterations,
-                    parts: StepParts::of(&r),
-                }
-            }
-            Runner::Neural(s) => {
-                let r = s.step()?;
+            Runner::Reduced(s) => {
+                let r = s.step_report()?;
                 StepInfo {
                     seconds: r.wall_seconds,
                     iterations: r.iterations,
@@ -280,8 +238,7 @@ impl Runner {
     pub fn set_state(&mut self, step: usize, q_now: &[f64], q_before: &[f64]) -> Result<()> {
         match self {
             Runner::Full(_) => anyhow::bail!("a full-space runner has no subspace state"),
-            Runner::Pca(s) => s.set_state(step, q_now, q_before)?,
-            Runner::Neural(s) => s.set_state(step, q_now, q_before)?,
+            Runner::Reduced(s) => s.set_state(step, q_now, q_before)?,
         }
         Ok(())
     }
@@ -290,24 +247,28 @@ impl Runner {
     pub fn displacement(&self) -> Vec<f64> {
         match self {
             Runner::Full(s) => s.state.u.clone(),
-            Runner::Pca(s) => s.full_displacement(),
-            Runner::Neural(s) => s.full_displacement(),
+            Runner::Reduced(s) => {
+                let mut u = vec![0.0; s.simulator().model().num_full()];
+                // The runner's model holds every row, so this cannot fail.
+                if let Err(e) = s.displacement_into(&mut u) {
+                    tracing::error!("{e}");
+                }
+                u
+            }
         }
     }
 
     pub fn time(&self) -> f64 {
         match self {
             Runner::Full(s) => s.state.time,
-            Runner::Pca(s) => s.state.time,
-            Runner::Neural(s) => s.state.time,
+            Runner::Reduced(s) => s.time(),
         }
     }
 
     pub fn model(&self) -> &FullSpaceModel {
         match self {
             Runner::Full(s) => &s.model,
-            Runner::Pca(s) => &s.model,
-            Runner::Neural(s) => &s.model,
+            Runner::Reduced(s) => s.simulator().model(),
         }
     }
 
@@ -316,8 +277,7 @@ impl Runner {
     pub fn total_energy(&mut self) -> f64 {
         match self {
             Runner::Full(s) => s.report().total_energy,
-            Runner::Pca(s) => s.energy().total,
-            Runner::Neural(s) => s.energy().total,
+            Runner::Reduced(s) => s.energy().total,
         }
     }
 
@@ -325,8 +285,15 @@ impl Runner {
     pub fn dim(&self) -> usize {
         match self {
             Runner::Full(s) => s.model.dofs.num_free(),
-            Runner::Pca(s) => s.space.k,
-            Runner::Neural(s) => s.subspace.latent_dim(),
+            Runner::Reduced(s) => s.simulator().latent_dim(),
+        }
+    }
+
+    /// Elements the elastic energy is evaluated on.
+    pub fn elements(&self) -> usize {
+        match self {
+            Runner::Full(s) => s.model.elements.len(),
+            Runner::Reduced(s) => s.simulator().space().elements.len(),
         }
     }
 }
@@ -366,9 +333,7 @@ pub fn solver_for(scene: &Scene, method: Method) -> SolverConfig {
             solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
         }
         Method::Pca | Method::PcaCubature | Method::Neural | Method::NeuralCubature => {
-            solver.method = scene.reduced.method;
-            solver.tolerance = scene.reduced.tolerance;
-            solver.max_iterations = solver.max_iterations.max(REDUCED_MIN_ITERATIONS);
+            solver = scene.reduced.solver(&scene.solver);
         }
     }
     solver
@@ -392,6 +357,7 @@ pub fn simulate(
         pipeline,
         opts.method,
         model,
+        &scene.material,
         time,
         solver.clone(),
         stage_progress,
@@ -417,11 +383,7 @@ pub fn simulate(
                 times.push(r.wall_seconds);
                 steps.push(r);
             }),
-            Runner::Pca(s) => s.step().map_err(anyhow::Error::from).map(|r| {
-                times.push(r.wall_seconds);
-                reduced_steps.push(r);
-            }),
-            Runner::Neural(s) => s.step().map_err(anyhow::Error::from).map(|r| {
+            Runner::Reduced(s) => s.step_report().map_err(anyhow::Error::from).map(|r| {
                 times.push(r.wall_seconds);
                 reduced_steps.push(r);
             }),

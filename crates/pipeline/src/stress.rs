@@ -216,7 +216,16 @@ fn run_one(
     if release.is_some() {
         solver.tolerance = solver.tolerance.min(FREE_RUN_TOLERANCE);
     }
-    let mut runner = match Runner::new(base, method, model, time, solver, stage_progress) {
+    let runner = Runner::new(
+        base,
+        method,
+        model,
+        &scene.material,
+        time,
+        solver,
+        stage_progress,
+    );
+    let mut runner = match runner {
         Ok(r) => r,
         Err(e) => {
             let outcome = Outcome::Error {

@@ -1,0 +1,247 @@
+//! The model file: a fixed header, then the model serialised with postcard.
+//!
+//! Layout (little-endian): magic `LATDYNm\0` · format version (u32) · payload length (u64) ·
+//! payload checksum (u64, FNV-1a) · header checksum (u64, FNV-1a of the 28 bytes before it) ·
+//! payload. Reading checks, in order, that the magic is this format's, the version one this
+//! build reads, the header intact, the payload as long as announced and intact, that it decodes
+//! with nothing left over and that the decoded model is consistent ([`ReducedModel::check`]);
+//! each failure is its own [`ModelFormatError`], never a panic. Writing goes through a temporary
+//! file renamed into place ([`fem_core::io::write_atomic`]), so a reader never sees a half-written
+//! model and an interrupted export leaves the previous one intact.
+
+use std::path::{Path, PathBuf};
+
+use super::ReducedModel;
+
+/// The first eight bytes of every model file.
+pub const MAGIC: &[u8; 8] = b"LATDYNm\0";
+
+/// Version of the file's layout and of the model's serialised form. Bump it when either
+/// changes, so that an older build refuses a newer file instead of misreading it.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Bytes before the payload.
+pub const HEADER_LEN: usize = 8 + 4 + 8 + 8 + 8;
+
+/// What is wrong with the bytes of a model file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelFormatError {
+    /// Shorter than its header, or than the payload its header announces.
+    #[error(
+        "the file is truncated: {len} bytes where its {what} needs {needed} (was the writer \
+         interrupted?)"
+    )]
+    Truncated {
+        len: u64,
+        needed: u64,
+        what: &'static str,
+    },
+    /// Not a model file of this project (the magic does not match).
+    #[error("not a latent-dynamics model file (its first bytes are not the model magic)")]
+    Foreign,
+    /// Written by a newer build.
+    #[error(
+        "written in model format version {version}; this build reads version {supported}: update \
+         latent-sim to read it"
+    )]
+    NewerFormat { version: u32, supported: u32 },
+    /// Written by an older build, in a format this one no longer reads.
+    #[error(
+        "written in model format version {version}; this build reads version {supported}: export \
+         the model again with `cargo xtask export`"
+    )]
+    OlderFormat { version: u32, supported: u32 },
+    /// The header's checksum does not match the header.
+    #[error("the header checksum does not match (the file is corrupted)")]
+    HeaderCorrupted,
+    /// The payload's checksum does not match the payload.
+    #[error("the payload checksum does not match (the file is corrupted)")]
+    PayloadCorrupted,
+    /// Bytes after the payload the header announces.
+    #[error("{extra} bytes follow the payload its header announces (appended to?)")]
+    TrailingBytes { extra: u64 },
+    /// The payload is intact but does not decode as a model.
+    #[error("the payload does not decode as a model: {reason}")]
+    Decode { reason: String },
+    /// The model decodes but is inconsistent.
+    #[error("the model is inconsistent: {reason}")]
+    Invalid { reason: String },
+}
+
+/// Why a model file could not be read or written; names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelFileError {
+    #[error("{}: cannot read: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {source}", path.display())]
+    Format {
+        path: PathBuf,
+        source: ModelFormatError,
+    },
+}
+
+impl ModelFileError {
+    /// What is wrong with the content, when the file could be read.
+    pub fn format(&self) -> Option<&ModelFormatError> {
+        match self {
+            ModelFileError::Format { source, .. } => Some(source),
+            _ => None,
+        }
+    }
+}
+
+/// FNV-1a, 64 bit (the stage artifacts' checksum): it changes on any single-bit flip.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// `bytes[at..at + N]`, which the caller has checked exist.
+fn field<const N: usize>(bytes: &[u8], at: usize) -> [u8; N] {
+    let mut out = [0; N];
+    out.copy_from_slice(&bytes[at..at + N]);
+    out
+}
+
+impl ReducedModel {
+    /// The model as the bytes of a model file.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let payload =
+            postcard::to_allocvec(self).expect("a model serialises (no maps, no unsized values)");
+        let mut bytes = Vec::with_capacity(HEADER_LEN + payload.len());
+        bytes.extend_from_slice(MAGIC);
+        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        bytes.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&fnv1a(&payload).to_le_bytes());
+        let header_sum = fnv1a(&bytes);
+        bytes.extend_from_slice(&header_sum.to_le_bytes());
+        bytes.extend_from_slice(&payload);
+        bytes
+    }
+
+    /// Reads the bytes of a model file (see the [module documentation](self)).
+    ///
+    /// # Errors
+    /// One [`ModelFormatError`] per way the bytes can be wrong.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelFormatError> {
+        let len = bytes.len();
+        let truncated = |needed: usize, what| ModelFormatError::Truncated {
+            len: len as u64,
+            needed: needed as u64,
+            what,
+        };
+        // A short file is truncated if what it has is the start of a model file, foreign if not.
+        let magic_len = len.min(MAGIC.len());
+        if bytes[..magic_len] != MAGIC[..magic_len] {
+            return Err(ModelFormatError::Foreign);
+        }
+        if len < 12 {
+            return Err(truncated(HEADER_LEN, "header"));
+        }
+        let version = u32::from_le_bytes(field(bytes, 8));
+        if version > FORMAT_VERSION {
+            return Err(ModelFormatError::NewerFormat {
+                version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        if version < FORMAT_VERSION {
+            return Err(ModelFormatError::OlderFormat {
+                version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        if len < HEADER_LEN {
+            return Err(truncated(HEADER_LEN, "header"));
+        }
+        let payload_len = u64::from_le_bytes(field(bytes, 12));
+        let payload_sum = u64::from_le_bytes(field(bytes, 20));
+        let header_sum = u64::from_le_bytes(field(bytes, 28));
+        if fnv1a(&bytes[..28]) != header_sum {
+            return Err(ModelFormatError::HeaderCorrupted);
+        }
+        let payload = &bytes[HEADER_LEN..];
+        let have = payload.len() as u64;
+        if have < payload_len {
+            return Err(ModelFormatError::Truncated {
+                len: len as u64,
+                needed: (HEADER_LEN as u64).saturating_add(payload_len),
+                what: "payload",
+            });
+        }
+        if have > payload_len {
+            return Err(ModelFormatError::TrailingBytes {
+                extra: have - payload_len,
+            });
+        }
+        if fnv1a(payload) != payload_sum {
+            return Err(ModelFormatError::PayloadCorrupted);
+        }
+        Self::from_payload(payload)
+    }
+
+    /// Decodes and checks a payload without its header: what [`Self::from_bytes`] does once the
+    /// header and checksums have passed. For tools and fuzzing, which want to reach the decoder
+    /// without forging checksums.
+    ///
+    /// # Errors
+    /// [`ModelFormatError::Decode`] or [`ModelFormatError::Invalid`].
+    pub fn from_payload(payload: &[u8]) -> Result<Self, ModelFormatError> {
+        let model = match postcard::take_from_bytes::<Self>(payload) {
+            Ok((model, [])) => model,
+            Ok((_, rest)) => {
+                return Err(ModelFormatError::Decode {
+                    reason: format!("{} bytes left over after the model", rest.len()),
+                });
+            }
+            Err(e) => {
+                return Err(ModelFormatError::Decode {
+                    reason: e.to_string(),
+                });
+            }
+        };
+        model
+            .check()
+            .map_err(|reason| ModelFormatError::Invalid { reason })?;
+        Ok(model)
+    }
+
+    /// Writes the model file at `path` atomically.
+    ///
+    /// # Errors
+    /// [`ModelFileError::Write`].
+    pub fn save(&self, path: &Path) -> Result<(), ModelFileError> {
+        fem_core::io::write_atomic(path, &self.to_bytes()).map_err(|source| ModelFileError::Write {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// Reads the model file at `path`.
+    ///
+    /// # Errors
+    /// [`ModelFileError::Read`], or [`ModelFileError::Format`] with what is wrong with the
+    /// content (truncated, corrupted, foreign, newer, …).
+    pub fn load(path: &Path) -> Result<Self, ModelFileError> {
+        let bytes = std::fs::read(path).map_err(|source| ModelFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_bytes(&bytes).map_err(|source| ModelFileError::Format {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+}

@@ -1,0 +1,220 @@
+//! Handles: spring forces a program adds, moves and removes by id, the same way for every
+//! simulator ([`Backend`] is what a simulator provides for it).
+
+use fem_core::Vec3;
+use fem_core::forces::{ExternalForce, ForceKind};
+
+use super::{RuntimeError, Surface, finite, positive};
+use crate::ReducedError;
+
+/// A grabbed set of vertices (or a force added as data), to move or release.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Handle(u64);
+
+impl std::fmt::Display for Handle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "#{}", self.0)
+    }
+}
+
+/// A handle and the force it is.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    handle: Handle,
+    /// Index of its force in the simulator's list.
+    force: usize,
+    /// For a spring, d − t: the spring's offset d for a target t is t + base (ū − p for a
+    /// patch with mean displacement ū grabbed at p). None for a point load.
+    base: Option<Vec3>,
+}
+
+/// The handles of one simulator.
+#[derive(Debug, Default)]
+pub(crate) struct Handles {
+    next: u64,
+    entries: Vec<Entry>,
+}
+
+impl Handles {
+    fn insert(&mut self, force: usize, base: Option<Vec3>) -> Handle {
+        let handle = Handle(self.next);
+        self.next += 1;
+        self.entries.push(Entry {
+            handle,
+            force,
+            base,
+        });
+        handle
+    }
+
+    fn find(&self, handle: Handle) -> Result<Entry, RuntimeError> {
+        self.entries
+            .iter()
+            .find(|e| e.handle == handle)
+            .copied()
+            .ok_or(RuntimeError::UnknownHandle(handle))
+    }
+
+    /// Forgets `handle` and returns its force's index; the forces after it move down by one.
+    fn remove(&mut self, handle: Handle) -> Result<usize, RuntimeError> {
+        let at = self
+            .entries
+            .iter()
+            .position(|e| e.handle == handle)
+            .ok_or(RuntimeError::UnknownHandle(handle))?;
+        let force = self.entries.remove(at).force;
+        for e in &mut self.entries {
+            if e.force > force {
+                e.force -= 1;
+            }
+        }
+        Ok(force)
+    }
+}
+
+/// What a simulator provides for its handles.
+pub(crate) trait Backend {
+    fn rest(&self) -> &[Vec3];
+    fn surface(&self) -> &Surface;
+    /// The current displacement of vertex `v` (which exists).
+    fn displacement(&self, v: usize) -> Result<Vec3, RuntimeError>;
+    /// The current displacements of the surface vertices, 3 per vertex.
+    fn surface_displacements(&mut self) -> &[f64];
+    /// Adds a checked force last and returns its index.
+    fn push_force(&mut self, force: ExternalForce) -> Result<usize, RuntimeError>;
+    fn remove_force(&mut self, index: usize) -> Result<(), RuntimeError>;
+    fn set_keyframes(&mut self, index: usize, keyframes: &[[f64; 4]]) -> Result<(), RuntimeError>;
+    fn handles(&mut self) -> &mut Handles;
+}
+
+/// A spring on `vertices` (sorted, unique) with offset `offset` now and `base` (see [`Entry`]).
+fn attach<B: Backend>(
+    b: &mut B,
+    vertices: Vec<usize>,
+    stiffness: f64,
+    offset: Vec3,
+    base: Vec3,
+) -> Result<Handle, RuntimeError> {
+    let force = ExternalForce {
+        kind: ForceKind::Spring,
+        vertices,
+        stiffness,
+        keyframes: vec![[0.0, offset.x, offset.y, offset.z]],
+        start: f64::NEG_INFINITY,
+        end: f64::INFINITY,
+    };
+    let index = b.push_force(force)?;
+    Ok(b.handles().insert(index, Some(base)))
+}
+
+/// Sorted, unique, existing vertices, at least one.
+fn vertex_set(vertices: &[usize], count: usize) -> Result<Vec<usize>, RuntimeError> {
+    if vertices.is_empty() {
+        return Err(RuntimeError::NoVertices);
+    }
+    if let Some(&vertex) = vertices.iter().find(|&&v| v >= count) {
+        return Err(RuntimeError::NoSuchVertex { vertex, count });
+    }
+    let mut set = vertices.to_vec();
+    set.sort_unstable();
+    set.dedup();
+    Ok(set)
+}
+
+pub(crate) fn grab<B: Backend>(
+    b: &mut B,
+    vertices: &[usize],
+    stiffness: f64,
+) -> Result<Handle, RuntimeError> {
+    positive("stiffness", stiffness)?;
+    let set = vertex_set(vertices, b.rest().len())?;
+    let (mut mean_u, mut mean_x) = (Vec3::zeros(), Vec3::zeros());
+    for &v in &set {
+        mean_u += b.displacement(v)?;
+        mean_x += b.rest()[v];
+    }
+    let n = set.len() as f64;
+    let (mean_u, mean_x) = (mean_u / n, mean_x / n);
+    // Grabbed at the current centroid p = X̄ + ū: base = ū − p = −X̄.
+    attach(b, set, stiffness, mean_u, -mean_x)
+}
+
+pub(crate) fn grab_near<B: Backend>(
+    b: &mut B,
+    point: [f64; 3],
+    radius: f64,
+    stiffness: f64,
+) -> Result<Handle, RuntimeError> {
+    finite("point", point)?;
+    positive("radius", radius)?;
+    positive("stiffness", stiffness)?;
+    let p = Vec3::from(point);
+    // Not a per-frame path: a copy keeps the borrows simple.
+    let u = b.surface_displacements().to_vec();
+    let (mut set, mut mean_u) = (Vec::new(), Vec3::zeros());
+    for (&v, uv) in b.surface().vertices().iter().zip(u.chunks_exact(3)) {
+        let uv = Vec3::new(uv[0], uv[1], uv[2]);
+        if (b.rest()[v] + uv - p).norm_squared() <= radius * radius {
+            set.push(v);
+            mean_u += uv;
+        }
+    }
+    if set.is_empty() {
+        return Err(RuntimeError::NothingInReach { point, radius });
+    }
+    let mean_u = mean_u / set.len() as f64;
+    attach(b, set, stiffness, mean_u, mean_u - p)
+}
+
+pub(crate) fn move_handle<B: Backend>(
+    b: &mut B,
+    handle: Handle,
+    target: [f64; 3],
+) -> Result<(), RuntimeError> {
+    finite("target", target)?;
+    let entry = b.handles().find(handle)?;
+    let base = entry.base.ok_or(RuntimeError::NotASpring(handle))?;
+    let d = Vec3::from(target) + base;
+    b.set_keyframes(entry.force, &[[0.0, d.x, d.y, d.z]])
+}
+
+pub(crate) fn release<B: Backend>(b: &mut B, handle: Handle) -> Result<(), RuntimeError> {
+    let index = b.handles().remove(handle)?;
+    b.remove_force(index)
+}
+
+pub(crate) fn add_force<B: Backend>(
+    b: &mut B,
+    force: ExternalForce,
+) -> Result<Handle, RuntimeError> {
+    // Checked, not reordered: the order of a force's vertices is the order its terms are summed
+    // in, which a replayed schedule keeps so that its trajectory is the same bit for bit.
+    vertex_set(&force.vertices, b.rest().len())?;
+    let k = &force.keyframes;
+    if k.is_empty()
+        || k.iter().flatten().any(|x| !x.is_finite())
+        || k.windows(2).any(|w| w[1][0] < w[0][0])
+    {
+        return Err(ReducedError::Keyframes.into());
+    }
+    if force.start.is_nan() || force.end.is_nan() || force.end < force.start {
+        return Err(RuntimeError::NotPositive {
+            what: "force's active span (end − start)",
+            value: force.end - force.start,
+        });
+    }
+    let base = match force.kind {
+        ForceKind::Spring => {
+            positive("stiffness", force.stiffness)?;
+            let centroid = force
+                .vertices
+                .iter()
+                .fold(Vec3::zeros(), |s, &v| s + b.rest()[v])
+                / force.vertices.len() as f64;
+            Some(-centroid)
+        }
+        ForceKind::Point => None,
+    };
+    let index = b.push_force(force)?;
+    Ok(b.handles().insert(index, base))
+}

@@ -1,0 +1,207 @@
+//! Interactive simulation of a mesh, reduced or in full space, behind one API (DESIGN §11): grab
+//! vertices with a spring ([`Interactive::grab`], [`Interactive::grab_near`]), move the
+//! spring's target, release it; several handles at once; gravity on or off; reset to rest;
+//! step; read positions, or only the surface's into an `f32` or `f64` buffer.
+//!
+//! A handle is a spring force of fem-core ([`fem_core::forces`]): a stiffness k split evenly
+//! over its n vertices, each pulled toward its rest position moved by one offset d, energy
+//! k/(2n) Σ_v ‖u_v − d‖². Grabbing at a point p records the vertices' mean displacement ū, and
+//! moving the target to t sets d = ū + (t − p): the patch is dragged by how far the target
+//! moved from where it was grabbed. Forces given as data ([`Interactive::add_force`], e.g. a
+//! scene's schedule) act the same way in both simulators, so a program can run one schedule
+//! in full space and reduced and compare.
+
+mod full;
+mod handles;
+mod reduced;
+mod surface;
+
+pub use full::FullRuntime;
+pub use handles::Handle;
+pub use reduced::{AnyReducedSimulator, ReducedRuntime};
+pub use surface::Surface;
+
+use fem_core::forces::ExternalForce;
+use fem_core::{FemError, Vec3};
+
+use crate::ReducedError;
+
+/// A floating-point type positions can be read into.
+pub trait Real: Copy + sealed::Sealed {
+    /// The nearest value of this type.
+    fn from_f64(x: f64) -> Self;
+}
+
+impl Real for f32 {
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+}
+
+impl Real for f64 {
+    #[inline]
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+}
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for f32 {}
+    impl Sealed for f64 {}
+}
+
+/// What one step did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepStats {
+    /// The step just taken (1 for the first) and the time it reached.
+    pub step: usize,
+    pub time: f64,
+    /// Solver iterations.
+    pub iterations: usize,
+    /// Wall time of the step.
+    pub seconds: f64,
+}
+
+/// Errors of the interactive simulators.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    #[error(transparent)]
+    Reduced(#[from] ReducedError),
+    #[error(transparent)]
+    Fem(#[from] FemError),
+    /// A handle this simulator does not have (released already, or another simulator's).
+    #[error("no handle {0} in this simulator (released already?)")]
+    UnknownHandle(Handle),
+    /// No surface vertex within the radius of the point.
+    #[error("no surface vertex within {radius} of ({}, {}, {})", point[0], point[1], point[2])]
+    NothingInReach { point: [f64; 3], radius: f64 },
+    /// A vertex index past the mesh's vertices.
+    #[error("vertex {vertex} does not exist (the mesh has {count})")]
+    NoSuchVertex { vertex: usize, count: usize },
+    /// A handle on no vertex.
+    #[error("a handle needs at least one vertex")]
+    NoVertices,
+    /// A number that must be positive and finite (a stiffness, a radius) is not.
+    #[error("the {what} must be positive and finite, got {value}")]
+    NotPositive { what: &'static str, value: f64 },
+    /// A point or target with a coordinate that is not finite.
+    #[error("the {what} must be finite, got ({}, {}, {})", value[0], value[1], value[2])]
+    NotFinite { what: &'static str, value: [f64; 3] },
+    /// A point load has no target to move.
+    #[error("handle {0} is a point load; only a spring has a target to move")]
+    NotASpring(Handle),
+    /// A caller's buffer of the wrong length.
+    #[error("the {what} buffer has {got} values, expected {expected} (3 per vertex)")]
+    BufferLength {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
+}
+
+/// One simulator of a mesh that a program drives interactively: [`ReducedRuntime`] (a trained
+/// model) or [`FullRuntime`] (full space). Positions are rest positions plus displacement; the
+/// surface is [`Interactive::surface`]'s vertices, in its order.
+pub trait Interactive {
+    /// Rest positions, one per vertex.
+    fn rest_positions(&self) -> &[Vec3];
+    /// The boundary surface: its vertices and triangles.
+    fn surface(&self) -> &Surface;
+    /// Simulated time (s) and steps taken.
+    fn time(&self) -> f64;
+    fn steps(&self) -> usize;
+    /// Advances one time step.
+    ///
+    /// # Errors
+    /// When the step's solve fails (diverges, does not converge, meets an inverted element);
+    /// the state is then the one before the step.
+    fn step(&mut self) -> Result<StepStats, RuntimeError>;
+    /// Grabs `vertices` with a spring of total stiffness `stiffness` (N/m), its target at their
+    /// current centroid.
+    ///
+    /// # Errors
+    /// [`RuntimeError::NoVertices`], [`RuntimeError::NoSuchVertex`],
+    /// [`RuntimeError::NotPositive`]; a reduced model without the rows of a vertex:
+    /// [`ReducedError::NoBasisRows`].
+    fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError>;
+    /// Grabs the surface vertices within `radius` of `point` (where they are now) with a spring
+    /// of total stiffness `stiffness`, its target at `point`.
+    ///
+    /// # Errors
+    /// [`RuntimeError::NothingInReach`], [`RuntimeError::NotPositive`],
+    /// [`RuntimeError::NotFinite`].
+    fn grab_near(
+        &mut self,
+        point: [f64; 3],
+        radius: f64,
+        stiffness: f64,
+    ) -> Result<Handle, RuntimeError>;
+    /// Moves a handle's target to `target`: its vertices are pulled toward where they were
+    /// grabbed, moved by `target` minus the grab point.
+    ///
+    /// # Errors
+    /// [`RuntimeError::UnknownHandle`], [`RuntimeError::NotASpring`],
+    /// [`RuntimeError::NotFinite`].
+    fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError>;
+    /// Lets go of a handle (or removes a force added with [`Interactive::add_force`]).
+    ///
+    /// # Errors
+    /// [`RuntimeError::UnknownHandle`].
+    fn release(&mut self, handle: Handle) -> Result<(), RuntimeError>;
+    /// Adds a force given as data (a spring or point load with its schedule, as a scene's
+    /// `[[force]]` resolves to); it can be released like a handle, and a spring's target moved
+    /// (from its vertices' rest centroid).
+    ///
+    /// # Errors
+    /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`], [`ReducedError::Keyframes`]
+    /// ; a reduced model without the rows of a vertex: [`ReducedError::NoBasisRows`].
+    fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError>;
+    /// Turns gravity on (the model's acceleration) or off.
+    fn set_gravity(&mut self, enabled: bool);
+    fn gravity(&self) -> bool;
+    /// Back to rest at time 0; handles, forces and the gravity setting stay.
+    fn reset(&mut self);
+    /// Positions of every vertex (3 per vertex) into `out`.
+    ///
+    /// # Errors
+    /// [`RuntimeError::BufferLength`]; a reduced model that keeps only the rows in use (the
+    /// default export): [`ReducedError::NoBasisRows`] — read the surface instead.
+    fn positions_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError>;
+    /// Positions of the surface vertices (3 per vertex, in [`Surface::vertices`]'s order) into
+    /// `out`, without allocating: a reduced model decodes only those vertices' rows.
+    ///
+    /// # Errors
+    /// [`RuntimeError::BufferLength`].
+    fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError>;
+}
+
+/// Checks a handle's stiffness, a radius, a point.
+fn positive(what: &'static str, value: f64) -> Result<(), RuntimeError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(RuntimeError::NotPositive { what, value })
+    }
+}
+
+fn finite(what: &'static str, value: [f64; 3]) -> Result<(), RuntimeError> {
+    if value.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(RuntimeError::NotFinite { what, value })
+    }
+}
+
+fn buffer_length(what: &'static str, expected: usize, got: usize) -> Result<(), RuntimeError> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(RuntimeError::BufferLength {
+            what,
+            expected,
+            got,
+        })
+    }
+}

@@ -1,0 +1,329 @@
+//! The runtime of a trained model: [`ReducedRuntime`], built by [`ReducedModel::simulator`].
+
+use fem_core::Vec3;
+use fem_core::forces::ExternalForce;
+use fem_core::integrator::FullSpaceModel;
+use fem_core::optim::SolverConfig;
+
+use super::handles::{self, Backend, Handles};
+use super::{Handle, Interactive, Real, RuntimeError, StepStats, Surface, buffer_length};
+use crate::model::{ReducedModel, SubspaceParts};
+use crate::reduced::PackedRows;
+use crate::{
+    Augmented, LinearSubspace, NeuralSubspace, ReducedEnergy, ReducedError, ReducedSimulator,
+    ReducedSpace, ReducedState, ReducedStepReport, Subspace,
+};
+
+/// The reduced simulator of a model, with its subspace's type.
+#[derive(Debug)]
+#[allow(clippy::large_enum_variant)]
+pub enum AnyReducedSimulator {
+    /// PCA: q = z.
+    Linear(ReducedSimulator<LinearSubspace>),
+    /// The autoencoder with linear directions beside it.
+    Neural(ReducedSimulator<Augmented<NeuralSubspace>>),
+}
+
+/// `$body` with `$s` bound to the simulator inside an [`AnyReducedSimulator`].
+macro_rules! each {
+    ($sim:expr, $s:ident => $body:expr) => {
+        match $sim {
+            AnyReducedSimulator::Linear($s) => $body,
+            AnyReducedSimulator::Neural($s) => $body,
+        }
+    };
+}
+
+impl AnyReducedSimulator {
+    pub fn model(&self) -> &FullSpaceModel {
+        each!(self, s => &s.model)
+    }
+
+    pub fn space(&self) -> &ReducedSpace {
+        each!(self, s => &s.space)
+    }
+
+    pub fn state(&self) -> &ReducedState {
+        each!(self, s => &s.state)
+    }
+
+    /// Latent coordinates (with the linear directions).
+    pub fn latent_dim(&self) -> usize {
+        each!(self, s => s.subspace.latent_dim())
+    }
+}
+
+/// A trained model stepping: the [`Interactive`] API over the reduced simulator, with exactly
+/// the solver settings the model holds (those `cargo xtask run` measures).
+#[derive(Debug)]
+pub struct ReducedRuntime {
+    sim: AnyReducedSimulator,
+    surface: Surface,
+    /// The surface vertices' rows of U, packed: reading the surface decodes only these.
+    surface_rows: PackedRows,
+    surface_u: Vec<f64>,
+    /// The model's reduced gravity load (the space's is zero while gravity is off).
+    gravity_load: Vec<f64>,
+    gravity_enabled: bool,
+    handles: Handles,
+}
+
+impl ReducedModel {
+    /// The runtime of this model, at rest, gravity on, no force.
+    ///
+    /// # Errors
+    /// When the model is inconsistent ([`ReducedModel::check`], its space's or directions'
+    /// parts), or a setting is invalid.
+    pub fn simulator(&self) -> Result<ReducedRuntime, RuntimeError> {
+        ReducedRuntime::new(self)
+    }
+}
+
+impl ReducedRuntime {
+    /// See [`ReducedModel::simulator`].
+    pub fn new(model: &ReducedModel) -> Result<Self, RuntimeError> {
+        let full = model.full_space_model()?;
+        let space = ReducedSpace::from_parts(&full, &model.space, model.cubature.as_ref())?;
+        let surface = Surface::new(&model.surface, full.mesh.num_vertices());
+        if let Some(&vertex) = surface.vertices().iter().find(|&&v| !space.has_rows(v)) {
+            return Err(ReducedError::NoBasisRows { vertex }.into());
+        }
+        let surface_rows = PackedRows::new(&space, surface.vertices());
+        let gravity_load = space.gravity.clone();
+        let (time, solver) = (model.time(), SolverConfig::from(&model.solver));
+        let k = space.k;
+        let mut sim = match &model.subspace {
+            SubspaceParts::Linear => AnyReducedSimulator::Linear(ReducedSimulator::new(
+                full,
+                space,
+                LinearSubspace::new(k),
+                time,
+                solver,
+            )?),
+            SubspaceParts::Neural {
+                autoencoder,
+                directions,
+            } => {
+                let subspace =
+                    Augmented::from_parts(NeuralSubspace::new(autoencoder.clone()), directions)?;
+                AnyReducedSimulator::Neural(ReducedSimulator::new(
+                    full, space, subspace, time, solver,
+                )?)
+            }
+        };
+        each!(&mut sim, s => s.preconditioning = model.preconditioning);
+        Ok(Self {
+            sim,
+            surface_u: vec![0.0; 3 * surface.vertices().len()],
+            surface,
+            surface_rows,
+            gravity_load,
+            gravity_enabled: true,
+            handles: Handles::default(),
+        })
+    }
+
+    /// One step, with where its time went.
+    ///
+    /// # Errors
+    /// As [`ReducedSimulator::step`].
+    pub fn step_report(&mut self) -> Result<ReducedStepReport, ReducedError> {
+        each!(&mut self.sim, s => s.step())
+    }
+
+    /// Puts the simulator in the states its subspace gives to the PCA coefficients `q_now` (at
+    /// step `step`) and `q_before` ([`ReducedSimulator::set_state`]).
+    ///
+    /// # Errors
+    /// [`ReducedError::StateShape`].
+    pub fn set_state(
+        &mut self,
+        step: usize,
+        q_now: &[f64],
+        q_before: &[f64],
+    ) -> Result<(), ReducedError> {
+        each!(&mut self.sim, s => s.set_state(step, q_now, q_before))
+    }
+
+    /// The energies of the current state ([`ReducedSimulator::energy`]).
+    pub fn energy(&mut self) -> ReducedEnergy {
+        each!(&mut self.sim, s => s.energy())
+    }
+
+    /// The displacement u = Uq of every vertex (3 per vertex) into `out`.
+    ///
+    /// # Errors
+    /// [`RuntimeError::BufferLength`]; [`ReducedError::NoBasisRows`] when the model keeps only
+    /// the rows in use.
+    pub fn displacement_into(&self, out: &mut [f64]) -> Result<(), RuntimeError> {
+        let space = self.sim.space();
+        buffer_length("displacement", self.sim.model().num_full(), out.len())?;
+        if let Some(vertex) = (0..out.len() / 3).find(|&v| !space.has_rows(v)) {
+            return Err(ReducedError::NoBasisRows { vertex }.into());
+        }
+        space.reconstruct(&self.sim.state().q, out);
+        Ok(())
+    }
+
+    /// The PCA coefficients q of the current state.
+    pub fn coefficients(&self) -> &[f64] {
+        &self.sim.state().q
+    }
+
+    /// The reduced simulator. Its forces are the handles' (change them through this runtime).
+    pub fn simulator(&self) -> &AnyReducedSimulator {
+        &self.sim
+    }
+
+    /// The reduced simulator, mutable: for diagnostics that evaluate its objective.
+    pub fn simulator_mut(&mut self) -> &mut AnyReducedSimulator {
+        &mut self.sim
+    }
+}
+
+impl Backend for ReducedRuntime {
+    fn rest(&self) -> &[Vec3] {
+        &self.sim.model().mesh.vertices
+    }
+
+    fn surface(&self) -> &Surface {
+        &self.surface
+    }
+
+    fn displacement(&self, v: usize) -> Result<Vec3, RuntimeError> {
+        let space = self.sim.space();
+        let rows = space
+            .vertex_rows(v)
+            .ok_or(ReducedError::NoBasisRows { vertex: v })?;
+        let (q, k) = (&self.sim.state().q, space.k);
+        let row = |c: usize| -> f64 {
+            rows[c * k..(c + 1) * k]
+                .iter()
+                .zip(q)
+                .map(|(a, b)| a * b)
+                .sum()
+        };
+        Ok(Vec3::new(row(0), row(1), row(2)))
+    }
+
+    fn surface_displacements(&mut self) -> &[f64] {
+        self.surface_rows
+            .apply(&self.sim.state().q, &mut self.surface_u);
+        &self.surface_u
+    }
+
+    fn push_force(&mut self, force: ExternalForce) -> Result<usize, RuntimeError> {
+        Ok(each!(&mut self.sim, s => s.add_force(force))?)
+    }
+
+    fn remove_force(&mut self, index: usize) -> Result<(), RuntimeError> {
+        each!(&mut self.sim, s => s.remove_force(index))?;
+        Ok(())
+    }
+
+    fn set_keyframes(&mut self, index: usize, keyframes: &[[f64; 4]]) -> Result<(), RuntimeError> {
+        Ok(each!(&mut self.sim, s => s.set_force_keyframes(index, keyframes))?)
+    }
+
+    fn handles(&mut self) -> &mut Handles {
+        &mut self.handles
+    }
+}
+
+impl Interactive for ReducedRuntime {
+    fn rest_positions(&self) -> &[Vec3] {
+        self.rest()
+    }
+
+    fn surface(&self) -> &Surface {
+        &self.surface
+    }
+
+    fn time(&self) -> f64 {
+        self.sim.state().time
+    }
+
+    fn steps(&self) -> usize {
+        self.sim.state().step
+    }
+
+    fn step(&mut self) -> Result<StepStats, RuntimeError> {
+        let r = self.step_report()?;
+        Ok(StepStats {
+            step: r.step,
+            time: r.time,
+            iterations: r.iterations,
+            seconds: r.wall_seconds,
+        })
+    }
+
+    fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError> {
+        handles::grab(self, vertices, stiffness)
+    }
+
+    fn grab_near(
+        &mut self,
+        point: [f64; 3],
+        radius: f64,
+        stiffness: f64,
+    ) -> Result<Handle, RuntimeError> {
+        handles::grab_near(self, point, radius, stiffness)
+    }
+
+    fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError> {
+        handles::move_handle(self, handle, target)
+    }
+
+    fn release(&mut self, handle: Handle) -> Result<(), RuntimeError> {
+        handles::release(self, handle)
+    }
+
+    fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError> {
+        handles::add_force(self, force)
+    }
+
+    fn set_gravity(&mut self, enabled: bool) {
+        self.gravity_enabled = enabled;
+        let load = &self.gravity_load;
+        each!(&mut self.sim, s => if enabled {
+            s.space.gravity.copy_from_slice(load);
+        } else {
+            s.space.gravity.fill(0.0);
+        });
+    }
+
+    fn gravity(&self) -> bool {
+        self.gravity_enabled
+    }
+
+    fn reset(&mut self) {
+        each!(&mut self.sim, s => s.reset());
+    }
+
+    fn positions_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
+        self.displacement_into(out)?;
+        for (x, rest) in out.chunks_exact_mut(3).zip(self.rest()) {
+            for c in 0..3 {
+                x[c] += rest[c];
+            }
+        }
+        Ok(())
+    }
+
+    fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {
+        buffer_length("surface", self.surface_u.len(), out.len())?;
+        self.surface_rows
+            .apply(&self.sim.state().q, &mut self.surface_u);
+        let rest = &self.sim.model().mesh.vertices;
+        for ((o, u), &v) in out
+            .chunks_exact_mut(3)
+            .zip(self.surface_u.chunks_exact(3))
+            .zip(self.surface.vertices())
+        {
+            for c in 0..3 {
+                o[c] = T::from_f64(rest[v][c] + u[c]);
+            }
+        }
+        Ok(())
+    }
+}

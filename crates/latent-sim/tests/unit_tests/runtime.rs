@@ -1,0 +1,279 @@
+//! The interactive API, the same on the reduced runtime and in full space: handles pull their
+//! vertices toward their targets and let go, several at once; gravity, reset, read-back.
+
+use fem_core::Vec3;
+use latent_sim::model::Rows;
+use latent_sim::{FullRuntime, Interactive, ReducedError, ReducedModel, RuntimeError};
+
+use super::models::{Kind, bar, build, build_with_rule, snapshot_basis, surface_rule, tip};
+
+/// The bar's PCA model (every row) and its full-space simulator: one mesh, two simulators.
+fn simulators(g: f64) -> (ReducedModel, FullRuntime) {
+    let m = bar([6, 2, 2], g);
+    let basis = snapshot_basis(&m, 12);
+    let model = build(Kind::Pca, &m, &basis, Rows::All);
+    let full = FullRuntime::from_model(&model).unwrap();
+    (model, full)
+}
+
+/// The mean position of `vertices`.
+fn centroid<S: Interactive>(sim: &mut S, vertices: &[usize]) -> Vec3 {
+    let mut x = vec![0.0; 3 * sim.rest_positions().len()];
+    sim.positions_into(&mut x).unwrap();
+    vertices.iter().fold(Vec3::zeros(), |s, &v| {
+        s + Vec3::new(x[3 * v], x[3 * v + 1], x[3 * v + 2])
+    }) / vertices.len() as f64
+}
+
+/// The largest distance of a vertex from its rest position.
+fn max_displacement<S: Interactive>(sim: &mut S) -> f64 {
+    let mut x = vec![0.0; 3 * sim.rest_positions().len()];
+    sim.positions_into(&mut x).unwrap();
+    x.chunks_exact(3)
+        .zip(sim.rest_positions())
+        .map(|(x, r)| (Vec3::new(x[0], x[1], x[2]) - r).norm())
+        .fold(0.0, f64::max)
+}
+
+/// Moves each handle's target in a straight line from its start to its end over 30 steps, as
+/// a hand drags, then holds it for 60.
+fn drag<S: Interactive>(sim: &mut S, moves: &[(latent_sim::Handle, Vec3, Vec3)]) {
+    for step in 1..=90 {
+        let s = (step as f64 / 30.0).min(1.0);
+        for &(h, from, to) in moves {
+            sim.move_handle(h, (from + (to - from) * s).into()).unwrap();
+        }
+        sim.step().unwrap();
+    }
+}
+
+/// Without gravity: grab the tip, lift its target 10 cm, let go.
+fn drag_and_release<S: Interactive>(sim: &mut S, tip: &[usize], what: &str) {
+    sim.set_gravity(false);
+    let start = centroid(sim, tip);
+    let h = sim.grab(tip, 400.0).unwrap();
+    let target = start + Vec3::new(0.0, 0.1, 0.0);
+    drag(sim, &[(h, start, target)]);
+    let pulled = centroid(sim, tip);
+    assert!(
+        (pulled - target).norm() < 0.5 * (start - target).norm(),
+        "{what}: the tip went from {start} to {pulled}, target {target}"
+    );
+    assert!(pulled.y > start.y + 0.03, "{what}: {pulled} from {start}");
+    sim.release(h).unwrap();
+    // Implicit Euler damps the bar's first bending mode (period about 1.4 s) by about a quarter
+    // in 3 s: it swings about its rest shape, less and less.
+    let (mut early_peak, mut late_peak, mut mean_height) = (0.0f64, 0.0f64, 0.0);
+    for step in 0..300 {
+        sim.step().unwrap();
+        let d = max_displacement(sim);
+        if step < 150 {
+            early_peak = early_peak.max(d);
+        } else {
+            late_peak = late_peak.max(d);
+            mean_height += centroid(sim, tip).y / 150.0;
+        }
+    }
+    assert!(
+        late_peak < 0.95 * early_peak,
+        "{what}: the body swings up to {early_peak} from rest in the 1.5 s after the release, \
+         {late_peak} in the 1.5 s after that"
+    );
+    assert!(
+        (mean_height - start.y).abs() < 0.4 * (pulled.y - start.y),
+        "{what}: the tip swings about {mean_height}, rest {}, pulled to {}",
+        start.y,
+        pulled.y
+    );
+    assert!(matches!(sim.release(h), Err(RuntimeError::UnknownHandle(g)) if g == h));
+}
+
+#[test]
+fn a_handle_pulls_toward_its_target_and_the_body_returns_toward_rest_after_release() {
+    let (model, mut full) = simulators(-9.81);
+    let tip = tip(&model.full_space_model().unwrap());
+    drag_and_release(&mut model.simulator().unwrap(), &tip, "reduced");
+    drag_and_release(&mut full, &tip, "full");
+}
+
+/// Two handles, the tip sideways and the middle down (stiffer: a beam is stiffer there);
+/// releasing one leaves the other pulling.
+fn two_handles<S: Interactive>(sim: &mut S, tip: &[usize], middle: [f64; 3], what: &str) {
+    sim.set_gravity(false);
+    let a = sim.grab(tip, 400.0).unwrap();
+    let b = sim.grab_near(middle, 0.15, 4000.0).unwrap();
+    assert_ne!(a, b);
+    let tip0 = centroid(sim, tip);
+    let middle = Vec3::from(middle);
+    drag(
+        sim,
+        &[
+            (a, tip0, tip0 + Vec3::new(0.0, 0.0, 0.08)),
+            (b, middle, middle - Vec3::new(0.0, 0.05, 0.0)),
+        ],
+    );
+    let near_middle: Vec<usize> = (0..sim.rest_positions().len())
+        .filter(|&v| (sim.rest_positions()[v] - middle).norm() <= 0.15)
+        .collect();
+    let mid = centroid(sim, &near_middle);
+    let up = centroid(sim, tip);
+    assert!(up.z > tip0.z + 0.02, "{what}: tip at {up}");
+    assert!(mid.y < middle.y - 0.02, "{what}: middle at {mid}");
+    sim.release(b).unwrap();
+    for _ in 0..60 {
+        sim.step().unwrap();
+    }
+    assert!(
+        centroid(sim, tip).z > tip0.z + 0.02,
+        "{what}: the tip handle let go"
+    );
+    assert!(matches!(
+        sim.release(b),
+        Err(RuntimeError::UnknownHandle(_))
+    ));
+    sim.release(a).unwrap();
+}
+
+#[test]
+fn two_handles_pull_at_once_and_release_independently() {
+    let (model, mut full) = simulators(-9.81);
+    let tip = tip(&model.full_space_model().unwrap());
+    // The middle of the bar: the surface vertices around it are its cross-section's ring.
+    let middle = [0.5, 0.1, 0.1];
+    two_handles(&mut full, &tip, middle, "full");
+    two_handles(&mut model.simulator().unwrap(), &tip, middle, "reduced");
+}
+
+/// Errors of the interaction calls, the same for both simulators.
+fn refusals<S: Interactive>(sim: &mut S, what: &str) {
+    let n = sim.rest_positions().len();
+    let released = sim.grab(&[n - 1], 10.0).unwrap();
+    sim.release(released).unwrap();
+    assert!(
+        matches!(sim.release(released), Err(RuntimeError::UnknownHandle(h)) if h == released),
+        "{what}"
+    );
+    assert!(matches!(sim.grab(&[], 1.0), Err(RuntimeError::NoVertices)));
+    assert!(matches!(
+        sim.grab(&[n], 1.0),
+        Err(RuntimeError::NoSuchVertex { vertex, count }) if vertex == n && count == n
+    ));
+    assert!(matches!(
+        sim.grab(&[0], -1.0),
+        Err(RuntimeError::NotPositive { .. })
+    ));
+    assert!(matches!(
+        sim.grab_near([5.0, 5.0, 5.0], 0.1, 1.0),
+        Err(RuntimeError::NothingInReach { .. })
+    ));
+    assert!(matches!(
+        sim.grab_near([f64::NAN, 0.0, 0.0], 0.1, 1.0),
+        Err(RuntimeError::NotFinite { .. })
+    ));
+    let h = sim.grab(&[n - 1], 10.0).unwrap();
+    assert!(matches!(
+        sim.move_handle(h, [0.0, f64::INFINITY, 0.0]),
+        Err(RuntimeError::NotFinite { .. })
+    ));
+    let mut short = vec![0.0f32; 5];
+    assert!(matches!(
+        sim.surface_positions_into(&mut short),
+        Err(RuntimeError::BufferLength { .. })
+    ));
+    sim.release(h).unwrap();
+}
+
+#[test]
+fn interaction_errors_are_typed() {
+    let (model, mut full) = simulators(-9.81);
+    refusals(&mut model.simulator().unwrap(), "reduced");
+    refusals(&mut full, "full");
+}
+
+/// Under gravity, for 20 steps: the trajectory of the surface.
+fn fall<S: Interactive>(sim: &mut S) -> Vec<Vec<f64>> {
+    let mut buf = vec![0.0; 3 * sim.surface().vertices().len()];
+    (0..20)
+        .map(|_| {
+            sim.step().unwrap();
+            sim.surface_positions_into(&mut buf).unwrap();
+            buf.clone()
+        })
+        .collect()
+}
+
+#[test]
+fn reset_gravity_and_read_back() {
+    let (model, mut full) = simulators(-9.81);
+    let mut reduced = model.simulator().unwrap();
+    // Reset gives a new simulator's trajectory, bit for bit.
+    let first = fall(&mut reduced);
+    reduced.reset();
+    assert_eq!(reduced.steps(), 0);
+    assert_eq!(fall(&mut reduced), first);
+    let first_full = fall(&mut full);
+    full.reset();
+    assert_eq!(fall(&mut full), first_full);
+    // Without gravity (or any force) a body at rest stays there.
+    still(&mut reduced);
+    still(&mut full);
+    // The surface in f32 and f64 is the positions of the surface vertices.
+    reduced.set_gravity(true);
+    for _ in 0..5 {
+        reduced.step().unwrap();
+    }
+    let mut all = vec![0.0; 3 * reduced.rest_positions().len()];
+    reduced.positions_into(&mut all).unwrap();
+    let ns = reduced.surface().vertices().len();
+    let (mut s64, mut s32) = (vec![0.0f64; 3 * ns], vec![0.0f32; 3 * ns]);
+    reduced.surface_positions_into(&mut s64).unwrap();
+    reduced.surface_positions_into(&mut s32).unwrap();
+    for (i, &v) in reduced.surface().vertices().iter().enumerate() {
+        for c in 0..3 {
+            let x = all[3 * v + c];
+            assert!((s64[3 * i + c] - x).abs() <= 1e-14, "vertex {v}");
+            assert!((s32[3 * i + c] as f64 - x).abs() <= 1e-7 * x.abs().max(1.0));
+        }
+    }
+    // Triangles index the surface vertices.
+    let tris = reduced.surface().triangles();
+    assert!(!tris.is_empty() && tris.iter().flatten().all(|&i| (i as usize) < ns));
+}
+
+/// Reset, gravity off, ten steps: still at rest.
+fn still<S: Interactive>(sim: &mut S) {
+    sim.reset();
+    sim.set_gravity(false);
+    assert!(!sim.gravity());
+    for _ in 0..10 {
+        sim.step().unwrap();
+    }
+    assert!(max_displacement(sim) < 1e-12);
+}
+
+#[test]
+fn a_model_with_the_rows_in_use_reads_its_surface_but_not_its_interior() {
+    let m = bar([6, 2, 2], -9.81);
+    let basis = snapshot_basis(&m, 8);
+    let surface = m.mesh.surface_vertices();
+    let rule = surface_rule(&m, 12);
+    let model = build_with_rule(Kind::NeuralCubature, &m, &basis, Rows::Used, Some(&rule));
+    let interior = (0..m.mesh.num_vertices())
+        .find(|v| !surface.contains(v))
+        .unwrap();
+    assert!(!model.space.vertices.contains(&interior));
+    let mut sim = model.simulator().unwrap();
+    sim.step().unwrap();
+    let mut x = vec![0.0; 3 * m.mesh.num_vertices()];
+    assert!(matches!(
+        sim.positions_into(&mut x),
+        Err(RuntimeError::Reduced(ReducedError::NoBasisRows { vertex })) if vertex == interior
+    ));
+    assert!(matches!(
+        sim.grab(&[interior], 10.0),
+        Err(RuntimeError::Reduced(ReducedError::NoBasisRows { .. }))
+    ));
+    let mut surface = vec![0.0f32; 3 * sim.surface().vertices().len()];
+    sim.surface_positions_into(&mut surface).unwrap();
+    assert!(surface.iter().all(|x| x.is_finite()));
+}

@@ -1,0 +1,189 @@
+//! A reduced method's trained model as one self-contained file (DESIGN §11): a
+//! [`latent_sim::ReducedModel`] built from the cached stages, for `cargo xtask export` and
+//! `run`, and for the runners of `simulate` and `run`, which step the same model through
+//! latent-sim's runtime.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use fem_core::integrator::{FullSpaceModel, TimeConfig};
+use fem_core::material::MaterialConfig;
+use fem_core::optim::SolverConfig;
+use latent_sim::ReducedModel;
+use latent_sim::model::{MeasuredError, ModelSource, Provenance, Rows, StageKey, SubspaceSource};
+
+use crate::pipeline::{Pipeline, Progress};
+use crate::simulate::{Method, solver_for};
+
+/// The method `cargo xtask export` exports and `run` writes the model of: the paper's.
+pub const DEFAULT_METHOD: Method = Method::NeuralCubature;
+
+/// The method whose model `run` writes among `methods`: [`DEFAULT_METHOD`] when it ran, else the
+/// first reduced method (none when only full-space methods ran).
+pub fn run_method(methods: &[Method]) -> Option<Method> {
+    if methods.contains(&DEFAULT_METHOD) {
+        Some(DEFAULT_METHOD)
+    } else {
+        methods.iter().copied().find(|m| !m.is_full())
+    }
+}
+
+/// Where `cargo xtask export` and `run` put `method`'s model: `<folder>/<method>.ldm`.
+pub fn model_path(folder: &std::path::Path, method: Method) -> PathBuf {
+    folder.join(format!("{}.ldm", method.name()))
+}
+
+/// The model of reduced `method` on `model` (built with `material`; its forces are not part of
+/// the model) with the time step of `time` and the solver settings `solver`, from the cached
+/// stages (computed when missing), keeping the basis rows `rows`.
+///
+/// # Errors
+/// For a full-space method, or when a stage fails or its products do not fit the model.
+#[allow(clippy::too_many_arguments)]
+pub fn reduced_model(
+    pipeline: &mut Pipeline<'_>,
+    method: Method,
+    model: &FullSpaceModel,
+    material: &MaterialConfig,
+    time: &TimeConfig,
+    solver: SolverConfig,
+    rows: Rows,
+    progress: Progress<'_>,
+) -> Result<ReducedModel> {
+    if method.is_full() {
+        bail!(
+            "{} is a full-space method; only the reduced methods (pca, pca-cubature, neural, \
+             neural-cubature) have a trained model",
+            method.name()
+        );
+    }
+    let scene = pipeline.scene;
+    let key = |stage: &str, key: u64| StageKey {
+        stage: stage.into(),
+        key,
+    };
+    let mut stage_keys = vec![
+        key("snapshots", pipeline.snapshots_key()),
+        key("pca", pipeline.pca_key()),
+    ];
+    let training = |name: String, value: f64| MeasuredError {
+        name,
+        held_out: false,
+        value,
+    };
+    let fit = pipeline.pca(progress)?;
+    let mut errors = Vec::new();
+    if let Some(&e) = fit.max_vertex_error_per_k.get(fit.chosen_k() - 1) {
+        errors.push(training(
+            format!(
+                "PCA (k = {}): largest vertex distance over the snapshots (m)",
+                fit.chosen_k()
+            ),
+            e,
+        ));
+    }
+    let neural = matches!(method, Method::Neural | Method::NeuralCubature);
+    // The stages in the order the runners always asked for them.
+    let trained = if neural {
+        stage_keys.push(key("train", pipeline.train_key()));
+        let t = pipeline.train(progress)?;
+        errors.push(training(
+            format!(
+                "autoencoder (d = {}): largest vertex distance over the snapshots (m)",
+                t.latent_dim
+            ),
+            t.max_vertex_error,
+        ));
+        Some(t)
+    } else {
+        None
+    };
+    let cubature = match method {
+        Method::PcaCubature => {
+            stage_keys.push(key("cubature", pipeline.cubature_key()));
+            Some(pipeline.cubature(progress)?)
+        }
+        Method::NeuralCubature => {
+            stage_keys.push(key("cubature-neural", pipeline.cubature_neural_key()));
+            Some(pipeline.cubature_neural(progress)?)
+        }
+        _ => None,
+    };
+    if let Some(c) = &cubature {
+        errors.push(training(
+            format!(
+                "cubature ({} elements): relative reduced-force error on the training poses",
+                c.rule.len()
+            ),
+            c.rule.training_error,
+        ));
+        errors.push(MeasuredError {
+            name: "cubature: relative reduced-force error on held-out test trajectory 0".into(),
+            held_out: true,
+            value: c.held_out_error,
+        });
+    }
+    let complement = if neural {
+        let columns = pipeline.complement_columns(progress)?;
+        if !columns.is_empty() {
+            stage_keys.push(key("complement", pipeline.complement_key()));
+        }
+        columns
+    } else {
+        Vec::new()
+    };
+    let subspace = match &trained {
+        Some(t) => SubspaceSource::Neural {
+            autoencoder: &t.model,
+            onset_directions: scene.reduced.onset_directions,
+            complement: &complement,
+        },
+        None => SubspaceSource::Linear,
+    };
+    let source = ModelSource {
+        model,
+        material,
+        time,
+        basis: &fit.basis,
+        cubature: cubature.as_ref().map(|c| &c.rule),
+        subspace,
+        solver,
+        preconditioning: scene.reduced.preconditioner,
+        full_solver: scene.solver.clone(),
+        rows,
+        provenance: Provenance {
+            project_version: env!("CARGO_PKG_VERSION").into(),
+            scene: scene.name.clone(),
+            method: method.name().into(),
+            stage_keys,
+            errors,
+        },
+    };
+    ReducedModel::build(source)
+        .map_err(|e| anyhow::anyhow!("{}: model of {}: {e}", scene.source, method.name()))
+}
+
+/// The model of reduced `method` on the scene, with the solver settings `cargo xtask run` steps
+/// it with, keeping the basis rows `rows` (the rows in use, by default).
+///
+/// # Errors
+/// As [`reduced_model`].
+pub fn scene_model(
+    pipeline: &mut Pipeline<'_>,
+    method: Method,
+    rows: Rows,
+    progress: Progress<'_>,
+) -> Result<ReducedModel> {
+    let scene = pipeline.scene;
+    let model = pipeline.model.clone();
+    reduced_model(
+        pipeline,
+        method,
+        &model,
+        &scene.material,
+        &scene.time,
+        solver_for(scene, method),
+        rows,
+        progress,
+    )
+}

@@ -1,0 +1,162 @@
+//! The trained model leaving the pipeline: `run` writes the default method's model file beside
+//! its report, and a model loaded from its file, driven by the held-out trajectory's forces
+//! through latent-sim's runtime, steps bit for bit as `run` and `simulate` step the method.
+
+use std::path::{Path, PathBuf};
+
+use latent_sim::model::Rows;
+use latent_sim::{Interactive, ReducedModel};
+use pipeline::export::{self, model_path};
+use pipeline::pipeline::Pipeline;
+use pipeline::run::{RunOptions, run};
+use pipeline::scene::Scene;
+use pipeline::simulate::{Method, Runner, SimulateOptions, Trajectory, setup};
+
+/// A bar with interior vertices (so that a model keeps only some rows), trained in seconds.
+const TINY: &str = r#"
+name = "export"
+[mesh]
+generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 2, 2] }
+[material]
+youngs_modulus = 1.0e5
+poisson_ratio = 0.4
+density = 1000.0
+[[pin]]
+plane = { axis = "x", side = "min" }
+[time]
+step = 0.02
+frames = 8
+[training]
+schedules = 3
+frames_per_schedule = 8
+[test]
+frames_per_schedule = 8
+[pca]
+dimension = 6
+[cubature]
+tolerance = 0.05
+[autoencoder]
+latent_dim = 3
+hidden = [8]
+epochs = 30
+batch_size = 8
+"#;
+
+fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir()
+        .join(format!("pipeline-model-export-{}", std::process::id()))
+        .join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn no_progress(_: usize, _: usize) {}
+
+#[test]
+fn a_model_loaded_from_its_file_replays_the_runners_trajectory_bit_for_bit() {
+    let scene = Scene::from_str(TINY, Path::new("."), "tiny.toml").unwrap();
+    let dir = scratch("replay");
+    let mut p = Pipeline::new(&scene, &dir.join("cache")).unwrap();
+    for method in [
+        Method::Pca,
+        Method::PcaCubature,
+        Method::Neural,
+        Method::NeuralCubature,
+    ] {
+        let opts = SimulateOptions {
+            method,
+            trajectory: Trajectory::Test(0),
+            out: dir.join(method.name()),
+            frames: None,
+            every: 0,
+            solver: None,
+        };
+        let (model, time, solver) = setup(&p, &opts).unwrap();
+        let forces = model.forces.clone();
+        assert!(!forces.is_empty());
+        let mut runner = Runner::new(
+            &mut p,
+            method,
+            model,
+            &scene.material,
+            time.clone(),
+            solver,
+            &no_progress,
+        )
+        .unwrap();
+        let path = model_path(&dir, method);
+        export::scene_model(&mut p, method, Rows::Used, &no_progress)
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        let loaded = ReducedModel::load(&path).unwrap();
+        assert_eq!(loaded.provenance.method, method.name());
+        let mut sim = loaded.simulator().unwrap();
+        for f in forces {
+            sim.add_force(f).unwrap();
+        }
+        let Runner::Reduced(reference) = &mut runner else {
+            panic!("a reduced runner")
+        };
+        for step in 1..=time.frames {
+            reference.step_report().unwrap();
+            sim.step().unwrap();
+            let (a, b) = (reference.coefficients(), sim.coefficients());
+            assert!(
+                a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{}: step {step}: {a:?} vs {b:?}",
+                method.name()
+            );
+        }
+    }
+}
+
+#[test]
+fn run_writes_the_default_methods_model_beside_its_report() {
+    let scene = Scene::from_str(TINY, Path::new("."), "tiny.toml").unwrap();
+    let dir = scratch("run");
+    let mut p = Pipeline::new(&scene, &dir.join("cache")).unwrap();
+    let opts = RunOptions {
+        out: dir.join("out"),
+        every: 0,
+        methods: vec![Method::Full, Method::Pca, Method::NeuralCubature],
+        trajectory: 0,
+    };
+    let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    assert_eq!(
+        export::run_method(&opts.methods),
+        Some(export::DEFAULT_METHOD)
+    );
+    let model = ReducedModel::load(&model_path(&opts.out, Method::NeuralCubature)).unwrap();
+    assert!(opts.out.join("report.json").exists());
+    assert_eq!(model.provenance.scene, "export");
+    let row = rows.iter().find(|r| r.method == "neural-cubature").unwrap();
+    let held_out = model
+        .provenance
+        .errors
+        .iter()
+        .find(|e| {
+            e.held_out && e.name.contains("test trajectory 0") && e.name.contains("displacement")
+        })
+        .unwrap();
+    assert_eq!(held_out.value, row.mean_rel_error);
+    let stages: Vec<&str> = model
+        .provenance
+        .stage_keys
+        .iter()
+        .map(|k| k.stage.as_str())
+        .collect();
+    assert_eq!(stages, ["snapshots", "pca", "train", "cubature-neural"]);
+    // Only reduced methods have a model; without the default, the first reduced one is written.
+    assert_eq!(
+        export::run_method(&[Method::Full, Method::FullNewton]),
+        None
+    );
+    assert_eq!(
+        export::run_method(&[Method::Full, Method::PcaCubature, Method::Pca]),
+        Some(Method::PcaCubature)
+    );
+    let err = export::scene_model(&mut p, Method::Full, Rows::Used, &no_progress).unwrap_err();
+    assert!(err.to_string().contains("full-space method"), "{err}");
+}
