@@ -3,7 +3,7 @@
 //! gravity, the basis rows in use with the reduced matrices of the whole basis, the decoder,
 //! the cubature rule, the linear directions, the solver settings — and where it came from.
 //!
-//! [`ReducedModel::save`] and [`ReducedModel::load`] write and read it ([`file`] has the layout
+//! [`ReducedModel::save`] and [`ReducedModel::load`] write and read it ([`mod@file`] has the layout
 //! and the typed errors of a damaged file); [`ReducedModel::simulator`] steps it with exactly the
 //! settings `cargo xtask run` measures, and [`crate::FullRuntime::from_model`] steps the same
 //! mesh in full space.
