@@ -3,6 +3,7 @@
 
 mod assembly;
 mod integrator;
+mod large_strain;
 mod materials;
 mod readers;
 
