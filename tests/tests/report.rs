@@ -308,7 +308,7 @@ fn mean_distance(out: &Path, a: &str, b: &str, frames: usize) -> f64 {
 /// leave its method's trajectory within 1 % of the trajectory without it
 /// (measured: 0.28 % and 0.14 %; with every weight replaced by 1, 35 % and 13 %), and move the
 /// reported error by at most half a percentage point (measured: 0.01 and 0.04; with unit
-/// weights 26 and 8.6).
+/// weights 26 and 8.5).
 #[test]
 fn cubature_rules_stay_close_to_every_element() {
     let text =
