@@ -1,25 +1,42 @@
 //! Support for the workspace's end-to-end tests (in `tests/tests/`).
 //!
 //! Tests that compare against independent references read them from the `shared/` folder beside
-//! the repository. A user's clone has no such folder, so those tests print why they skip.
+//! the repository. A user's clone has no such folder, so those tests say what they skip and why.
 
+use std::io::Write;
 use std::path::PathBuf;
 
-/// The `shared/` folder beside the repository (or `$LATENT_SHARED_DIR`), if present; prints a
-/// skip reason otherwise.
-pub fn shared_dir() -> Option<PathBuf> {
+/// This package's folder, read when the test runs: `cargo test` sets `CARGO_MANIFEST_DIR` for
+/// the test process too, so a copy of the checkout tested against the same build (`.ci/run`
+/// does this) looks beside the copy, not beside the checkout that compiled the binary. The
+/// compile-time value serves a test binary started by hand.
+pub fn manifest_dir() -> PathBuf {
+    std::env::var_os("CARGO_MANIFEST_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")))
+}
+
+/// The `shared/` folder beside the repository (or `$LATENT_SHARED_DIR`), if present; otherwise
+/// prints one line saying that `what` is skipped and why.
+pub fn shared_dir(what: &str) -> Option<PathBuf> {
     let dir = std::env::var_os("LATENT_SHARED_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+        .unwrap_or_else(|| manifest_dir().join("../../shared"));
     if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipping: {} not found (set LATENT_SHARED_DIR to the shared/ folder to run this test)",
-            dir.display()
-        );
-        None
+        return Some(dir);
     }
+    skip(&format!(
+        "{what}: {} not found (set LATENT_SHARED_DIR to the shared/ folder to run it)",
+        dir.display()
+    ));
+    None
+}
+
+/// Prints `skipping <reason>` as one line on the terminal. Written to the stderr handle itself,
+/// not through `eprintln!`, which the test harness captures and shows only for failed tests: a
+/// skip must be seen in a passing run.
+pub fn skip(reason: &str) {
+    let _ = writeln!(std::io::stderr(), "skipping {reason}");
 }
 
 /// A fresh empty folder under the system's temporary directory for a test's output.

@@ -65,7 +65,9 @@ fn vec3(v: &Value) -> [f64; 3] {
 
 #[test]
 fn static_cantilever_tip_matches_reference_at_every_gravity_level() {
-    let Some(shared) = shared_dir() else { return };
+    let Some(shared) = shared_dir("the static cantilever against shared/validation/beams") else {
+        return;
+    };
     let beams = shared.join("validation/beams");
     let reference: Value =
         serde_json::from_str(&std::fs::read_to_string(beams.join("beam_reference.json")).unwrap())
@@ -127,7 +129,10 @@ fn static_cantilever_tip_matches_reference_at_every_gravity_level() {
 
 #[test]
 fn implicit_euler_trajectory_matches_reference() {
-    let Some(shared) = shared_dir() else { return };
+    let Some(shared) = shared_dir("the implicit Euler trajectory against shared/validation/beams")
+    else {
+        return;
+    };
     let beams = shared.join("validation/beams");
     let reference: Value = serde_json::from_str(
         &std::fs::read_to_string(beams.join("dynamics_reference.json")).unwrap(),

@@ -11,7 +11,7 @@
 //! Schedule `i` of a family depends only on (seed, i), so any subset (a shard) can be simulated
 //! anywhere and merged.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 use rayon::prelude::*;
 
@@ -396,7 +396,10 @@ pub fn generate(
 ) -> Result<SnapshotSet, FemError> {
     let (index, count) = shard;
     let schedules: Vec<usize> = (index..config.schedules).step_by(count.max(1)).collect();
-    let done = AtomicUsize::new(0);
+    // Counted and reported under one lock, so the calls arrive in order and the last one is
+    // `done == total`, where a progress bar finishes (a bare atomic count let two threads call
+    // out of order).
+    let done = Mutex::new(0);
     let probe = StiffnessProbe::new(model, config.frames_per_schedule as f64 * time.step)?;
     let results: Vec<Result<Vec<Vec<f64>>, FemError>> = schedules
         .par_iter()
@@ -415,7 +418,9 @@ pub fn generate(
                 index: s,
                 source: Box::new(e),
             });
-            progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+            let mut count = done.lock().unwrap_or_else(|e| e.into_inner());
+            *count += 1;
+            progress(*count);
             r
         })
         .collect();

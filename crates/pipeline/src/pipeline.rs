@@ -692,10 +692,19 @@ impl<'a> Pipeline<'a> {
                 ),
                 _ => {}
             }
+            let reported = std::cell::Cell::new((0, 0));
             let search = nn::train_search(q.as_ref(), &cfg, error_of, |_, r| {
+                reported.set((r.epoch, r.epochs));
                 progress(r.epoch, r.epochs)
             })
             .map_err(|e| anyhow::anyhow!("{}: stage train: {e}", p.scene.source))?;
+            // Training that stops early for want of improvement ends before its last epoch:
+            // the stage still reports its end, where a progress bar finishes.
+            if let (done, total) = reported.get()
+                && done < total
+            {
+                progress(total, total);
+            }
             let train_seconds = start.elapsed().as_secs_f64();
             let chosen = search.chosen_trial();
             let d = chosen.latent_dim;

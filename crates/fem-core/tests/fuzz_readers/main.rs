@@ -22,7 +22,8 @@ mod check;
 mod mutate;
 mod writers;
 
-use std::path::{Path, PathBuf};
+use std::io::Write;
+use std::path::PathBuf;
 use std::sync::Once;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -62,11 +63,28 @@ fn setup() {
     });
 }
 
-fn shared_dir() -> Option<PathBuf> {
+/// This package's folder, read when the test runs (`cargo test` sets `CARGO_MANIFEST_DIR` for
+/// the test process too), so a copy of the checkout tested against the same build (`.ci/run`)
+/// looks beside the copy, not beside the checkout that compiled the binary.
+fn manifest_dir() -> PathBuf {
+    std::env::var_os("CARGO_MANIFEST_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")))
+}
+
+/// The `shared/` folder beside the repository (or `$LATENT_SHARED_DIR`): found, or where it was
+/// looked for.
+fn shared_dir() -> Result<PathBuf, PathBuf> {
     let dir = std::env::var_os("LATENT_SHARED_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"));
-    dir.is_dir().then_some(dir)
+        .unwrap_or_else(|| manifest_dir().join("../../../shared"));
+    if dir.is_dir() { Ok(dir) } else { Err(dir) }
+}
+
+/// Prints `skipping <reason>` as one line on the terminal, through the stderr handle itself:
+/// the harness captures `eprintln!` and shows it only for failed tests.
+fn skip(reason: &str) {
+    let _ = writeln!(std::io::stderr(), "skipping {reason}");
 }
 
 /// Which reader takes each format.
@@ -184,12 +202,17 @@ fn generated_bases(reader: Reader) -> Vec<Base> {
 
 /// The real meshes of `shared/` that `reader` takes (empty, with a printed reason, without it).
 fn shared_bases(reader: Reader) -> Vec<Base> {
-    let Some(shared) = shared_dir() else {
-        eprintln!(
-            "{}: skipping the shared meshes: shared/ not found (set LATENT_SHARED_DIR)",
-            reader.name()
-        );
-        return Vec::new();
+    let shared = match shared_dir() {
+        Ok(dir) => dir,
+        Err(dir) => {
+            skip(&format!(
+                "the shared meshes for the {} reader (generated ones only): {} not found \
+                 (set LATENT_SHARED_DIR to the shared/ folder to use them)",
+                reader.name(),
+                dir.display()
+            ));
+            return Vec::new();
+        }
     };
     let ext = match reader {
         Reader::Medit => "mesh",
@@ -549,7 +572,7 @@ mod defects;
 #[test]
 #[ignore = "writes files into fuzz/seeds"]
 fn write_fuzz_seeds() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds");
+    let root = manifest_dir().join("../../fuzz/seeds");
     for (target, formats) in fuzz_targets() {
         let dir = root.join(target);
         std::fs::create_dir_all(&dir).unwrap();
@@ -584,9 +607,9 @@ fn fuzz_targets() -> [(&'static str, Vec<Format>); 4] {
 #[test]
 fn fuzz_seeds_are_valid_meshes() {
     setup();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds");
+    let root = manifest_dir().join("../../fuzz/seeds");
     if !root.is_dir() {
-        eprintln!("skipping: {} not found", root.display());
+        skip(&format!("the fuzz seeds: {} not found", root.display()));
         return;
     }
     for (target, formats) in fuzz_targets() {

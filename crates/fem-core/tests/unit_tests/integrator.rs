@@ -368,7 +368,9 @@ fn quasi_static_without_support_is_a_clear_error() {
 /// a scene that names either one completes the schedule.
 #[test]
 fn a_step_where_newton_crawls_is_redone_with_lbfgs() {
-    let Some(shared) = super::shared_dir() else {
+    let Some(shared) =
+        super::shared_dir("the dinosaur step Newton cannot finish (needs the AutoDef mesh)")
+    else {
         return;
     };
     let (mesh, _) = fem_core::io::read_mesh(&shared.join("meshes/25cm_dino_low.mesh")).unwrap();

@@ -414,8 +414,10 @@ mod neohookean_table {
     use super::*;
     use serde_json::Value;
 
-    fn table() -> Option<Value> {
-        let path = super::super::shared_dir()?.join("validation/materials/neohookean_table.json");
+    /// The table, or `None` (saying that `what` is skipped) without `shared/`.
+    fn table(what: &str) -> Option<Value> {
+        let path =
+            super::super::shared_dir(what)?.join("validation/materials/neohookean_table.json");
         let text = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
         Some(serde_json::from_str(&text).expect("neohookean_table.json is valid JSON"))
@@ -471,7 +473,9 @@ mod neohookean_table {
 
     #[test]
     fn cases_match_reference_values() {
-        let Some(t) = table() else { return };
+        let Some(t) = table("the Neo-Hookean reference table") else {
+            return;
+        };
         let mu = num(&t["parameters"]["mu"]);
         let lam = num(&t["parameters"]["lam"]);
         let m = NeoHookean::new(Lame { mu, lambda: lam });
@@ -519,7 +523,9 @@ mod neohookean_table {
 
     #[test]
     fn inverted_case_has_infinite_energy() {
-        let Some(t) = table() else { return };
+        let Some(t) = table("the Neo-Hookean table's inverted case") else {
+            return;
+        };
         let m = NeoHookean::new(Lame {
             mu: num(&t["parameters"]["mu"]),
             lambda: num(&t["parameters"]["lam"]),
@@ -537,7 +543,9 @@ mod neohookean_table {
 
     #[test]
     fn single_tet_energy_forces_and_hessian() {
-        let Some(t) = table() else { return };
+        let Some(t) = table("the Neo-Hookean table's single tet") else {
+            return;
+        };
         let t = &t["single_tet_element"];
         let m = NeoHookean::new(Lame {
             mu: num(&t["mu"]),

@@ -152,7 +152,7 @@ fn assert_same_mesh(name: &str, a: &TetMesh, b: &TetMesh, tolerance: f64) {
 
 #[test]
 fn every_shared_mesh_reads_with_its_declared_counts() {
-    let Some(shared) = super::shared_dir() else {
+    let Some(shared) = super::shared_dir("the shared meshes' declared counts") else {
         return;
     };
     let dir = shared.join("meshes");
@@ -174,7 +174,7 @@ fn every_shared_mesh_reads_with_its_declared_counts() {
 
 #[test]
 fn readers_agree_on_the_spot_reference_in_every_format() {
-    let Some(shared) = super::shared_dir() else {
+    let Some(shared) = super::shared_dir("the spot reference in every format") else {
         return;
     };
     let dir = shared.join("validation/readers");
@@ -246,7 +246,7 @@ fn readers_agree_on_the_spot_reference_in_every_format() {
 
 #[test]
 fn beam_meshes_are_identical_in_every_format() {
-    let Some(shared) = super::shared_dir() else {
+    let Some(shared) = super::shared_dir("the beam meshes in every format") else {
         return;
     };
     let dir = shared.join("validation/beams");

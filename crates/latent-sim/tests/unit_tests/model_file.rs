@@ -314,7 +314,11 @@ proptest! {
 #[test]
 #[ignore]
 fn write_fuzz_seeds() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/model");
+    use std::path::PathBuf;
+    let dir = std::env::var_os("CARGO_MANIFEST_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")))
+        .join("../../fuzz/seeds/model");
     std::fs::create_dir_all(&dir).unwrap();
     let m = bar([2, 1, 1], -9.81);
     let basis = snapshot_basis(&m, 3);

@@ -480,3 +480,141 @@ fn derivatives_scale_to_the_autodef_shape() {
         assert!(rel_err(&jac[j * 49..(j + 1) * 49], &col) <= 1e-13);
     }
 }
+
+/// The number of first-layer units of `mlp` at `z` whose activation is not the identity there
+/// (ELU: a₁ < 0), from a₁ = W₁z + b₁ computed here.
+fn nonlinear_first_units(mlp: &Mlp, z: &[f64]) -> usize {
+    let (n0, n1) = (mlp.sizes()[0], mlp.sizes()[1]);
+    let (w, b) = (mlp.weights(0), mlp.bias(0));
+    (0..n1)
+        .filter(|&i| b[i] + (0..n0).map(|j| w[i * n0 + j] * z[j]).sum::<f64>() < 0.0)
+        .count()
+}
+
+/// Whether the VJP at `z` runs its second layer over the first layer's nonlinear units S (the
+/// condition `Mlp` documents for its sparse layer: two hidden layers or more and
+/// 4 (|S| + n₀) < 3 n₁) with at least a tenth of the units in S, so that the correction over S
+/// has work to do: a test can require the path it means to check.
+fn takes_sparse_layer(mlp: &Mlp, z: &[f64]) -> bool {
+    let (sizes, s) = (mlp.sizes(), nonlinear_first_units(mlp, z));
+    sizes.len() > 3 && 4 * (s + sizes[0]) < 3 * sizes[1] && 10 * s >= sizes[1]
+}
+
+/// Jᵀv by central differences of v · f(z) with f = `f`, step `h`.
+fn fd_vjp(f: &mut dyn FnMut(&[f64]) -> Vec<f64>, z: &[f64], v: &[f64], h: f64) -> Vec<f64> {
+    (0..z.len())
+        .map(|j| {
+            let (mut zp, mut zm) = (z.to_vec(), z.to_vec());
+            zp[j] += h;
+            zm[j] -= h;
+            (dot(&f(&zp), v) - dot(&f(&zm), v)) / (2.0 * h)
+        })
+        .collect()
+}
+
+/// The decoder's VJP where it runs the second layer over the first layer's nonlinear units only
+/// (the path a trained ELU decoder takes at run time) against central differences of the plain
+/// forward pass: decoders shaped like the cantilever's (20 → 100 → 100 → k) and the catapult's
+/// (24 → 200 → 200 → 89), a small one, and one with three hidden layers (the sparse layer below
+/// a dense top layer), at first-layer bias shifts that leave 10–40 % of the units nonlinear, on
+/// a fresh and on a reused workspace. Each case asserts that it takes the sparse path.
+#[test]
+fn sparse_layer_vjp_matches_finite_differences() {
+    let cases: [(&[usize], f64); 5] = [
+        (&[20, 100, 100, 60], 0.5),
+        (&[24, 200, 200, 89], 0.3),
+        (&[3, 40, 11, 5], 0.3),
+        (&[4, 64, 32, 16, 12], 0.5),
+        (&[6, 48, 48, 48, 30], 0.5),
+    ];
+    for (case, (sizes, shift)) in cases.into_iter().enumerate() {
+        let mut mlp = random_mlp(sizes, Activation::Elu, 300 + case as u64);
+        mlp.bias_mut(0).iter_mut().for_each(|b| *b += shift);
+        let (n_in, n_out) = (sizes[0], sizes[sizes.len() - 1]);
+        let mut rng = Rng::new(400 + case as u64);
+        let mut reused = mlp.workspace();
+        let mut sparse_trials = 0;
+        for trial in 0..4 {
+            let z: Vec<f64> = rng.vec(n_in).iter().map(|x| 0.5 * x).collect();
+            let v = rng.vec(n_out);
+            let what = format!("{sizes:?}, bias shift {shift}, trial {trial}");
+            if !takes_sparse_layer(&mlp, &z) {
+                continue;
+            }
+            sparse_trials += 1;
+            let fd = fd_vjp(&mut |x| plain_forward(&mlp, x), &z, &v, 1e-6);
+            for ws in [&mut reused, &mut mlp.workspace()] {
+                let mut jtv = vec![f64::NAN; n_in];
+                mlp.vjp(&z, &v, &mut jtv, ws);
+                let err = rel_err(&jtv, &fd);
+                assert!(err <= 1e-7, "{what}: VJP against differences {err:e}");
+                let mut y = vec![0.0; n_out];
+                mlp.forward(&z, &mut y, ws);
+                mlp.vjp_cached(&v, &mut jtv, ws);
+                let err = rel_err(&jtv, &fd);
+                assert!(
+                    err <= 1e-7,
+                    "{what}: cached VJP against differences {err:e}"
+                );
+            }
+        }
+        assert!(
+            sparse_trials >= 3,
+            "{sizes:?}: only {sparse_trials} of 4 points take the sparse layer"
+        );
+    }
+}
+
+/// The same through the autoencoder's decode VJP as the latent simulation calls it: with the
+/// input scaling and the linear skip, ∂/∂z of v · decode(z) by central differences of `decode`.
+#[test]
+fn sparse_layer_decode_vjp_matches_finite_differences() {
+    let (k, d) = (30, 6);
+    let mut rng = Rng::new(500);
+    let shift: Vec<f64> = rng.vec(k).iter().map(|x| 0.1 * x).collect();
+    let scale: Vec<f64> = (0..k).map(|i| 10f64.powi(-(i as i32 % 4))).collect();
+    for (case, skip) in [false, true].into_iter().enumerate() {
+        let scaling = InputScaling::new(shift.clone(), scale.clone()).unwrap();
+        let encoder = random_mlp(&[k, 32, d], Activation::Elu, 501);
+        let mut decoder = random_mlp(&[d, 120, 80, k], Activation::Elu, 502);
+        decoder.bias_mut(0).iter_mut().for_each(|b| *b += 0.3);
+        let mut ae = Autoencoder::new(encoder.clone(), decoder.clone(), Some(scaling)).unwrap();
+        if skip {
+            // with_skip zeroes the output layers: put the random ones back.
+            ae = ae.with_skip().unwrap();
+            let (enc, dec) = ae.networks_mut();
+            *enc = encoder;
+            *dec = decoder.clone();
+        }
+        let mut ws = ae.workspace();
+        let mut fd_ws = ae.workspace();
+        for trial in 0..3 {
+            let z: Vec<f64> = rng.vec(d).iter().map(|x| 0.5 * x).collect();
+            let v = rng.vec(k);
+            let what = format!("skip {skip} (case {case}), trial {trial}");
+            assert!(takes_sparse_layer(&decoder, &z), "{what}: dense path");
+            let fd = fd_vjp(
+                &mut |x| {
+                    let mut q = vec![0.0; k];
+                    ae.decode(x, &mut q, &mut fd_ws);
+                    q
+                },
+                &z,
+                &v,
+                1e-6,
+            );
+            let mut jtv = vec![f64::NAN; d];
+            ae.decode_vjp(&z, &v, &mut jtv, &mut ws);
+            let err = rel_err(&jtv, &fd);
+            assert!(
+                err <= 1e-7,
+                "{what}: decode VJP against differences {err:e}"
+            );
+            let mut q = vec![0.0; k];
+            ae.decode(&z, &mut q, &mut ws);
+            let mut cached = vec![f64::NAN; d];
+            ae.decode_vjp_cached(&v, &mut cached, &mut ws);
+            assert_eq!(cached, jtv, "{what}: cached decode VJP");
+        }
+    }
+}

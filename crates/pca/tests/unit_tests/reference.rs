@@ -41,7 +41,7 @@ fn numbers(v: &serde_json::Value) -> Vec<f64> {
 
 #[test]
 fn reproduces_the_shared_beam_snapshot_pca() {
-    let Some(shared) = shared_dir() else {
+    let Some(shared) = shared_dir("the PCA of the shared beam snapshots") else {
         return;
     };
     let s = read_snapshots(&shared.join(SNAPSHOTS));

@@ -1,0 +1,260 @@
+//! Progress reaches 100 %: every long stage (snapshots and their shards, the reference, the
+//! autoencoder's training) and `run`, `simulate` and `stress` report progress that ends with a
+//! call `done == total`, the call on which `cargo xtask` finishes and clears its bar. The
+//! callbacks record every call, in order, from whichever thread makes it.
+
+use std::path::Path;
+use std::sync::Mutex;
+
+use pipeline::pipeline::Pipeline;
+use pipeline::run::{RunOptions, run};
+use pipeline::scene::Scene;
+use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
+use pipeline::stress::{Condition, stress};
+use tests::scratch_dir;
+
+const TINY: &str = r#"
+name = "tiny"
+[mesh]
+generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
+[material]
+youngs_modulus = 1.0e5
+poisson_ratio = 0.4
+density = 1000.0
+[[pin]]
+plane = { axis = "x", side = "min" }
+[time]
+step = 0.02
+frames = 10
+[solver]
+tolerance = 1.0e-8
+[training]
+schedules = 5
+frames_per_schedule = 8
+[test]
+frames_per_schedule = 12
+[pca]
+dimension = 6
+[autoencoder]
+latent_dim = 2
+hidden = [16, 16]
+epochs = 150
+batch_size = 16
+"#;
+
+fn scene(text: &str) -> Scene {
+    Scene::from_str(text, Path::new("."), "tiny.toml").unwrap()
+}
+
+fn no_progress(_: usize, _: usize) {}
+
+/// Every `(done, total)` call, in the order made.
+#[derive(Debug, Default)]
+struct Recorder(Mutex<Vec<(usize, usize)>>);
+
+impl Recorder {
+    fn record(&self, done: usize, total: usize) {
+        self.0.lock().unwrap().push((done, total));
+    }
+
+    fn calls(&self) -> Vec<(usize, usize)> {
+        self.0.lock().unwrap().clone()
+    }
+}
+
+/// The calls count 1, 2, …, `total`, in order, with that total.
+fn assert_counts_to(what: &str, calls: &[(usize, usize)], total: usize) {
+    let expected: Vec<(usize, usize)> = (1..=total).map(|d| (d, total)).collect();
+    assert_eq!(calls, expected, "{what}");
+}
+
+/// Calls from several stages one after another: each stage's calls (a stage starts where the
+/// total changes or the count does not grow) end with `done == total`, none passes its total.
+/// Returns the stages' totals.
+fn assert_each_stage_completes(what: &str, calls: &[(usize, usize)]) -> Vec<usize> {
+    assert!(!calls.is_empty(), "{what}: no progress at all");
+    let mut totals = Vec::new();
+    for (i, &(done, total)) in calls.iter().enumerate() {
+        assert!(
+            total > 0 && done <= total,
+            "{what}: call {i} is {done}/{total}"
+        );
+        let ends = calls
+            .get(i + 1)
+            .is_none_or(|&(d, t)| t != total || d <= done);
+        if ends {
+            assert_eq!(
+                done, total,
+                "{what}: a stage stopped at {done}/{total}: {calls:?}"
+            );
+            totals.push(total);
+        }
+    }
+    totals
+}
+
+#[test]
+fn snapshot_stages_count_every_schedule() {
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, &scratch_dir("progress-snapshots")).unwrap();
+    // Schedules run in parallel; the count still arrives in order, ending at the total.
+    let rec = Recorder::default();
+    p.snapshots(&|d, t| rec.record(d, t)).unwrap();
+    assert_counts_to("snapshots", &rec.calls(), 5);
+    let rec = Recorder::default();
+    p.snapshot_shard(1, 2, &|d, t| rec.record(d, t)).unwrap();
+    assert_counts_to("shard 1/2 (schedules 1, 3)", &rec.calls(), 2);
+}
+
+#[test]
+fn the_reference_counts_every_frame() {
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, &scratch_dir("progress-reference")).unwrap();
+    let rec = Recorder::default();
+    p.reference(0, &|d, t| rec.record(d, t)).unwrap();
+    assert_counts_to("reference", &rec.calls(), 12);
+}
+
+/// Training counts epochs over all restarts and ends at the total when it runs them all, when
+/// it stops early for want of improvement (patience), and when a restart stops early.
+#[test]
+fn training_ends_at_its_total_even_when_it_stops_early() {
+    for (case, settings, early) in [
+        ("all epochs", "epochs = 150\npatience = 0\n", false),
+        ("stops early", "epochs = 400\npatience = 3\n", true),
+        (
+            "two restarts",
+            "epochs = 150\npatience = 3\nrestarts = 2\n",
+            true,
+        ),
+    ] {
+        let text = TINY.replace("epochs = 150\n", settings);
+        let s = scene(&text);
+        let mut p = Pipeline::new(&s, &scratch_dir(&format!("progress-train-{case}"))).unwrap();
+        p.pca(&no_progress).unwrap();
+        let rec = Recorder::default();
+        let trained = p.train(&|d, t| rec.record(d, t)).unwrap();
+        assert_eq!(
+            trained.stopped_early,
+            early,
+            "{case}: {} epochs",
+            trained.history.len()
+        );
+        let calls = rec.calls();
+        let total = s.autoencoder.epochs * s.autoencoder.restarts;
+        assert!(calls.iter().all(|&(_, t)| t == total), "{case}: {calls:?}");
+        assert!(
+            calls.windows(2).all(|w| w[0].0 < w[1].0),
+            "{case}: {calls:?}"
+        );
+        assert_eq!(calls.last(), Some(&(total, total)), "{case}");
+    }
+}
+
+/// `run` counts each reduced method's steps to the trajectory's frames (full space is the
+/// reference stage's trajectory); the stages it computes on the way (into an empty cache) each
+/// complete.
+#[test]
+fn run_counts_every_step_of_every_method() {
+    let s = scene(TINY);
+    let out = scratch_dir("progress-run");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let methods = [
+        Method::Full,
+        Method::Pca,
+        Method::PcaCubature,
+        Method::Neural,
+        Method::NeuralCubature,
+    ];
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: methods.to_vec(),
+        trajectory: 0,
+    };
+    let stages = Recorder::default();
+    let mut steps: Vec<(String, usize, usize)> = Vec::new();
+    run(
+        &mut p,
+        &opts,
+        &|d, t| stages.record(d, t),
+        &mut |m, d, t| steps.push((m.to_string(), d, t)),
+    )
+    .unwrap();
+    for m in methods {
+        let calls: Vec<(usize, usize)> = steps
+            .iter()
+            .filter(|(name, _, _)| name == m.name())
+            .map(|&(_, d, t)| (d, t))
+            .collect();
+        // Full space is the cached reference, whose frames count as a stage below.
+        let frames = if m == Method::Full { 0 } else { 12 };
+        assert_counts_to(m.name(), &calls, frames);
+    }
+    let totals = assert_each_stage_completes("run's stages", &stages.calls());
+    // The reference (12 frames), the snapshots (5 schedules) and the training (150 epochs).
+    for total in [12, 5, 150] {
+        assert!(totals.contains(&total), "run's stages: {totals:?}");
+    }
+}
+
+#[test]
+fn simulate_counts_every_step() {
+    let s = scene(TINY);
+    let out = scratch_dir("progress-simulate");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    for (method, trajectory, frames) in [
+        (Method::Full, Trajectory::Scene, 10),
+        (Method::Neural, Trajectory::Test(0), 12),
+    ] {
+        let opts = SimulateOptions {
+            method,
+            trajectory,
+            out: out.join(method.name()),
+            frames: None,
+            every: 0,
+            solver: None,
+        };
+        let stages = Recorder::default();
+        let mut steps = Vec::new();
+        simulate(&mut p, &opts, &|d, t| stages.record(d, t), &mut |d, t| {
+            steps.push((d, t))
+        })
+        .unwrap();
+        assert_counts_to(method.name(), &steps, frames);
+        if method == Method::Neural {
+            assert_each_stage_completes("simulate's stages", &stages.calls());
+        }
+    }
+}
+
+/// `stress` reports every (condition, method) pair once, condition by condition, and the
+/// stages it computes complete.
+#[test]
+fn stress_reports_every_method_under_every_condition() {
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, &scratch_dir("progress-stress")).unwrap();
+    let methods = [Method::Full, Method::Pca, Method::NeuralCubature];
+    let conditions = [
+        Condition::Base,
+        Condition::Stiffness(100.0),
+        Condition::FreeRun(30),
+    ];
+    let stages = Recorder::default();
+    let mut reported = Vec::new();
+    stress(
+        &mut p,
+        &methods,
+        &conditions,
+        0,
+        &|d, t| stages.record(d, t),
+        &mut |r| reported.push((r.condition.clone(), r.method.clone())),
+    )
+    .unwrap();
+    let expected: Vec<(String, String)> = conditions
+        .iter()
+        .flat_map(|c| methods.iter().map(|m| (c.label(), m.name().to_string())))
+        .collect();
+    assert_eq!(reported, expected);
+    assert_each_stage_completes("stress's stages", &stages.calls());
+}
