@@ -26,7 +26,7 @@ struct Common {
     /// Scene file (TOML); the built-in cantilever when absent.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Artifact cache folder (default: out/<scene name>/cache).
+    /// Artifact cache folder (default: out/SCENE/cache, SCENE the scene's name).
     #[arg(long)]
     cache: Option<PathBuf>,
 }
@@ -38,7 +38,7 @@ enum Command {
     Run {
         #[command(flatten)]
         common: Common,
-        /// Output folder (default: out/<scene name>).
+        /// Output folder (default: out/SCENE).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Write every K-th frame of each method (0: none).
@@ -69,7 +69,7 @@ enum Command {
         /// Overrides the scene's `[solver] method`.
         #[arg(long, value_enum)]
         solver: Option<SolverArg>,
-        /// Output folder (default: out/<scene name>/<method>).
+        /// Output folder (default: out/SCENE/METHOD).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -98,7 +98,7 @@ enum Command {
         common: Common,
     },
     /// Stage `train`: the autoencoder on the PCA coefficients (runs earlier stages if needed);
-    /// writes the loss curve to out/<scene>/train/.
+    /// writes the loss curve to out/SCENE/train/.
     Train {
         #[command(flatten)]
         common: Common,
@@ -108,7 +108,7 @@ enum Command {
     Bench {
         #[command(flatten)]
         common: Common,
-        /// Output folder (default: out/<scene name>/bench).
+        /// Output folder (default: out/SCENE/bench).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Timed runs of the trajectory per variant (after one warm-up run).
@@ -136,7 +136,7 @@ enum Command {
     Stress {
         #[command(flatten)]
         common: Common,
-        /// Output folder for stress.json and stress.md (default: out/<scene name>/stress).
+        /// Output folder for stress.json and stress.md (default: out/SCENE/stress).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Methods to stress.
