@@ -83,15 +83,14 @@ struct Axis {
 }
 
 impl Axis {
-    fn fit(mut lo: f64, mut hi: f64, scale: Scale) -> Self {
+    /// `pad` (in decades, on a log axis) keeps markers near a decade's end off the frame.
+    fn fit(mut lo: f64, mut hi: f64, scale: Scale, pad: f64) -> Self {
         // No point to show: an empty range (∞, −∞).
         if !(lo.is_finite() && hi.is_finite()) {
             (lo, hi) = (0.0, 1.0);
         }
         if scale == Scale::Log {
-            // Whole decades, with a marker near one's end (0.08 decade is about its half-width)
-            // kept off the frame.
-            (lo, hi) = ((lo - 0.08).floor(), (hi + 0.08).ceil());
+            (lo, hi) = ((lo - pad).floor(), (hi + pad).ceil());
         }
         if hi - lo < 1e-12 {
             lo -= 0.5;
@@ -174,9 +173,16 @@ pub fn svg(plot: &Plot, series: &[Series]) -> String {
         (lo, hi) if lo <= hi => (lo, hi),
         _ => range(&mut fitted(true)),
     };
+    // Whole decades on log axes; where markers are drawn, one near a decade's end moves the
+    // axis on to the next (0.08 decade is about a marker's half-width).
+    let pad = if series.iter().any(|s| !s.line) {
+        0.08
+    } else {
+        0.0
+    };
     let (xa, ya) = (
-        Axis::fit(x0, x1, plot.x_scale),
-        Axis::fit(y0, y1, plot.y_scale),
+        Axis::fit(x0, x1, plot.x_scale, pad),
+        Axis::fit(y0, y1, plot.y_scale, pad),
     );
     let listed: Vec<usize> = (0..series.len()).filter(|&i| !pts[i].is_empty()).collect();
     let longest = listed
@@ -398,7 +404,7 @@ mod tests {
         };
         // Frames 1..=100 of h = 0.01: the axis used to tick at 0.01, 0.208, 0.406, ….
         let points = (1..=100)
-            .map(|j| (j as f64 * 0.01, 2e-3 * j as f64))
+            .map(|j| (j as f64 * 0.01, 1e-3 * j as f64))
             .collect();
         let s = svg(
             &plot,
@@ -411,11 +417,11 @@ mod tests {
         );
         let labels = tick_labels(&s);
         assert_eq!(labels[..6], ["0.0", "0.2", "0.4", "0.6", "0.8", "1.0"]);
-        assert_eq!(labels[6..], ["1e-3", "1e-2", "1e-1", "1e0"]);
-        let axis = Axis::fit(3.0, 1234.0, Scale::Linear);
+        assert_eq!(labels[6..], ["1e-3", "1e-2", "1e-1"]);
+        let axis = Axis::fit(3.0, 1234.0, Scale::Linear, 0.0);
         assert_eq!((axis.lo, axis.hi), (0.0, 1500.0));
         assert_eq!(axis.label(axis.ticks[1]), "500");
-        let axis = Axis::fit(-0.013, 0.0021, Scale::Linear);
+        let axis = Axis::fit(-0.013, 0.0021, Scale::Linear, 0.0);
         assert_eq!(
             axis.ticks
                 .iter()
