@@ -9,6 +9,7 @@ use pipeline::bench::{BenchOptions, bench};
 use pipeline::pipeline::{Pipeline, StageOutcome};
 use pipeline::run::{RunOptions, markdown, run};
 use pipeline::scene::Scene;
+use pipeline::shard::Shard;
 use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
 use pipeline::stress::{Condition, Outcome, stress};
 
@@ -25,7 +26,7 @@ struct Common {
     /// Scene file (TOML); the built-in cantilever when absent.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Artifact cache folder (default: out/<scene name>/cache).
+    /// Artifact cache folder (default: out/SCENE/cache, SCENE the scene's name).
     #[arg(long)]
     cache: Option<PathBuf>,
 }
@@ -37,7 +38,7 @@ enum Command {
     Run {
         #[command(flatten)]
         common: Common,
-        /// Output folder (default: out/<scene name>).
+        /// Output folder (default: out/SCENE).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Write every K-th frame of each method (0: none).
@@ -68,7 +69,7 @@ enum Command {
         /// Overrides the scene's `[solver] method`.
         #[arg(long, value_enum)]
         solver: Option<SolverArg>,
-        /// Output folder (default: out/<scene name>/<method>).
+        /// Output folder (default: out/SCENE/METHOD).
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -93,7 +94,10 @@ enum Command {
     Snapshots {
         #[command(flatten)]
         common: Common,
-        /// Simulate only shard I of N (every N-th schedule from I), for array jobs.
+        /// Simulate only shard I of N (every N-th schedule from I), for array jobs. Without it,
+        /// an array job's variables give the shard: SLURM_ARRAY_TASK_ID and
+        /// SLURM_ARRAY_TASK_COUNT, or a Kubernetes Indexed Job's JOB_COMPLETION_INDEX with
+        /// LATENT_SHARD_COUNT (docs/cluster.md).
         #[arg(long, value_name = "I/N")]
         shard: Option<String>,
         /// Combine shards 0..N into the snapshots artifact.
@@ -111,7 +115,7 @@ enum Command {
         common: Common,
     },
     /// Stage `train`: the autoencoder on the PCA coefficients (runs earlier stages if needed);
-    /// writes the loss curve to out/<scene>/train/.
+    /// writes the loss curve to out/SCENE/train/.
     Train {
         #[command(flatten)]
         common: Common,
@@ -121,7 +125,7 @@ enum Command {
     Bench {
         #[command(flatten)]
         common: Common,
-        /// Output folder (default: out/<scene name>/bench).
+        /// Output folder (default: out/SCENE/bench).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Timed runs of the trajectory per variant (after one warm-up run).
@@ -149,7 +153,7 @@ enum Command {
     Stress {
         #[command(flatten)]
         common: Common,
-        /// Output folder for stress.json and stress.md (default: out/<scene name>/stress).
+        /// Output folder for stress.json and stress.md (default: out/SCENE/stress).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Methods to stress.
@@ -605,11 +609,22 @@ fn dispatch(cli: Cli) -> Result<()> {
         } => {
             let scene = load_scene(common.scene.as_ref())?;
             let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;
+            // Without a flag, an array job's variables give the shard.
+            let shard = match (shard, merge) {
+                (Some(s), _) => Some(parse_shard(&s)?),
+                (None, None) => Shard::from_env()?.map(|(s, scheduler)| {
+                    println!(
+                        "shard {}/{} from the {scheduler}'s variables",
+                        s.index, s.count
+                    );
+                    s
+                }),
+                (None, Some(_)) => None,
+            };
             match (shard, merge) {
                 (Some(_), Some(_)) => bail!("give either --shard or --merge, not both"),
                 (Some(s), None) => {
-                    let (i, n) = parse_shard(&s)?;
-                    p.snapshot_shard(i, n, &stage_progress)?;
+                    p.snapshot_shard(s.index, s.count, &stage_progress)?;
                 }
                 (None, Some(n)) => {
                     let set = p.merge_shards(n)?;
@@ -749,13 +764,9 @@ fn print_training(t: &pipeline::pipeline::TrainedModel) {
     );
 }
 
-fn parse_shard(s: &str) -> Result<(usize, usize)> {
+fn parse_shard(s: &str) -> Result<Shard> {
     let (i, n) = s
         .split_once('/')
         .ok_or_else(|| anyhow::anyhow!("--shard takes I/N, e.g. 0/4; got {s}"))?;
-    let (i, n): (usize, usize) = (i.trim().parse()?, n.trim().parse()?);
-    if n == 0 || i >= n {
-        bail!("--shard {s}: need 0 ≤ I < N");
-    }
-    Ok((i, n))
+    Ok(Shard::new(i.trim().parse()?, n.trim().parse()?)?)
 }

@@ -18,6 +18,12 @@
 //! how duplicate, zero and rank-deficient columns are handled. The algorithm is deterministic
 //! (ties go to the lowest index).
 //!
+//! The factor and the passive set survive between solves, so the greedy fit, which grows the
+//! problem by one column a step, goes on from the last step's solution instead of starting over.
+//! On the default cantilever's cubature stage (training matrix and greedy fit, 169 of 15,360
+//! elements) that took 2.6–2.8 s, against 3.3–3.5 s with every step solved from an empty passive
+//! set (two runs each, alternating).
+//!
 //! ```
 //! use faer::mat;
 //! // min ‖Ax − b‖, x ≥ 0: the unconstrained solution is (1, −1), the constrained one (0.5, 0).

@@ -28,11 +28,14 @@ pub mod mass;
 pub mod material;
 pub mod mesh;
 pub mod optim;
-pub mod rng;
 pub mod snapshots;
 pub mod sparse;
 pub mod sparse_cholesky;
 pub mod step_norm;
+
+/// The seeded generator of the training schedules, re-exported so `fem_core::rng::SplitMix64`
+/// names the one the schedules are drawn with.
+pub use rng;
 
 pub use error::{FemError, MeshError};
 pub use mesh::TetMesh;

@@ -21,6 +21,10 @@
 //! order; Wᵀg adds the rows' contributions to each element in row order, four rows at a time. So
 //! [`fused_layer`] gives bit for bit the values of [`mat_vec`] followed by [`mat_t_vec`], and
 //! `Mlp::vjp` equals `Mlp::forward` + `Mlp::vjp_cached`.
+//!
+//! Hand-written over `pulp` rather than left to faer's products because it measured faster on the
+//! X decoder 6 → 200 → 200 → 49 (best of rounds, `crates/nn/README.md`): forward 9.1 → 5.6 µs,
+//! VJP 14.9 → 7.9 µs, JVP 14.4 → 8.1 µs, Jacobian 25.4 → 17.7 µs.
 
 use pulp::{Arch, Simd, WithSimd};
 

@@ -73,7 +73,6 @@ mod kernels;
 mod linalg;
 pub mod mlp;
 pub mod peak;
-pub mod rng;
 pub mod scaling;
 pub mod simd;
 pub mod synthetic;

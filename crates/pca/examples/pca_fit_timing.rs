@@ -6,16 +6,6 @@ use std::time::Instant;
 use faer::Mat;
 use pca::{PcaBasis, PcaConfig};
 
-/// SplitMix64 → uniform in [-1, 1).
-fn uniform(state: &mut u64) -> f64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
-    2.0 * ((z >> 11) as f64 / (1u64 << 53) as f64) - 1.0
-}
-
 fn main() -> Result<(), pca::PcaError> {
     let mut args = std::env::args()
         .skip(1)
@@ -24,9 +14,9 @@ fn main() -> Result<(), pca::PcaError> {
     let ns = args.next().unwrap_or(2_000);
     // Rank-400 snapshots with a spectrum decaying like 1/m²: S = A diag(1/m²) B.
     let r = 400.min(n).min(ns);
-    let mut state = 7;
-    let a = Mat::from_fn(n, r, |_, m| uniform(&mut state) / ((m + 1) as f64).powi(2));
-    let b = Mat::from_fn(r, ns, |_, _| uniform(&mut state));
+    let mut rng = rng::SplitMix64::new(7);
+    let a = Mat::from_fn(n, r, |_, m| rng.range(-1.0, 1.0) / ((m + 1) as f64).powi(2));
+    let b = Mat::from_fn(r, ns, |_, _| rng.range(-1.0, 1.0));
     let s = a * b;
     let mass: Vec<f64> = (0..n).map(|i| 1.0 + ((i / 3) % 7) as f64 * 0.1).collect();
     println!(

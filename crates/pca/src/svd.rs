@@ -5,6 +5,10 @@
 //! expensive step for a 10⁴ × 2·10³ snapshot matrix, while PCA needs at most `max_dimension`
 //! (≤ 300) of them. Here Q is kept in factored form and applied only to the columns asked for.
 //! Wide matrices (more snapshots than rows) use faer's thin SVD directly: U is then at most n × n.
+//!
+//! Measured on 10,002 × 2,000 snapshots (`cargo run -p pca --release --example pca_fit_timing`,
+//! 2 threads, two runs on a shared machine): a fit to 300 columns 4.7–6.4 s, faer's thin SVD
+//! with its vectors 8.1–18.4 s.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::householder::{

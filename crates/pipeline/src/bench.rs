@@ -312,8 +312,9 @@ pub fn markdown(rows: &[BenchRow]) -> String {
 }
 
 /// Error (log) against ms/step (log), one series per method, the Pareto front as a line.
-/// Variants with zero error (the full-space reference itself) cannot sit on a log axis and are
-/// left out.
+/// Variants with zero error (the full-space reference itself) cannot sit on a log axis: the
+/// title names the reference's cost instead. The other full-space solvers are drawn apart, so
+/// that their round-off does not set the y axis.
 pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
     let mut series: Vec<Series> = Vec::new();
     for r in rows {
@@ -324,10 +325,16 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
                 name: r.report.method.clone(),
                 points: vec![point],
                 line: false,
+                reference: crate::run::is_full_method(&r.report.method),
                 ..Default::default()
             }),
         }
     }
+    let full = rows
+        .iter()
+        .find(|r| r.report.method == Method::Full.name())
+        .map(|r| format!(" (full: {:.1} ms/step)", r.report.ms_per_step))
+        .unwrap_or_default();
     let mut front: Vec<(f64, f64)> = rows
         .iter()
         .filter(|r| r.pareto && r.report.mean_rel_error > 0.0)
@@ -338,10 +345,11 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
         name: "Pareto front".into(),
         points: front,
         line: true,
+        color: Some(crate::plot::GUIDE),
         ..Default::default()
     });
     let p = Plot {
-        title: format!("{scene}: error against cost, every method and size"),
+        title: format!("{scene}: error against cost, every method and size{full}"),
         x_label: "median ms per step".into(),
         y_label: "mean relative error".into(),
         x_scale: Scale::Log,

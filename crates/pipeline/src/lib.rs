@@ -12,6 +12,7 @@ pub mod pipeline;
 pub mod plot;
 pub mod run;
 pub mod scene;
+pub mod shard;
 pub mod simulate;
 pub mod stress;
 pub mod suite;

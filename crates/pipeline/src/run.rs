@@ -514,7 +514,8 @@ fn mean_usize(v: &[usize]) -> f64 {
 }
 
 /// Mean relative error against median ms/step, one marker per method, both axes logarithmic.
-/// Full space has no error against itself: it is named in the title instead of plotted.
+/// Full space has no error against itself: it is named in the title instead of plotted; the
+/// other full-space solvers are drawn apart, so that their round-off does not set the y axis.
 pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     let full = rows
         .iter()
@@ -528,6 +529,7 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
             name: format!("{} (dim {}, {} el.)", r.method, r.dim, r.cubature_elements),
             points: vec![(r.ms_per_step, r.mean_rel_error)],
             line: false,
+            reference: is_full_method(&r.method),
             ..Default::default()
         })
         .collect();
@@ -543,7 +545,7 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
 
 /// Whether a report row's method name is a full-space method (any solver): the method read
 /// back from the serde name that [`Method::name`] also gives, then [`Method::is_full`].
-fn is_full_method(name: &str) -> bool {
+pub(crate) fn is_full_method(name: &str) -> bool {
     use serde::Deserialize;
     use serde::de::IntoDeserializer;
     use serde::de::value::{Error, StrDeserializer};
@@ -605,6 +607,7 @@ pub fn frame_error_plot(scene: &str, rows: &[MethodReport], h: f64) -> String {
             line: true,
             dashed: false,
             color: Some(i),
+            ..Default::default()
         });
         series.push(Series {
             // Listed under its method, in its colour, dashed: the name can stay short.
@@ -613,6 +616,7 @@ pub fn frame_error_plot(scene: &str, rows: &[MethodReport], h: f64) -> String {
             line: true,
             dashed: true,
             color: Some(i),
+            ..Default::default()
         });
     }
     let plot = Plot {

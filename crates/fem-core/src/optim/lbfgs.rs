@@ -4,6 +4,11 @@
 //! P is the factorised rest-pose system (K₀ + M/h² in full space, its projection in a subspace),
 //! which makes the first iteration a good Newton step and keeps the iteration count low.
 //! All work vectors are owned by [`Lbfgs`] and reused, so a solve allocates nothing.
+//!
+//! Hand-written: the optimisation crates lag the faer and nalgebra versions used here, and the
+//! preconditioner is what makes it pay. On the default cantilever (9,720 DOFs) full space with
+//! this solver took 27.9 ms/step (6.3 iterations) against Newton's 124.9 ms/step (2.1 iterations)
+//! in one `cargo xtask run` (its report's `full` and `full-newton` rows).
 
 use super::{
     Objective, SolveParams, SolveStats, armijo_backtracking, at_roundoff_floor, dot, norm, relative,

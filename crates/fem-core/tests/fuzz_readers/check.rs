@@ -43,8 +43,6 @@ pub enum Outcome {
     ParseError,
     /// Read, then refused by validation ([`MeshError::Invalid`] with file and reason).
     InvalidMesh,
-    /// A panic inside mshio, contained by the Gmsh reader and turned into a parse error.
-    ContainedPanic,
 }
 
 /// Whether `bytes` is a Gmsh file whose header declares binary data (errors there carry byte
@@ -118,9 +116,6 @@ pub fn check(reader: Reader, bytes: &[u8]) -> Result<Outcome, String> {
             };
             if p != path || reason.trim().is_empty() {
                 return Err(format!("malformed parse error: {e:?}"));
-            }
-            if reason.contains("(mshio) failed") {
-                return Ok(Outcome::ContainedPanic);
             }
             let binary = reader == Reader::Gmsh && gmsh_binary(bytes);
             let line_ok = if binary {

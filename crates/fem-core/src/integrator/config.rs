@@ -1,0 +1,64 @@
+//! The `[time]` and `[gravity]` sections of a scene.
+
+use crate::FemError;
+
+/// The `[time]` section of a scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeConfig {
+    /// Time step h in seconds.
+    pub step: f64,
+    /// Number of steps `simulate` takes with the scene's own forces (200 when not given).
+    #[serde(default = "default_frames")]
+    pub frames: usize,
+    /// Solve for static equilibrium at each frame's loads instead of dynamics.
+    #[serde(default)]
+    pub quasi_static: bool,
+}
+
+fn default_frames() -> usize {
+    200
+}
+
+impl Default for TimeConfig {
+    fn default() -> Self {
+        Self {
+            step: 0.01,
+            frames: default_frames(),
+            quasi_static: false,
+        }
+    }
+}
+
+impl TimeConfig {
+    pub fn check(&self, errors: &mut Vec<FemError>) {
+        if !(self.step.is_finite() && self.step > 0.0) {
+            errors.push(FemError::InvalidConfig {
+                field: "time.step".into(),
+                reason: format!("must be a positive number of seconds, got {}", self.step),
+            });
+        }
+        if self.frames == 0 {
+            errors.push(FemError::InvalidConfig {
+                field: "time.frames".into(),
+                reason: "must be at least 1".into(),
+            });
+        }
+    }
+}
+
+/// The `[gravity]` section of a scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GravityConfig {
+    /// Gravitational acceleration in m/s².
+    pub acceleration: [f64; 3],
+}
+
+impl Default for GravityConfig {
+    fn default() -> Self {
+        Self {
+            acceleration: [0.0, -9.81, 0.0],
+        }
+    }
+}
