@@ -2,6 +2,9 @@
 
 use std::time::Instant;
 
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt;
+use faer::{MatMut, MatRef, Par};
 use fem_core::FemError;
 use fem_core::forces::ExternalForce;
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
@@ -78,10 +81,26 @@ struct Timers {
 
 /// Dense Cholesky factor L (lower, column-major) of a symmetric d×d matrix, reused between
 /// factorisations so that refactorising allocates nothing. Also the preconditioner z = P⁻¹ r.
-#[derive(Debug, Default)]
+///
+/// faer's blocked LLᵀ (`faer::linalg::cholesky::llt`) on one thread, through its explicit layer
+/// so that the factor and its scratch are owned here. Measured against the hand-written
+/// unblocked factor it replaced (best of five timing loops, one thread): at d = 6 0.10 against
+/// 0.04 µs, at d = 26 0.92 against 1.12, at d = 42 2.7 against 4.6, at d = 66 9.9 against 20.9;
+/// the two solves take the same time (0.08–2 µs). The small sizes lose tens of nanoseconds, the
+/// large ones gain where the factor costs anything.
+#[derive(Default)]
 pub(crate) struct DenseFactor {
     n: usize,
     l: Vec<f64>,
+    scratch: Option<MemBuffer>,
+}
+
+impl std::fmt::Debug for DenseFactor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DenseFactor")
+            .field("n", &self.n)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Preconditioner for DenseFactor {
@@ -95,29 +114,24 @@ impl DenseFactor {
     /// Cholesky of a + shift·I from the lower triangle of `a`; false when a pivot is not
     /// positive (or not finite).
     fn try_factor(&mut self, a: &[f64], n: usize, shift: f64) -> bool {
+        if self.n != n || self.scratch.is_none() {
+            let req =
+                llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default());
+            self.scratch = Some(MemBuffer::new(req));
+        }
         self.n = n;
         self.l.clear();
-        self.l.resize(n * n, 0.0);
-        let l = &mut self.l;
+        self.l.extend_from_slice(&a[..n * n]);
         for j in 0..n {
-            let mut djj = a[j * n + j] + shift;
-            for p in 0..j {
-                djj -= l[p * n + j] * l[p * n + j];
-            }
-            if !(djj > 0.0 && djj.is_finite()) {
-                return false;
-            }
-            let ljj = djj.sqrt();
-            l[j * n + j] = ljj;
-            for i in j + 1..n {
-                let mut s = a[j * n + i];
-                for p in 0..j {
-                    s -= l[p * n + i] * l[p * n + j];
-                }
-                l[j * n + i] = s / ljj;
-            }
+            self.l[j * n + j] += shift;
         }
-        true
+        let stack = MemStack::new(self.scratch.as_mut().expect("scratch allocated above"));
+        let l = MatMut::from_column_major_slice_mut(&mut self.l, n, n);
+        // faer stops at a pivot that is not positive (NaN included); an infinite pivot leaves an
+        // infinite diagonal entry of L.
+        llt::factor::cholesky_in_place(l, Default::default(), Par::Seq, stack, Default::default())
+            .is_ok()
+            && (0..n).all(|j| self.l[j * n + j].is_finite())
     }
 
     /// Factorises, adding a growing diagonal shift when `a` is only semidefinite.
@@ -144,18 +158,10 @@ impl DenseFactor {
 
     /// x ← (LLᵀ)⁻¹ x.
     pub(crate) fn solve_in_place(&self, x: &mut [f64]) {
-        let (n, l) = (self.n, &self.l);
-        for j in 0..n {
-            x[j] /= l[j * n + j];
-            let xj = x[j];
-            for i in j + 1..n {
-                x[i] -= l[j * n + i] * xj;
-            }
-        }
-        for j in (0..n).rev() {
-            let s = dot(&l[j * n + j + 1..(j + 1) * n], &x[j + 1..]);
-            x[j] = (x[j] - s) / l[j * n + j];
-        }
+        let n = self.n;
+        let l = MatRef::from_column_major_slice(&self.l, n, n);
+        let x = MatMut::from_column_major_slice_mut(&mut x[..n], n, 1);
+        llt::solve::solve_in_place(l, x, Par::Seq, MemStack::new(&mut []));
     }
 }
 
