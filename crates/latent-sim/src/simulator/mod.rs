@@ -2,24 +2,33 @@
 
 use std::time::Instant;
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt;
-use faer::{MatMut, MatRef, Par};
 use fem_core::FemError;
 use fem_core::forces::ExternalForce;
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
 use fem_core::material::Material;
 use fem_core::optim::{
-    Lbfgs, NewtonSystem, Objective, Preconditioner, PreconditionerUse, SolveParams, SolveStats,
-    SolverConfig, SolverMethod, newton,
+    Lbfgs, NewtonSystem, Objective, PreconditionerUse, SolveParams, SolveStats, SolverConfig,
+    SolverMethod, newton,
 };
 use fem_core::{Mat3, with_material};
-use nn::simd::{add_combination, dot_rows};
-use pulp::{Arch, Simd, WithSimd};
+use pulp::Arch;
 
 use crate::ElasticPath;
-use crate::reduced::{LANES, PANEL, ReducedSpace, SpaceBuffers, axpy, dot};
+use crate::dense_factor::DenseFactor;
+use crate::reduced::{ReducedSpace, SpaceBuffers, axpy, dot};
 use crate::{ReducedError, Subspace};
+
+mod kernels;
+mod preconditioner;
+mod springs;
+
+pub(crate) use kernels::sandwich;
+use kernels::{
+    BasisTimesQ, ElementGaussNewton, PanelsTimesJacobian, StressTimesRows, VertexRowsToF,
+};
+use preconditioner::PRECOND_EXTRA_ITERATIONS;
+pub use preconditioner::{PRECOND_MAX_AGE, Preconditioning};
+use springs::SpringTerm;
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,162 +86,6 @@ struct Timers {
     newton: f64,
     /// Evaluations of the energy and its gradient.
     evaluations: usize,
-}
-
-/// Dense Cholesky factor L (lower, column-major) of a symmetric d×d matrix, reused between
-/// factorisations so that refactorising allocates nothing. Also the preconditioner z = P⁻¹ r.
-///
-/// faer's blocked LLᵀ (`faer::linalg::cholesky::llt`) on one thread, through its explicit layer
-/// so that the factor and its scratch are owned here. Measured against the hand-written
-/// unblocked factor it replaced (best of five timing loops, one thread): at d = 6 0.10 against
-/// 0.04 µs, at d = 26 0.92 against 1.12, at d = 42 2.7 against 4.6, at d = 66 9.9 against 20.9;
-/// the two solves take the same time (0.08–2 µs). The small sizes lose tens of nanoseconds, the
-/// large ones gain where the factor costs anything.
-#[derive(Default)]
-pub(crate) struct DenseFactor {
-    n: usize,
-    l: Vec<f64>,
-    scratch: Option<MemBuffer>,
-}
-
-impl std::fmt::Debug for DenseFactor {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DenseFactor")
-            .field("n", &self.n)
-            .finish_non_exhaustive()
-    }
-}
-
-impl Preconditioner for DenseFactor {
-    fn apply(&mut self, r: &[f64], z: &mut [f64]) {
-        z.copy_from_slice(r);
-        self.solve_in_place(z);
-    }
-}
-
-impl DenseFactor {
-    /// Cholesky of a + shift·I from the lower triangle of `a`; false when a pivot is not
-    /// positive (or not finite).
-    fn try_factor(&mut self, a: &[f64], n: usize, shift: f64) -> bool {
-        if self.n != n || self.scratch.is_none() {
-            let req =
-                llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default());
-            self.scratch = Some(MemBuffer::new(req));
-        }
-        self.n = n;
-        self.l.clear();
-        self.l.extend_from_slice(&a[..n * n]);
-        for j in 0..n {
-            self.l[j * n + j] += shift;
-        }
-        let stack = MemStack::new(self.scratch.as_mut().expect("scratch allocated above"));
-        let l = MatMut::from_column_major_slice_mut(&mut self.l, n, n);
-        // faer stops at a pivot that is not positive (NaN included); an infinite pivot leaves an
-        // infinite diagonal entry of L.
-        llt::factor::cholesky_in_place(l, Default::default(), Par::Seq, stack, Default::default())
-            .is_ok()
-            && (0..n).all(|j| self.l[j * n + j].is_finite())
-    }
-
-    /// Factorises, adding a growing diagonal shift when `a` is only semidefinite.
-    pub(crate) fn factor(
-        &mut self,
-        a: &[f64],
-        d: usize,
-        what: &'static str,
-    ) -> Result<(), ReducedError> {
-        let mean = (0..d).map(|i| a[i * d + i].abs()).sum::<f64>() / d.max(1) as f64;
-        let mut shift = 0.0;
-        for _ in 0..12 {
-            if self.try_factor(a, d, shift) {
-                return Ok(());
-            }
-            shift = if shift == 0.0 {
-                1e-12 * mean.max(f64::MIN_POSITIVE)
-            } else {
-                shift * 10.0
-            };
-        }
-        Err(ReducedError::NotPositiveDefinite { what })
-    }
-
-    /// x ← (LLᵀ)⁻¹ x.
-    pub(crate) fn solve_in_place(&self, x: &mut [f64]) {
-        let n = self.n;
-        let l = MatRef::from_column_major_slice(&self.l, n, n);
-        let x = MatMut::from_column_major_slice_mut(&mut x[..n], n, 1);
-        llt::solve::solve_in_place(l, x, Par::Seq, MemStack::new(&mut []));
-    }
-}
-
-/// Σ_f k_f/n_f Σ_v U_vᵀU_v over the springs active at the time it was updated for (k×k): the
-/// springs' constant Hessian in q, rebuilt only when a force switches on or off.
-#[derive(Debug, Default)]
-struct SpringTerm {
-    active: Vec<bool>,
-    valid: bool,
-    matrix: Vec<f64>,
-}
-
-impl SpringTerm {
-    fn update(&mut self, model: &FullSpaceModel, space: &ReducedSpace, t: f64) -> &[f64] {
-        let same = self.valid
-            && model
-                .forces
-                .iter()
-                .map(|f| f.is_active(t))
-                .eq(self.active.iter().copied());
-        if !same {
-            let k = space.k;
-            self.active.clear();
-            self.active
-                .extend(model.forces.iter().map(|f| f.is_active(t)));
-            self.matrix.clear();
-            self.matrix.resize(k * k, 0.0);
-            for (f, gram) in model.forces.iter().zip(&space.force_gram) {
-                if f.is_active(t) && f.stiffness > 0.0 {
-                    let s = f.stiffness / f.vertices.len() as f64;
-                    axpy(s, gram, &mut self.matrix);
-                }
-            }
-            self.valid = true;
-        }
-        &self.matrix
-    }
-}
-
-/// The most steps an L-BFGS preconditioner that depends on the state is kept.
-pub const PRECOND_MAX_AGE: usize = 8;
-
-/// A preconditioner that depends on the state is rebuilt once the solves it served have taken,
-/// together, this many iterations more than the first one did: about what a rebuild costs in
-/// energy evaluations (its Jacobian and per-element Gauss–Newton products take 9–10 evaluations'
-/// time on the catapult's 128-element rule). A fixed count, not a timing, so that trajectories
-/// do not depend on the machine's load. On the catapult it measured 5.0 iterations and 24 %
-/// rebuilds per step against 4.5 and 37 % for the rule it replaced (rebuild when one solve takes
-/// half again as many iterations as the first), about 5 % less time.
-const PRECOND_EXTRA_ITERATIONS: usize = 8;
-
-/// The matrix that preconditions the reduced L-BFGS.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Preconditioning {
-    /// `current-state`, with or without cubature. Without cubature its matrix costs every element
-    /// of the mesh, but the rest matrix is so far from the Hessian once the body rotates that
-    /// L-BFGS crawls: on the catapult, pca (no cubature) took 712 ms per step with `rest` (95
-    /// iterations) against 36 ms with `current-state` (15), neural 75 against 15 ms; on the
-    /// cantilever 1.7 against 1.0 ms and 1.1 against 0.8 ms.
-    #[default]
-    Auto,
-    /// The Gauss–Newton matrix Jᵀ(Σ_e w_e U_eᵀ H_e U_e + UᵀMU/h² + springs)J at the state the
-    /// step starts from, with the exact element tangents H_e when the matrix is positive
-    /// definite and tangents projected to be positive semidefinite otherwise (the matrix of
-    /// reduced Newton, over the same elements): it sees the rotations and stretches the body is
-    /// in. Kept for several steps (see [`PRECOND_MAX_AGE`]).
-    CurrentState,
-    /// Jᵀ(UᵀK₀U + UᵀMU/h² + springs)J with the stiffness at rest over every element (AutoDef's):
-    /// cheap to form, but far from the Hessian once the body rotates or stretches.
-    Rest,
 }
 
 /// Implicit Euler in a subspace.
@@ -811,84 +664,6 @@ impl<S: Subspace> ReducedSimulator<S> {
     }
 }
 
-/// out = Bᵀ A B for a symmetric A (k×k) and B (k×d), column-major; `ab` is k×d scratch.
-pub(crate) fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize, ab: &mut [f64], out: &mut [f64]) {
-    Arch::new().dispatch(Sandwich {
-        a: &a[..k * k],
-        b: &b[..k * d],
-        k,
-        d,
-        ab: &mut ab[..k * d],
-        out: &mut out[..d * d],
-    });
-}
-
-/// Bᵀ A B under SIMD dispatch: A B column by column as combinations of four columns of A at a
-/// time (groups of four zero coefficients skipped: B = I for a linear subspace), then Bᵀ(A B) on
-/// and below the diagonal by dot products of four columns of B at a time, mirrored, so the
-/// result is exactly symmetric.
-struct Sandwich<'a> {
-    a: &'a [f64],
-    b: &'a [f64],
-    k: usize,
-    d: usize,
-    ab: &'a mut [f64],
-    out: &'a mut [f64],
-}
-
-impl WithSimd for Sandwich<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Self {
-            a,
-            b,
-            k,
-            d,
-            ab,
-            out,
-        } = self;
-        fn column(m: &[f64], k: usize, j: usize) -> &[f64] {
-            &m[j * k..(j + 1) * k]
-        }
-        for (bj, abj) in b.chunks_exact(k).zip(ab.chunks_exact_mut(k)) {
-            abj.fill(0.0);
-            let mut l = 0;
-            while l + 4 <= k {
-                let c = [bj[l], bj[l + 1], bj[l + 2], bj[l + 3]];
-                if c != [0.0; 4] {
-                    add_combination(simd, abj, c, std::array::from_fn(|t| column(a, k, l + t)));
-                }
-                l += 4;
-            }
-            for l in l..k {
-                if bj[l] != 0.0 {
-                    add_combination(simd, abj, [bj[l]], [column(a, k, l)]);
-                }
-            }
-        }
-        let ab: &[f64] = ab;
-        for j in 0..d {
-            let abj = column(ab, k, j);
-            let mut i = j;
-            while i + 4 <= d {
-                let r: [f64; 4] = dot_rows(simd, std::array::from_fn(|t| column(b, k, i + t)), abj);
-                for (t, &x) in r.iter().enumerate() {
-                    out[j * d + i + t] = x;
-                    out[(i + t) * d + j] = x;
-                }
-                i += 4;
-            }
-            for i in i..d {
-                let x = dot_rows(simd, [column(b, k, i)], abj)[0];
-                out[j * d + i] = x;
-                out[i * d + j] = x;
-            }
-        }
-    }
-}
-
 /// The objective of one reduced step, over latent coordinates z.
 struct StepObjective<'a, S: Subspace> {
     model: &'a FullSpaceModel,
@@ -1199,184 +974,6 @@ fn sum_in_q_is_cheaper(elements: usize, k: usize, d: usize) -> bool {
     let in_q = kernel * (rows * 9.0 * k + k * k * d + 0.5 * k * d * d) + lower * rows * 0.5 * k * k;
     let in_z = full * rows * k * d + kernel * rows * 9.0 * d + lower * rows * 0.5 * d * d;
     in_q < in_z
-}
-
-/// U J on the rows of the element vertices (3·n × d, row-major) from the packed rows of U (panels
-/// of [`PANEL`] rows) and J (k×d, column-major): four columns of J per pass over a panel, a
-/// PANEL × 4 block of accumulators in registers. Exactly J's entries when J = I.
-struct PanelsTimesJacobian<'a> {
-    panels: std::slice::ChunksExact<'a, f64>,
-    rows: usize,
-    jac: &'a [f64],
-    k: usize,
-    d: usize,
-    uj: &'a mut [f64],
-}
-
-impl WithSimd for PanelsTimesJacobian<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, _: S) {
-        let Self {
-            panels,
-            rows: m,
-            jac,
-            k,
-            d,
-            uj,
-        } = self;
-        for (p, panel) in panels.enumerate() {
-            let r0 = p * PANEL;
-            if r0 >= m {
-                break;
-            }
-            let rows = PANEL.min(m - r0);
-            let mut j = 0;
-            while j + 4 <= d {
-                panel_columns::<4>(panel, jac, k, j, r0, rows, d, uj);
-                j += 4;
-            }
-            for j in j..d {
-                panel_columns::<1>(panel, jac, k, j, r0, rows, d, uj);
-            }
-        }
-    }
-}
-
-/// Columns j..j + C of U J on one panel's `rows` rows (from row r0): a PANEL × C block of
-/// accumulators over the panel's columns.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn panel_columns<const C: usize>(
-    panel: &[f64],
-    jac: &[f64],
-    k: usize,
-    j: usize,
-    r0: usize,
-    rows: usize,
-    d: usize,
-    uj: &mut [f64],
-) {
-    let cols: [&[f64]; C] = std::array::from_fn(|t| &jac[(j + t) * k..(j + t + 1) * k]);
-    let mut acc = [[0.0f64; PANEL]; C];
-    for (l, c) in panel.chunks_exact(PANEL).enumerate() {
-        for t in 0..C {
-            let jl = cols[t][l];
-            for i in 0..PANEL {
-                acc[t][i] += c[i] * jl;
-            }
-        }
-    }
-    for i in 0..rows {
-        for t in 0..C {
-            uj[(r0 + i) * d + j + t] = acc[t][i];
-        }
-    }
-}
-
-/// G B (9×d, row-major) from B = U_e J (12×d, row-major): row 3j + i is Σ_a g_a[j] B[3a + i].
-struct VertexRowsToF<'a> {
-    b: &'a [f64],
-    g: [[f64; 3]; 4],
-    d: usize,
-    fb: &'a mut [f64],
-}
-
-impl WithSimd for VertexRowsToF<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Self { b, g, d, fb } = self;
-        for j in 0..3 {
-            for i in 0..3 {
-                let rows = std::array::from_fn(|v| &b[(3 * v + i) * d..(3 * v + i + 1) * d]);
-                let out = &mut fb[(3 * j + i) * d..(3 * j + i + 1) * d];
-                out.fill(0.0);
-                add_combination(simd, out, g.map(|gv| gv[j]), rows);
-            }
-        }
-    }
-}
-
-/// vec(F − I) = B_e q on the element-basis path, from the element's 9 basis rows (of `stride`
-/// entries, k of them used).
-struct BasisTimesQ<'a> {
-    basis: &'a [f64],
-    stride: usize,
-    q: &'a [f64],
-}
-
-impl WithSimd for BasisTimesQ<'_> {
-    type Output = [f64; 9];
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) -> [f64; 9] {
-        let Self { basis, stride, q } = self;
-        let k = q.len();
-        let rows: [&[f64]; 9] = std::array::from_fn(|r| &basis[r * stride..r * stride + k]);
-        dot_rows(simd, rows, q)
-    }
-}
-
-/// The 9 rows of A R into `out` (9 × n, row-major), A a 9×9 stress derivative (column-major)
-/// and R 9 rows of length n: each row one fused linear combination of the rows of R.
-struct StressTimesRows<'a> {
-    a: &'a [f64; 81],
-    rows: [&'a [f64]; 9],
-    out: &'a mut [f64],
-}
-
-impl WithSimd for StressTimesRows<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Self { a, rows, out } = self;
-        let n = rows[0].len();
-        for (r, out) in out.chunks_exact_mut(n).enumerate() {
-            out.fill(0.0);
-            add_combination(simd, out, std::array::from_fn(|c| a[c * 9 + r]), rows);
-        }
-    }
-}
-
-/// One element's Gauss–Newton term in z, from G B (9×d, row-major; B = U_e J): A G B (A the 9×9
-/// stress derivative, column-major, already scaled by w_e V_e) and hz += (G B)ᵀ A (G B), column
-/// by column, on and below the diagonal. Each row of the two products is one fused linear
-/// combination of whole rows.
-struct ElementGaussNewton<'a> {
-    a: &'a [f64; 81],
-    d: usize,
-    fb: &'a [f64],
-    afb: &'a mut [f64],
-    hz: &'a mut [f64],
-}
-
-impl WithSimd for ElementGaussNewton<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Self { a, d, fb, afb, hz } = self;
-        let fb_rows: [&[f64]; 9] = std::array::from_fn(|c| &fb[c * d..(c + 1) * d]);
-        StressTimesRows {
-            a,
-            rows: fb_rows,
-            out: afb,
-        }
-        .with_simd(simd);
-        let afb: &[f64] = afb;
-        // hz is symmetric: column m from row m on (rounded down to a whole SIMD vector, so the
-        // rows stay vectors) is enough, and the caller mirrors the lower triangle.
-        for m in 0..d {
-            let from = m - m % LANES;
-            let coefficients: [f64; 9] = std::array::from_fn(|r| fb_rows[r][m]);
-            let rows = std::array::from_fn(|r| &afb[r * d + from..(r + 1) * d]);
-            add_combination(simd, &mut hz[m * d + from..(m + 1) * d], coefficients, rows);
-        }
-    }
 }
 
 impl<S: Subspace> Objective for StepObjective<'_, S> {
