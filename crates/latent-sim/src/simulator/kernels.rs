@@ -1,8 +1,8 @@
 //! The SIMD kernels of the reduced step (under `pulp` dispatch): Bᵀ A B, U J on the element
 //! rows, G B, B_e q, A R and one element's Gauss–Newton term in z.
 
-use nn::simd::{add_combination, dot_rows};
 use pulp::{Arch, Simd, WithSimd};
+use simd_kernels::rows::{add_combination, dot_rows};
 
 use crate::reduced::{LANES, PANEL};
 
