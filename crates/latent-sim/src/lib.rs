@@ -97,6 +97,7 @@
 //! ```
 
 mod config;
+mod dense_factor;
 pub mod model;
 mod neural;
 mod onset;

@@ -18,8 +18,9 @@
 
 use fem_core::integrator::TimeConfig;
 
+use crate::dense_factor::DenseFactor;
 use crate::reduced::{axpy, dot};
-use crate::simulator::{DenseFactor, sandwich};
+use crate::simulator::sandwich;
 use crate::{ReducedError, ReducedSpace, Subspace};
 
 /// An iterate is kept when at least this fraction of its A-norm is new.

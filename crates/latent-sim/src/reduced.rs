@@ -13,9 +13,9 @@ use fem_core::forces::{ExternalForce, ForceKind};
 use fem_core::integrator::FullSpaceModel;
 use fem_core::material::Material;
 use fem_core::{Mat3, with_material};
-use nn::simd::{add_combination, dot_rows};
 use pca::PcaBasis;
 use pulp::{Arch, Simd, WithSimd};
+use simd_kernels::rows::{add_combination, dot_rows};
 
 use crate::ReducedError;
 

@@ -28,7 +28,9 @@
 
 use pulp::{Arch, Simd, WithSimd};
 
-use crate::{Activation, simd};
+use simd_kernels::rows as simd;
+
+use crate::Activation;
 
 /// Rows per register block: eight independent dot products hide the fused multiply–add latency
 /// (2 units × 4 cycles) while W is streamed.
@@ -562,19 +564,7 @@ pub(crate) fn fused_layer(
     });
 }
 
-/// The number of f64 lanes of the SIMD instruction set [`Arch::dispatch`] picks on this machine
-/// (4 with AVX2), which fixes the layout of [`pack_rows`].
-pub(crate) fn lanes() -> usize {
-    struct Lanes;
-    impl WithSimd for Lanes {
-        type Output = usize;
-        #[inline(always)]
-        fn with_simd<S: Simd>(self, _: S) -> usize {
-            S::F64_LANES
-        }
-    }
-    Arch::new().dispatch(Lanes)
-}
+pub(crate) use simd_kernels::lanes;
 
 /// SIMD vectors of rows per panel of [`pack_rows`]: 3 × 4 accumulators per column group and the
 /// three weight vectors fill 15 of the 16 AVX2 registers.

@@ -1,4 +1,4 @@
-//! Row kernels under `pulp`'s SIMD dispatch, shared by this crate's single-vector kernels and
+//! Row kernels under `pulp`'s SIMD dispatch, shared by `nn`'s single-vector kernels and
 //! `latent-sim`'s per-element products: call them from inside a [`pulp::WithSimd`] body so that
 //! they are compiled with its target features (both are `#[inline(always)]`).
 //!

@@ -1,5 +1,5 @@
 //! The f64 multiply–add rate one thread of this machine sustains with the SIMD instructions the
-//! crate's kernels are dispatched to: the yardstick that turns a kernel's time into a fraction
+//! kernels are dispatched to: the yardstick that turns a kernel's time into a fraction
 //! of what the core can do. On a shared or frequency-scaled machine absolute times move by tens
 //! of percent from one hour to the next; a kernel's time measured beside this rate does not.
 //!
@@ -8,7 +8,7 @@
 //! the multiply–add throughput alone: no memory traffic, no horizontal sums.
 //!
 //! ```
-//! let probe = nn::peak::fma_rate(std::time::Duration::from_millis(5));
+//! let probe = simd_kernels::peak::fma_rate(std::time::Duration::from_millis(5));
 //! assert!(probe.multiply_adds_per_second > 0.0);
 //! ```
 
@@ -16,8 +16,6 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use pulp::{Arch, Simd, WithSimd};
-
-use crate::kernels;
 
 /// Independent accumulator chains of the probe.
 pub const CHAINS: usize = 12;
@@ -34,7 +32,7 @@ pub struct FmaRate {
 /// Measures the f64 multiply–add rate of the calling thread for about `duration` (the best of
 /// several rounds, which a busy machine disturbs least).
 pub fn fma_rate(duration: Duration) -> FmaRate {
-    let lanes = kernels::lanes();
+    let lanes = crate::lanes();
     // Rounds of about 2 ms: long next to the timer's resolution, short next to a scheduler slice.
     let iterations = calibrate();
     let per_round = (iterations * CHAINS * lanes) as f64;
@@ -119,7 +117,7 @@ mod tests {
     /// closed form of a ← a·b + c with c = 1 − b.
     #[test]
     fn the_probe_runs_every_multiply_add() {
-        let lanes = kernels::lanes();
+        let lanes = crate::lanes();
         for iterations in [0, 1, 7, 1_000, 123_457] {
             let a0 = 3.0;
             let expected = (CHAINS * lanes) as f64 * (1.0 + PROBE_B.powi(iterations) * (a0 - 1.0));
