@@ -55,3 +55,43 @@ pub fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
     let den: f64 = b.iter().map(|y| y * y).sum();
     (num / den).sqrt()
 }
+
+/// A 6×1×1-cell beam whose every stage (snapshots, PCA, autoencoder, cubature, reference) runs
+/// in well under a second: the scene of the end-to-end tests, which vary it by text replacement.
+pub const TINY: &str = r#"
+name = "tiny"
+[mesh]
+generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
+[material]
+youngs_modulus = 1.0e5
+poisson_ratio = 0.4
+density = 1000.0
+[[pin]]
+plane = { axis = "x", side = "min" }
+[time]
+step = 0.02
+frames = 10
+[solver]
+tolerance = 1.0e-8
+[training]
+schedules = 4
+frames_per_schedule = 8
+[test]
+frames_per_schedule = 12
+[pca]
+dimension = 6
+[autoencoder]
+latent_dim = 2
+hidden = [16, 16]
+epochs = 150
+batch_size = 16
+"#;
+
+/// Scene text parsed with relative paths from the working folder, named `tiny.toml` in messages.
+pub fn scene(text: &str) -> pipeline::scene::Scene {
+    pipeline::scene::Scene::from_str(text, std::path::Path::new("."), "tiny.toml")
+        .expect("the test scene is valid")
+}
+
+/// A progress callback that ignores its calls.
+pub fn no_progress(_: usize, _: usize) {}

@@ -3,7 +3,6 @@
 //! call `done == total`, the call on which `cargo xtask` finishes and clears its bar. The
 //! callbacks record every call, in order, from whichever thread makes it.
 
-use std::path::Path;
 use std::sync::Mutex;
 
 use pipeline::pipeline::Pipeline;
@@ -11,42 +10,16 @@ use pipeline::run::{RunOptions, run};
 use pipeline::scene::Scene;
 use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
 use pipeline::stress::{Condition, stress};
-use tests::scratch_dir;
+use tests::{no_progress, scratch_dir};
 
-const TINY: &str = r#"
-name = "tiny"
-[mesh]
-generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
-[material]
-youngs_modulus = 1.0e5
-poisson_ratio = 0.4
-density = 1000.0
-[[pin]]
-plane = { axis = "x", side = "min" }
-[time]
-step = 0.02
-frames = 10
-[solver]
-tolerance = 1.0e-8
-[training]
-schedules = 5
-frames_per_schedule = 8
-[test]
-frames_per_schedule = 12
-[pca]
-dimension = 6
-[autoencoder]
-latent_dim = 2
-hidden = [16, 16]
-epochs = 150
-batch_size = 16
-"#;
-
-fn scene(text: &str) -> Scene {
-    Scene::from_str(text, Path::new("."), "tiny.toml").unwrap()
+/// The end-to-end scene with five training schedules (two shards of unequal size).
+fn tiny() -> String {
+    tests::TINY.replace("schedules = 4\n", "schedules = 5\n")
 }
 
-fn no_progress(_: usize, _: usize) {}
+fn scene(text: &str) -> Scene {
+    tests::scene(text)
+}
 
 /// Every `(done, total)` call, in the order made.
 #[derive(Debug, Default)]
@@ -95,7 +68,7 @@ fn assert_each_stage_completes(what: &str, calls: &[(usize, usize)]) -> Vec<usiz
 
 #[test]
 fn snapshot_stages_count_every_schedule() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let mut p = Pipeline::new(&s, &scratch_dir("progress-snapshots")).unwrap();
     // Schedules run in parallel; the count still arrives in order, ending at the total.
     let rec = Recorder::default();
@@ -108,7 +81,7 @@ fn snapshot_stages_count_every_schedule() {
 
 #[test]
 fn the_reference_counts_every_frame() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let mut p = Pipeline::new(&s, &scratch_dir("progress-reference")).unwrap();
     let rec = Recorder::default();
     p.reference(0, &|d, t| rec.record(d, t)).unwrap();
@@ -128,7 +101,7 @@ fn training_ends_at_its_total_even_when_it_stops_early() {
             true,
         ),
     ] {
-        let text = TINY.replace("epochs = 150\n", settings);
+        let text = tiny().replace("epochs = 150\n", settings);
         let s = scene(&text);
         let mut p = Pipeline::new(&s, &scratch_dir(&format!("progress-train-{case}"))).unwrap();
         p.pca(&no_progress).unwrap();
@@ -156,7 +129,7 @@ fn training_ends_at_its_total_even_when_it_stops_early() {
 /// complete.
 #[test]
 fn run_counts_every_step_of_every_method() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let out = scratch_dir("progress-run");
     let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
     let methods = [
@@ -200,7 +173,7 @@ fn run_counts_every_step_of_every_method() {
 
 #[test]
 fn simulate_counts_every_step() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let out = scratch_dir("progress-simulate");
     let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
     for (method, trajectory, frames) in [
@@ -232,7 +205,7 @@ fn simulate_counts_every_step() {
 /// stages it computes complete.
 #[test]
 fn stress_reports_every_method_under_every_condition() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let mut p = Pipeline::new(&s, &scratch_dir("progress-stress")).unwrap();
     let methods = [Method::Full, Method::Pca, Method::NeuralCubature];
     let conditions = [

@@ -10,43 +10,7 @@ use pipeline::pipeline::Pipeline;
 use pipeline::run::{MethodReport, RunOptions, run};
 use pipeline::scene::Scene;
 use pipeline::simulate::Method;
-use tests::scratch_dir;
-
-/// The end-to-end scene of `pipeline.rs`: a 6-cell beam, 12 test frames.
-const TINY: &str = r#"
-name = "tiny"
-[mesh]
-generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
-[material]
-youngs_modulus = 1.0e5
-poisson_ratio = 0.4
-density = 1000.0
-[[pin]]
-plane = { axis = "x", side = "min" }
-[time]
-step = 0.02
-frames = 10
-[solver]
-tolerance = 1.0e-8
-[training]
-schedules = 4
-frames_per_schedule = 8
-[test]
-frames_per_schedule = 12
-[pca]
-dimension = 6
-[autoencoder]
-latent_dim = 2
-hidden = [16, 16]
-epochs = 150
-batch_size = 16
-"#;
-
-fn scene(text: &str) -> Scene {
-    Scene::from_str(text, Path::new("."), "tiny.toml").unwrap()
-}
-
-fn no_progress(_: usize, _: usize) {}
+use tests::{TINY, no_progress, scene, scratch_dir};
 
 /// Runs `methods` on test trajectory 0 of `s`, writing every frame to `out`.
 fn run_all_frames(s: &Scene, out: &Path, methods: &[Method]) -> Vec<MethodReport> {

@@ -11,35 +11,10 @@ use pipeline::simulate::Method;
 use pipeline::stress::{Condition, Outcome, stress};
 use tests::scratch_dir;
 
-/// A 6×1×1-cell beam with every stage small enough to run in seconds.
-const TINY: &str = r#"
-name = "stress-tiny"
-[mesh]
-generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
-[material]
-youngs_modulus = 1.0e5
-poisson_ratio = 0.4
-density = 1000.0
-[[pin]]
-plane = { axis = "x", side = "min" }
-[time]
-step = 0.02
-frames = 10
-[solver]
-tolerance = 1.0e-8
-[training]
-schedules = 4
-frames_per_schedule = 8
-[test]
-frames_per_schedule = 12
-[pca]
-dimension = 6
-[autoencoder]
-latent_dim = 2
-hidden = [16, 16]
-epochs = 150
-batch_size = 16
-"#;
+/// The end-to-end scene under its own name.
+fn tiny() -> String {
+    tests::TINY.replace("name = \"tiny\"", "name = \"stress-tiny\"")
+}
 
 const ALL: [Method; 6] = [
     Method::Full,
@@ -61,7 +36,7 @@ fn no_progress(_: usize, _: usize) {}
 /// full-space L-BFGS agrees with the reference and the reduced methods' error is reported.
 #[test]
 fn every_method_survives_every_condition_or_reports_an_error() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let cache = scratch_dir("stress-conditions");
     let mut p = Pipeline::new(&s, &cache).unwrap();
     // `cargo xtask stress`'s conditions; the free run has its own test below.
@@ -118,7 +93,7 @@ fn every_method_survives_every_condition_or_reports_an_error() {
 /// (beyond the solver tolerance's slack), and the displacement stays bounded.
 #[test]
 fn long_free_runs_never_gain_energy() {
-    let s = scene(TINY);
+    let s = scene(&tiny());
     let cache = scratch_dir("stress-free-run");
     let mut p = Pipeline::new(&s, &cache).unwrap();
     let results = stress(
@@ -140,7 +115,7 @@ fn long_free_runs_never_gain_energy() {
 /// step by more than the check's slack; the free run solves to at most 1e-6 instead.
 #[test]
 fn a_loose_reduced_tolerance_does_not_fake_an_energy_gain() {
-    let s = scene(&format!("{TINY}[reduced]\ntolerance = 5.0e-2\n"));
+    let s = scene(&format!("{}[reduced]\ntolerance = 5.0e-2\n", tiny()));
     let cache = scratch_dir("stress-free-run-loose");
     let mut p = Pipeline::new(&s, &cache).unwrap();
     let results = stress(
@@ -272,7 +247,7 @@ fn classic_neo_hookean_never_produces_garbage_under_inverting_forces() {
 fn a_failed_run_keeps_its_last_good_frame_and_nothing_after() {
     // No gravity, and a spring that only starts pulling at t = 0.1 s (step 6): the steps before
     // are at rest and converge at once.
-    let text = TINY.replace(
+    let text = tiny().replace(
         "tolerance = 1.0e-8",
         "tolerance = 1.0e-8\nmax_iterations = 1",
     ) + r#"
