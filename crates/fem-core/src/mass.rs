@@ -116,12 +116,47 @@ impl MassMatrix {
             .map(|(a, b)| a * b)
             .sum::<f64>()
     }
+
+    /// The error metric of every report (DESIGN §9): ‖u − r‖_M / ‖r‖_M for full displacement
+    /// vectors u and reference r, or `None` where the reference is at rest (‖r‖_M = 0).
+    pub fn relative_error(&self, u: &[f64], r: &[f64]) -> Option<f64> {
+        let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
+        let mut scratch = vec![0.0; u.len()];
+        let num = self.half_norm_squared(&diff, &mut scratch);
+        let den = self.half_norm_squared(r, &mut scratch);
+        (den > 0.0).then(|| (num / den).sqrt())
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::mesh::generate::{BoxSpec, box_mesh};
+
+    #[test]
+    fn the_relative_error_is_the_mass_weighted_ratio_and_none_at_rest() {
+        let m = box_mesh(&BoxSpec {
+            size: [1.0, 0.5, 0.2],
+            cells: [2, 1, 1],
+            ..Default::default()
+        })
+        .unwrap();
+        let elements = crate::element::Elements::new(&m);
+        let mass = MassMatrix::new(&elements, m.num_vertices(), 1000.0, MassKind::Lumped);
+        let n = 3 * m.num_vertices();
+        let r: Vec<f64> = (0..n).map(|i| (i % 7) as f64 * 0.01).collect();
+        // Vertex 0 moved by 0.1 along x only: ‖u − r‖²_M = m₀ · 0.01.
+        let mut u = r.clone();
+        u[0] += 0.1;
+        let den: f64 = (0..n).map(|i| mass.lumped[i / 3] * r[i] * r[i]).sum();
+        let expected = (mass.lumped[0] * 0.01 / den).sqrt();
+        let got = mass.relative_error(&u, &r).unwrap();
+        assert!(
+            (got - expected).abs() <= 1e-14 * expected,
+            "{got} vs {expected}"
+        );
+        assert_eq!(mass.relative_error(&u, &vec![0.0; n]), None);
+    }
 
     #[test]
     fn consistent_and_lumped_agree_on_rigid_motion() {

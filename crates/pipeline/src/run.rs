@@ -104,14 +104,11 @@ impl ErrorAccumulator {
     }
 
     fn add_full(&mut self, model: &FullSpaceModel, u: &[f64], r: &[f64]) {
-        let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
-        let mut scratch = vec![0.0; u.len()];
-        let num = model.mass.half_norm_squared(&diff, &mut scratch);
-        let den = model.mass.half_norm_squared(r, &mut scratch);
-        if den > 0.0 {
-            self.rel.push((num / den).sqrt());
+        if let Some(e) = model.mass.relative_error(u, r) {
+            self.rel.push(e);
         }
-        for d in diff.chunks_exact(3) {
+        for (a, b) in u.chunks_exact(3).zip(r.chunks_exact(3)) {
+            let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
             self.max_vertex = self
                 .max_vertex
                 .max((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());

@@ -281,7 +281,7 @@ fn run_one(
             last_energy = e;
         }
         if let Some(r) = reference.and_then(|r| r.get(step - 1)) {
-            errors.push(relative_error(&u, r, runner.model()));
+            errors.push(runner.model().mass.relative_error(&u, r).unwrap_or(0.0));
         }
         trace.push(u);
     }
@@ -294,15 +294,6 @@ fn run_one(
         },
         trace,
     ))
-}
-
-/// ‖u − r‖_M / ‖r‖_M (0 when r = 0).
-fn relative_error(u: &[f64], r: &[f64], model: &FullSpaceModel) -> f64 {
-    let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
-    let mut scratch = vec![0.0; u.len()];
-    let num = model.mass.half_norm_squared(&diff, &mut scratch);
-    let den = model.mass.half_norm_squared(r, &mut scratch);
-    if den > 0.0 { (num / den).sqrt() } else { 0.0 }
 }
 
 /// The results as a markdown table: one row per method, one column per condition.
