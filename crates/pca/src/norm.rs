@@ -10,7 +10,6 @@
 //! UᵀMU = I holds as the rest of the pipeline needs.
 
 use faer::{Mat, MatRef};
-use rayon::prelude::*;
 
 use crate::{PcaBasis, PcaError};
 
@@ -74,8 +73,10 @@ impl PcaBasis {
         let mut columns: Vec<Vec<f64>> = (0..k)
             .map(|c| modes.col(c).iter().copied().collect())
             .collect();
+        // In order, not a parallel sum: rayon's split points vary from run to run, and with
+        // them the round-off, so the basis (and every stage after it) would not reproduce.
         let m_dot = |a: &[f64], b: &[f64]| -> f64 {
-            a.par_iter()
+            a.iter()
                 .zip(b)
                 .zip(&mass)
                 .map(|((x, y), m)| x * y * m)

@@ -77,3 +77,22 @@ fn in_the_mass_norm_the_refit_spans_the_pca_basis() {
     let p = &pca_u * (pca_u.transpose() * &m * &refit);
     assert!((&p - &refit).norm_l2() < 1e-8 * refit.norm_l2());
 }
+
+/// The refit is the same to the bit on every run, so the stages after it stay cached: its sums
+/// run in a fixed order (a parallel sum's split points, and so its round-off, vary by run).
+#[test]
+fn the_refit_reproduces_to_the_bit() {
+    let mut rng = Rng::new(9);
+    let (n, ns, k) = (30_000, 12, 5);
+    let s = decaying_snapshots(&mut rng, n, ns, 0.8);
+    let mass = rng.mass(n, 3);
+    let fit = PcaBasis::fit(s.as_ref(), Some(&mass), &PcaConfig::by_dimension(k), 3).unwrap();
+    let weights: Vec<f64> = mass.iter().map(|m| 2.0 * m + 1.0).collect();
+    let w = |x: faer::MatRef<'_, f64>| {
+        Mat::from_fn(x.nrows(), x.ncols(), |i, j| weights[i] * x[(i, j)])
+    };
+    let first = fit.basis.refit_in_norm(s.as_ref(), w).unwrap();
+    for _ in 0..4 {
+        assert_eq!(fit.basis.refit_in_norm(s.as_ref(), w).unwrap(), first);
+    }
+}
