@@ -513,7 +513,6 @@ impl<'a> Pipeline<'a> {
                 fit.basis = fit
                     .basis
                     .refit_in_norm(mat, |s| {
-                        let mut out = faer::Mat::<f64>::zeros(s.nrows(), s.ncols());
                         let cols: Vec<Vec<f64>> = (0..s.ncols())
                             .into_par_iter()
                             .map(|j| {
@@ -523,12 +522,7 @@ impl<'a> Pipeline<'a> {
                                 y
                             })
                             .collect();
-                        for (j, c) in cols.iter().enumerate() {
-                            for (i, v) in c.iter().enumerate() {
-                                out[(i, j)] = *v;
-                            }
-                        }
-                        out
+                        faer::Mat::from_fn(s.nrows(), s.ncols(), |i, j| cols[j][i])
                     })
                     .map_err(err)?;
             }

@@ -1,7 +1,7 @@
 //! When a run's result is not to be trusted: plain warnings from a run's report rows, each
 //! naming the method, what was measured and what to change.
 
-use crate::run::MethodReport;
+use crate::run::{MethodReport, is_full_method};
 
 /// A reduced method whose trajectory is further than this from the full one (mean M-norm
 /// relative error) is not a usable stand-in for it.
@@ -15,7 +15,7 @@ pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 /// [`UNTRUSTED_ERROR`] and its subspace within [`UNCOVERED_SUBSPACE_ERROR`].
 pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
     let mut out = Vec::new();
-    for r in rows.iter().filter(|r| !r.method.starts_with("full")) {
+    for r in rows.iter().filter(|r| !is_full_method(&r.method)) {
         let pct = |x: f64| 100.0 * x;
         if let Some(f) = &r.failure {
             out.push(format!(
