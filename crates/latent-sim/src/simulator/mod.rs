@@ -450,11 +450,21 @@ impl<S: Subspace> ReducedSimulator<S> {
                         // motion: 7.2 instead of 4.5 iterations per step on the catapult (with
                         // the first-order start z_n + h ż_n).
                         let mut precond = std::mem::take(&mut self.precond);
-                        let factored = self.step_objective().factor_gauss_newton(
+                        let mut factored = self.step_objective().factor_gauss_newton(
                             &z,
                             &mut precond,
                             "preconditioner",
                         );
+                        // An extrapolated start past an inverted element (classic Neo-Hookean)
+                        // has no matrix: form it at z_n and start there (see the solve below).
+                        if factored.is_err() && z != self.state.z {
+                            z.copy_from_slice(&self.state.z);
+                            factored = self.step_objective().factor_gauss_newton(
+                                &z,
+                                &mut precond,
+                                "preconditioner",
+                            );
+                        }
                         self.precond = precond;
                         factored?;
                     }
@@ -473,45 +483,17 @@ impl<S: Subspace> ReducedSimulator<S> {
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
-        let inv_h2 = self.inv_h2();
-        let stats: SolveStats = {
-            let mut obj = StepObjective {
-                model: &self.model,
-                space: &self.space,
-                subspace: &mut self.subspace,
-                work: &mut self.work,
-                t,
-                inv_h2,
-                scale: 0.0,
-                noise: 0.0,
-            };
-            match self.solver.method {
-                SolverMethod::Lbfgs => {
-                    // The curvature pairs of the last steps' solves are kept until the
-                    // preconditioner is rebuilt: 10 % fewer iterations on the catapult.
-                    match self
-                        .lbfgs
-                        .minimize_warm(&mut obj, &mut self.precond, &mut z, params)
-                    {
-                        Ok(s) => s,
-                        // Where the energy curves far more than the rest-state preconditioner
-                        // says (a nearly degenerate element along the subspace), L-BFGS crawls:
-                        // redo the step with Newton on the reduced Hessian.
-                        Err(
-                            e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
-                        ) => {
-                            tracing::info!("{e}; retrying the step with reduced Newton");
-                            self.lbfgs.reset();
-                            z.copy_from_slice(&self.state.z);
-                            let mut s = newton(&mut obj, &mut z, params)?;
-                            s.iterations += params.max_iterations;
-                            s
-                        }
-                        Err(e) => return Err(e.into()),
-                    }
-                }
-                SolverMethod::Newton => newton(&mut obj, &mut z, params)?,
+        let stats = match self.solve(&mut z, t, params) {
+            // The extrapolated start can leave the region where the energy is defined (an
+            // element inverted under the classic Neo-Hookean model, whose energy is then not
+            // finite) where z_n, the last step's answer, was inside it: start again from z_n.
+            Err(FemError::NonFinite { what, .. }) if z != self.state.z => {
+                tracing::info!("{what} not finite from the extrapolated start; retrying from z_n");
+                self.lbfgs.reset();
+                z.copy_from_slice(&self.state.z);
+                self.solve(&mut z, t, params)?
             }
+            r => r?,
         };
         let mut q_new = std::mem::take(&mut self.next_q);
         q_new.resize(k, 0.0);
@@ -565,6 +547,55 @@ impl<S: Subspace> ReducedSimulator<S> {
             evaluations: self.work.timers.evaluations,
             preconditioner_rebuilt: rebuilt,
         })
+    }
+
+    /// Minimises the step objective at time `t` from `z` (overwritten) with the configured
+    /// solver; an L-BFGS solve that crawls or whose line search fails is redone with reduced
+    /// Newton from z_n.
+    fn solve(
+        &mut self,
+        z: &mut [f64],
+        t: f64,
+        params: SolveParams,
+    ) -> Result<SolveStats, FemError> {
+        let inv_h2 = self.inv_h2();
+        let mut obj = StepObjective {
+            model: &self.model,
+            space: &self.space,
+            subspace: &mut self.subspace,
+            work: &mut self.work,
+            t,
+            inv_h2,
+            scale: 0.0,
+            noise: 0.0,
+        };
+        match self.solver.method {
+            SolverMethod::Lbfgs => {
+                // The curvature pairs of the last steps' solves are kept until the
+                // preconditioner is rebuilt: 10 % fewer iterations on the catapult.
+                match self
+                    .lbfgs
+                    .minimize_warm(&mut obj, &mut self.precond, z, params)
+                {
+                    Ok(s) => Ok(s),
+                    // Where the energy curves far more than the rest-state preconditioner
+                    // says (a nearly degenerate element along the subspace), L-BFGS crawls:
+                    // redo the step with Newton on the reduced Hessian.
+                    Err(
+                        e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
+                    ) => {
+                        tracing::info!("{e}; retrying the step with reduced Newton");
+                        self.lbfgs.reset();
+                        z.copy_from_slice(&self.state.z);
+                        let mut s = newton(&mut obj, z, params)?;
+                        s.iterations += params.max_iterations;
+                        Ok(s)
+                    }
+                    Err(e) => Err(e),
+                }
+            }
+            SolverMethod::Newton => newton(&mut obj, z, params),
+        }
     }
 
     /// The inertial prediction q̃ = q_n + h q̇_n of the next step (q_n when quasi-static).
