@@ -388,6 +388,8 @@ mod tests {
                 frame_errors: vec![err],
                 subspace_frame_errors: Vec::new(),
                 step_frame_errors: Vec::new(),
+                training_distance: 0.0,
+                training_distance_time: 0.0,
                 failure: None,
                 machine_gfma: None,
             },

@@ -6,6 +6,7 @@
 
 pub mod artifact;
 pub mod bench;
+pub mod coverage;
 pub mod export;
 pub mod output;
 pub mod pipeline;

@@ -246,6 +246,8 @@ pub struct Pipeline<'a> {
     memo: std::collections::HashMap<PathBuf, Box<dyn std::any::Any>>,
     /// Sum of the recorded stages' own seconds, to take nested stages out of a stage's time.
     recorded_seconds: f64,
+    /// The training snapshots' PCA coefficients, once a run has needed them.
+    pub(crate) training_poses: Option<std::sync::Arc<crate::coverage::TrainingPoses>>,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -293,6 +295,7 @@ impl<'a> Pipeline<'a> {
             on_stage: Box::new(|_| {}),
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
+            training_poses: None,
         })
     }
 

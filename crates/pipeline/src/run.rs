@@ -78,6 +78,14 @@ pub struct MethodReport {
     /// The one-step error frame by frame (empty for full space; shorter when a step from the
     /// reference failed).
     pub step_frame_errors: Vec<f64>,
+    /// The largest distance over frames of this method's pose from the nearest training pose,
+    /// relative to the pose ([`crate::coverage`]; zero for full space): above
+    /// [`crate::coverage::OUTSIDE_TRAINING`] the trajectory left the training data.
+    #[serde(default)]
+    pub training_distance: f64,
+    /// The time (s) of the frame at `training_distance`.
+    #[serde(default)]
+    pub training_distance_time: f64,
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
@@ -280,6 +288,8 @@ pub fn measure(
             elastic_ms: 0.0,
             vjp_ms: 0.0,
             precond_ms: 0.0,
+            training_distance: 0.0,
+            training_distance_time: 0.0,
             failure: None,
             machine_gfma: None,
         });
@@ -295,6 +305,8 @@ pub fn measure(
     let mut failure = None;
     // The last run's runner measures the one-step errors afterwards (set_state resets it).
     let mut last_runner = None;
+    // The reduced pose of each frame of the first run, for its distance to the training data.
+    let mut poses: Vec<Vec<f64>> = Vec::new();
     for repeat in 0..m.repeats.max(1) {
         let (model, time, solver) = setup(pipeline, &sim_opts)?;
         let material = pipeline.scene.material.clone();
@@ -343,6 +355,9 @@ pub fn measure(
             parts.elastic += info.parts.elastic;
             parts.vjp += info.parts.vjp;
             parts.precond += info.parts.precond;
+            if let Some(q) = runner.coefficients() {
+                poses.push(q.to_vec());
+            }
             // Reconstruction for the error is outside the timed step.
             let u = runner.displacement();
             errors.add(runner.model(), &u, &reference.frames[k]);
@@ -388,6 +403,17 @@ pub fn measure(
         };
         (subspace, step)
     };
+    let (mut training_distance, mut training_distance_time) = (0.0, 0.0);
+    if !poses.is_empty() {
+        let training = crate::coverage::TrainingPoses::shared(pipeline, stage_progress)?;
+        for (k, q) in poses.iter().enumerate() {
+            let d = training.distance(q);
+            if d > training_distance {
+                training_distance = d;
+                training_distance_time = (k + 1) as f64 * pipeline.scene.time.step;
+            }
+        }
+    }
     Ok(MethodReport {
         method: method.name().into(),
         dim,
@@ -411,6 +437,8 @@ pub fn measure(
         frame_errors: errors.rel,
         subspace_frame_errors,
         step_frame_errors,
+        training_distance,
+        training_distance_time,
         failure,
         machine_gfma,
     })
@@ -634,11 +662,11 @@ pub(crate) fn gfma_cell(rate: Option<f64>) -> String {
 /// The report as a markdown table.
 pub fn markdown(rows: &[MethodReport]) -> String {
     let mut s = String::from(
-        "| method | dim | elements | ms/step | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | one-step error | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| method | dim | elements | ms/step | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | max vertex error | subspace error | one-step error | from training | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
                 None => r.method.clone(),
@@ -654,6 +682,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             r.max_vertex_error,
             r.subspace_error,
             r.step_error,
+            r.training_distance,
             r.iterations,
             gfma_cell(r.machine_gfma),
         ));

@@ -243,6 +243,14 @@ impl Runner {
         Ok(())
     }
 
+    /// The PCA coefficients of a reduced runner's state (None in full space).
+    pub fn coefficients(&self) -> Option<&[f64]> {
+        match self {
+            Runner::Full(_) => None,
+            Runner::Reduced(s) => Some(s.coefficients()),
+        }
+    }
+
     /// The full displacement of the current state (reconstructed for reduced methods).
     pub fn displacement(&self) -> Vec<f64> {
         match self {

@@ -171,5 +171,14 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
             s += &format!("\n{}: stopped: {f}\n\n", r.scene);
         }
     }
+    for r in rows {
+        let warnings = crate::trust::warnings(&r.methods);
+        if !warnings.is_empty() {
+            s += &format!("\n{}, not to be trusted:\n", r.scene);
+            for w in warnings {
+                s += &format!("- {w}\n");
+            }
+        }
+    }
     s
 }

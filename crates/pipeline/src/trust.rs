@@ -1,6 +1,7 @@
 //! When a run's result is not to be trusted: plain warnings from a run's report rows, each
 //! naming the method, what was measured and what to change.
 
+use crate::coverage::OUTSIDE_TRAINING;
 use crate::run::{MethodReport, is_full_method};
 
 /// A reduced method whose trajectory is further than this from the full one (mean M-norm
@@ -12,7 +13,8 @@ pub const UNTRUSTED_ERROR: f64 = 0.2;
 pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 
 /// Warnings for the reduced methods of a run, in row order; empty when every one is within
-/// [`UNTRUSTED_ERROR`] and its subspace within [`UNCOVERED_SUBSPACE_ERROR`].
+/// [`UNTRUSTED_ERROR`], its subspace within [`UNCOVERED_SUBSPACE_ERROR`] and its trajectory
+/// within [`OUTSIDE_TRAINING`] of the training poses.
 pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
     let mut out = Vec::new();
     for r in rows.iter().filter(|r| !is_full_method(&r.method)) {
@@ -30,6 +32,17 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
                  (`[training] schedules`, `kinds`), or keep more PCA coefficients (`[pca]`)",
                 r.method,
                 pct(r.subspace_error)
+            ));
+        }
+        if r.training_distance > OUTSIDE_TRAINING {
+            out.push(format!(
+                "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
+                 poses, so the decoder and the cubature rule extrapolate there: add training \
+                 schedules that reach such poses (`[training] schedules`, `kinds`, larger \
+                 amplitudes)",
+                r.method,
+                r.training_distance_time,
+                pct(r.training_distance)
             ));
         }
         if r.mean_rel_error > UNTRUSTED_ERROR {
@@ -95,5 +108,18 @@ mod tests {
             w[2]
         );
         assert!(warnings(&rows[..3]).is_empty());
+        let far = MethodReport {
+            training_distance: 0.8,
+            training_distance_time: 0.25,
+            ..row("neural-cubature", 0.03, 0.01)
+        };
+        let w = warnings(&[far]);
+        assert_eq!(w.len(), 1, "{w:#?}");
+        assert!(
+            w[0].starts_with("neural-cubature: at t = 0.250 s its pose goes 80 %"),
+            "{}",
+            w[0]
+        );
+        assert!(w[0].contains("extrapolate"), "{}", w[0]);
     }
 }
