@@ -30,6 +30,21 @@ pub enum ScheduleKind {
     Drag,
 }
 
+/// Where a family's schedules grab the surface.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PatchPlacement {
+    /// Each schedule at a surface vertex drawn at random (the held-out tests: any patch a
+    /// person might grab).
+    #[default]
+    Random,
+    /// Schedule i at the i-th vertex of a farthest-point ordering of the surface (its start
+    /// drawn from the seed): the patches of n schedules spread over the whole surface, so the
+    /// data holds the response to a grab anywhere, not only where the draws fell (24 random
+    /// draws on an X or a dinosaur leave whole limbs ungrabbed).
+    Spread,
+}
+
 /// The `[training]` and `[test]` sections as written: every key optional, filled from
 /// [`ScheduleConfig::training`] or [`ScheduleConfig::test`].
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -51,6 +66,8 @@ pub struct ScheduleSection {
     pub patch_radius: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gravity_scale: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub patches: Option<PatchPlacement>,
 }
 
 impl ScheduleSection {
@@ -67,6 +84,7 @@ impl ScheduleSection {
             stiffness: self.stiffness.unwrap_or(defaults.stiffness),
             patch_radius: self.patch_radius.unwrap_or(defaults.patch_radius),
             gravity_scale: self.gravity_scale.unwrap_or(defaults.gravity_scale),
+            patches: self.patches.unwrap_or(defaults.patches),
         }
     }
 }
@@ -89,6 +107,14 @@ pub struct ScheduleConfig {
     pub patch_radius: f64,
     /// Scales the scene's gravity (1 = as in the scene).
     pub gravity_scale: f64,
+    /// Where the schedules grab the surface. Left out of the serialised form when random, so
+    /// the cache keys of families from before the setting stay as they were.
+    #[serde(default, skip_serializing_if = "is_random")]
+    pub patches: PatchPlacement,
+}
+
+fn is_random(p: &PatchPlacement) -> bool {
+    *p == PatchPlacement::Random
 }
 
 impl ScheduleConfig {
@@ -106,6 +132,7 @@ impl ScheduleConfig {
             stiffness: [0.5, 2.0],
             patch_radius: 0.08,
             gravity_scale: 1.0,
+            patches: PatchPlacement::Spread,
         }
     }
 
@@ -116,6 +143,7 @@ impl ScheduleConfig {
             frames_per_schedule: 100,
             seed: 1_000_003,
             kinds: vec![ScheduleKind::Drag],
+            patches: PatchPlacement::Random,
             ..Self::training()
         }
     }
@@ -178,7 +206,12 @@ impl ScheduleConfig {
             return Vec::new();
         }
         let kind = self.kinds[rng.below(self.kinds.len())];
-        let center = mesh.vertices[candidates[rng.below(candidates.len())]];
+        // Drawn in either placement, so that the other draws of schedule i do not depend on it.
+        let drawn = candidates[rng.below(candidates.len())];
+        let center = mesh.vertices[match self.patches {
+            PatchPlacement::Random => drawn,
+            PatchPlacement::Spread => spread_vertex(mesh, &candidates, self.seed, index),
+        }];
         let radius = match kind {
             ScheduleKind::Poke => 0.5 * self.patch_radius * diag,
             _ => self.patch_radius * diag,
@@ -239,6 +272,27 @@ impl ScheduleConfig {
             end,
         }]
     }
+}
+
+/// The `index`-th vertex (cyclically) of a farthest-point ordering of `candidates` (mesh
+/// vertices), which starts at one drawn from `seed`: each vertex the furthest from those before.
+fn spread_vertex(mesh: &crate::TetMesh, candidates: &[usize], seed: u64, index: usize) -> usize {
+    let n = candidates.len();
+    let mut rng = SplitMix64::for_item(seed, u64::MAX);
+    let mut current = rng.below(n);
+    let mut nearest = vec![f64::INFINITY; n];
+    for _ in 0..index % n {
+        let p = mesh.vertices[candidates[current]];
+        let mut far = (0, -1.0);
+        for (i, d) in nearest.iter_mut().enumerate() {
+            *d = d.min((mesh.vertices[candidates[i]] - p).norm_squared());
+            if *d > far.1 {
+                far = (i, *d);
+            }
+        }
+        current = far.0;
+    }
+    candidates[current]
 }
 
 /// The body's stiffness at a surface patch: A = K₀ + M/T² factorised once per mesh.

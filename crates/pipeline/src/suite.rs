@@ -72,6 +72,30 @@ fn minimal_scene_of(
     )
 }
 
+/// The `.mesh` files of folder `dir`, sorted, leaving out those with more than `max_vertices`
+/// vertices when given.
+///
+/// # Errors
+/// When the folder or a mesh cannot be read.
+pub fn meshes_in(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read mesh folder {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mesh"))
+        .collect();
+    files.sort();
+    if let Some(max) = max_vertices {
+        let mut kept = Vec::new();
+        for f in files {
+            if read(&f)?.0.num_vertices() <= max {
+                kept.push(f);
+            }
+        }
+        files = kept;
+    }
+    Ok(files)
+}
+
 /// One mesh's outcome.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct SuiteRow {

@@ -389,6 +389,7 @@ fn a_step_where_newton_crawls_is_redone_with_lbfgs() {
     use fem_core::snapshots::ScheduleKind;
     let family = fem_core::snapshots::ScheduleConfig {
         kinds: vec![ScheduleKind::Pull, ScheduleKind::Poke],
+        patches: fem_core::snapshots::PatchPlacement::Random,
         ..fem_core::snapshots::ScheduleConfig::training()
     };
     let time = dynamic(family.frames_per_schedule);
@@ -417,4 +418,80 @@ fn a_step_where_newton_crawls_is_redone_with_lbfgs() {
         largest > 0.3,
         "the schedule is the large rotation it was ({largest} m)"
     );
+}
+
+/// Spread training patches cover the surface: on a long bar clamped at one end, the centres of
+/// 8 schedules' patches are further apart than 8 random draws', pairwise and from the far end,
+/// and the draws of everything else (kind, stiffness, direction) are the same.
+#[test]
+fn spread_patches_cover_the_surface_and_change_nothing_else() {
+    use fem_core::snapshots::{PatchPlacement, ScheduleConfig, StiffnessProbe};
+    let mesh = box_mesh(&BoxSpec {
+        size: [1.0, 0.1, 0.1],
+        cells: [20, 2, 2],
+        ..Default::default()
+    })
+    .unwrap();
+    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
+        .select(&mesh, "pin")
+        .unwrap();
+    let m = FullSpaceModel::new(
+        mesh,
+        &MaterialConfig::default(),
+        pinned,
+        Vec3::zeros(),
+        vec![],
+    )
+    .unwrap();
+    let h = 0.01;
+    let probe = StiffnessProbe::new(&m, 0.6).unwrap();
+    let centres = |patches| -> Vec<(Vec3, f64, usize)> {
+        let family = ScheduleConfig {
+            patches,
+            ..ScheduleConfig::training()
+        };
+        (0..8)
+            .map(|i| {
+                let f = &family.schedule(&m, &probe, i, h)[0];
+                let c = f.vertices.iter().map(|&v| m.mesh.vertices[v]).sum::<Vec3>()
+                    / f.vertices.len() as f64;
+                (c, f.keyframes.len() as f64 + f.end, f.vertices.len())
+            })
+            .collect()
+    };
+    let (spread, random) = (
+        centres(PatchPlacement::Spread),
+        centres(PatchPlacement::Random),
+    );
+    let closest = |c: &[(Vec3, f64, usize)]| {
+        let mut d = f64::INFINITY;
+        for i in 0..c.len() {
+            for j in 0..i {
+                d = d.min((c[i].0 - c[j].0).norm());
+            }
+        }
+        d
+    };
+    assert!(
+        closest(&spread) > 2.0 * closest(&random),
+        "closest pair: spread {:.3}, random {:.3}",
+        closest(&spread),
+        closest(&random)
+    );
+    // Eight patches over a 1 m bar: none of its length is more than a bar-length/8 + the
+    // patch's reach from a spread centre.
+    let far_end = spread
+        .iter()
+        .map(|c| 1.0 - c.0.x)
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        far_end < 0.1,
+        "the nearest spread patch is {far_end:.3} m from the free end"
+    );
+    for (s, r) in spread.iter().zip(&random) {
+        assert_eq!(
+            s.1, r.1,
+            "the schedule's kind and timing must not depend on the placement"
+        );
+    }
 }

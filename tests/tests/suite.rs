@@ -1,0 +1,68 @@
+//! The mesh suite on the small real meshes (AutoDef's, in `shared/meshes`): the minimal scene
+//! a user would write (mesh, material, bottom pinned, gravity, time step) runs from an empty
+//! cache through every stage and every method, each mesh with another material.
+
+use pipeline::simulate::Method;
+use pipeline::suite::{MATERIALS, markdown, meshes_in, run_suite};
+use tests::{no_progress, scratch_dir, shared_dir};
+
+/// Meshes up to this size run in CI (a minute or two each on 2 cores); `cargo xtask suite`
+/// runs them all.
+const CI_MAX_VERTICES: usize = 1100;
+
+#[test]
+fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
+    let Some(shared) = shared_dir("the mesh suite on AutoDef's meshes") else {
+        return;
+    };
+    let meshes = meshes_in(&shared.join("meshes"), Some(CI_MAX_VERTICES)).unwrap();
+    assert!(
+        meshes.len() >= 2,
+        "expected the small AutoDef meshes in {}, found {meshes:?}",
+        shared.join("meshes").display()
+    );
+    let out = scratch_dir("suite");
+    let rows = run_suite(&meshes, 1e5, &out, &no_progress, &mut |_| {}).unwrap();
+    let table = markdown(&rows);
+    println!("{table}");
+    assert_eq!(rows.len(), meshes.len());
+    for (i, r) in rows.iter().enumerate() {
+        assert!(r.failure.is_none(), "{}: {:?}", r.scene, r.failure);
+        let material = serde_json::to_value(MATERIALS[i % MATERIALS.len()]).unwrap();
+        assert!(
+            r.scene.ends_with(material.as_str().unwrap()),
+            "{} should use {material}",
+            r.scene
+        );
+        for m in [
+            Method::Full,
+            Method::FullLbfgs,
+            Method::Pca,
+            Method::PcaCubature,
+            Method::Neural,
+            Method::NeuralCubature,
+        ] {
+            let row = r
+                .methods
+                .iter()
+                .find(|x| x.method == m.name())
+                .unwrap_or_else(|| panic!("{}: no {} row", r.scene, m.name()));
+            assert!(
+                row.failure.is_none(),
+                "{} {}: {:?}",
+                r.scene,
+                m.name(),
+                row.failure
+            );
+            assert!(
+                row.mean_rel_error.is_finite() && row.ms_per_step > 0.0,
+                "{} {}: error {}, {} ms/step",
+                r.scene,
+                m.name(),
+                row.mean_rel_error,
+                row.ms_per_step
+            );
+        }
+        assert!(table.contains(&format!("| {} |", r.scene)), "{table}");
+    }
+}
