@@ -14,6 +14,7 @@ use latent_sim::model::{MeasuredError, ModelSource, Provenance, Rows, StageKey, 
 
 use crate::pipeline::{Pipeline, Progress};
 use crate::simulate::{Method, solver_for};
+use crate::stage::Stage;
 
 /// The method `cargo xtask export` exports and `run` writes the model of: the paper's.
 pub const DEFAULT_METHOD: Method = Method::NeuralCubature;
@@ -58,13 +59,13 @@ pub fn reduced_model(
         );
     }
     let scene = pipeline.scene;
-    let key = |stage: &str, key: u64| StageKey {
-        stage: stage.into(),
+    let key = |stage: Stage, key: u64| StageKey {
+        stage: stage.name().into(),
         key,
     };
     let mut stage_keys = vec![
-        key("snapshots", pipeline.snapshots_key()),
-        key("pca", pipeline.pca_key()),
+        key(Stage::Snapshots, pipeline.snapshots_key()),
+        key(Stage::Pca, pipeline.pca_key()),
     ];
     let training = |name: String, value: f64| MeasuredError {
         name,
@@ -85,7 +86,7 @@ pub fn reduced_model(
     let neural = matches!(method, Method::Neural | Method::NeuralCubature);
     // The stages in the order the runners always asked for them.
     let trained = if neural {
-        stage_keys.push(key("train", pipeline.train_key()));
+        stage_keys.push(key(Stage::Train, pipeline.train_key()));
         let t = pipeline.train(progress)?;
         errors.push(training(
             format!(
@@ -100,11 +101,11 @@ pub fn reduced_model(
     };
     let cubature = match method {
         Method::PcaCubature => {
-            stage_keys.push(key("cubature", pipeline.cubature_key()));
+            stage_keys.push(key(Stage::Cubature, pipeline.cubature_key()));
             Some(pipeline.cubature(progress)?)
         }
         Method::NeuralCubature => {
-            stage_keys.push(key("cubature-neural", pipeline.cubature_neural_key()));
+            stage_keys.push(key(Stage::CubatureNeural, pipeline.cubature_neural_key()));
             Some(pipeline.cubature_neural(progress)?)
         }
         _ => None,
@@ -126,7 +127,7 @@ pub fn reduced_model(
     let complement = if neural {
         let columns = pipeline.complement_columns(progress)?;
         if !columns.is_empty() {
-            stage_keys.push(key("complement", pipeline.complement_key()));
+            stage_keys.push(key(Stage::Complement, pipeline.complement_key()));
         }
         columns
     } else {

@@ -14,6 +14,7 @@ pub mod run;
 pub mod scene;
 pub mod shard;
 pub mod simulate;
+pub mod stage;
 pub mod stress;
 pub mod suite;
 pub mod trust;

@@ -20,18 +20,16 @@ use serde::de::DeserializeOwned;
 
 use crate::artifact::{self, Expect, KeyBuilder, fnv1a};
 use crate::scene::Scene;
+use crate::stage::Stage;
 
-/// The stages, in order.
 /// Age past which a temporary file in the cache belongs to a killed run (a live write takes
 /// seconds).
 pub const STALE_TEMPORARY_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
 
-pub const STAGES: [&str; 4] = ["snapshots", "pca", "cubature", "train"];
-
 /// What happened to one stage in a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StageOutcome {
-    pub stage: String,
+    pub stage: Stage,
     /// Loaded from the cache instead of computed.
     pub cached: bool,
     /// Time spent in this stage itself: loading, or computing less the upstream stages that the
@@ -297,7 +295,7 @@ impl<'a> Pipeline<'a> {
     }
 
     /// What every full-space simulation reads: mesh, material, pins, gravity, time step, solver.
-    fn physics_key(&self, stage: &str) -> KeyBuilder {
+    fn physics_key(&self, stage: Stage) -> KeyBuilder {
         let s = self.scene;
         KeyBuilder::new(stage)
             .mix_key(self.mesh_hash)
@@ -309,20 +307,20 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn snapshots_key(&self) -> u64 {
-        self.physics_key("snapshots")
+        self.physics_key(Stage::Snapshots)
             .mix(&self.scene.training())
             .finish()
     }
 
     pub fn pca_key(&self) -> u64 {
-        KeyBuilder::new("pca")
+        KeyBuilder::new(Stage::Pca)
             .mix_key(self.snapshots_key())
             .mix(&self.scene.pca)
             .finish()
     }
 
     pub fn cubature_key(&self) -> u64 {
-        KeyBuilder::new("cubature")
+        KeyBuilder::new(Stage::Cubature)
             .mix_key(self.pca_key())
             .mix_key(self.reference_key(0))
             .mix(&self.scene.cubature.for_linear())
@@ -330,27 +328,27 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn train_key(&self) -> u64 {
-        KeyBuilder::new("train")
+        KeyBuilder::new(Stage::Train)
             .mix_key(self.pca_key())
             .mix(&self.scene.autoencoder)
             .finish()
     }
 
     fn reference_key(&self, trajectory: usize) -> u64 {
-        self.physics_key("reference")
+        self.physics_key(Stage::Reference)
             .mix(&self.scene.test())
             .mix(&trajectory)
             .finish()
     }
 
-    fn path(&self, stage: &str, key: u64) -> PathBuf {
+    fn path(&self, stage: Stage, key: u64) -> PathBuf {
         self.cache.join(format!("{stage}-{key:016x}.art"))
     }
 
     /// Loads the artifact of `stage` under `key`, or computes and stores it.
     fn stage<T: Serialize + DeserializeOwned + Clone + StageSummary + 'static>(
         &mut self,
-        stage: &str,
+        stage: Stage,
         key: u64,
         compute: impl FnOnce(&mut Self) -> Result<T>,
     ) -> Result<T> {
@@ -365,7 +363,7 @@ impl<'a> Pipeline<'a> {
 
     fn load_or_compute<T: Serialize + DeserializeOwned + StageSummary>(
         &mut self,
-        stage: &str,
+        stage: Stage,
         key: u64,
         path: PathBuf,
         compute: impl FnOnce(&mut Self) -> Result<T>,
@@ -395,7 +393,7 @@ impl<'a> Pipeline<'a> {
     /// Records a finished stage; `start` is its start time and the recorded seconds then.
     fn record(
         &mut self,
-        stage: &str,
+        stage: Stage,
         cached: bool,
         start: (Instant, f64),
         path: PathBuf,
@@ -405,7 +403,7 @@ impl<'a> Pipeline<'a> {
         let seconds = (start.0.elapsed().as_secs_f64() - nested).max(0.0);
         self.recorded_seconds += seconds;
         let o = StageOutcome {
-            stage: stage.to_string(),
+            stage,
             cached,
             seconds,
             path,
@@ -418,7 +416,7 @@ impl<'a> Pipeline<'a> {
     /// Stage `snapshots`: every training schedule simulated in full space.
     pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<SnapshotSet> {
         let key = self.snapshots_key();
-        self.stage("snapshots", key, |p| {
+        self.stage(Stage::Snapshots, key, |p| {
             let cfg = p.scene.training();
             p.simulate_shard(&cfg, (0, 1), progress)
         })
@@ -454,32 +452,32 @@ impl<'a> Pipeline<'a> {
         if count == 0 || index >= count {
             bail!("--shard {index}/{count}: need 0 ≤ index < count");
         }
-        let key = KeyBuilder::new("snapshots-shard")
+        let key = KeyBuilder::new(Stage::SnapshotsShard)
             .mix_key(self.snapshots_key())
             .mix(&(index, count))
             .finish();
-        self.stage("snapshots-shard", key, |p| {
+        self.stage(Stage::SnapshotsShard, key, |p| {
             let cfg = p.scene.training();
             p.simulate_shard(&cfg, (index, count), progress)
         })?;
-        Ok(self.path("snapshots-shard", key))
+        Ok(self.path(Stage::SnapshotsShard, key))
     }
 
     /// Merges shards `0..count` into the `snapshots` artifact (identical to an unsharded run).
     pub fn merge_shards(&mut self, count: usize) -> Result<SnapshotSet> {
         let key = self.snapshots_key();
-        self.stage("snapshots", key, |p| {
+        self.stage(Stage::Snapshots, key, |p| {
             let mut parts = Vec::with_capacity(count);
             for index in 0..count {
-                let k = KeyBuilder::new("snapshots-shard")
+                let k = KeyBuilder::new(Stage::SnapshotsShard)
                     .mix_key(key)
                     .mix(&(index, count))
                     .finish();
-                let path = p.path("snapshots-shard", k);
+                let path = p.path(Stage::SnapshotsShard, k);
                 let part: SnapshotSet = artifact::load(
                     &path,
                     Expect {
-                        stage: "snapshots-shard",
+                        stage: Stage::SnapshotsShard,
                         key: Some(k),
                         mesh: Some(p.mesh_hash),
                     },
@@ -495,7 +493,7 @@ impl<'a> Pipeline<'a> {
     /// only when the basis itself is not cached).
     pub fn pca(&mut self, progress: Progress<'_>) -> Result<PcaFit> {
         let key = self.pca_key();
-        self.stage("pca", key, |p| {
+        self.stage(Stage::Pca, key, |p| {
             let snaps = p.snapshots(progress)?;
             let mass: Vec<f64> = p
                 .model
@@ -534,21 +532,23 @@ impl<'a> Pipeline<'a> {
     /// forces over the snapshots, with its error on the held-out test trajectory.
     pub fn cubature(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
         let key = self.cubature_key();
-        self.stage("cubature", key, |p| p.fit_cubature(false, progress))
+        self.stage(Stage::Cubature, key, |p| p.fit_cubature(false, progress))
     }
 
     /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
     /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
     pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
         let key = self.cubature_neural_key();
-        self.stage("cubature-neural", key, |p| p.fit_cubature(true, progress))
+        self.stage(Stage::CubatureNeural, key, |p| {
+            p.fit_cubature(true, progress)
+        })
     }
 
     pub fn cubature_neural_key(&self) -> u64 {
         // The complement directions are left out: fitted with them, their forces (stiff
         // directions, large for small displacements) dominate the relative error and the rule
         // neglects the decoder's tangent.
-        let mut key = KeyBuilder::new("cubature-neural")
+        let mut key = KeyBuilder::new(Stage::CubatureNeural)
             .mix_key(self.cubature_key())
             .mix_key(self.train_key());
         // Mixed in only when given, so that the keys of scenes without it stay as they were.
@@ -644,7 +644,7 @@ impl<'a> Pipeline<'a> {
     /// Stage `train`: the autoencoder on the snapshots' PCA coefficients, the basis frozen.
     pub fn train(&mut self, progress: Progress<'_>) -> Result<TrainedModel> {
         let key = self.train_key();
-        self.stage("train", key, |p| {
+        self.stage(Stage::Train, key, |p| {
             let snaps = p.snapshots(progress)?;
             let fit = p.pca(progress)?;
             let basis = &fit.basis;
@@ -743,7 +743,7 @@ impl<'a> Pipeline<'a> {
     /// ([`Complement`]), for the neural methods' `[reduced] complement_directions`.
     pub fn complement(&mut self, progress: Progress<'_>) -> Result<Complement> {
         let key = self.complement_key();
-        self.stage("complement", key, |p| {
+        self.stage(Stage::Complement, key, |p| {
             let snaps = p.snapshots(progress)?;
             let fit = p.pca(progress)?;
             let trained = p.train(progress)?;
@@ -774,7 +774,7 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn complement_key(&self) -> u64 {
-        KeyBuilder::new("complement")
+        KeyBuilder::new(Stage::Complement)
             .mix_key(self.train_key())
             .finish()
     }
@@ -805,7 +805,7 @@ impl<'a> Pipeline<'a> {
     /// The full-space simulation of test trajectory `trajectory` (cached stage `reference`).
     pub fn reference(&mut self, trajectory: usize, progress: Progress<'_>) -> Result<Reference> {
         let key = self.reference_key(trajectory);
-        self.stage("reference", key, |p| {
+        self.stage(Stage::Reference, key, |p| {
             let cfg = p.scene.test();
             let model = p.test_model(trajectory)?;
             let time = TimeConfig {
