@@ -144,13 +144,13 @@ fn a_tiny_scene_runs_end_to_end() {
         assert!(neural.mean_rel_error.is_finite(), "{neural:?}");
     }
     assert!(rows[4].cubature_elements < full.cubature_elements);
-    assert_eq!(cub.method, "pca-cubature");
+    assert_eq!(cub.method, Method::PcaCubature);
     assert!(cub.cubature_elements < full.cubature_elements, "{cub:?}");
     assert!(
         cub.mean_rel_error.is_finite() && cub.max_rel_error < 1.0,
         "{cub:?}"
     );
-    assert_eq!(full.method, "full");
+    assert_eq!(full.method, Method::Full);
     assert_eq!(full.mean_rel_error, 0.0);
     assert_eq!(pca.dim, 6);
     assert!(pca.mean_rel_error.is_finite() && pca.mean_rel_error > 0.0);

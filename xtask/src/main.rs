@@ -339,10 +339,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 scene.test().frames_per_schedule
             );
             print!("{}", markdown(&rows));
-            let reduced: Vec<_> = rows
-                .iter()
-                .filter(|r| !r.method.starts_with("full"))
-                .collect();
+            let reduced: Vec<_> = rows.iter().filter(|r| !r.method.is_full()).collect();
             if !reduced.is_empty() {
                 println!("\nwhere a reduced step's time goes (mean ms per step):\n");
                 println!(

@@ -32,7 +32,8 @@ pub struct RunOptions {
 /// One row of the report.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct MethodReport {
-    pub method: String,
+    /// Serialised as its [`Method::name`].
+    pub method: Method,
     /// Simulated dimension (free DOFs for full).
     pub dim: usize,
     /// Elements the elastic energy is evaluated on.
@@ -152,7 +153,7 @@ pub fn run(
         let mut model = crate::export::scene_model(pipeline, method, Rows::Used, stage_progress)?;
         if let Some(row) = rows
             .iter()
-            .find(|r| r.method == method.name() && r.failure.is_none())
+            .find(|r| r.method == method && r.failure.is_none())
         {
             model.provenance.errors.push(MeasuredError {
                 name: format!(
@@ -187,7 +188,7 @@ pub fn run(
 pub fn set_speedups(rows: &mut [MethodReport]) {
     let fastest_full = rows
         .iter()
-        .filter(|r| is_full_method(&r.method))
+        .filter(|r| r.method.is_full())
         .map(|r| r.ms_per_step)
         .fold(f64::INFINITY, f64::min);
     if fastest_full.is_finite() {
@@ -258,7 +259,7 @@ pub fn measure(
             w.finish()?;
         }
         return Ok(MethodReport {
-            method: method.name().into(),
+            method,
             dim: model.dofs.num_free(),
             cubature_elements: model.elements.len(),
             ms_per_step: full_ms,
@@ -389,7 +390,7 @@ pub fn measure(
         (subspace, step)
     };
     Ok(MethodReport {
-        method: method.name().into(),
+        method,
         dim,
         cubature_elements,
         ms_per_step: ms,
@@ -516,17 +517,17 @@ fn mean_usize(v: &[usize]) -> f64 {
 pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     let full = rows
         .iter()
-        .find(|r| r.method == Method::Full.name())
+        .find(|r| r.method == Method::Full)
         .map(|r| format!(" (full: {:.1} ms/step)", r.ms_per_step))
         .unwrap_or_default();
     let series: Vec<Series> = rows
         .iter()
-        .filter(|r| r.method != Method::Full.name())
+        .filter(|r| r.method != Method::Full)
         .map(|r| Series {
             name: format!("{} (dim {}, {} el.)", r.method, r.dim, r.cubature_elements),
             points: vec![(r.ms_per_step, r.mean_rel_error)],
             line: false,
-            reference: is_full_method(&r.method),
+            reference: r.method.is_full(),
             ..Default::default()
         })
         .collect();
@@ -540,19 +541,9 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     crate::plot::svg(&plot, &series)
 }
 
-/// Whether a report row's method name is a full-space method (any solver): the method read
-/// back from the serde name that [`Method::name`] also gives, then [`Method::is_full`].
-pub(crate) fn is_full_method(name: &str) -> bool {
-    use serde::Deserialize;
-    use serde::de::IntoDeserializer;
-    use serde::de::value::{Error, StrDeserializer};
-    let name: StrDeserializer<'_, Error> = name.into_deserializer();
-    Method::deserialize(name).is_ok_and(Method::is_full)
-}
-
 /// The reduced rows (full space has no error against itself).
 fn reduced_rows(rows: &[MethodReport]) -> impl Iterator<Item = &MethodReport> {
-    rows.iter().filter(|r| !is_full_method(&r.method))
+    rows.iter().filter(|r| !r.method.is_full())
 }
 
 /// The errors frame by frame as CSV: frame, time, then for every reduced method its trajectory
@@ -599,7 +590,7 @@ pub fn frame_error_plot(scene: &str, rows: &[MethodReport], h: f64) -> String {
     let mut series = Vec::new();
     for (i, r) in reduced_rows(rows).enumerate() {
         series.push(Series {
-            name: r.method.clone(),
+            name: r.method.to_string(),
             points: over_time(&r.frame_errors),
             line: true,
             dashed: false,
@@ -641,7 +632,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
-                None => r.method.clone(),
+                None => r.method.to_string(),
             },
             r.dim,
             r.cubature_elements,
@@ -668,12 +659,12 @@ pub fn markdown(rows: &[MethodReport]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{Method, is_full_method, mean};
+    use super::{Method, MethodReport, mean};
 
-    /// Report rows name their method by `Method::name`; reading it back must find the method.
+    /// A report row's method is written as its name, in JSON as in the tables.
     #[test]
-    fn full_space_rows_are_recognised_by_name() {
-        for m in [
+    fn rows_name_their_method_by_its_name() {
+        for method in [
             Method::Full,
             Method::FullLbfgs,
             Method::FullNewton,
@@ -682,9 +673,14 @@ mod tests {
             Method::Neural,
             Method::NeuralCubature,
         ] {
-            assert_eq!(is_full_method(m.name()), m.is_full(), "{}", m.name());
+            let row = MethodReport {
+                method,
+                ..Default::default()
+            };
+            let json = serde_json::to_value(&row).unwrap();
+            assert_eq!(json["method"], method.name());
+            assert_eq!(method.to_string(), method.name());
         }
-        assert!(!is_full_method("full lbfgs"));
     }
 
     /// Full space has no subspace error: its mean must print as 0, not −0.

@@ -39,6 +39,7 @@ pub enum Method {
 }
 
 impl Method {
+    /// The method's name on the command line, in reports and in file names (its serde name).
     pub fn name(self) -> &'static str {
         match self {
             Method::Full => "full",
@@ -64,6 +65,12 @@ impl Method {
             Method::FullNewton => Some(SolverMethod::Newton),
             _ => None,
         }
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.name())
     }
 }
 

@@ -145,7 +145,12 @@ pub fn run_suite(
 /// The suite's table: per mesh, every reduced method's mean error and speed-up, and the
 /// pipeline's time from an empty cache.
 pub fn markdown(rows: &[SuiteRow]) -> String {
-    let reduced = ["pca", "pca-cubature", "neural", "neural-cubature"];
+    let reduced = [
+        Method::Pca,
+        Method::PcaCubature,
+        Method::Neural,
+        Method::NeuralCubature,
+    ];
     let mut s = String::from("| scene | vertices | tets | pipeline s |");
     for m in reduced {
         s += &format!(" {m} error | {m} speed-up |");
