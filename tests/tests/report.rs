@@ -221,7 +221,7 @@ fn speedups_and_rates_follow_from_the_reported_times() {
     };
     let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
     assert_eq!(rows.len(), 4);
-    let mut steps = p.reference(0, &no_progress).unwrap().step_seconds;
+    let mut steps = p.reference(0, &no_progress).unwrap().step_seconds.clone();
     steps.sort_by(f64::total_cmp);
     let reference_ms = steps[steps.len() / 2] * 1e3;
     assert!(

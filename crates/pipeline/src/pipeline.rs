@@ -8,6 +8,7 @@
 //! snapshots.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -240,8 +241,8 @@ pub struct Pipeline<'a> {
     /// Called after each stage (to print a line).
     pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
     /// Artifacts already loaded or computed in this run, by path: a stage that several later
-    /// stages need is read (and announced) once.
-    memo: std::collections::HashMap<PathBuf, Box<dyn std::any::Any>>,
+    /// stages need is read (and announced) once, and every user shares the one copy.
+    memo: std::collections::HashMap<PathBuf, Arc<dyn std::any::Any + Send + Sync>>,
     /// Sum of the recorded stages' own seconds, to take nested stages out of a stage's time.
     recorded_seconds: f64,
 }
@@ -345,19 +346,24 @@ impl<'a> Pipeline<'a> {
         self.cache.join(format!("{stage}-{key:016x}.art"))
     }
 
-    /// Loads the artifact of `stage` under `key`, or computes and stores it.
-    fn stage<T: Serialize + DeserializeOwned + Clone + StageSummary + 'static>(
+    /// Loads the artifact of `stage` under `key`, or computes and stores it; shared with every
+    /// later use in this pipeline.
+    fn stage<T: Serialize + DeserializeOwned + StageSummary + Send + Sync + 'static>(
         &mut self,
         stage: Stage,
         key: u64,
         compute: impl FnOnce(&mut Self) -> Result<T>,
-    ) -> Result<T> {
+    ) -> Result<Arc<T>> {
         let path = self.path(stage, key);
-        if let Some(v) = self.memo.get(&path).and_then(|b| b.downcast_ref::<T>()) {
-            return Ok(v.clone());
+        if let Some(v) = self
+            .memo
+            .get(&path)
+            .and_then(|v| v.clone().downcast::<T>().ok())
+        {
+            return Ok(v);
         }
-        let value = self.load_or_compute(stage, key, path.clone(), compute)?;
-        self.memo.insert(path, Box::new(value.clone()));
+        let value = Arc::new(self.load_or_compute(stage, key, path.clone(), compute)?);
+        self.memo.insert(path, value.clone());
         Ok(value)
     }
 
@@ -414,7 +420,7 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Stage `snapshots`: every training schedule simulated in full space.
-    pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<SnapshotSet> {
+    pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<Arc<SnapshotSet>> {
         let key = self.snapshots_key();
         self.stage(Stage::Snapshots, key, |p| {
             let cfg = p.scene.training();
@@ -464,7 +470,7 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Merges shards `0..count` into the `snapshots` artifact (identical to an unsharded run).
-    pub fn merge_shards(&mut self, count: usize) -> Result<SnapshotSet> {
+    pub fn merge_shards(&mut self, count: usize) -> Result<Arc<SnapshotSet>> {
         let key = self.snapshots_key();
         self.stage(Stage::Snapshots, key, |p| {
             let mut parts = Vec::with_capacity(count);
@@ -491,7 +497,7 @@ impl<'a> Pipeline<'a> {
 
     /// Stage `pca`: the mass-orthonormal basis of the snapshots (which are loaded or computed
     /// only when the basis itself is not cached).
-    pub fn pca(&mut self, progress: Progress<'_>) -> Result<PcaFit> {
+    pub fn pca(&mut self, progress: Progress<'_>) -> Result<Arc<PcaFit>> {
         let key = self.pca_key();
         self.stage(Stage::Pca, key, |p| {
             let snaps = p.snapshots(progress)?;
@@ -530,14 +536,14 @@ impl<'a> Pipeline<'a> {
 
     /// Stage `cubature`: a weighted element set reproducing the PCA subspace's reduced elastic
     /// forces over the snapshots, with its error on the held-out test trajectory.
-    pub fn cubature(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+    pub fn cubature(&mut self, progress: Progress<'_>) -> Result<Arc<FittedCubature>> {
         let key = self.cubature_key();
         self.stage(Stage::Cubature, key, |p| p.fit_cubature(false, progress))
     }
 
     /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
     /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
-    pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+    pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<Arc<FittedCubature>> {
         let key = self.cubature_neural_key();
         self.stage(Stage::CubatureNeural, key, |p| {
             p.fit_cubature(true, progress)
@@ -642,7 +648,7 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Stage `train`: the autoencoder on the snapshots' PCA coefficients, the basis frozen.
-    pub fn train(&mut self, progress: Progress<'_>) -> Result<TrainedModel> {
+    pub fn train(&mut self, progress: Progress<'_>) -> Result<Arc<TrainedModel>> {
         let key = self.train_key();
         self.stage(Stage::Train, key, |p| {
             let snaps = p.snapshots(progress)?;
@@ -741,7 +747,7 @@ impl<'a> Pipeline<'a> {
 
     /// Stage `complement`: the directions the trained autoencoder misses in the snapshots
     /// ([`Complement`]), for the neural methods' `[reduced] complement_directions`.
-    pub fn complement(&mut self, progress: Progress<'_>) -> Result<Complement> {
+    pub fn complement(&mut self, progress: Progress<'_>) -> Result<Arc<Complement>> {
         let key = self.complement_key();
         self.stage(Stage::Complement, key, |p| {
             let snaps = p.snapshots(progress)?;
@@ -803,7 +809,11 @@ impl<'a> Pipeline<'a> {
     }
 
     /// The full-space simulation of test trajectory `trajectory` (cached stage `reference`).
-    pub fn reference(&mut self, trajectory: usize, progress: Progress<'_>) -> Result<Reference> {
+    pub fn reference(
+        &mut self,
+        trajectory: usize,
+        progress: Progress<'_>,
+    ) -> Result<Arc<Reference>> {
         let key = self.reference_key(trajectory);
         self.stage(Stage::Reference, key, |p| {
             let cfg = p.scene.test();

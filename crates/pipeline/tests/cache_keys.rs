@@ -520,7 +520,9 @@ fn run_stages(scene: &Scene, cache: &Path) -> (Vec<(Stage, PathBuf, bool)>, Arti
     let mut p = Pipeline::new(scene, cache).unwrap_or_else(|e| panic!("{e:#}"));
     macro_rules! ok {
         ($stage:expr) => {
-            $stage.unwrap_or_else(|e| panic!("{}: {e:#}", scene.source))
+            std::sync::Arc::unwrap_or_clone(
+                $stage.unwrap_or_else(|e| panic!("{}: {e:#}", scene.source)),
+            )
         };
     }
     let a = Artifacts {
