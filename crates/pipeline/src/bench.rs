@@ -277,6 +277,18 @@ fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
     Ok(())
 }
 
+/// What `cargo xtask bench` shows at the end: the table and where it is written.
+pub fn summary(scene: &Scene, opts: &BenchOptions, rows: &[BenchRow]) -> String {
+    format!(
+        "\n{} — held-out test trajectory {}, {} timed runs per variant\n\n{}\nbench: {} (also bench.md, bench.svg)\n",
+        scene.name,
+        opts.trajectory,
+        opts.repeats,
+        markdown(rows),
+        opts.out.join("bench.json").display()
+    )
+}
+
 /// The sweep as a markdown table (Pareto-optimal variants marked with ★).
 pub fn markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(

@@ -3,7 +3,7 @@
 //! `run`, and for the runners of `simulate` and `run`, which step the same model through
 //! latent-sim's runtime.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
@@ -30,7 +30,7 @@ pub fn run_method(methods: &[Method]) -> Option<Method> {
 }
 
 /// Where `cargo xtask export` and `run` put `method`'s model: `<folder>/<method>.ldm`.
-pub fn model_path(folder: &std::path::Path, method: Method) -> PathBuf {
+pub fn model_path(folder: &Path, method: Method) -> PathBuf {
     folder.join(format!("{}.ldm", method.name()))
 }
 
@@ -162,6 +162,28 @@ pub fn reduced_model(
     };
     ReducedModel::build(source)
         .map_err(|e| anyhow::anyhow!("{}: model of {}: {e}", scene.source, method.name()))
+}
+
+/// One line saying what the model of `method` on scene `scene`, written to `path`, holds: its
+/// sizes, the vertices whose basis rows it keeps, its elements and the file's size.
+pub fn describe(scene: &str, method: Method, model: &ReducedModel, path: &Path) -> String {
+    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    format!(
+        "{}: {} model, {} vertices ({} with basis rows), {} tets, k = {}, latent dimension {}, {} elements evaluated → {} ({:.2} MB)",
+        scene,
+        method.name(),
+        model.mesh.num_vertices(),
+        model.space.vertices.len(),
+        model.mesh.num_tets(),
+        model.space.k,
+        model.latent_dim(),
+        model
+            .cubature
+            .as_ref()
+            .map_or(model.mesh.num_tets(), |c| c.len()),
+        path.display(),
+        bytes as f64 / 1e6
+    )
 }
 
 /// The model of reduced `method` on the scene, with the solver settings `cargo xtask run` steps

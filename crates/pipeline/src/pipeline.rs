@@ -41,6 +41,30 @@ pub struct StageOutcome {
     pub summary: String,
 }
 
+/// Two lines: whether the stage was loaded (and from where) or computed (in how long, to
+/// where), and under it what it chose.
+impl std::fmt::Display for StageOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.cached {
+            writeln!(
+                f,
+                "{:>10}: unchanged, skipped ({})",
+                self.stage,
+                self.path.display()
+            )?;
+        } else {
+            writeln!(
+                f,
+                "{:>10}: computed in {:.1} s → {}",
+                self.stage,
+                self.seconds,
+                self.path.display()
+            )?;
+        }
+        write!(f, "{:>10}  {}", "", self.summary)
+    }
+}
+
 /// One line saying what a stage's artifact holds and why, for [`StageOutcome::summary`].
 pub trait StageSummary {
     fn summary(&self) -> String;
@@ -894,112 +918,9 @@ fn max_vertex_distance(
     worst.sqrt()
 }
 
-impl TrainedModel {
-    /// Writes `loss.csv` (epoch, training and validation loss) and `loss.svg` into `dir`.
-    pub fn write_loss_curve(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut csv = String::from("epoch,train_loss,validation_loss\n");
-        for r in &self.history {
-            let v = r.validation_loss.map(|v| v.to_string()).unwrap_or_default();
-            csv.push_str(&format!("{},{},{}\n", r.epoch, r.train_loss, v));
-        }
-        fem_core::io::write_atomic(&dir.join("loss.csv"), csv.as_bytes())?;
-        let mut series = vec![crate::plot::Series {
-            name: "training".into(),
-            points: self
-                .history
-                .iter()
-                .map(|r| (r.epoch as f64, r.train_loss))
-                .collect(),
-            line: true,
-            ..Default::default()
-        }];
-        if self.history.iter().any(|r| r.validation_loss.is_some()) {
-            series.push(crate::plot::Series {
-                name: "validation".into(),
-                points: self
-                    .history
-                    .iter()
-                    .filter_map(|r| Some((r.epoch as f64, r.validation_loss?)))
-                    .collect(),
-                line: true,
-                ..Default::default()
-            });
-        }
-        let plot = crate::plot::Plot {
-            title: format!(
-                "autoencoder {} → {} → {} (MSE, scaled units)",
-                self.pca_k, self.latent_dim, self.pca_k
-            ),
-            x_label: "epoch".into(),
-            y_label: "loss".into(),
-            x_scale: crate::plot::Scale::Linear,
-            y_scale: crate::plot::Scale::Log,
-        };
-        fem_core::io::write_atomic(
-            &dir.join("loss.svg"),
-            crate::plot::svg(&plot, &series).as_bytes(),
-        )?;
-        Ok(())
-    }
-}
-
 /// U as one column-major slice (n_free × k).
 pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
     (0..basis.k())
         .flat_map(|j| basis.column(j).iter().copied())
         .collect()
-}
-
-impl FittedCubature {
-    /// Writes `error.csv` (elements, relative force error on the training poses) and `error.svg`.
-    pub fn write_error_curve(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut csv = String::from("elements,relative_error,held_out_error\n");
-        for (n, e) in &self.rule.error_curve {
-            let held = self
-                .held_out_curve
-                .iter()
-                .find(|&&(m, _)| m == *n)
-                .map(|&(_, h)| h.to_string())
-                .unwrap_or_default();
-            csv.push_str(&format!("{n},{e},{held}\n"));
-        }
-        fem_core::io::write_atomic(&dir.join("error.csv"), csv.as_bytes())?;
-        let series = vec![
-            crate::plot::Series {
-                name: "training poses".into(),
-                points: self
-                    .rule
-                    .error_curve
-                    .iter()
-                    .map(|&(n, e)| (n as f64, e))
-                    .collect(),
-                line: true,
-                ..Default::default()
-            },
-            crate::plot::Series {
-                name: "held-out trajectory".into(),
-                points: self
-                    .held_out_curve
-                    .iter()
-                    .map(|&(n, e)| (n as f64, e))
-                    .collect(),
-                line: true,
-                ..Default::default()
-            },
-        ];
-        let plot = crate::plot::Plot {
-            title: "optimized cubature: relative reduced-force error".into(),
-            x_label: "elements".into(),
-            y_label: "relative error".into(),
-            x_scale: crate::plot::Scale::Linear,
-            y_scale: crate::plot::Scale::Log,
-        };
-        fem_core::io::write_atomic(
-            &dir.join("error.svg"),
-            crate::plot::svg(&plot, &series).as_bytes(),
-        )?;
-        Ok(())
-    }
 }

@@ -11,6 +11,7 @@ use latent_sim::model::{MeasuredError, Rows};
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
 use crate::plot::{Plot, Scale, Series};
+use crate::scene::Scene;
 use crate::simulate::{
     Method, Runner, SimulateOptions, StepParts, Trajectory, median, setup, write_json,
 };
@@ -182,6 +183,58 @@ pub fn run(
         frame_error_plot(&pipeline.scene.name, &rows, h).as_bytes(),
     )?;
     Ok(rows)
+}
+
+/// What `cargo xtask run` shows after the stages: the table, where a reduced step's time goes,
+/// the warnings of [`crate::trust`], and where the report, the frames and the model are.
+pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> String {
+    let mut s = format!(
+        "\n{} — held-out test trajectory {}, {} frames\n\n",
+        scene.name,
+        opts.trajectory,
+        scene.test().frames_per_schedule
+    );
+    s.push_str(&markdown(rows));
+    s.push_str(&time_split_markdown(rows));
+    let warnings = crate::trust::warnings(rows);
+    if !warnings.is_empty() {
+        s.push_str("\nnot to be trusted:\n");
+        for w in &warnings {
+            s.push_str(&format!("- {w}\n"));
+        }
+    }
+    s.push_str(&format!(
+        "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg); frames: {}/<method>/series.pvd\n",
+        opts.out.join("report.json").display(),
+        opts.out.display()
+    ));
+    if let Some(m) = crate::export::run_method(&opts.methods) {
+        s.push_str(&format!(
+            "model: {}\n",
+            crate::export::model_path(&opts.out, m).display()
+        ));
+    }
+    s
+}
+
+/// Where a reduced step's time goes, mean ms per step, as a markdown table under a heading
+/// (empty when no reduced method ran).
+pub fn time_split_markdown(rows: &[MethodReport]) -> String {
+    let mut reduced = reduced_rows(rows).peekable();
+    if reduced.peek().is_none() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\nwhere a reduced step's time goes (mean ms per step):\n\n\
+         | method | decode | elastic | VJP | preconditioner or Newton matrix |\n|---|---:|---:|---:|---:|\n",
+    );
+    for r in reduced {
+        s.push_str(&format!(
+            "| {} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
+            r.method, r.decode_ms, r.elastic_ms, r.vjp_ms, r.precond_ms
+        ));
+    }
+    s
 }
 
 /// Speed-ups over the faster full-space solver among `rows` (unchanged when none ran).

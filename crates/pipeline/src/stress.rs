@@ -125,6 +125,24 @@ pub struct StressResult {
     pub outcome: Outcome,
 }
 
+/// One line: method, condition and outcome, with the error's message or why it diverged.
+impl std::fmt::Display for StressResult {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let detail = match &self.outcome {
+            Outcome::Error { message, .. } => format!(": {message}"),
+            Outcome::Diverged { reason, .. } => format!(": {reason}"),
+            Outcome::Ok { .. } => String::new(),
+        };
+        write!(
+            f,
+            "{:>16} | {:<20} | {}{detail}",
+            self.method,
+            self.condition,
+            self.outcome.cell()
+        )
+    }
+}
+
 /// A state counts as unbounded when a vertex moves more than this many bounding-box diagonals.
 pub const UNBOUNDED_DIAGONALS: f64 = 10.0;
 

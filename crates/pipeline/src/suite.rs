@@ -72,6 +72,46 @@ fn minimal_scene_of(
     )
 }
 
+/// The `.mesh` files of folder `dir`, sorted, leaving out those with more vertices than
+/// `max_vertices`.
+///
+/// # Errors
+/// When the folder cannot be read, a mesh cannot be read to count its vertices, or no mesh is
+/// left.
+pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| anyhow::anyhow!("cannot read mesh folder {}: {e}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "mesh"))
+        .collect();
+    files.sort();
+    if let Some(max) = max_vertices {
+        let mut kept = Vec::new();
+        for f in files {
+            let (m, _) = fem_core::io::read_mesh(&f)?;
+            if m.num_vertices() <= max {
+                kept.push(f);
+            }
+        }
+        files = kept;
+    }
+    if files.is_empty() {
+        anyhow::bail!("no .mesh files to run in {}", dir.display());
+    }
+    Ok(files)
+}
+
+/// Writes `suite.md` and `suite.json` into `out`.
+pub fn write(out: &Path, rows: &[SuiteRow]) -> Result<()> {
+    std::fs::create_dir_all(out)?;
+    fem_core::io::write_atomic(&out.join("suite.md"), markdown(rows).as_bytes())?;
+    fem_core::io::write_atomic(
+        &out.join("suite.json"),
+        serde_json::to_string_pretty(&rows)?.as_bytes(),
+    )?;
+    Ok(())
+}
+
 /// One mesh's outcome.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct SuiteRow {
