@@ -189,7 +189,7 @@ struct ExportArgs {
     /// The reduced method whose model to write.
     #[arg(long, value_enum, default_value_t = MethodArg::NeuralCubature)]
     method: MethodArg,
-    /// Model file (default: out/<scene name>/<method>.ldm).
+    /// Model file (default: out/SCENE/METHOD.ldm).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Keep the basis rows of every vertex (the whole displacement can be read back, interior
