@@ -4,13 +4,11 @@
 use pipeline::pipeline::Pipeline;
 use pipeline::run::{RunOptions, run};
 use pipeline::simulate::Method;
+use pipeline::stage::Stage;
 use tests::{TINY, no_progress, scene, scratch_dir};
 
-fn stages(p: &Pipeline<'_>) -> Vec<(String, bool)> {
-    p.outcomes
-        .iter()
-        .map(|o| (o.stage.clone(), o.cached))
-        .collect()
+fn stages(p: &Pipeline<'_>) -> Vec<(Stage, bool)> {
+    p.outcomes.iter().map(|o| (o.stage, o.cached)).collect()
 }
 
 #[test]
@@ -21,10 +19,7 @@ fn unchanged_scenes_do_no_work_and_pca_changes_reuse_snapshots() {
     let start = std::time::Instant::now();
     let first = p.pca(&no_progress).unwrap();
     let wall = start.elapsed().as_secs_f64();
-    assert_eq!(
-        stages(&p),
-        [("snapshots".into(), false), ("pca".into(), false)]
-    );
+    assert_eq!(stages(&p), [(Stage::Snapshots, false), (Stage::Pca, false)]);
     // Each stage reports its own time: the PCA's excludes the snapshots it had to compute first.
     let own: f64 = p.outcomes.iter().map(|o| o.seconds).sum();
     assert!(
@@ -35,25 +30,19 @@ fn unchanged_scenes_do_no_work_and_pca_changes_reuse_snapshots() {
     // Second run: nothing is computed, the basis is identical.
     let mut p = Pipeline::new(&s, &cache).unwrap();
     let again = p.pca(&no_progress).unwrap();
-    assert_eq!(stages(&p), [("pca".into(), true)]);
+    assert_eq!(stages(&p), [(Stage::Pca, true)]);
     assert_eq!(first, again);
     // Changing only [pca]: the snapshots are reused, the basis recomputed.
     let s2 = scene(&TINY.replace("dimension = 6", "dimension = 4"));
     let mut p = Pipeline::new(&s2, &cache).unwrap();
     let fit = p.pca(&no_progress).unwrap();
     assert_eq!(fit.chosen_k(), 4);
-    assert_eq!(
-        stages(&p),
-        [("snapshots".into(), true), ("pca".into(), false)]
-    );
+    assert_eq!(stages(&p), [(Stage::Snapshots, true), (Stage::Pca, false)]);
     // Changing the physics invalidates both.
     let s3 = scene(&TINY.replace("youngs_modulus = 1.0e5", "youngs_modulus = 2.0e5"));
     let mut p = Pipeline::new(&s3, &cache).unwrap();
     p.pca(&no_progress).unwrap();
-    assert_eq!(
-        stages(&p),
-        [("snapshots".into(), false), ("pca".into(), false)]
-    );
+    assert_eq!(stages(&p), [(Stage::Snapshots, false), (Stage::Pca, false)]);
 }
 
 /// `[cubature] neural_tolerance` refits the neural rule only, to that tolerance; the PCA rule
@@ -76,13 +65,13 @@ fn the_neural_tolerance_refits_the_neural_rule_only() {
     let mut p = Pipeline::new(&s2, &cache).unwrap();
     assert_eq!(p.cubature(&no_progress).unwrap().rule, linear.rule);
     let tight = p.cubature_neural(&no_progress).unwrap();
-    let computed: Vec<(String, bool)> = stages(&p)
+    let computed: Vec<(Stage, bool)> = stages(&p)
         .into_iter()
-        .filter(|(stage, _)| stage.starts_with("cubature"))
+        .filter(|(stage, _)| matches!(stage, Stage::Cubature | Stage::CubatureNeural))
         .collect();
     assert_eq!(
         computed,
-        [("cubature".into(), true), ("cubature-neural".into(), false)]
+        [(Stage::Cubature, true), (Stage::CubatureNeural, false)]
     );
     assert!(
         tight.rule.training_error <= 0.01 || !tight.rule.tolerance_met,
@@ -104,7 +93,7 @@ fn a_corrupt_artifact_is_recomputed_not_used() {
     std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
     let mut p = Pipeline::new(&s, &cache).unwrap();
     let again = p.snapshots(&no_progress).unwrap();
-    assert_eq!(stages(&p), [("snapshots".into(), false)]);
+    assert_eq!(stages(&p), [(Stage::Snapshots, false)]);
     assert_eq!(good, again);
 }
 
@@ -155,13 +144,13 @@ fn a_tiny_scene_runs_end_to_end() {
         assert!(neural.mean_rel_error.is_finite(), "{neural:?}");
     }
     assert!(rows[4].cubature_elements < full.cubature_elements);
-    assert_eq!(cub.method, "pca-cubature");
+    assert_eq!(cub.method, Method::PcaCubature);
     assert!(cub.cubature_elements < full.cubature_elements, "{cub:?}");
     assert!(
         cub.mean_rel_error.is_finite() && cub.max_rel_error < 1.0,
         "{cub:?}"
     );
-    assert_eq!(full.method, "full");
+    assert_eq!(full.method, Method::Full);
     assert_eq!(full.mean_rel_error, 0.0);
     assert_eq!(pca.dim, 6);
     assert!(pca.mean_rel_error.is_finite() && pca.mean_rel_error > 0.0);

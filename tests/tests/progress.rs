@@ -221,12 +221,12 @@ fn stress_reports_every_method_under_every_condition() {
         &conditions,
         0,
         &|d, t| stages.record(d, t),
-        &mut |r| reported.push((r.condition.clone(), r.method.clone())),
+        &mut |r| reported.push((r.condition.clone(), r.method)),
     )
     .unwrap();
-    let expected: Vec<(String, String)> = conditions
+    let expected: Vec<(String, Method)> = conditions
         .iter()
-        .flat_map(|c| methods.iter().map(|m| (c.label(), m.name().to_string())))
+        .flat_map(|c| methods.iter().map(|&m| (c.label(), m)))
         .collect();
     assert_eq!(reported, expected);
     assert_each_stage_completes("stress's stages", &stages.calls());

@@ -69,7 +69,7 @@ fn every_method_survives_every_condition_or_reports_an_error() {
                 }
             }
         }
-        if r.method == "full-lbfgs"
+        if r.method == Method::FullLbfgs
             && let Outcome::Ok {
                 mean_rel_error: Some(e),
                 ..

@@ -3,7 +3,7 @@
 //! cache through every stage and every method, each mesh with another material.
 
 use pipeline::simulate::Method;
-use pipeline::suite::{MATERIALS, markdown, meshes_in, run_suite};
+use pipeline::suite::{MATERIALS, markdown, meshes, run_suite};
 use tests::{no_progress, scratch_dir, shared_dir};
 
 /// Meshes up to this size run in CI (a minute or two each on 2 cores); `cargo xtask suite`
@@ -15,7 +15,7 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
     let Some(shared) = shared_dir("the mesh suite on AutoDef's meshes") else {
         return;
     };
-    let meshes = meshes_in(&shared.join("meshes"), Some(CI_MAX_VERTICES)).unwrap();
+    let meshes = meshes(&shared.join("meshes"), Some(CI_MAX_VERTICES)).unwrap();
     assert!(
         meshes.len() >= 2,
         "expected the small AutoDef meshes in {}, found {meshes:?}",
@@ -45,7 +45,7 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
             let row = r
                 .methods
                 .iter()
-                .find(|x| x.method == m.name())
+                .find(|x| x.method == m)
                 .unwrap_or_else(|| panic!("{}: no {} row", r.scene, m.name()));
             assert!(
                 row.failure.is_none(),

@@ -15,74 +15,27 @@ use fem_core::io::write_atomic;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use crate::stage::Stage;
+
 const MAGIC: &[u8; 8] = b"LATDYN\0a";
 
 /// Version of every artifact's layout and meaning; bump it when either changes so old caches
 /// are recomputed instead of misread. 2: header checksum.
 pub const FORMAT_VERSION: u32 = 2;
 
-/// Version of what each stage computes. Bump a stage's number when its numerical method changes
-/// so that its cached artifacts (and everything downstream, whose keys include its key) are
-/// recomputed, while other stages' caches stay valid.
-pub fn stage_version(stage: &str) -> u32 {
-    match stage {
-        // 2: inputs centred with one common scale instead of per-feature standardisation.
-        // 3: the training gradient sums in a different (still fixed) order.
-        // 5: without `[autoencoder] latent_dim`, d is half the PCA dimension (was 6).
-        "train" => 5,
-        // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
-        // 3: sequential sparse factorisation on small pools (round-off), current-state L-BFGS
-        //    preconditioner (iterates within tolerance).
-        // 4: L-BFGS's preconditioner solves with its factor rounded to f32 (iterates within
-        //    tolerance).
-        // 5: L-BFGS's preconditioner factorised in f32 where it passes its check (iterates
-        //    within tolerance).
-        // 6: each step's solve starts from the extrapolation u_n + h u̇_n + h² ü_n (iterates
-        //    within tolerance).
-        // 7: the preconditioner's f32 factor stored in 16 bits where that passes its check
-        //    (iterates within tolerance).
-        // 8: the substitutions multiply by the diagonal's reciprocals instead of dividing
-        //    (round-off).
-        "snapshots" | "snapshots-shard" | "reference" => 8,
-        // 2: the held-out error along the greedy path is stored with the rule.
-        "cubature" => 2,
-        // 3: the decoder's Jacobian from SIMD kernels (round-off).
-        "cubature-neural" => 3,
-        _ => 1,
-    }
-}
-
-/// The command that (re)builds the artifact of `stage`. Every command recomputes an unusable
-/// artifact of a stage it needs, so re-running it repairs the cache.
-pub fn rebuild_command(stage: &str) -> &'static str {
-    match stage {
-        "snapshots" => "cargo xtask snapshots",
-        "snapshots-shard" => {
-            "cargo xtask snapshots --shard I/N` (for that shard) or `cargo xtask snapshots"
-        }
-        "pca" => "cargo xtask pca",
-        "cubature" => "cargo xtask cubature",
-        "cubature-neural" => "cargo xtask run --methods neural-cubature",
-        "train" => "cargo xtask train",
-        // The full-space simulation of a held-out trajectory, computed by `run`.
-        "reference" => "cargo xtask run",
-        _ => "cargo xtask run",
-    }
-}
-
 /// Why an artifact could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ArtifactError {
-    #[error("{path}: cannot read: {source}; re-run `{}` to rebuild it", rebuild_command(.stage))]
+    #[error("{path}: cannot read: {source}; re-run `{}` to rebuild it", .stage.rebuild_command())]
     Io {
         path: String,
-        stage: String,
+        stage: Stage,
         source: std::io::Error,
     },
-    #[error("{path}: {reason}; re-run `{}` to rebuild it", rebuild_command(.stage))]
+    #[error("{path}: {reason}; re-run `{}` to rebuild it", .stage.rebuild_command())]
     Invalid {
         path: String,
-        stage: String,
+        stage: Stage,
         reason: String,
     },
 }
@@ -107,11 +60,11 @@ pub struct KeyBuilder(u64);
 
 impl KeyBuilder {
     /// A key for `stage` at the current [`FORMAT_VERSION`] and the stage's own
-    /// [`stage_version`].
-    pub fn new(stage: &str) -> Self {
-        let h = fnv1a(stage.as_bytes());
+    /// [`version`](Stage::version).
+    pub fn new(stage: Stage) -> Self {
+        let h = fnv1a(stage.name().as_bytes());
         let h = fnv1a_continue(h, &FORMAT_VERSION.to_le_bytes());
-        Self(fnv1a_continue(h, &stage_version(stage).to_le_bytes()))
+        Self(fnv1a_continue(h, &stage.version().to_le_bytes()))
     }
 
     /// Mixes in a serialisable value (a scene section, a list of pinned vertices, …).
@@ -136,11 +89,12 @@ impl KeyBuilder {
 /// Writes `value` as the artifact of `stage`.
 pub fn save<T: Serialize>(
     path: &Path,
-    stage: &str,
+    stage: Stage,
     key: u64,
     mesh: u64,
     value: &T,
 ) -> std::io::Result<()> {
+    let stage = stage.name();
     let payload = postcard::to_allocvec(value).map_err(std::io::Error::other)?;
     let stage_len = u16::try_from(stage.len()).map_err(std::io::Error::other)?;
     let mut bytes = Vec::with_capacity(payload.len() + 72 + stage.len());
@@ -160,8 +114,8 @@ pub fn save<T: Serialize>(
 
 /// What the caller expects of an artifact.
 #[derive(Debug, Clone, Copy)]
-pub struct Expect<'a> {
-    pub stage: &'a str,
+pub struct Expect {
+    pub stage: Stage,
     /// The cache key, when it must match.
     pub key: Option<u64>,
     /// The mesh hash, when it must match.
@@ -169,17 +123,17 @@ pub struct Expect<'a> {
 }
 
 /// Reads and checks the artifact at `path`.
-pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect<'_>) -> Result<T, ArtifactError> {
+pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect) -> Result<T, ArtifactError> {
     let shown = path.display().to_string();
-    let stage = expect.stage.to_string();
+    let stage = expect.stage;
     let bytes = std::fs::read(path).map_err(|source| ArtifactError::Io {
         path: shown.clone(),
-        stage: stage.clone(),
+        stage,
         source,
     })?;
     let invalid = |reason: String| ArtifactError::Invalid {
         path: shown.clone(),
-        stage: stage.clone(),
+        stage,
         reason,
     };
     let mut r = Reader {
@@ -214,7 +168,7 @@ pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect<'_>) -> Result<T, A
             "header checksum mismatch (the file is corrupted)".into(),
         ));
     }
-    if name != expect.stage.as_bytes() {
+    if name != expect.stage.name().as_bytes() {
         return Err(invalid(format!(
             "holds stage `{}`, expected `{}`",
             String::from_utf8_lossy(name),
@@ -296,9 +250,9 @@ mod tests {
     fn round_trip_and_every_corruption_is_detected() {
         let p = tmp("a.art");
         let value: Vec<f64> = (0..100).map(|i| i as f64 * 0.5).collect();
-        save(&p, "pca", 42, 7, &value).unwrap();
+        save(&p, Stage::Pca, 42, 7, &value).unwrap();
         let ok = Expect {
-            stage: "pca",
+            stage: Stage::Pca,
             key: Some(42),
             mesh: Some(7),
         };
@@ -323,7 +277,7 @@ mod tests {
             msg(load::<Vec<f64>>(
                 &p,
                 Expect {
-                    stage: "train",
+                    stage: Stage::Train,
                     ..ok
                 }
             )

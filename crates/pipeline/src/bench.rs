@@ -277,6 +277,18 @@ fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
     Ok(())
 }
 
+/// What `cargo xtask bench` shows at the end: the table and where it is written.
+pub fn summary(scene: &Scene, opts: &BenchOptions, rows: &[BenchRow]) -> String {
+    format!(
+        "\n{} — held-out test trajectory {}, {} timed runs per variant\n\n{}\nbench: {} (also bench.md, bench.svg)\n",
+        scene.name,
+        opts.trajectory,
+        opts.repeats,
+        markdown(rows),
+        opts.out.join("bench.json").display()
+    )
+}
+
 /// The sweep as a markdown table (Pareto-optimal variants marked with ★).
 pub fn markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(
@@ -319,20 +331,20 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
     let mut series: Vec<Series> = Vec::new();
     for r in rows {
         let point = (r.report.ms_per_step, r.report.mean_rel_error);
-        match series.iter_mut().find(|s| s.name == r.report.method) {
+        match series.iter_mut().find(|s| s.name == r.report.method.name()) {
             Some(s) => s.points.push(point),
             None => series.push(Series {
-                name: r.report.method.clone(),
+                name: r.report.method.to_string(),
                 points: vec![point],
                 line: false,
-                reference: crate::run::is_full_method(&r.report.method),
+                reference: r.report.method.is_full(),
                 ..Default::default()
             }),
         }
     }
     let full = rows
         .iter()
-        .find(|r| r.report.method == Method::Full.name())
+        .find(|r| r.report.method == Method::Full)
         .map(|r| format!(" (full: {:.1} ms/step)", r.report.ms_per_step))
         .unwrap_or_default();
     let mut front: Vec<(f64, f64)> = rows
@@ -366,7 +378,7 @@ mod tests {
         BenchRow {
             variant: String::new(),
             report: MethodReport {
-                method: "pca".into(),
+                method: Method::Pca,
                 dim: 1,
                 cubature_elements: 1,
                 ms_per_step: ms,

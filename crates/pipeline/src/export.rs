@@ -3,7 +3,7 @@
 //! `run`, and for the runners of `simulate` and `run`, which step the same model through
 //! latent-sim's runtime.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use fem_core::integrator::{FullSpaceModel, TimeConfig};
@@ -14,6 +14,7 @@ use latent_sim::model::{MeasuredError, ModelSource, Provenance, Rows, StageKey, 
 
 use crate::pipeline::{Pipeline, Progress};
 use crate::simulate::{Method, solver_for};
+use crate::stage::Stage;
 
 /// The method `cargo xtask export` exports and `run` writes the model of: the paper's.
 pub const DEFAULT_METHOD: Method = Method::NeuralCubature;
@@ -29,7 +30,7 @@ pub fn run_method(methods: &[Method]) -> Option<Method> {
 }
 
 /// Where `cargo xtask export` and `run` put `method`'s model: `<folder>/<method>.ldm`.
-pub fn model_path(folder: &std::path::Path, method: Method) -> PathBuf {
+pub fn model_path(folder: &Path, method: Method) -> PathBuf {
     folder.join(format!("{}.ldm", method.name()))
 }
 
@@ -58,13 +59,13 @@ pub fn reduced_model(
         );
     }
     let scene = pipeline.scene;
-    let key = |stage: &str, key: u64| StageKey {
-        stage: stage.into(),
+    let key = |stage: Stage, key: u64| StageKey {
+        stage: stage.name().into(),
         key,
     };
     let mut stage_keys = vec![
-        key("snapshots", pipeline.snapshots_key()),
-        key("pca", pipeline.pca_key()),
+        key(Stage::Snapshots, pipeline.snapshots_key()),
+        key(Stage::Pca, pipeline.pca_key()),
     ];
     let training = |name: String, value: f64| MeasuredError {
         name,
@@ -85,7 +86,7 @@ pub fn reduced_model(
     let neural = matches!(method, Method::Neural | Method::NeuralCubature);
     // The stages in the order the runners always asked for them.
     let trained = if neural {
-        stage_keys.push(key("train", pipeline.train_key()));
+        stage_keys.push(key(Stage::Train, pipeline.train_key()));
         let t = pipeline.train(progress)?;
         errors.push(training(
             format!(
@@ -100,11 +101,11 @@ pub fn reduced_model(
     };
     let cubature = match method {
         Method::PcaCubature => {
-            stage_keys.push(key("cubature", pipeline.cubature_key()));
+            stage_keys.push(key(Stage::Cubature, pipeline.cubature_key()));
             Some(pipeline.cubature(progress)?)
         }
         Method::NeuralCubature => {
-            stage_keys.push(key("cubature-neural", pipeline.cubature_neural_key()));
+            stage_keys.push(key(Stage::CubatureNeural, pipeline.cubature_neural_key()));
             Some(pipeline.cubature_neural(progress)?)
         }
         _ => None,
@@ -126,7 +127,7 @@ pub fn reduced_model(
     let complement = if neural {
         let columns = pipeline.complement_columns(progress)?;
         if !columns.is_empty() {
-            stage_keys.push(key("complement", pipeline.complement_key()));
+            stage_keys.push(key(Stage::Complement, pipeline.complement_key()));
         }
         columns
     } else {
@@ -161,6 +162,28 @@ pub fn reduced_model(
     };
     ReducedModel::build(source)
         .map_err(|e| anyhow::anyhow!("{}: model of {}: {e}", scene.source, method.name()))
+}
+
+/// One line saying what the model of `method` on scene `scene`, written to `path`, holds: its
+/// sizes, the vertices whose basis rows it keeps, its elements and the file's size.
+pub fn describe(scene: &str, method: Method, model: &ReducedModel, path: &Path) -> String {
+    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    format!(
+        "{}: {} model, {} vertices ({} with basis rows), {} tets, k = {}, latent dimension {}, {} elements evaluated → {} ({:.2} MB)",
+        scene,
+        method.name(),
+        model.mesh.num_vertices(),
+        model.space.vertices.len(),
+        model.mesh.num_tets(),
+        model.space.k,
+        model.latent_dim(),
+        model
+            .cubature
+            .as_ref()
+            .map_or(model.mesh.num_tets(), |c| c.len()),
+        path.display(),
+        bytes as f64 / 1e6
+    )
 }
 
 /// The model of reduced `method` on the scene, with the solver settings `cargo xtask run` steps

@@ -15,6 +15,8 @@ pub mod run;
 pub mod scene;
 pub mod shard;
 pub mod simulate;
+pub mod stage;
+pub mod stage_report;
 pub mod stress;
 pub mod suite;
 pub mod trust;

@@ -8,6 +8,7 @@
 //! snapshots.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -20,18 +21,16 @@ use serde::de::DeserializeOwned;
 
 use crate::artifact::{self, Expect, KeyBuilder, fnv1a};
 use crate::scene::Scene;
+use crate::stage::Stage;
 
-/// The stages, in order.
 /// Age past which a temporary file in the cache belongs to a killed run (a live write takes
 /// seconds).
 pub const STALE_TEMPORARY_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
 
-pub const STAGES: [&str; 4] = ["snapshots", "pca", "cubature", "train"];
-
 /// What happened to one stage in a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StageOutcome {
-    pub stage: String,
+    pub stage: Stage,
     /// Loaded from the cache instead of computed.
     pub cached: bool,
     /// Time spent in this stage itself: loading, or computing less the upstream stages that the
@@ -40,6 +39,30 @@ pub struct StageOutcome {
     pub path: PathBuf,
     /// What the stage chose and why, in one line (sizes, dimensions, rule sizes and errors).
     pub summary: String,
+}
+
+/// Two lines: whether the stage was loaded (and from where) or computed (in how long, to
+/// where), and under it what it chose.
+impl std::fmt::Display for StageOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.cached {
+            writeln!(
+                f,
+                "{:>10}: unchanged, skipped ({})",
+                self.stage,
+                self.path.display()
+            )?;
+        } else {
+            writeln!(
+                f,
+                "{:>10}: computed in {:.1} s → {}",
+                self.stage,
+                self.seconds,
+                self.path.display()
+            )?;
+        }
+        write!(f, "{:>10}  {}", "", self.summary)
+    }
 }
 
 /// One line saying what a stage's artifact holds and why, for [`StageOutcome::summary`].
@@ -242,8 +265,8 @@ pub struct Pipeline<'a> {
     /// Called after each stage (to print a line).
     pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
     /// Artifacts already loaded or computed in this run, by path: a stage that several later
-    /// stages need is read (and announced) once.
-    memo: std::collections::HashMap<PathBuf, Box<dyn std::any::Any>>,
+    /// stages need is read (and announced) once, and every user shares the one copy.
+    memo: std::collections::HashMap<PathBuf, Arc<dyn std::any::Any + Send + Sync>>,
     /// Sum of the recorded stages' own seconds, to take nested stages out of a stage's time.
     recorded_seconds: f64,
     /// The training snapshots' PCA coefficients, once a run has needed them.
@@ -300,7 +323,7 @@ impl<'a> Pipeline<'a> {
     }
 
     /// What every full-space simulation reads: mesh, material, pins, gravity, time step, solver.
-    fn physics_key(&self, stage: &str) -> KeyBuilder {
+    fn physics_key(&self, stage: Stage) -> KeyBuilder {
         let s = self.scene;
         KeyBuilder::new(stage)
             .mix_key(self.mesh_hash)
@@ -312,20 +335,20 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn snapshots_key(&self) -> u64 {
-        self.physics_key("snapshots")
+        self.physics_key(Stage::Snapshots)
             .mix(&self.scene.training())
             .finish()
     }
 
     pub fn pca_key(&self) -> u64 {
-        KeyBuilder::new("pca")
+        KeyBuilder::new(Stage::Pca)
             .mix_key(self.snapshots_key())
             .mix(&self.scene.pca)
             .finish()
     }
 
     pub fn cubature_key(&self) -> u64 {
-        KeyBuilder::new("cubature")
+        KeyBuilder::new(Stage::Cubature)
             .mix_key(self.pca_key())
             .mix_key(self.reference_key(0))
             .mix(&self.scene.cubature.for_linear())
@@ -333,42 +356,47 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn train_key(&self) -> u64 {
-        KeyBuilder::new("train")
+        KeyBuilder::new(Stage::Train)
             .mix_key(self.pca_key())
             .mix(&self.scene.autoencoder)
             .finish()
     }
 
     fn reference_key(&self, trajectory: usize) -> u64 {
-        self.physics_key("reference")
+        self.physics_key(Stage::Reference)
             .mix(&self.scene.test())
             .mix(&trajectory)
             .finish()
     }
 
-    fn path(&self, stage: &str, key: u64) -> PathBuf {
+    fn path(&self, stage: Stage, key: u64) -> PathBuf {
         self.cache.join(format!("{stage}-{key:016x}.art"))
     }
 
-    /// Loads the artifact of `stage` under `key`, or computes and stores it.
-    fn stage<T: Serialize + DeserializeOwned + Clone + StageSummary + 'static>(
+    /// Loads the artifact of `stage` under `key`, or computes and stores it; shared with every
+    /// later use in this pipeline.
+    fn stage<T: Serialize + DeserializeOwned + StageSummary + Send + Sync + 'static>(
         &mut self,
-        stage: &str,
+        stage: Stage,
         key: u64,
         compute: impl FnOnce(&mut Self) -> Result<T>,
-    ) -> Result<T> {
+    ) -> Result<Arc<T>> {
         let path = self.path(stage, key);
-        if let Some(v) = self.memo.get(&path).and_then(|b| b.downcast_ref::<T>()) {
-            return Ok(v.clone());
+        if let Some(v) = self
+            .memo
+            .get(&path)
+            .and_then(|v| v.clone().downcast::<T>().ok())
+        {
+            return Ok(v);
         }
-        let value = self.load_or_compute(stage, key, path.clone(), compute)?;
-        self.memo.insert(path, Box::new(value.clone()));
+        let value = Arc::new(self.load_or_compute(stage, key, path.clone(), compute)?);
+        self.memo.insert(path, value.clone());
         Ok(value)
     }
 
     fn load_or_compute<T: Serialize + DeserializeOwned + StageSummary>(
         &mut self,
-        stage: &str,
+        stage: Stage,
         key: u64,
         path: PathBuf,
         compute: impl FnOnce(&mut Self) -> Result<T>,
@@ -398,7 +426,7 @@ impl<'a> Pipeline<'a> {
     /// Records a finished stage; `start` is its start time and the recorded seconds then.
     fn record(
         &mut self,
-        stage: &str,
+        stage: Stage,
         cached: bool,
         start: (Instant, f64),
         path: PathBuf,
@@ -408,7 +436,7 @@ impl<'a> Pipeline<'a> {
         let seconds = (start.0.elapsed().as_secs_f64() - nested).max(0.0);
         self.recorded_seconds += seconds;
         let o = StageOutcome {
-            stage: stage.to_string(),
+            stage,
             cached,
             seconds,
             path,
@@ -419,9 +447,9 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Stage `snapshots`: every training schedule simulated in full space.
-    pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<SnapshotSet> {
+    pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<Arc<SnapshotSet>> {
         let key = self.snapshots_key();
-        self.stage("snapshots", key, |p| {
+        self.stage(Stage::Snapshots, key, |p| {
             let cfg = p.scene.training();
             p.simulate_shard(&cfg, (0, 1), progress)
         })
@@ -457,32 +485,32 @@ impl<'a> Pipeline<'a> {
         if count == 0 || index >= count {
             bail!("--shard {index}/{count}: need 0 ≤ index < count");
         }
-        let key = KeyBuilder::new("snapshots-shard")
+        let key = KeyBuilder::new(Stage::SnapshotsShard)
             .mix_key(self.snapshots_key())
             .mix(&(index, count))
             .finish();
-        self.stage("snapshots-shard", key, |p| {
+        self.stage(Stage::SnapshotsShard, key, |p| {
             let cfg = p.scene.training();
             p.simulate_shard(&cfg, (index, count), progress)
         })?;
-        Ok(self.path("snapshots-shard", key))
+        Ok(self.path(Stage::SnapshotsShard, key))
     }
 
     /// Merges shards `0..count` into the `snapshots` artifact (identical to an unsharded run).
-    pub fn merge_shards(&mut self, count: usize) -> Result<SnapshotSet> {
+    pub fn merge_shards(&mut self, count: usize) -> Result<Arc<SnapshotSet>> {
         let key = self.snapshots_key();
-        self.stage("snapshots", key, |p| {
+        self.stage(Stage::Snapshots, key, |p| {
             let mut parts = Vec::with_capacity(count);
             for index in 0..count {
-                let k = KeyBuilder::new("snapshots-shard")
+                let k = KeyBuilder::new(Stage::SnapshotsShard)
                     .mix_key(key)
                     .mix(&(index, count))
                     .finish();
-                let path = p.path("snapshots-shard", k);
+                let path = p.path(Stage::SnapshotsShard, k);
                 let part: SnapshotSet = artifact::load(
                     &path,
                     Expect {
-                        stage: "snapshots-shard",
+                        stage: Stage::SnapshotsShard,
                         key: Some(k),
                         mesh: Some(p.mesh_hash),
                     },
@@ -496,9 +524,9 @@ impl<'a> Pipeline<'a> {
 
     /// Stage `pca`: the mass-orthonormal basis of the snapshots (which are loaded or computed
     /// only when the basis itself is not cached).
-    pub fn pca(&mut self, progress: Progress<'_>) -> Result<PcaFit> {
+    pub fn pca(&mut self, progress: Progress<'_>) -> Result<Arc<PcaFit>> {
         let key = self.pca_key();
-        self.stage("pca", key, |p| {
+        self.stage(Stage::Pca, key, |p| {
             let snaps = p.snapshots(progress)?;
             let mass: Vec<f64> = p
                 .model
@@ -535,23 +563,25 @@ impl<'a> Pipeline<'a> {
 
     /// Stage `cubature`: a weighted element set reproducing the PCA subspace's reduced elastic
     /// forces over the snapshots, with its error on the held-out test trajectory.
-    pub fn cubature(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+    pub fn cubature(&mut self, progress: Progress<'_>) -> Result<Arc<FittedCubature>> {
         let key = self.cubature_key();
-        self.stage("cubature", key, |p| p.fit_cubature(false, progress))
+        self.stage(Stage::Cubature, key, |p| p.fit_cubature(false, progress))
     }
 
     /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
     /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
-    pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<FittedCubature> {
+    pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<Arc<FittedCubature>> {
         let key = self.cubature_neural_key();
-        self.stage("cubature-neural", key, |p| p.fit_cubature(true, progress))
+        self.stage(Stage::CubatureNeural, key, |p| {
+            p.fit_cubature(true, progress)
+        })
     }
 
     pub fn cubature_neural_key(&self) -> u64 {
         // The complement directions are left out: fitted with them, their forces (stiff
         // directions, large for small displacements) dominate the relative error and the rule
         // neglects the decoder's tangent.
-        let mut key = KeyBuilder::new("cubature-neural")
+        let mut key = KeyBuilder::new(Stage::CubatureNeural)
             .mix_key(self.cubature_key())
             .mix_key(self.train_key());
         // Mixed in only when given, so that the keys of scenes without it stay as they were.
@@ -645,9 +675,9 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Stage `train`: the autoencoder on the snapshots' PCA coefficients, the basis frozen.
-    pub fn train(&mut self, progress: Progress<'_>) -> Result<TrainedModel> {
+    pub fn train(&mut self, progress: Progress<'_>) -> Result<Arc<TrainedModel>> {
         let key = self.train_key();
-        self.stage("train", key, |p| {
+        self.stage(Stage::Train, key, |p| {
             let snaps = p.snapshots(progress)?;
             let fit = p.pca(progress)?;
             let basis = &fit.basis;
@@ -744,9 +774,9 @@ impl<'a> Pipeline<'a> {
 
     /// Stage `complement`: the directions the trained autoencoder misses in the snapshots
     /// ([`Complement`]), for the neural methods' `[reduced] complement_directions`.
-    pub fn complement(&mut self, progress: Progress<'_>) -> Result<Complement> {
+    pub fn complement(&mut self, progress: Progress<'_>) -> Result<Arc<Complement>> {
         let key = self.complement_key();
-        self.stage("complement", key, |p| {
+        self.stage(Stage::Complement, key, |p| {
             let snaps = p.snapshots(progress)?;
             let fit = p.pca(progress)?;
             let trained = p.train(progress)?;
@@ -777,7 +807,7 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn complement_key(&self) -> u64 {
-        KeyBuilder::new("complement")
+        KeyBuilder::new(Stage::Complement)
             .mix_key(self.train_key())
             .finish()
     }
@@ -806,9 +836,13 @@ impl<'a> Pipeline<'a> {
     }
 
     /// The full-space simulation of test trajectory `trajectory` (cached stage `reference`).
-    pub fn reference(&mut self, trajectory: usize, progress: Progress<'_>) -> Result<Reference> {
+    pub fn reference(
+        &mut self,
+        trajectory: usize,
+        progress: Progress<'_>,
+    ) -> Result<Arc<Reference>> {
         let key = self.reference_key(trajectory);
-        self.stage("reference", key, |p| {
+        self.stage(Stage::Reference, key, |p| {
             let cfg = p.scene.test();
             let model = p.test_model(trajectory)?;
             let time = TimeConfig {
@@ -887,112 +921,9 @@ fn max_vertex_distance(
     worst.sqrt()
 }
 
-impl TrainedModel {
-    /// Writes `loss.csv` (epoch, training and validation loss) and `loss.svg` into `dir`.
-    pub fn write_loss_curve(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut csv = String::from("epoch,train_loss,validation_loss\n");
-        for r in &self.history {
-            let v = r.validation_loss.map(|v| v.to_string()).unwrap_or_default();
-            csv.push_str(&format!("{},{},{}\n", r.epoch, r.train_loss, v));
-        }
-        fem_core::io::write_atomic(&dir.join("loss.csv"), csv.as_bytes())?;
-        let mut series = vec![crate::plot::Series {
-            name: "training".into(),
-            points: self
-                .history
-                .iter()
-                .map(|r| (r.epoch as f64, r.train_loss))
-                .collect(),
-            line: true,
-            ..Default::default()
-        }];
-        if self.history.iter().any(|r| r.validation_loss.is_some()) {
-            series.push(crate::plot::Series {
-                name: "validation".into(),
-                points: self
-                    .history
-                    .iter()
-                    .filter_map(|r| Some((r.epoch as f64, r.validation_loss?)))
-                    .collect(),
-                line: true,
-                ..Default::default()
-            });
-        }
-        let plot = crate::plot::Plot {
-            title: format!(
-                "autoencoder {} → {} → {} (MSE, scaled units)",
-                self.pca_k, self.latent_dim, self.pca_k
-            ),
-            x_label: "epoch".into(),
-            y_label: "loss".into(),
-            x_scale: crate::plot::Scale::Linear,
-            y_scale: crate::plot::Scale::Log,
-        };
-        fem_core::io::write_atomic(
-            &dir.join("loss.svg"),
-            crate::plot::svg(&plot, &series).as_bytes(),
-        )?;
-        Ok(())
-    }
-}
-
 /// U as one column-major slice (n_free × k).
 pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
     (0..basis.k())
         .flat_map(|j| basis.column(j).iter().copied())
         .collect()
-}
-
-impl FittedCubature {
-    /// Writes `error.csv` (elements, relative force error on the training poses) and `error.svg`.
-    pub fn write_error_curve(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut csv = String::from("elements,relative_error,held_out_error\n");
-        for (n, e) in &self.rule.error_curve {
-            let held = self
-                .held_out_curve
-                .iter()
-                .find(|&&(m, _)| m == *n)
-                .map(|&(_, h)| h.to_string())
-                .unwrap_or_default();
-            csv.push_str(&format!("{n},{e},{held}\n"));
-        }
-        fem_core::io::write_atomic(&dir.join("error.csv"), csv.as_bytes())?;
-        let series = vec![
-            crate::plot::Series {
-                name: "training poses".into(),
-                points: self
-                    .rule
-                    .error_curve
-                    .iter()
-                    .map(|&(n, e)| (n as f64, e))
-                    .collect(),
-                line: true,
-                ..Default::default()
-            },
-            crate::plot::Series {
-                name: "held-out trajectory".into(),
-                points: self
-                    .held_out_curve
-                    .iter()
-                    .map(|&(n, e)| (n as f64, e))
-                    .collect(),
-                line: true,
-                ..Default::default()
-            },
-        ];
-        let plot = crate::plot::Plot {
-            title: "optimized cubature: relative reduced-force error".into(),
-            x_label: "elements".into(),
-            y_label: "relative error".into(),
-            x_scale: crate::plot::Scale::Linear,
-            y_scale: crate::plot::Scale::Log,
-        };
-        fem_core::io::write_atomic(
-            &dir.join("error.svg"),
-            crate::plot::svg(&plot, &series).as_bytes(),
-        )?;
-        Ok(())
-    }
 }

@@ -11,6 +11,7 @@ use latent_sim::model::{MeasuredError, Rows};
 use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
 use crate::plot::{Plot, Scale, Series};
+use crate::scene::Scene;
 use crate::simulate::{
     Method, Runner, SimulateOptions, StepParts, Trajectory, median, setup, write_json,
 };
@@ -32,7 +33,8 @@ pub struct RunOptions {
 /// One row of the report.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct MethodReport {
-    pub method: String,
+    /// Serialised as its [`Method::name`].
+    pub method: Method,
     /// Simulated dimension (free DOFs for full).
     pub dim: usize,
     /// Elements the elastic energy is evaluated on.
@@ -160,7 +162,7 @@ pub fn run(
         let mut model = crate::export::scene_model(pipeline, method, Rows::Used, stage_progress)?;
         if let Some(row) = rows
             .iter()
-            .find(|r| r.method == method.name() && r.failure.is_none())
+            .find(|r| r.method == method && r.failure.is_none())
         {
             model.provenance.errors.push(MeasuredError {
                 name: format!(
@@ -191,11 +193,63 @@ pub fn run(
     Ok(rows)
 }
 
+/// What `cargo xtask run` shows after the stages: the table, where a reduced step's time goes,
+/// the warnings of [`crate::trust`], and where the report, the frames and the model are.
+pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> String {
+    let mut s = format!(
+        "\n{} — held-out test trajectory {}, {} frames\n\n",
+        scene.name,
+        opts.trajectory,
+        scene.test().frames_per_schedule
+    );
+    s.push_str(&markdown(rows));
+    s.push_str(&time_split_markdown(rows));
+    let warnings = crate::trust::warnings(rows);
+    if !warnings.is_empty() {
+        s.push_str("\nnot to be trusted:\n");
+        for w in &warnings {
+            s.push_str(&format!("- {w}\n"));
+        }
+    }
+    s.push_str(&format!(
+        "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg); frames: {}/<method>/series.pvd\n",
+        opts.out.join("report.json").display(),
+        opts.out.display()
+    ));
+    if let Some(m) = crate::export::run_method(&opts.methods) {
+        s.push_str(&format!(
+            "model: {}\n",
+            crate::export::model_path(&opts.out, m).display()
+        ));
+    }
+    s
+}
+
+/// Where a reduced step's time goes, mean ms per step, as a markdown table under a heading
+/// (empty when no reduced method ran).
+pub fn time_split_markdown(rows: &[MethodReport]) -> String {
+    let mut reduced = reduced_rows(rows).peekable();
+    if reduced.peek().is_none() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\nwhere a reduced step's time goes (mean ms per step):\n\n\
+         | method | decode | elastic | VJP | preconditioner or Newton matrix |\n|---|---:|---:|---:|---:|\n",
+    );
+    for r in reduced {
+        s.push_str(&format!(
+            "| {} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
+            r.method, r.decode_ms, r.elastic_ms, r.vjp_ms, r.precond_ms
+        ));
+    }
+    s
+}
+
 /// Speed-ups over the faster full-space solver among `rows` (unchanged when none ran).
 pub fn set_speedups(rows: &mut [MethodReport]) {
     let fastest_full = rows
         .iter()
-        .filter(|r| is_full_method(&r.method))
+        .filter(|r| r.method.is_full())
         .map(|r| r.ms_per_step)
         .fold(f64::INFINITY, f64::min);
     if fastest_full.is_finite() {
@@ -266,7 +320,7 @@ pub fn measure(
             w.finish()?;
         }
         return Ok(MethodReport {
-            method: method.name().into(),
+            method,
             dim: model.dofs.num_free(),
             cubature_elements: model.elements.len(),
             ms_per_step: full_ms,
@@ -415,7 +469,7 @@ pub fn measure(
         }
     }
     Ok(MethodReport {
-        method: method.name().into(),
+        method,
         dim,
         cubature_elements,
         ms_per_step: ms,
@@ -544,17 +598,17 @@ fn mean_usize(v: &[usize]) -> f64 {
 pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     let full = rows
         .iter()
-        .find(|r| r.method == Method::Full.name())
+        .find(|r| r.method == Method::Full)
         .map(|r| format!(" (full: {:.1} ms/step)", r.ms_per_step))
         .unwrap_or_default();
     let series: Vec<Series> = rows
         .iter()
-        .filter(|r| r.method != Method::Full.name())
+        .filter(|r| r.method != Method::Full)
         .map(|r| Series {
             name: format!("{} (dim {}, {} el.)", r.method, r.dim, r.cubature_elements),
             points: vec![(r.ms_per_step, r.mean_rel_error)],
             line: false,
-            reference: is_full_method(&r.method),
+            reference: r.method.is_full(),
             ..Default::default()
         })
         .collect();
@@ -568,19 +622,9 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
     crate::plot::svg(&plot, &series)
 }
 
-/// Whether a report row's method name is a full-space method (any solver): the method read
-/// back from the serde name that [`Method::name`] also gives, then [`Method::is_full`].
-pub(crate) fn is_full_method(name: &str) -> bool {
-    use serde::Deserialize;
-    use serde::de::IntoDeserializer;
-    use serde::de::value::{Error, StrDeserializer};
-    let name: StrDeserializer<'_, Error> = name.into_deserializer();
-    Method::deserialize(name).is_ok_and(Method::is_full)
-}
-
 /// The reduced rows (full space has no error against itself).
 fn reduced_rows(rows: &[MethodReport]) -> impl Iterator<Item = &MethodReport> {
-    rows.iter().filter(|r| !is_full_method(&r.method))
+    rows.iter().filter(|r| !r.method.is_full())
 }
 
 /// The errors frame by frame as CSV: frame, time, then for every reduced method its trajectory
@@ -627,7 +671,7 @@ pub fn frame_error_plot(scene: &str, rows: &[MethodReport], h: f64) -> String {
     let mut series = Vec::new();
     for (i, r) in reduced_rows(rows).enumerate() {
         series.push(Series {
-            name: r.method.clone(),
+            name: r.method.to_string(),
             points: over_time(&r.frame_errors),
             line: true,
             dashed: false,
@@ -669,7 +713,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
-                None => r.method.clone(),
+                None => r.method.to_string(),
             },
             r.dim,
             r.cubature_elements,
@@ -697,12 +741,12 @@ pub fn markdown(rows: &[MethodReport]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{Method, is_full_method, mean};
+    use super::{Method, MethodReport, mean};
 
-    /// Report rows name their method by `Method::name`; reading it back must find the method.
+    /// A report row's method is written as its name, in JSON as in the tables.
     #[test]
-    fn full_space_rows_are_recognised_by_name() {
-        for m in [
+    fn rows_name_their_method_by_its_name() {
+        for method in [
             Method::Full,
             Method::FullLbfgs,
             Method::FullNewton,
@@ -711,9 +755,14 @@ mod tests {
             Method::Neural,
             Method::NeuralCubature,
         ] {
-            assert_eq!(is_full_method(m.name()), m.is_full(), "{}", m.name());
+            let row = MethodReport {
+                method,
+                ..Default::default()
+            };
+            let json = serde_json::to_value(&row).unwrap();
+            assert_eq!(json["method"], method.name());
+            assert_eq!(method.to_string(), method.name());
         }
-        assert!(!is_full_method("full lbfgs"));
     }
 
     /// Full space has no subspace error: its mean must print as 0, not −0.

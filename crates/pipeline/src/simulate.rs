@@ -39,6 +39,7 @@ pub enum Method {
 }
 
 impl Method {
+    /// The method's name on the command line, in reports and in file names (its serde name).
     pub fn name(self) -> &'static str {
         match self {
             Method::Full => "full",
@@ -64,6 +65,12 @@ impl Method {
             Method::FullNewton => Some(SolverMethod::Newton),
             _ => None,
         }
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.name())
     }
 }
 
@@ -114,6 +121,36 @@ pub struct Summary {
     /// Per-step numbers of a reduced run.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub reduced_steps: Vec<ReducedStepReport>,
+}
+
+impl Summary {
+    /// What `cargo xtask simulate` shows: the steps, sizes and times, and where the frames
+    /// written to `out` are.
+    pub fn describe(&self, out: &Path) -> String {
+        let mut s = format!(
+            "{}: {} steps of {} (dim {}; {} vertices, {} tets) in {:.2} s, median {:.3} ms/step, {} frames written to {}\n",
+            self.scene,
+            self.steps
+                .len()
+                .saturating_sub(1)
+                .max(self.reduced_steps.len()),
+            self.method.name(),
+            self.dim,
+            self.vertices,
+            self.tets,
+            self.total_seconds,
+            self.median_step_ms,
+            self.frames_written,
+            out.display()
+        );
+        if self.frames_written > 0 {
+            s.push_str(&format!(
+                "open {} in ParaView\n",
+                out.join("series.pvd").display()
+            ));
+        }
+        s
+    }
 }
 
 /// The summary and the final full displacement of a finished simulation.

@@ -118,10 +118,29 @@ impl Outcome {
 /// One cell of the table.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct StressResult {
-    pub method: String,
+    /// Serialised as its [`Method::name`].
+    pub method: Method,
     pub condition: String,
     #[serde(flatten)]
     pub outcome: Outcome,
+}
+
+/// One line: method, condition and outcome, with the error's message or why it diverged.
+impl std::fmt::Display for StressResult {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let detail = match &self.outcome {
+            Outcome::Error { message, .. } => format!(": {message}"),
+            Outcome::Diverged { reason, .. } => format!(": {reason}"),
+            Outcome::Ok { .. } => String::new(),
+        };
+        write!(
+            f,
+            "{:>16} | {:<20} | {}{detail}",
+            self.method,
+            self.condition,
+            self.outcome.cell()
+        )
+    }
 }
 
 /// A state counts as unbounded when a vertex moves more than this many bounding-box diagonals.
@@ -174,7 +193,7 @@ pub fn stress(
                 reference = Some(trace);
             }
             let r = StressResult {
-                method: method.name().into(),
+                method,
                 condition: c.label(),
                 outcome,
             };
@@ -299,13 +318,13 @@ fn run_one(
 /// The results as a markdown table: one row per method, one column per condition.
 pub fn markdown(results: &[StressResult]) -> String {
     let mut conditions: Vec<&str> = Vec::new();
-    let mut methods: Vec<&str> = Vec::new();
+    let mut methods: Vec<Method> = Vec::new();
     for r in results {
         if !conditions.contains(&r.condition.as_str()) {
             conditions.push(&r.condition);
         }
-        if !methods.contains(&r.method.as_str()) {
-            methods.push(&r.method);
+        if !methods.contains(&r.method) {
+            methods.push(r.method);
         }
     }
     let mut s = format!("| method | {} |\n|---|", conditions.join(" | "));

@@ -72,14 +72,15 @@ fn minimal_scene_of(
     )
 }
 
-/// The `.mesh` files of folder `dir`, sorted, leaving out those with more than `max_vertices`
-/// vertices when given.
+/// The `.mesh` files of folder `dir`, sorted, leaving out those with more vertices than
+/// `max_vertices`.
 ///
 /// # Errors
-/// When the folder or a mesh cannot be read.
-pub fn meshes_in(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
+/// When the folder cannot be read, a mesh cannot be read to count its vertices, or no mesh is
+/// left.
+pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read mesh folder {}", dir.display()))?
+        .map_err(|e| anyhow::anyhow!("cannot read mesh folder {}: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "mesh"))
         .collect();
@@ -87,13 +88,28 @@ pub fn meshes_in(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>
     if let Some(max) = max_vertices {
         let mut kept = Vec::new();
         for f in files {
-            if read(&f)?.0.num_vertices() <= max {
+            let (m, _) = fem_core::io::read_mesh(&f)?;
+            if m.num_vertices() <= max {
                 kept.push(f);
             }
         }
         files = kept;
     }
+    if files.is_empty() {
+        anyhow::bail!("no .mesh files to run in {}", dir.display());
+    }
     Ok(files)
+}
+
+/// Writes `suite.md` and `suite.json` into `out`.
+pub fn write(out: &Path, rows: &[SuiteRow]) -> Result<()> {
+    std::fs::create_dir_all(out)?;
+    fem_core::io::write_atomic(&out.join("suite.md"), markdown(rows).as_bytes())?;
+    fem_core::io::write_atomic(
+        &out.join("suite.json"),
+        serde_json::to_string_pretty(&rows)?.as_bytes(),
+    )?;
+    Ok(())
 }
 
 /// One mesh's outcome.
@@ -169,7 +185,12 @@ pub fn run_suite(
 /// The suite's table: per mesh, every reduced method's mean error and speed-up, and the
 /// pipeline's time from an empty cache.
 pub fn markdown(rows: &[SuiteRow]) -> String {
-    let reduced = ["pca", "pca-cubature", "neural", "neural-cubature"];
+    let reduced = [
+        Method::Pca,
+        Method::PcaCubature,
+        Method::Neural,
+        Method::NeuralCubature,
+    ];
     let mut s = String::from("| scene | vertices | tets | pipeline s |");
     for m in reduced {
         s += &format!(" {m} error | {m} speed-up |");

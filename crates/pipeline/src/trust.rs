@@ -2,7 +2,7 @@
 //! naming the method, what was measured and what to change.
 
 use crate::coverage::OUTSIDE_TRAINING;
-use crate::run::{MethodReport, is_full_method};
+use crate::run::MethodReport;
 
 /// A reduced method whose trajectory is further than this from the full one (mean M-norm
 /// relative error) is not a usable stand-in for it.
@@ -17,7 +17,7 @@ pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 /// within [`OUTSIDE_TRAINING`] of the training poses.
 pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
     let mut out = Vec::new();
-    for r in rows.iter().filter(|r| !is_full_method(&r.method)) {
+    for r in rows.iter().filter(|r| !r.method.is_full()) {
         let pct = |x: f64| 100.0 * x;
         if let Some(f) = &r.failure {
             out.push(format!(
@@ -72,10 +72,11 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::simulate::Method;
 
-    fn row(method: &str, mean: f64, subspace: f64) -> MethodReport {
+    fn row(method: Method, mean: f64, subspace: f64) -> MethodReport {
         MethodReport {
-            method: method.into(),
+            method,
             mean_rel_error: mean,
             subspace_error: subspace,
             step_error: 0.07,
@@ -86,11 +87,11 @@ mod tests {
     #[test]
     fn each_untrusted_figure_gets_a_warning_naming_the_method_and_what_to_change() {
         let rows = [
-            row("full", 0.0, 0.0),
-            row("full-lbfgs", 0.9, 0.9),
-            row("pca", 0.01, 0.004),
-            row("pca-cubature", 0.92, 0.023),
-            row("neural", 0.3, 0.22),
+            row(Method::Full, 0.0, 0.0),
+            row(Method::FullLbfgs, 0.9, 0.9),
+            row(Method::Pca, 0.01, 0.004),
+            row(Method::PcaCubature, 0.92, 0.023),
+            row(Method::Neural, 0.3, 0.22),
         ];
         let w = warnings(&rows);
         assert_eq!(w.len(), 3, "{w:#?}");
@@ -111,7 +112,7 @@ mod tests {
         let far = MethodReport {
             training_distance: 0.8,
             training_distance_time: 0.25,
-            ..row("neural-cubature", 0.03, 0.01)
+            ..row(Method::NeuralCubature, 0.03, 0.01)
         };
         let w = warnings(&[far]);
         assert_eq!(w.len(), 1, "{w:#?}");

@@ -15,9 +15,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use pipeline::artifact::{self, ArtifactError, Expect, FORMAT_VERSION, fnv1a, rebuild_command};
+use pipeline::artifact::{self, ArtifactError, Expect, FORMAT_VERSION, fnv1a};
 use pipeline::pipeline::{FittedCubature, Pipeline, Reference, TrainedModel};
 use pipeline::scene::Scene;
+use pipeline::stage::Stage;
 use serde::de::DeserializeOwned;
 
 const TINY: &str = r#"
@@ -59,13 +60,17 @@ fn scratch(name: &str) -> PathBuf {
 fn no_progress(_: usize, _: usize) {}
 
 /// Stage and key of an artifact from its file name `<stage>-<key:016x>.art`.
-fn stage_and_key(path: &Path) -> (String, u64) {
+fn stage_and_key(path: &Path) -> (Stage, u64) {
     let stem = path.file_stem().unwrap().to_string_lossy();
     let (stage, key) = stem.rsplit_once('-').unwrap();
-    (stage.to_string(), u64::from_str_radix(key, 16).unwrap())
+    (
+        stage.parse().unwrap(),
+        u64::from_str_radix(key, 16).unwrap(),
+    )
 }
 
-/// Length of the header of an artifact of `stage` (everything before the payload).
+/// Length of the header of an artifact whose stage is named `stage` (everything before the
+/// payload).
 fn header_len(stage: &str) -> usize {
     8 + 4 + 2 + stage.len() + 5 * 8
 }
@@ -100,17 +105,17 @@ struct Tally {
 fn corrupt_and_load<T: DeserializeOwned>(good: &Path, mesh: u64, other_mesh: u64) -> Tally {
     let (stage, key) = stage_and_key(good);
     let expect = Expect {
-        stage: &stage,
+        stage,
         key: Some(key),
         mesh: Some(mesh),
     };
     let bytes = std::fs::read(good).unwrap();
     artifact::load::<T>(good, expect).expect("the good artifact loads");
-    let header = header_len(&stage);
+    let header = header_len(stage.name());
     assert!(bytes.len() > header, "{stage}: no payload");
     let payload = bytes.len() - header;
 
-    let mut cases: Vec<(String, Vec<u8>, Expect<'_>)> = Vec::new();
+    let mut cases: Vec<(String, Vec<u8>, Expect)> = Vec::new();
     // Truncated: at every header byte, along the payload, one byte short.
     for cut in (0..=header).chain((1..32).map(|k| header + k * payload / 32)) {
         cases.push((
@@ -154,11 +159,11 @@ fn corrupt_and_load<T: DeserializeOwned>(good: &Path, mesh: u64, other_mesh: u64
         cases.push((format!("format version {version}"), b, expect));
     }
     // Another stage's artifact at this stage's path.
-    for other in ["pca", "snapshots", "train", "reference"] {
+    for other in [Stage::Pca, Stage::Snapshots, Stage::Train, Stage::Reference] {
         if other != stage {
             cases.push((
                 format!("stage `{other}`"),
-                restage(&bytes, &stage, other),
+                restage(&bytes, stage.name(), other.name()),
                 expect,
             ));
         }
@@ -194,7 +199,7 @@ fn corrupt_and_load<T: DeserializeOwned>(good: &Path, mesh: u64, other_mesh: u64
                 let msg = e.to_string();
                 assert!(msg.contains(&path.display().to_string()), "{msg}");
                 assert!(
-                    msg.contains(rebuild_command(&stage)),
+                    msg.contains(stage.rebuild_command()),
                     "{stage}, {what}: {msg}"
                 );
                 tally.detected += 1;
@@ -208,7 +213,7 @@ fn corrupt_and_load<T: DeserializeOwned>(good: &Path, mesh: u64, other_mesh: u64
     tally.tried += 1;
     match artifact::load::<T>(&path, expect) {
         Err(e @ ArtifactError::Io { .. }) => {
-            assert!(e.to_string().contains(rebuild_command(&stage)), "{e}");
+            assert!(e.to_string().contains(stage.rebuild_command()), "{e}");
             tally.detected += 1;
         }
         other => tally
@@ -251,16 +256,16 @@ fn every_corruption_of_every_artifact_type_is_detected() {
     let mut total = Tally::default();
     for file in &files {
         let (stage, _) = stage_and_key(file);
-        let tally = match stage.as_str() {
-            "snapshots" | "snapshots-shard" => {
+        let tally = match stage {
+            Stage::Snapshots | Stage::SnapshotsShard => {
                 corrupt_and_load::<fem_core::snapshots::SnapshotSet>(file, mesh, other_mesh)
             }
-            "pca" => corrupt_and_load::<pca::PcaFit>(file, mesh, other_mesh),
-            "train" => corrupt_and_load::<TrainedModel>(file, mesh, other_mesh),
-            "cubature" | "cubature-neural" => {
+            Stage::Pca => corrupt_and_load::<pca::PcaFit>(file, mesh, other_mesh),
+            Stage::Train => corrupt_and_load::<TrainedModel>(file, mesh, other_mesh),
+            Stage::Cubature | Stage::CubatureNeural => {
                 corrupt_and_load::<FittedCubature>(file, mesh, other_mesh)
             }
-            "reference" => corrupt_and_load::<Reference>(file, mesh, other_mesh),
+            Stage::Reference => corrupt_and_load::<Reference>(file, mesh, other_mesh),
             other => panic!("unexpected artifact {other}"),
         };
         println!(
@@ -283,32 +288,39 @@ fn every_corruption_of_every_artifact_type_is_detected() {
         total.tried, total.detected
     );
     for stage in [
-        "snapshots",
-        "snapshots-shard",
-        "pca",
-        "train",
-        "cubature",
-        "reference",
+        Stage::Snapshots,
+        Stage::SnapshotsShard,
+        Stage::Pca,
+        Stage::Train,
+        Stage::Cubature,
+        Stage::Reference,
     ] {
-        assert!(seen.iter().any(|s| s == stage), "no {stage} artifact");
+        assert!(seen.contains(&stage), "no {stage} artifact");
     }
     assert_eq!(total.tried, total.detected);
 
     // The pipeline itself: a corrupted cached artifact is recomputed, not used.
-    let pca_file = files.iter().find(|f| stage_and_key(f).0 == "pca").unwrap();
+    let pca_file = files
+        .iter()
+        .find(|f| stage_and_key(f).0 == Stage::Pca)
+        .unwrap();
     let mut b = std::fs::read(pca_file).unwrap();
     let last = b.len() - 1;
     b[last] ^= 0x10;
     std::fs::write(pca_file, &b).unwrap();
     let mut again = Pipeline::new(&scene, &cache).unwrap();
     again.pca(&no_progress).unwrap();
-    let outcome = again.outcomes.iter().find(|o| o.stage == "pca").unwrap();
+    let outcome = again
+        .outcomes
+        .iter()
+        .find(|o| o.stage == Stage::Pca)
+        .unwrap();
     assert!(!outcome.cached, "a corrupted artifact must be recomputed");
     let (stage, key) = stage_and_key(pca_file);
     artifact::load::<pca::PcaFit>(
         pca_file,
         Expect {
-            stage: &stage,
+            stage,
             key: Some(key),
             mesh: Some(mesh),
         },
@@ -319,18 +331,19 @@ fn every_corruption_of_every_artifact_type_is_detected() {
 #[test]
 fn rebuild_commands_name_real_commands() {
     for (stage, command) in [
-        ("snapshots", "cargo xtask snapshots"),
-        ("snapshots-shard", "cargo xtask snapshots --shard"),
-        ("pca", "cargo xtask pca"),
-        ("train", "cargo xtask train"),
-        ("cubature", "cargo xtask cubature"),
+        (Stage::Snapshots, "cargo xtask snapshots"),
+        (Stage::SnapshotsShard, "cargo xtask snapshots --shard"),
+        (Stage::Pca, "cargo xtask pca"),
+        (Stage::Train, "cargo xtask train"),
+        (Stage::Cubature, "cargo xtask cubature"),
         (
-            "cubature-neural",
+            Stage::CubatureNeural,
             "cargo xtask run --methods neural-cubature",
         ),
-        ("reference", "cargo xtask run"),
+        (Stage::Complement, "cargo xtask run"),
+        (Stage::Reference, "cargo xtask run"),
     ] {
-        assert!(rebuild_command(stage).starts_with(command), "{stage}");
+        assert!(stage.rebuild_command().starts_with(command), "{stage}");
     }
 }
 
@@ -343,7 +356,7 @@ struct Big {
 }
 
 const BIG_LEN: usize = 2_000_000;
-const BIG_STAGE: &str = "snapshots";
+const BIG_STAGE: Stage = Stage::Snapshots;
 const BIG_KEY: u64 = 0x5eed;
 const BIG_MESH: u64 = 0x3e54;
 const CHILD_ENV: &str = "XTASK_ARTIFACT_KILL_TEST_PATH";
@@ -355,7 +368,7 @@ fn big(marker: u64, len: usize) -> Big {
     }
 }
 
-fn big_expect() -> Expect<'static> {
+fn big_expect() -> Expect {
     Expect {
         stage: BIG_STAGE,
         key: Some(BIG_KEY),

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use fem_core::TetMesh;
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
+use pipeline::stage::Stage;
 
 /// The base scene: a 5-cell beam, stages small enough to compute each a few dozen times.
 const BASE: &str = r#"name = "keys"
@@ -57,26 +58,26 @@ batch_size = 8
 tolerance = 0.1
 "#;
 
-const SNAPSHOTS: &str = "snapshots";
-const PCA: &str = "pca";
-const TRAIN: &str = "train";
-const COMPLEMENT: &str = "complement";
-const CUBATURE: &str = "cubature";
-const NEURAL: &str = "cubature-neural";
-const REFERENCE: &str = "reference";
+const SNAPSHOTS: Stage = Stage::Snapshots;
+const PCA: Stage = Stage::Pca;
+const TRAIN: Stage = Stage::Train;
+const COMPLEMENT: Stage = Stage::Complement;
+const CUBATURE: Stage = Stage::Cubature;
+const NEURAL: Stage = Stage::CubatureNeural;
+const REFERENCE: Stage = Stage::Reference;
 
 /// Every stage with an artifact.
-const ALL: &[&str] = &[
+const ALL: &[Stage] = &[
     SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL, REFERENCE,
 ];
 /// What the training schedules feed: everything but the held-out reference.
-const TRAINING: &[&str] = &[SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL];
+const TRAINING: &[Stage] = &[SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL];
 /// The reference, and the rules whose held-out error is measured on it.
-const TEST: &[&str] = &[REFERENCE, CUBATURE, NEURAL];
-const BASIS: &[&str] = &[PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL];
-const NETWORK: &[&str] = &[TRAIN, COMPLEMENT, NEURAL];
-const RULES: &[&str] = &[CUBATURE, NEURAL];
-const NONE: &[&str] = &[];
+const TEST: &[Stage] = &[REFERENCE, CUBATURE, NEURAL];
+const BASIS: &[Stage] = &[PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL];
+const NETWORK: &[Stage] = &[TRAIN, COMPLEMENT, NEURAL];
+const RULES: &[Stage] = &[CUBATURE, NEURAL];
+const NONE: &[Stage] = &[];
 
 /// One edit of the base scene: `from` (present once) becomes `to`.
 struct Variant {
@@ -84,14 +85,14 @@ struct Variant {
     from: &'static str,
     to: &'static str,
     /// The stages that must recompute.
-    recomputes: &'static [&'static str],
+    recomputes: &'static [Stage],
 }
 
 const fn v(
     field: &'static str,
     from: &'static str,
     to: &'static str,
-    recomputes: &'static [&'static str],
+    recomputes: &'static [Stage],
 ) -> Variant {
     Variant {
         field,
@@ -515,11 +516,13 @@ struct Artifacts {
 
 /// Runs every stage of `scene` on `cache`; returns each stage's artifact path and whether it was
 /// loaded, and the artifacts.
-fn run_stages(scene: &Scene, cache: &Path) -> (Vec<(String, PathBuf, bool)>, Artifacts) {
+fn run_stages(scene: &Scene, cache: &Path) -> (Vec<(Stage, PathBuf, bool)>, Artifacts) {
     let mut p = Pipeline::new(scene, cache).unwrap_or_else(|e| panic!("{e:#}"));
     macro_rules! ok {
         ($stage:expr) => {
-            $stage.unwrap_or_else(|e| panic!("{}: {e:#}", scene.source))
+            std::sync::Arc::unwrap_or_clone(
+                $stage.unwrap_or_else(|e| panic!("{}: {e:#}", scene.source)),
+            )
         };
     }
     let a = Artifacts {
@@ -543,14 +546,14 @@ fn run_stages(scene: &Scene, cache: &Path) -> (Vec<(String, PathBuf, bool)>, Art
     let outcomes = p
         .outcomes
         .iter()
-        .map(|o| (o.stage.clone(), o.path.clone(), o.cached))
+        .map(|o| (o.stage, o.path.clone(), o.cached))
         .collect();
     (outcomes, a)
 }
 
 /// Whether `a` and `b` hold the same artifact of `stage` (by value: `Debug` would also show
 /// bookkeeping such as a network's in-process version number).
-fn same_artifact(a: &Artifacts, b: &Artifacts, stage: &str) -> bool {
+fn same_artifact(a: &Artifacts, b: &Artifacts, stage: Stage) -> bool {
     match stage {
         SNAPSHOTS => a.snapshots == b.snapshots,
         PCA => a.pca == b.pca,
@@ -563,7 +566,7 @@ fn same_artifact(a: &Artifacts, b: &Artifacts, stage: &str) -> bool {
     }
 }
 
-fn check(variant: &Variant, scene: &Scene, shared: &Path, base: &[(String, PathBuf, bool)]) {
+fn check(variant: &Variant, scene: &Scene, shared: &Path, base: &[(Stage, PathBuf, bool)]) {
     let what = variant.field;
     let (outcomes, loaded) = run_stages(scene, shared);
     let mut seen = BTreeSet::new();
@@ -573,7 +576,7 @@ fn check(variant: &Variant, scene: &Scene, shared: &Path, base: &[(String, PathB
             .iter()
             .find(|(s, _, _)| s == stage)
             .unwrap_or_else(|| panic!("{what}: stage {stage} not in the base run"));
-        seen.insert(stage.as_str());
+        seen.insert(*stage);
         // A new key is a new file, computed; the same key is the base's file, loaded.
         assert_eq!(
             path != base_path,
@@ -582,11 +585,11 @@ fn check(variant: &Variant, scene: &Scene, shared: &Path, base: &[(String, PathB
             path.display()
         );
         if path != base_path {
-            recomputed.insert(stage.as_str());
+            recomputed.insert(*stage);
         }
     }
     assert_eq!(seen, ALL.iter().copied().collect(), "{what}: stages run");
-    let expected: BTreeSet<&str> = variant.recomputes.iter().copied().collect();
+    let expected: BTreeSet<Stage> = variant.recomputes.iter().copied().collect();
     assert_eq!(recomputed, expected, "{what}: stages recomputed");
     if recomputed.len() == ALL.len() {
         return;
@@ -595,7 +598,7 @@ fn check(variant: &Variant, scene: &Scene, shared: &Path, base: &[(String, PathB
     let (_, fresh) = run_stages(scene, &scratch(&format!("fresh-{what}")));
     for stage in ALL.iter().filter(|s| !recomputed.contains(*s)) {
         assert!(
-            same_artifact(&fresh, &loaded, stage),
+            same_artifact(&fresh, &loaded, *stage),
             "{what}: the cached {stage} is not what this scene computes"
         );
     }

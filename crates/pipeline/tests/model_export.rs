@@ -131,7 +131,10 @@ fn run_writes_the_default_methods_model_beside_its_report() {
     let model = ReducedModel::load(&model_path(&opts.out, Method::NeuralCubature)).unwrap();
     assert!(opts.out.join("report.json").exists());
     assert_eq!(model.provenance.scene, "export");
-    let row = rows.iter().find(|r| r.method == "neural-cubature").unwrap();
+    let row = rows
+        .iter()
+        .find(|r| r.method == Method::NeuralCubature)
+        .unwrap();
     let held_out = model
         .provenance
         .errors

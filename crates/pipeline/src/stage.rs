@@ -1,0 +1,164 @@
+//! The cached stages by name: what each is called on disk and in cache keys, the version of what
+//! it computes, and the command that rebuilds its artifact.
+//!
+//! A stage's [`name`](Stage::name) is part of its artifact's file name and header and of its
+//! cache key, so it must never change: a renamed stage would orphan every cached artifact.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// A cached stage of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Stage {
+    /// The training schedules simulated in full space.
+    Snapshots,
+    /// One shard of the snapshots, for array jobs (merged into [`Stage::Snapshots`]).
+    SnapshotsShard,
+    /// The mass-orthonormal PCA basis of the snapshots.
+    Pca,
+    /// The cubature rule of the PCA subspace.
+    Cubature,
+    /// The cubature rule of the autoencoder's subspace.
+    CubatureNeural,
+    /// The autoencoder on the snapshots' PCA coefficients.
+    Train,
+    /// The directions the autoencoder misses.
+    Complement,
+    /// The full-space simulation of a held-out test trajectory.
+    Reference,
+}
+
+impl Stage {
+    /// Every stage.
+    pub const ALL: [Stage; 8] = [
+        Stage::Snapshots,
+        Stage::SnapshotsShard,
+        Stage::Pca,
+        Stage::Cubature,
+        Stage::CubatureNeural,
+        Stage::Train,
+        Stage::Complement,
+        Stage::Reference,
+    ];
+
+    /// The stage's name in artifact file names, artifact headers and cache keys.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Stage::Snapshots => "snapshots",
+            Stage::SnapshotsShard => "snapshots-shard",
+            Stage::Pca => "pca",
+            Stage::Cubature => "cubature",
+            Stage::CubatureNeural => "cubature-neural",
+            Stage::Train => "train",
+            Stage::Complement => "complement",
+            Stage::Reference => "reference",
+        }
+    }
+
+    /// Version of what the stage computes, mixed into its cache key. Bump a stage's number when
+    /// its numerical method changes so that its cached artifacts (and everything downstream,
+    /// whose keys include its key) are recomputed, while other stages' caches stay valid.
+    pub const fn version(self) -> u32 {
+        match self {
+            // 2: inputs centred with one common scale instead of per-feature standardisation.
+            // 3: the training gradient sums in a different (still fixed) order.
+            // 5: without `[autoencoder] latent_dim`, d is half the PCA dimension (was 6).
+            Stage::Train => 5,
+            // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
+            // 3: sequential sparse factorisation on small pools (round-off), current-state
+            //    L-BFGS preconditioner (iterates within tolerance).
+            // 4: L-BFGS's preconditioner solves with its factor rounded to f32 (iterates within
+            //    tolerance).
+            // 5: L-BFGS's preconditioner factorised in f32 where it passes its check (iterates
+            //    within tolerance).
+            // 6: each step's solve starts from the extrapolation u_n + h u̇_n + h² ü_n (iterates
+            //    within tolerance).
+            // 7: the preconditioner's f32 factor stored in 16 bits where that passes its check
+            //    (iterates within tolerance).
+            // 8: the substitutions multiply by the diagonal's reciprocals instead of dividing
+            //    (round-off).
+            Stage::Snapshots | Stage::SnapshotsShard | Stage::Reference => 8,
+            // 2: the held-out error along the greedy path is stored with the rule.
+            Stage::Cubature => 2,
+            // 3: the decoder's Jacobian from SIMD kernels (round-off).
+            Stage::CubatureNeural => 3,
+            Stage::Pca | Stage::Complement => 1,
+        }
+    }
+
+    /// The command that (re)builds the stage's artifact. Every command recomputes an unusable
+    /// artifact of a stage it needs, so re-running it repairs the cache.
+    pub const fn rebuild_command(self) -> &'static str {
+        match self {
+            Stage::Snapshots => "cargo xtask snapshots",
+            Stage::SnapshotsShard => {
+                "cargo xtask snapshots --shard I/N` (for that shard) or `cargo xtask snapshots"
+            }
+            Stage::Pca => "cargo xtask pca",
+            Stage::Cubature => "cargo xtask cubature",
+            Stage::CubatureNeural => "cargo xtask run --methods neural-cubature",
+            Stage::Train => "cargo xtask train",
+            // The complement and the full-space simulation of a held-out trajectory are
+            // computed by `run`.
+            Stage::Complement | Stage::Reference => "cargo xtask run",
+        }
+    }
+}
+
+impl fmt::Display for Stage {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.pad(self.name())
+    }
+}
+
+impl serde::Serialize for Stage {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+/// A name that is no stage's.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` is not a stage")]
+pub struct UnknownStage(pub String);
+
+impl FromStr for Stage {
+    type Err = UnknownStage;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Stage::ALL
+            .into_iter()
+            .find(|stage| stage.name() == s)
+            .ok_or_else(|| UnknownStage(s.to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Stage;
+
+    /// Names and versions are part of every cache key and artifact file name: these are the
+    /// ones the caches on disk were written with.
+    #[test]
+    fn names_and_versions_are_the_ones_on_disk() {
+        let found: Vec<(&str, u32)> = Stage::ALL.map(|s| (s.name(), s.version())).to_vec();
+        assert_eq!(
+            found,
+            [
+                ("snapshots", 8),
+                ("snapshots-shard", 8),
+                ("pca", 1),
+                ("cubature", 2),
+                ("cubature-neural", 3),
+                ("train", 5),
+                ("complement", 1),
+                ("reference", 8),
+            ]
+        );
+        for s in Stage::ALL {
+            assert_eq!(s.name().parse::<Stage>(), Ok(s));
+            assert_eq!(format!("{s:>16}"), format!("{:>16}", s.name()));
+        }
+        assert!("cubature_neural".parse::<Stage>().is_err());
+    }
+}

@@ -1,0 +1,183 @@
+//! What the single-stage commands (`cargo xtask pca`, `train`, `cubature`) show and write beside
+//! a stage's artifact: what it holds, in a few lines, and its curves as CSV and SVG (PCA's
+//! spectrum, the autoencoder's loss, cubature's error against its element count).
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use pca::PcaFit;
+
+use crate::pipeline::{FittedCubature, TrainedModel};
+use crate::plot;
+
+/// The leading singular values, the chosen k with its rule, and the energy it explains.
+pub fn describe_pca(fit: &PcaFit) -> String {
+    let s = fit.basis.singular_values();
+    let shown: Vec<String> = s.iter().take(12).map(|v| format!("{v:.3e}")).collect();
+    format!(
+        "singular values: {} …\nk = {} ({:?}; tolerance met: {}), explained energy {:.6}\n",
+        shown.join(" "),
+        fit.chosen_k(),
+        fit.rule,
+        fit.tolerance_met,
+        fit.basis.explained_energy(fit.chosen_k())
+    )
+}
+
+/// Writes `spectrum.csv` (index, singular value) and, for the vertex-error rule,
+/// `vertex_error.csv` (k, maximum vertex error over the snapshots) into `dir`.
+pub fn write_pca_curves(dir: &Path, fit: &PcaFit) -> Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let mut csv = String::from("index,singular_value\n");
+    for (i, v) in fit.basis.singular_values().iter().enumerate() {
+        csv.push_str(&format!("{},{v}\n", i + 1));
+    }
+    fem_core::io::write_atomic(&dir.join("spectrum.csv"), csv.as_bytes())?;
+    if !fit.max_vertex_error_per_k.is_empty() {
+        let mut csv = String::from("k,max_vertex_error\n");
+        for (i, e) in fit.max_vertex_error_per_k.iter().enumerate() {
+            csv.push_str(&format!("{},{e}\n", i + 1));
+        }
+        fem_core::io::write_atomic(&dir.join("vertex_error.csv"), csv.as_bytes())?;
+    }
+    Ok(())
+}
+
+impl TrainedModel {
+    /// The network's sizes, its best epoch and training time, and its worst vertex error over
+    /// the snapshots beside PCA's at the same dimension and the PCA dimension that matches it.
+    pub fn describe(&self) -> String {
+        format!(
+            "autoencoder {k} → {d} → {k}: best epoch {} of {}{}, {:.1} s\n\
+             max vertex error over the snapshots: autoencoder (d = {d}) {:.3e}, PCA with {d} columns {:.3e}; PCA needs {} columns to match\n",
+            self.best_epoch,
+            self.history.len(),
+            if self.stopped_early {
+                " (stopped early)"
+            } else {
+                ""
+            },
+            self.train_seconds,
+            self.max_vertex_error,
+            self.pca_error_at_latent_dim,
+            self.pca_k_matching
+                .map(|k| k.to_string())
+                .unwrap_or_else(|| format!("more than {}", self.pca_k)),
+            k = self.pca_k,
+            d = self.latent_dim
+        )
+    }
+
+    /// Writes `loss.csv` (epoch, training and validation loss) and `loss.svg` into `dir`.
+    pub fn write_loss_curve(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let mut csv = String::from("epoch,train_loss,validation_loss\n");
+        for r in &self.history {
+            let v = r.validation_loss.map(|v| v.to_string()).unwrap_or_default();
+            csv.push_str(&format!("{},{},{}\n", r.epoch, r.train_loss, v));
+        }
+        fem_core::io::write_atomic(&dir.join("loss.csv"), csv.as_bytes())?;
+        let mut series = vec![plot::Series {
+            name: "training".into(),
+            points: self
+                .history
+                .iter()
+                .map(|r| (r.epoch as f64, r.train_loss))
+                .collect(),
+            line: true,
+            ..Default::default()
+        }];
+        if self.history.iter().any(|r| r.validation_loss.is_some()) {
+            series.push(plot::Series {
+                name: "validation".into(),
+                points: self
+                    .history
+                    .iter()
+                    .filter_map(|r| Some((r.epoch as f64, r.validation_loss?)))
+                    .collect(),
+                line: true,
+                ..Default::default()
+            });
+        }
+        let plot = plot::Plot {
+            title: format!(
+                "autoencoder {} → {} → {} (MSE, scaled units)",
+                self.pca_k, self.latent_dim, self.pca_k
+            ),
+            x_label: "epoch".into(),
+            y_label: "loss".into(),
+            x_scale: plot::Scale::Linear,
+            y_scale: plot::Scale::Log,
+        };
+        fem_core::io::write_atomic(&dir.join("loss.svg"), plot::svg(&plot, &series).as_bytes())?;
+        Ok(())
+    }
+}
+
+impl FittedCubature {
+    /// The rule's size out of `elements`, its force error on the training poses (and whether
+    /// it met its tolerance) and on the held-out trajectory, and its fit time.
+    pub fn describe(&self, elements: usize) -> String {
+        format!(
+            "{} of {} elements, relative force error {:.3e} on the training poses ({}met), {:.3e} on the held-out trajectory, fitted in {:.2} s\n",
+            self.rule.len(),
+            elements,
+            self.rule.training_error,
+            if self.rule.tolerance_met {
+                ""
+            } else {
+                "tolerance not "
+            },
+            self.held_out_error,
+            self.fit_seconds
+        )
+    }
+
+    /// Writes `error.csv` (elements, relative force error on the training poses) and `error.svg`.
+    pub fn write_error_curve(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let mut csv = String::from("elements,relative_error,held_out_error\n");
+        for (n, e) in &self.rule.error_curve {
+            let held = self
+                .held_out_curve
+                .iter()
+                .find(|&&(m, _)| m == *n)
+                .map(|&(_, h)| h.to_string())
+                .unwrap_or_default();
+            csv.push_str(&format!("{n},{e},{held}\n"));
+        }
+        fem_core::io::write_atomic(&dir.join("error.csv"), csv.as_bytes())?;
+        let series = vec![
+            plot::Series {
+                name: "training poses".into(),
+                points: self
+                    .rule
+                    .error_curve
+                    .iter()
+                    .map(|&(n, e)| (n as f64, e))
+                    .collect(),
+                line: true,
+                ..Default::default()
+            },
+            plot::Series {
+                name: "held-out trajectory".into(),
+                points: self
+                    .held_out_curve
+                    .iter()
+                    .map(|&(n, e)| (n as f64, e))
+                    .collect(),
+                line: true,
+                ..Default::default()
+            },
+        ];
+        let plot = plot::Plot {
+            title: "optimized cubature: relative reduced-force error".into(),
+            x_label: "elements".into(),
+            y_label: "relative error".into(),
+            x_scale: plot::Scale::Linear,
+            y_scale: plot::Scale::Log,
+        };
+        fem_core::io::write_atomic(&dir.join("error.svg"), plot::svg(&plot, &series).as_bytes())?;
+        Ok(())
+    }
+}
