@@ -27,6 +27,7 @@ impl<S: Subspace> StepObjective<'_, S> {
             space.decode_touched(&w.q, &mut w.u, &mut w.space);
         }
         self.subspace.jacobian(z, &mut w.jac);
+        w.jacobian_scale = super::rms_column_norm(&w.jac, k);
         let springs = w.springs.update(model, space, self.t);
         for (i, a) in w.hk.iter_mut().enumerate() {
             *a = self.inv_h2 * space.mass[i] + springs[i];

@@ -123,6 +123,12 @@ struct Work {
     mass_q: Vec<f64>,
     predicted: Vec<f64>,
     jac: Vec<f64>,
+    /// The root-mean-square column norm of `jac` when it was last formed: how much ∂E/∂z
+    /// shrinks or grows the gradient in q, so that the solver's relative gradient compares
+    /// quantities in the same units ([`StepObjective::value_gradient`]).
+    jacobian_scale: f64,
+    /// The smallest gradient scale in q ([`gradient_floor`]).
+    gradient_floor: f64,
     space: SpaceBuffers,
     springs: SpringTerm,
     /// A k×k matrix in q (preconditioner or the constant part of the Newton matrix).
@@ -196,6 +202,8 @@ impl<S: Subspace> ReducedSimulator<S> {
                 mass_q: vec![0.0; k],
                 predicted: vec![0.0; k],
                 jac: vec![0.0; k * d],
+                jacobian_scale: 1.0,
+                gradient_floor: gradient_floor(&model),
                 space: space.buffers(),
                 springs: SpringTerm::default(),
                 hk: vec![0.0; k * k],
@@ -228,6 +236,10 @@ impl<S: Subspace> ReducedSimulator<S> {
             time,
             solver,
         };
+        let mut sim = sim;
+        let z = sim.state.z.clone();
+        sim.subspace.jacobian(&z, &mut sim.work.jac);
+        sim.work.jacobian_scale = rms_column_norm(&sim.work.jac, k);
         Ok(sim)
     }
 
@@ -372,6 +384,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             *a = (self.space.rest_stiffness[i] + inv_h2 * self.space.mass[i]) + springs[i];
         }
         self.subspace.jacobian(z, &mut w.jac);
+        w.jacobian_scale = rms_column_norm(&w.jac, k);
         sandwich(&w.hk, &w.jac, k, d, &mut w.ab, &mut w.hz);
     }
 
@@ -757,7 +770,7 @@ impl<S: Subspace> StepObjective<'_, S> {
             }
             scale = scale.max(in_norm2.sqrt());
         }
-        self.scale = scale;
+        self.scale = scale.max(w.gradient_floor);
         self.noise = 16.0
             * f64::EPSILON
             * (model.energy_scale + elastic.abs() + external_size + inertia.abs());
@@ -775,6 +788,13 @@ impl<S: Subspace> Objective for StepObjective<'_, S> {
         let t0 = Instant::now();
         self.subspace.vjp(z, &self.work.grad_q, g);
         self.work.timers.vjp += t0.elapsed().as_secs_f64();
+        // The gradient's scale was taken in q; g = Jᵀ ∂E/∂q is in z. A decoder whose outputs
+        // are small next to its inputs (a stiff body's millimetre coefficients from O(1)
+        // latent coordinates) shrinks every gradient by the size of J, and a relative gradient
+        // against the q scale then met the tolerance at the start of every step: the body
+        // never moved (an AutoDef bar, classic Neo-Hookean, neural methods 100 % off). 1 for a
+        // linear subspace, so the PCA methods are as before.
+        self.scale *= self.work.jacobian_scale;
         e
     }
 
@@ -808,4 +828,30 @@ impl<S: Subspace> NewtonSystem for StepObjective<'_, S> {
 
 fn norm(a: &[f64]) -> f64 {
     dot(a, a).sqrt()
+}
+
+/// The root-mean-square Euclidean norm of the columns of the k-row column-major `m` (1 for
+/// the columns of an identity); 1 for an empty matrix.
+pub(super) fn rms_column_norm(m: &[f64], k: usize) -> f64 {
+    let cols = m.len() / k.max(1);
+    if cols == 0 {
+        return 1.0;
+    }
+    (m.iter().map(|x| x * x).sum::<f64>() / cols as f64).sqrt()
+}
+
+/// Gradients (in q, whose coordinates are displacements times √mass) below 10⁻¹² of the body's
+/// characteristic elastic force E·V/L, over √M, are round-off: at rest with nothing acting every
+/// term of the step's gradient is, and a gradient relative to them alone never converged (a
+/// neural model with gravity off failed its first step). Far below any load: gravity's gradient
+/// is √M·g, about 10⁹ times this on the default scene.
+fn gradient_floor(model: &FullSpaceModel) -> f64 {
+    let (lo, hi) = model.mesh.bounding_box();
+    let size = (hi - lo).norm();
+    let mass: f64 = model.mass.lumped.iter().sum();
+    if size > 0.0 && mass > 0.0 {
+        1e-12 * model.energy_scale / (size * mass.sqrt())
+    } else {
+        0.0
+    }
 }

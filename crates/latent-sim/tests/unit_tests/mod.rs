@@ -1003,3 +1003,76 @@ fn a_start_that_inverts_an_element_is_retried_from_the_last_state() {
         assert!(sim.energy().elastic.is_finite(), "{method:?}");
     }
 }
+
+/// q = s z: the identity subspace with latent coordinates 1/s times larger, as a decoder whose
+/// outputs are small next to its inputs (nonlinear, for the simulator: its Jacobian is formed).
+#[derive(Debug, Clone)]
+struct Stretched {
+    k: usize,
+    s: f64,
+}
+
+impl Subspace for Stretched {
+    fn latent_dim(&self) -> usize {
+        self.k
+    }
+    fn coeff_dim(&self) -> usize {
+        self.k
+    }
+    fn decode(&mut self, z: &[f64], q: &mut [f64]) {
+        q.iter_mut().zip(z).for_each(|(q, z)| *q = self.s * z);
+    }
+    fn vjp(&mut self, _z: &[f64], v: &[f64], out: &mut [f64]) {
+        out.iter_mut().zip(v).for_each(|(o, v)| *o = self.s * v);
+    }
+    fn jacobian(&mut self, _z: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        for i in 0..self.k {
+            out[i * self.k + i] = self.s;
+        }
+    }
+    fn encode(&mut self, q: &[f64], z: &mut [f64]) {
+        z.iter_mut().zip(q).for_each(|(z, q)| *z = q / self.s);
+    }
+}
+
+/// The solver's convergence test does not depend on the latent coordinates' units: the same
+/// subspace with z scaled by 10⁵ (q = 10⁻⁵ z), at the default tolerance, follows the linear
+/// subspace's trajectory. Before the relative gradient was measured in z's units it stopped at
+/// the start of every step there, and the bar never moved.
+#[test]
+fn the_trajectory_does_not_depend_on_the_units_of_z() {
+    let m = model();
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let space = reduced_space(&m, &basis, k, None).unwrap();
+    let solver = SolverConfig {
+        tolerance: 1e-4,
+        ..solver(SolverMethod::Lbfgs)
+    };
+    let mut linear = ReducedSimulator::new(
+        m.clone(),
+        space.clone(),
+        LinearSubspace::new(k),
+        time(8),
+        solver.clone(),
+    )
+    .unwrap();
+    let mut stretched =
+        ReducedSimulator::new(m, space, Stretched { k, s: 1e-5 }, time(8), solver).unwrap();
+    for step in 1..=8 {
+        linear.step().unwrap();
+        stretched.step().unwrap();
+        let size = linear.state.q.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let diff = linear
+            .state
+            .q
+            .iter()
+            .zip(&stretched.state.q)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(size > 0.0, "step {step}: the linear run must move");
+        assert!(diff <= 1e-2 * size, "step {step}: {diff:.2e} of {size:.2e}");
+    }
+}
