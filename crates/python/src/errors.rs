@@ -5,8 +5,8 @@
 //! LatentDynamicsError(Exception)
 //! ├── ModelFileError            a model file that cannot be read, written or decoded
 //! ├── SceneError(ValueError)    a scene file that cannot be read, a bad field, a bad mesh
-//! ├── SolverError               a step or a pipeline stage whose solve failed
-//! ├── PipelineError             any other failure of a pipeline run or export
+//! ├── SolverError               a step whose solve failed
+//! ├── PipelineError             a pipeline run or export that failed (a stage's solve included)
 //! ├── HandleError(LookupError)  a handle released already, of another simulator, nothing in reach
 //! └── InvalidArgumentError(ValueError)   a vertex, stiffness, point, array or name that is wrong
 //! ```
@@ -68,11 +68,15 @@ impl Class {
                  invalid, or its mesh cannot be loaded."
             }
             Class::Solver => {
-                "A solve that failed: a step that diverged, did not converge or met an inverted \
-                 element (the simulator keeps the state before the step), or a reduced matrix \
+                "A step whose solve failed: it diverged, did not converge or met an inverted \
+                 element (the simulator keeps the state before the step); or a reduced matrix \
                  that is not positive definite."
             }
-            Class::Pipeline => "A pipeline run or export that failed for another reason.",
+            Class::Pipeline => {
+                "A pipeline run or export that failed: a stage whose solve failed (with the \
+                 solver's message), a test trajectory that does not exist, an output that \
+                 cannot be written."
+            }
             Class::Handle => {
                 "A handle this simulator does not have (released already, or another \
                  simulator's), a point load moved like a spring, or no surface vertex within \
@@ -174,37 +178,13 @@ pub fn model_file(e: ModelFileError) -> PyErr {
 }
 
 /// A pipeline error (anyhow, with its context chain): a model file's own error keeps its class;
-/// a failed solve in a stage is a [`Class::Solver`]; anything else is `fallback`.
+/// anything else is `fallback`. (The stages put their errors' messages, not the errors, in the
+/// chain, so a stage whose solve failed is a [`Class::Pipeline`] with the solver's message.)
 pub fn pipeline(e: anyhow::Error, fallback: Class) -> PyErr {
-    let message = format!("{e:#}");
     let class = if e.downcast_ref::<ModelFileError>().is_some() {
         Class::ModelFile
-    } else if e.chain().any(|c| {
-        c.downcast_ref::<fem_core::FemError>()
-            .is_some_and(is_solve_failure)
-            || c.downcast_ref::<ReducedError>().is_some_and(|r| match r {
-                ReducedError::Fem(f) => is_solve_failure(f),
-                ReducedError::NotPositiveDefinite { .. } => true,
-                _ => false,
-            })
-    }) {
-        Class::Solver
     } else {
         fallback
     };
-    class.err(message)
-}
-
-/// Whether fem-core's error says a solve failed (rather than a bad input or output).
-fn is_solve_failure(e: &fem_core::FemError) -> bool {
-    use fem_core::FemError as F;
-    match e {
-        F::InvertedElement { .. }
-        | F::NonFinite { .. }
-        | F::NotConverged { .. }
-        | F::LineSearchFailed { .. }
-        | F::Factorization(_) => true,
-        F::Schedule { source, .. } => is_solve_failure(source),
-        _ => false,
-    }
+    class.err(format!("{e:#}"))
 }
