@@ -15,7 +15,6 @@ use latent_sim::{FullRuntime, Interactive, Real, ReducedRuntime, RuntimeError};
 use numpy::ndarray::Array2;
 use numpy::{Element, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyInt;
 
 use crate::errors::{self, Class};
 use crate::model::Model;
@@ -279,8 +278,9 @@ fn is_float32(py: Python<'_>, dtype: &Bound<'_, PyAny>) -> PyResult<bool> {
 
 /// Vertex indices from an int or a sequence (or integer array) of them, none negative.
 fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
-    let values: Vec<i64> = if vertices.is_instance_of::<PyInt>() {
-        vec![vertices.extract()?]
+    // One index: a Python int or anything with __index__ (a numpy integer).
+    let values: Vec<i64> = if let Ok(v) = vertices.extract::<i64>() {
+        vec![v]
     } else {
         vertices.extract().map_err(|_| {
             Class::InvalidArgument.err(format!(
