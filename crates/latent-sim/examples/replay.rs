@@ -65,10 +65,11 @@ fn replay<S: Interactive>(sim: &mut S, script: &str) -> Result<()> {
                 .collect::<std::result::Result<_, _>>()?)
         };
         let handle = |handles: &[Handle]| -> Result<Handle> {
-            let i: usize = args.first().ok_or_else(|| at("no handle".into()))?.parse()?;
-            Ok(*handles
-                .get(i)
-                .ok_or_else(|| at(format!("no handle {i}")))?)
+            let i: usize = args
+                .first()
+                .ok_or_else(|| at("no handle".into()))?
+                .parse()?;
+            Ok(*handles.get(i).ok_or_else(|| at(format!("no handle {i}")))?)
         };
         match action {
             "grab" => {
