@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import pathlib
-from typing import Optional, Sequence, Tuple, Union, overload
+from typing import Optional, Sequence, Tuple, Union, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -12,6 +12,28 @@ import numpy.typing as npt
 _Path = Union[str, "os.PathLike[str]"]
 _Point = Union[Sequence[float], npt.NDArray[np.floating]]
 _Vertices = Union[int, Sequence[int], npt.NDArray[np.integer]]
+
+__all__ = [
+    "Model",
+    "Simulator",
+    "Handle",
+    "StepStats",
+    "RunStats",
+    "Report",
+    "MethodRow",
+    "Stage",
+    "run_pipeline",
+    "export_model",
+    "LatentDynamicsError",
+    "ModelFileError",
+    "SceneError",
+    "SolverError",
+    "PipelineError",
+    "HandleError",
+    "InvalidArgumentError",
+    "__version__",
+    "MODEL_FORMAT_VERSION",
+]
 
 __version__: str
 MODEL_FORMAT_VERSION: int
@@ -38,6 +60,7 @@ class HandleError(LatentDynamicsError, LookupError):
 class InvalidArgumentError(LatentDynamicsError, ValueError):
     """A vertex, stiffness, radius, point, array, dtype or method name the library refuses."""
 
+@final
 class Model:
     """A trained model loaded from a model file; immutable, shareable by simulators."""
 
@@ -91,6 +114,7 @@ class Model:
     def errors(self) -> list[Tuple[str, bool, float]]:
         """(name, held_out, value) of each error the pipeline measured."""
 
+@final
 class StepStats:
     """The outcome of one step."""
 
@@ -104,6 +128,7 @@ class StepStats:
     def seconds(self) -> float:
         """Wall time of the step inside the library."""
 
+@final
 class RunStats:
     """Figures of the steps since the simulator was made or reset_stats was called."""
 
@@ -118,13 +143,15 @@ class RunStats:
     @property
     def last(self) -> Optional[StepStats]: ...
 
+@final
 class Handle:
     """A grabbed set of vertices; valid only in the simulator that made it. Hashable."""
 
+@final
 class Simulator:
     """A model stepping, reduced or (full_space=True) in full space on its mesh."""
 
-    def __init__(self, model: Model, full_space: bool = False) -> None: ...
+    def __new__(cls, model: Model, full_space: bool = False) -> Simulator: ...
     def step(self) -> StepStats:
         """One time step, without the GIL; raises SolverError (state kept) when it fails."""
     def grab(self, vertices: _Vertices, stiffness: float) -> Handle:
@@ -179,6 +206,7 @@ class Simulator:
     @property
     def model(self) -> Model: ...
 
+@final
 class Stage:
     """One pipeline stage, computed or loaded from the cache."""
 
@@ -193,6 +221,7 @@ class Stage:
     @property
     def summary(self) -> str: ...
 
+@final
 class MethodRow:
     """One method's row of a run's report (report.json's fields)."""
 
@@ -231,6 +260,7 @@ class MethodRow:
     @property
     def failure(self) -> Optional[str]: ...
 
+@final
 class Report:
     """What cargo xtask run prints and writes."""
 
