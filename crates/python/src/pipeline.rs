@@ -214,6 +214,52 @@ impl Report {
     }
 }
 
+/// Calls the Python `on_stage` callback (if any) after each stage, from the thread running the
+/// pipeline; the callback's first exception is kept, to be raised when the call returns (a stage
+/// cannot be interrupted).
+struct StageCallback<'c> {
+    callback: Option<&'c Py<PyAny>>,
+    failed: &'c std::sync::Mutex<Option<PyErr>>,
+}
+
+impl<'c> StageCallback<'c> {
+    fn new(
+        py: Python<'_>,
+        callback: Option<&'c Py<PyAny>>,
+        failed: &'c std::sync::Mutex<Option<PyErr>>,
+    ) -> PyResult<Self> {
+        if let Some(c) = callback
+            && !c.bind(py).is_callable()
+        {
+            return Err(Class::InvalidArgument.err("on_stage must be callable"));
+        }
+        Ok(Self { callback, failed })
+    }
+
+    fn install(&'c self, p: &mut Pipeline<'c>) {
+        if let Some(callback) = self.callback {
+            let failed = self.failed;
+            p.on_stage = Box::new(move |o: &StageOutcome| {
+                Python::attach(|py| {
+                    if let Err(e) = callback.call1(py, (Stage::from(o),))
+                        && let Ok(mut slot) = failed.lock()
+                    {
+                        slot.get_or_insert(e);
+                    }
+                })
+            });
+        }
+    }
+
+    /// The callback's exception, if it raised one.
+    fn raised(self) -> PyResult<()> {
+        match self.failed.lock().ok().and_then(|mut slot| slot.take()) {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+}
+
 fn methods(names: Option<Vec<String>>) -> PyResult<Vec<Method>> {
     match names {
         None => Ok(METHODS.to_vec()),
@@ -242,13 +288,15 @@ fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (Path
 /// ``scene``: a scene file (TOML), or None for the built-in default scene. ``out_dir``:
 /// default ``out/<scene name>``; ``cache_dir``: default ``out_dir/cache`` (run from the
 /// checkout's root, both are ``cargo xtask``'s). ``methods``: names, default every method.
-/// ``every``: write every K-th frame as ParaView files (0: none). Runs without the GIL.
+/// ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
+/// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
+/// raised when the run returns). Runs without the GIL.
 ///
 /// Raises ``SceneError`` for a scene that cannot be read or has a bad field or mesh,
 /// ``SolverError`` when a stage's solve fails, ``InvalidArgumentError`` for an unknown method
 /// and ``PipelineError`` otherwise.
 #[pyfunction]
-#[pyo3(signature = (scene = None, *, out_dir = None, cache_dir = None, methods = None, trajectory = 0, every = 0))]
+#[pyo3(signature = (scene = None, *, out_dir = None, cache_dir = None, methods = None, trajectory = 0, every = 0, on_stage = None))]
 pub fn run_pipeline(
     py: Python<'_>,
     scene: Option<PathBuf>,
@@ -257,12 +305,16 @@ pub fn run_pipeline(
     methods: Option<Vec<String>>,
     trajectory: usize,
     every: usize,
+    on_stage: Option<Py<PyAny>>,
 ) -> PyResult<Report> {
     let methods = self::methods(methods)?;
-    py.detach(move || -> Result<Report, Failure> {
+    let failed = std::sync::Mutex::new(None);
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
+    let report = py.detach(|| -> Result<Report, Failure> {
         let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
         let (out, cache) = folders(&scene, out_dir, cache_dir);
         let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+        callback.install(&mut p);
         let quiet = |_: usize, _: usize| {};
         // As `cargo xtask run`: the basis first, so its stage is the first reported.
         p.pca(&quiet).map_err(Failure::Run)?;
@@ -284,8 +336,10 @@ pub fn run_pipeline(
             out_dir: out,
             model_path,
         })
-    })
-    .map_err(Failure::into_py)
+    });
+    let report = report.map_err(Failure::into_py)?;
+    callback.raised()?;
+    Ok(report)
 }
 
 /// Exports a reduced method's trained model as one file, as ``cargo xtask export`` does (the
@@ -295,12 +349,13 @@ pub fn run_pipeline(
 /// method (``pca``, ``pca-cubature``, ``neural``, ``neural-cubature``). ``path``: default
 /// ``out/<scene name>/<method>.ldm``; ``cache_dir``: default ``out/<scene name>/cache``.
 /// ``all_rows``: keep every vertex's basis rows (so ``Simulator.positions`` can read the whole
-/// mesh) rather than only those in use. Runs without the GIL.
+/// mesh) rather than only those in use. ``on_stage`` as for ``run_pipeline``. Runs without the
+/// GIL.
 ///
 /// Raises as ``run_pipeline``, ``InvalidArgumentError`` for a full-space method, and
 /// ``ModelFileError`` when the file cannot be written.
 #[pyfunction]
-#[pyo3(signature = (scene = None, method = "neural-cubature", *, path = None, cache_dir = None, all_rows = false))]
+#[pyo3(signature = (scene = None, method = "neural-cubature", *, path = None, cache_dir = None, all_rows = false, on_stage = None))]
 pub fn export_model(
     py: Python<'_>,
     scene: Option<PathBuf>,
@@ -308,6 +363,7 @@ pub fn export_model(
     path: Option<PathBuf>,
     cache_dir: Option<PathBuf>,
     all_rows: bool,
+    on_stage: Option<Py<PyAny>>,
 ) -> PyResult<Model> {
     let method = self::method(method)?;
     if method.is_full() {
@@ -318,11 +374,14 @@ pub fn export_model(
         )));
     }
     let rows = if all_rows { Rows::All } else { Rows::Used };
+    let failed = std::sync::Mutex::new(None);
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
     let (model, path) = py
-        .detach(move || -> Result<_, Failure> {
+        .detach(|| -> Result<_, Failure> {
             let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
             let (out, cache) = folders(&scene, None, cache_dir);
             let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+            callback.install(&mut p);
             let quiet = |_: usize, _: usize| {};
             let model = pipeline::export::scene_model(&mut p, method, rows, &quiet)
                 .map_err(Failure::Run)?;
@@ -333,5 +392,6 @@ pub fn export_model(
             Ok((model, path))
         })
         .map_err(Failure::into_py)?;
+    callback.raised()?;
     Ok(Model::new(model, Some(path)))
 }

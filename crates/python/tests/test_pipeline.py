@@ -52,3 +52,33 @@ def test_export_writes_a_model_that_loads(tmp_path: pathlib.Path, cache_dir) -> 
     assert used.method == "pca" and used.elements == used.tet_count
     loaded = ld.Model.load(used.path)
     assert (loaded.latent_dim, loaded.vertex_count) == (used.latent_dim, used.vertex_count)
+
+
+def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.Path) -> None:
+    seen: list[ld.Stage] = []
+    model = ld.export_model(
+        TINY, "pca", path=tmp_path / "a.ldm", cache_dir=tmp_path / "cache", on_stage=seen.append
+    )
+    assert [s.name for s in seen] == ["snapshots", "pca"] and not any(s.cached for s in seen)
+    assert model.path.exists()
+
+    called: list[str] = []
+
+    def fail(stage: ld.Stage) -> None:
+        called.append(stage.name)
+        raise RuntimeError(f"stop at {stage.name}")
+
+    try:
+        ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=tmp_path / "cache", methods=["pca"], on_stage=fail)
+    except RuntimeError as e:
+        # The first exception; the run itself went on to the end.
+        assert len(called) > 1 and str(e) == f"stop at {called[0]}"
+    else:
+        raise AssertionError("the callback's exception was not raised")
+    assert (tmp_path / "report.json").exists()
+    try:
+        ld.run_pipeline(TINY, out_dir=tmp_path, methods=["pca"], on_stage=42)
+    except ld.InvalidArgumentError as e:
+        assert "callable" in str(e)
+    else:
+        raise AssertionError("a callback that is not callable was accepted")

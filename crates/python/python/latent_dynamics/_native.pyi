@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import pathlib
-from typing import Optional, Sequence, Tuple, Union, final, overload
+from typing import Callable, Optional, Sequence, Tuple, Union, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -286,6 +286,7 @@ def run_pipeline(
     methods: Optional[Sequence[str]] = None,
     trajectory: int = 0,
     every: int = 0,
+    on_stage: Optional[Callable[[Stage], object]] = None,
 ) -> Report:
     """cargo xtask run: the cached stages, then each method on a held-out test trajectory."""
 
@@ -296,5 +297,6 @@ def export_model(
     path: Optional[_Path] = None,
     cache_dir: Optional[_Path] = None,
     all_rows: bool = False,
+    on_stage: Optional[Callable[[Stage], object]] = None,
 ) -> Model:
     """cargo xtask export: a reduced method's model as one file, returned loaded."""
