@@ -1,0 +1,302 @@
+"""Type stubs of the compiled module (crates/python/src); import ``latent_dynamics`` instead."""
+
+from __future__ import annotations
+
+import os
+import pathlib
+from typing import Callable, Optional, Sequence, Tuple, Union, final, overload
+
+import numpy as np
+import numpy.typing as npt
+
+_Path = Union[str, "os.PathLike[str]"]
+_Point = Union[Sequence[float], npt.NDArray[np.floating]]
+_Vertices = Union[int, Sequence[int], npt.NDArray[np.integer]]
+
+__all__ = [
+    "Model",
+    "Simulator",
+    "Handle",
+    "StepStats",
+    "RunStats",
+    "Report",
+    "MethodRow",
+    "Stage",
+    "run_pipeline",
+    "export_model",
+    "LatentDynamicsError",
+    "ModelFileError",
+    "SceneError",
+    "SolverError",
+    "PipelineError",
+    "HandleError",
+    "InvalidArgumentError",
+    "__version__",
+    "MODEL_FORMAT_VERSION",
+]
+
+__version__: str
+MODEL_FORMAT_VERSION: int
+
+class LatentDynamicsError(Exception):
+    """Base class of every error the latent_dynamics module raises."""
+
+class ModelFileError(LatentDynamicsError):
+    """A model file that cannot be read or written, or whose bytes are not a valid model."""
+
+class SceneError(LatentDynamicsError, ValueError):
+    """A scene file that cannot be read, an unknown or invalid field, a mesh that cannot be
+    loaded."""
+
+class SolverError(LatentDynamicsError):
+    """A step whose solve failed (the simulator keeps the state before the step)."""
+
+class PipelineError(LatentDynamicsError):
+    """A pipeline run or export that failed (a stage's solve included)."""
+
+class HandleError(LatentDynamicsError, LookupError):
+    """A handle released already or of another simulator; no surface vertex within reach."""
+
+class InvalidArgumentError(LatentDynamicsError, ValueError):
+    """A vertex, stiffness, radius, point, array, dtype or method name the library refuses."""
+
+@final
+class Model:
+    """A trained model loaded from a model file; immutable, shareable by simulators."""
+
+    @staticmethod
+    def load(path: _Path) -> Model:
+        """Loads a model file; raises ModelFileError when it is missing or damaged."""
+    def save(self, path: _Path) -> None:
+        """Writes the model atomically; raises ModelFileError when it cannot."""
+    @property
+    def path(self) -> Optional[pathlib.Path]:
+        """The file the model was loaded from or exported to."""
+    @property
+    def method(self) -> str:
+        """The pipeline's name of the method: "neural-cubature", "pca", ..."""
+    @property
+    def scene(self) -> str:
+        """The name of the scene it was trained on."""
+    @property
+    def project_version(self) -> str: ...
+    @property
+    def latent_dim(self) -> int:
+        """Dimension of the space the simulator steps (latent coordinates and directions)."""
+    @property
+    def pca_dim(self) -> int:
+        """Columns k of the PCA basis."""
+    @property
+    def neural(self) -> bool:
+        """Whether the latent space is an autoencoder's."""
+    @property
+    def vertex_count(self) -> int: ...
+    @property
+    def tet_count(self) -> int: ...
+    @property
+    def rows_vertex_count(self) -> int:
+        """Vertices whose basis rows the model keeps."""
+    @property
+    def has_all_rows(self) -> bool:
+        """Whether Simulator.positions can read every vertex."""
+    @property
+    def elements(self) -> int:
+        """Elements the elastic energy is evaluated on."""
+    @property
+    def time_step(self) -> float: ...
+    @property
+    def gravity(self) -> Tuple[float, float, float]: ...
+    @property
+    def pinned(self) -> list[int]: ...
+    @property
+    def youngs_modulus(self) -> float: ...
+    @property
+    def errors(self) -> list[Tuple[str, bool, float]]:
+        """(name, held_out, value) of each error the pipeline measured."""
+
+@final
+class StepStats:
+    """The outcome of one step."""
+
+    @property
+    def step(self) -> int: ...
+    @property
+    def time(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def seconds(self) -> float:
+        """Wall time of the step inside the library."""
+
+@final
+class RunStats:
+    """Figures of the steps since the simulator was made or reset_stats was called."""
+
+    @property
+    def steps(self) -> int: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def steps_per_second(self) -> float: ...
+    @property
+    def iterations_per_step(self) -> float: ...
+    @property
+    def last(self) -> Optional[StepStats]: ...
+
+@final
+class Handle:
+    """A grabbed set of vertices; valid only in the simulator that made it. Hashable."""
+
+@final
+class Simulator:
+    """A model stepping, reduced or (full_space=True) in full space on its mesh."""
+
+    def __new__(cls, model: Model, full_space: bool = False) -> Simulator: ...
+    def step(self) -> StepStats:
+        """One time step, without the GIL; raises SolverError (state kept) when it fails."""
+    def grab(self, vertices: _Vertices, stiffness: float) -> Handle:
+        """A spring of total stiffness (N/m) on mesh vertices, its target at their centroid."""
+    def grab_near(self, point: _Point, radius: float, stiffness: float) -> Handle:
+        """A spring on the surface vertices within radius of point, its target at point."""
+    def move_handle(self, handle: Handle, target: _Point) -> None: ...
+    def release(self, handle: Handle) -> None: ...
+    def set_gravity(self, enabled: bool) -> None: ...
+    @property
+    def gravity(self) -> bool: ...
+    def reset(self) -> None:
+        """Back to rest at time 0; handles and gravity stay."""
+    @property
+    def time(self) -> float: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def stats(self) -> RunStats: ...
+    def reset_stats(self) -> None: ...
+    def positions(
+        self, out: Optional[npt.NDArray[np.float64]] = None
+    ) -> npt.NDArray[np.float64]:
+        """Every vertex, n x 3 float64 (into out when given)."""
+    @overload
+    def surface_positions(
+        self, dtype: None = None, out: None = None
+    ) -> npt.NDArray[np.float64]: ...
+    @overload
+    def surface_positions(
+        self, dtype: npt.DTypeLike, out: None = None
+    ) -> npt.NDArray[np.floating]: ...
+    @overload
+    def surface_positions(
+        self, dtype: None = None, *, out: npt.NDArray[np.floating]
+    ) -> npt.NDArray[np.floating]: ...
+    @property
+    def rest_positions(self) -> npt.NDArray[np.float64]:
+        """n x 3 float64."""
+    @property
+    def surface_vertices(self) -> npt.NDArray[np.int64]:
+        """Mesh index of each row of surface_positions."""
+    @property
+    def surface_triangles(self) -> npt.NDArray[np.uint32]:
+        """m x 3 rows of surface_positions, outward."""
+    @property
+    def vertex_count(self) -> int: ...
+    @property
+    def surface_vertex_count(self) -> int: ...
+    @property
+    def full_space(self) -> bool: ...
+    @property
+    def model(self) -> Model: ...
+
+@final
+class Stage:
+    """One pipeline stage, computed or loaded from the cache."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def cached(self) -> bool: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def path(self) -> pathlib.Path: ...
+    @property
+    def summary(self) -> str: ...
+
+@final
+class MethodRow:
+    """One method's row of a run's report (report.json's fields)."""
+
+    @property
+    def method(self) -> str: ...
+    @property
+    def dimension(self) -> int: ...
+    @property
+    def elements(self) -> int: ...
+    @property
+    def ms_per_step(self) -> float: ...
+    @property
+    def ms_min(self) -> float: ...
+    @property
+    def ms_max(self) -> float: ...
+    @property
+    def ms_mean(self) -> float: ...
+    @property
+    def hz(self) -> float: ...
+    @property
+    def speedup(self) -> float: ...
+    @property
+    def mean_rel_error(self) -> float: ...
+    @property
+    def max_rel_error(self) -> float: ...
+    @property
+    def max_vertex_error(self) -> float: ...
+    @property
+    def iterations(self) -> float: ...
+    @property
+    def subspace_error(self) -> float: ...
+    @property
+    def step_error(self) -> float: ...
+    @property
+    def frame_errors(self) -> list[float]: ...
+    @property
+    def failure(self) -> Optional[str]: ...
+
+@final
+class Report:
+    """What cargo xtask run prints and writes."""
+
+    @property
+    def scene(self) -> str: ...
+    @property
+    def rows(self) -> list[MethodRow]: ...
+    @property
+    def stages(self) -> list[Stage]: ...
+    @property
+    def warnings(self) -> list[str]: ...
+    @property
+    def out_dir(self) -> pathlib.Path: ...
+    @property
+    def model_path(self) -> Optional[pathlib.Path]: ...
+    def row(self, method: str) -> MethodRow: ...
+
+def run_pipeline(
+    scene: Optional[_Path] = None,
+    *,
+    out_dir: Optional[_Path] = None,
+    cache_dir: Optional[_Path] = None,
+    methods: Optional[Sequence[str]] = None,
+    trajectory: int = 0,
+    every: int = 0,
+    on_stage: Optional[Callable[[Stage], object]] = None,
+) -> Report:
+    """cargo xtask run: the cached stages, then each method on a held-out test trajectory."""
+
+def export_model(
+    scene: Optional[_Path] = None,
+    method: str = "neural-cubature",
+    *,
+    path: Optional[_Path] = None,
+    cache_dir: Optional[_Path] = None,
+    all_rows: bool = False,
+    on_stage: Optional[Callable[[Stage], object]] = None,
+) -> Model:
+    """cargo xtask export: a reduced method's model as one file, returned loaded."""

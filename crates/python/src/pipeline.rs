@@ -1,0 +1,397 @@
+//! The pipeline from Python: `run_pipeline` (what `cargo xtask run` does, same stages and
+//! cache) with its report as Python objects, and `export_model` (what `cargo xtask export`
+//! does). Both run without the GIL.
+
+use std::path::{Path, PathBuf};
+
+use latent_sim::model::Rows;
+use pipeline::pipeline::{Pipeline, StageOutcome};
+use pipeline::run::{MethodReport, RunOptions};
+use pipeline::scene::Scene;
+use pipeline::simulate::Method;
+use pyo3::prelude::*;
+
+use crate::errors::{self, Class};
+use crate::model::Model;
+
+/// Every method, in `cargo xtask run`'s order (its default list).
+const METHODS: [Method; 7] = [
+    Method::Full,
+    Method::FullNewton,
+    Method::FullLbfgs,
+    Method::Pca,
+    Method::PcaCubature,
+    Method::Neural,
+    Method::NeuralCubature,
+];
+
+fn method(name: &str) -> PyResult<Method> {
+    METHODS
+        .iter()
+        .copied()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            let names: Vec<_> = METHODS.iter().map(|m| m.name()).collect();
+            Class::InvalidArgument.err(format!(
+                "unknown method {name:?}; the methods are {}",
+                names.join(", ")
+            ))
+        })
+}
+
+/// The scene of a file, or the built-in default scene for None.
+fn scene(path: Option<&Path>) -> anyhow::Result<Scene> {
+    match path {
+        Some(p) => Scene::from_file(p),
+        None => Ok(Scene::builtin()),
+    }
+}
+
+/// Where a pipeline call failed: reading the scene or building its model, or later.
+enum Failure {
+    Scene(anyhow::Error),
+    Run(anyhow::Error),
+}
+
+impl Failure {
+    fn into_py(self) -> PyErr {
+        match self {
+            Failure::Scene(e) => errors::pipeline(e, Class::Scene),
+            Failure::Run(e) => errors::pipeline(e, Class::Pipeline),
+        }
+    }
+}
+
+/// One stage of a pipeline call: computed or loaded from the cache.
+#[pyclass(module = "latent_dynamics", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub struct Stage {
+    /// The stage's name (``snapshots``, ``pca``, ``train``, ``cubature``, ...).
+    name: String,
+    /// Loaded from the cache rather than computed.
+    cached: bool,
+    /// Time spent in the stage itself (s).
+    seconds: f64,
+    /// The artifact's file in the cache.
+    path: PathBuf,
+    /// What the stage chose and why, in one line.
+    summary: String,
+}
+
+impl From<&StageOutcome> for Stage {
+    fn from(o: &StageOutcome) -> Self {
+        Self {
+            name: o.stage.clone(),
+            cached: o.cached,
+            seconds: o.seconds,
+            path: o.path.clone(),
+            summary: o.summary.clone(),
+        }
+    }
+}
+
+#[pymethods]
+impl Stage {
+    fn __repr__(&self) -> String {
+        format!(
+            "Stage({:?}, cached={}, seconds={:.2})",
+            self.name,
+            if self.cached { "True" } else { "False" },
+            self.seconds
+        )
+    }
+}
+
+/// One method's row of a run's report (``report.json``'s fields).
+#[pyclass(module = "latent_dynamics", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub struct MethodRow {
+    /// The method's name (``full``, ``pca``, ``neural-cubature``, ...).
+    method: String,
+    /// Simulated dimension (free degrees of freedom for full space).
+    dimension: usize,
+    /// Elements the elastic energy is evaluated on.
+    elements: usize,
+    /// Median wall time per step (ms), its spread over repeated runs, and the mean.
+    ms_per_step: f64,
+    ms_min: f64,
+    ms_max: f64,
+    ms_mean: f64,
+    /// Steps per second.
+    hz: f64,
+    /// The faster full-space solver's ms/step over this method's.
+    speedup: f64,
+    /// Mean and largest over frames of the relative error ‖u − u_full‖_M / ‖u_full‖_M.
+    mean_rel_error: f64,
+    max_rel_error: f64,
+    /// Largest distance of a vertex from its full-space position over all frames (m).
+    max_vertex_error: f64,
+    /// Mean solver iterations per step.
+    iterations: f64,
+    /// Mean relative error of the reference's best representation in the method's subspace.
+    subspace_error: f64,
+    /// Mean relative error of one step started from the reference.
+    step_error: f64,
+    /// The relative error frame by frame.
+    frame_errors: Vec<f64>,
+    /// Why the method stopped before the last frame (None when it finished).
+    failure: Option<String>,
+}
+
+impl From<&MethodReport> for MethodRow {
+    fn from(r: &MethodReport) -> Self {
+        Self {
+            method: r.method.clone(),
+            dimension: r.dim,
+            elements: r.cubature_elements,
+            ms_per_step: r.ms_per_step,
+            ms_min: r.ms_min,
+            ms_max: r.ms_max,
+            ms_mean: r.ms_mean,
+            hz: r.hz,
+            speedup: r.speedup,
+            mean_rel_error: r.mean_rel_error,
+            max_rel_error: r.max_rel_error,
+            max_vertex_error: r.max_vertex_error,
+            iterations: r.iterations,
+            subspace_error: r.subspace_error,
+            step_error: r.step_error,
+            frame_errors: r.frame_errors.clone(),
+            failure: r.failure.clone(),
+        }
+    }
+}
+
+#[pymethods]
+impl MethodRow {
+    fn __repr__(&self) -> String {
+        format!(
+            "MethodRow({:?}, dimension={}, elements={}, ms_per_step={:.4}, mean_rel_error={:.4})",
+            self.method, self.dimension, self.elements, self.ms_per_step, self.mean_rel_error
+        )
+    }
+}
+
+/// The report of ``run_pipeline``: what ``cargo xtask run`` prints and writes.
+#[pyclass(module = "latent_dynamics", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub struct Report {
+    /// The scene's name.
+    scene: String,
+    /// One row per method, in the order run.
+    rows: Vec<MethodRow>,
+    /// The stages the run loaded or computed, in order.
+    stages: Vec<Stage>,
+    /// The run's "not to be trusted" warnings (empty when every reduced method is within
+    /// bounds).
+    warnings: Vec<String>,
+    /// The folder of ``report.json``, ``report.md``, ``report.svg``, ``errors.csv``, ...
+    out_dir: PathBuf,
+    /// The model file the run wrote (None when no reduced method ran).
+    model_path: Option<PathBuf>,
+}
+
+#[pymethods]
+impl Report {
+    /// The row of ``method``; raises ``InvalidArgumentError`` when it did not run.
+    fn row(&self, method: &str) -> PyResult<MethodRow> {
+        self.rows
+            .iter()
+            .find(|r| r.method == method)
+            .cloned()
+            .ok_or_else(|| {
+                Class::InvalidArgument.err(format!("no row for method {method:?} in this report"))
+            })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Report({:?}, {} rows, {} stages)",
+            self.scene,
+            self.rows.len(),
+            self.stages.len()
+        )
+    }
+}
+
+/// Calls the Python `on_stage` callback (if any) after each stage, from the thread running the
+/// pipeline; the callback's first exception is kept, to be raised when the call returns (a stage
+/// cannot be interrupted).
+struct StageCallback<'c> {
+    callback: Option<&'c Py<PyAny>>,
+    failed: &'c std::sync::Mutex<Option<PyErr>>,
+}
+
+impl<'c> StageCallback<'c> {
+    fn new(
+        py: Python<'_>,
+        callback: Option<&'c Py<PyAny>>,
+        failed: &'c std::sync::Mutex<Option<PyErr>>,
+    ) -> PyResult<Self> {
+        if let Some(c) = callback
+            && !c.bind(py).is_callable()
+        {
+            return Err(Class::InvalidArgument.err("on_stage must be callable"));
+        }
+        Ok(Self { callback, failed })
+    }
+
+    fn install(&'c self, p: &mut Pipeline<'c>) {
+        if let Some(callback) = self.callback {
+            let failed = self.failed;
+            p.on_stage = Box::new(move |o: &StageOutcome| {
+                Python::attach(|py| {
+                    if let Err(e) = callback.call1(py, (Stage::from(o),))
+                        && let Ok(mut slot) = failed.lock()
+                    {
+                        slot.get_or_insert(e);
+                    }
+                })
+            });
+        }
+    }
+
+    /// The callback's exception, if it raised one.
+    fn raised(self) -> PyResult<()> {
+        match self.failed.lock().ok().and_then(|mut slot| slot.take()) {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+}
+
+fn methods(names: Option<Vec<String>>) -> PyResult<Vec<Method>> {
+    match names {
+        None => Ok(METHODS.to_vec()),
+        Some(names) if names.is_empty() => {
+            Err(Class::InvalidArgument.err("methods must name at least one method"))
+        }
+        Some(names) => names.iter().map(|n| method(n)).collect(),
+    }
+}
+
+/// The output folder and cache folder of a call: `out/<scene name>` under the current
+/// directory and its `cache/` unless given (from the checkout's root these are the folders
+/// `cargo xtask` uses).
+fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (PathBuf, PathBuf) {
+    let out = out.unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
+    let cache = cache.unwrap_or_else(|| out.join("cache"));
+    (out, cache)
+}
+
+/// Runs the pipeline on a scene and every requested method on a held-out test trajectory, as
+/// ``cargo xtask run`` does: the stages load from the cache or are computed (and cached), then
+/// each method is simulated and measured against full space. Writes the report files into
+/// ``out_dir`` and, when a reduced method ran, the model of ``neural-cubature`` (or the first
+/// reduced method) as ``out_dir/<method>.ldm``.
+///
+/// ``scene``: a scene file (TOML), or None for the built-in default scene. ``out_dir``:
+/// default ``out/<scene name>``; ``cache_dir``: default ``out_dir/cache`` (run from the
+/// checkout's root, both are ``cargo xtask``'s). ``methods``: names, default every method.
+/// ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
+/// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
+/// raised when the run returns). Runs without the GIL.
+///
+/// Raises ``SceneError`` for a scene that cannot be read or has a bad field or mesh,
+/// ``SolverError`` when a stage's solve fails, ``InvalidArgumentError`` for an unknown method
+/// and ``PipelineError`` otherwise.
+#[pyfunction]
+#[pyo3(signature = (scene = None, *, out_dir = None, cache_dir = None, methods = None, trajectory = 0, every = 0, on_stage = None))]
+pub fn run_pipeline(
+    py: Python<'_>,
+    scene: Option<PathBuf>,
+    out_dir: Option<PathBuf>,
+    cache_dir: Option<PathBuf>,
+    methods: Option<Vec<String>>,
+    trajectory: usize,
+    every: usize,
+    on_stage: Option<Py<PyAny>>,
+) -> PyResult<Report> {
+    let methods = self::methods(methods)?;
+    let failed = std::sync::Mutex::new(None);
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
+    let report = py.detach(|| -> Result<Report, Failure> {
+        let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
+        let (out, cache) = folders(&scene, out_dir, cache_dir);
+        let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+        callback.install(&mut p);
+        let quiet = |_: usize, _: usize| {};
+        // As `cargo xtask run`: the basis first, so its stage is the first reported.
+        p.pca(&quiet).map_err(Failure::Run)?;
+        let opts = RunOptions {
+            out: out.clone(),
+            every,
+            methods: methods.clone(),
+            trajectory,
+        };
+        let rows =
+            pipeline::run::run(&mut p, &opts, &quiet, &mut |_, _, _| {}).map_err(Failure::Run)?;
+        let model_path =
+            pipeline::export::run_method(&methods).map(|m| pipeline::export::model_path(&out, m));
+        Ok(Report {
+            scene: scene.name.clone(),
+            rows: rows.iter().map(MethodRow::from).collect(),
+            stages: p.outcomes.iter().map(Stage::from).collect(),
+            warnings: pipeline::trust::warnings(&rows),
+            out_dir: out,
+            model_path,
+        })
+    });
+    let report = report.map_err(Failure::into_py)?;
+    callback.raised()?;
+    Ok(report)
+}
+
+/// Exports a reduced method's trained model as one file, as ``cargo xtask export`` does (the
+/// stages load from the cache or are computed), and returns it loaded.
+///
+/// ``scene``: a scene file, or None for the built-in default scene. ``method``: a reduced
+/// method (``pca``, ``pca-cubature``, ``neural``, ``neural-cubature``). ``path``: default
+/// ``out/<scene name>/<method>.ldm``; ``cache_dir``: default ``out/<scene name>/cache``.
+/// ``all_rows``: keep every vertex's basis rows (so ``Simulator.positions`` can read the whole
+/// mesh) rather than only those in use. ``on_stage`` as for ``run_pipeline``. Runs without the
+/// GIL.
+///
+/// Raises as ``run_pipeline``, ``InvalidArgumentError`` for a full-space method, and
+/// ``ModelFileError`` when the file cannot be written.
+#[pyfunction]
+#[pyo3(signature = (scene = None, method = "neural-cubature", *, path = None, cache_dir = None, all_rows = false, on_stage = None))]
+pub fn export_model(
+    py: Python<'_>,
+    scene: Option<PathBuf>,
+    method: &str,
+    path: Option<PathBuf>,
+    cache_dir: Option<PathBuf>,
+    all_rows: bool,
+    on_stage: Option<Py<PyAny>>,
+) -> PyResult<Model> {
+    let method = self::method(method)?;
+    if method.is_full() {
+        return Err(Class::InvalidArgument.err(format!(
+            "{} is a full-space method; only the reduced methods (pca, pca-cubature, neural, \
+             neural-cubature) have a trained model",
+            method.name()
+        )));
+    }
+    let rows = if all_rows { Rows::All } else { Rows::Used };
+    let failed = std::sync::Mutex::new(None);
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
+    let (model, path) = py
+        .detach(|| -> Result<_, Failure> {
+            let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
+            let (out, cache) = folders(&scene, None, cache_dir);
+            let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+            callback.install(&mut p);
+            let quiet = |_: usize, _: usize| {};
+            let model = pipeline::export::scene_model(&mut p, method, rows, &quiet)
+                .map_err(Failure::Run)?;
+            let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));
+            model
+                .save(&path)
+                .map_err(|e| Failure::Run(anyhow::Error::new(e)))?;
+            Ok((model, path))
+        })
+        .map_err(Failure::into_py)?;
+    callback.raised()?;
+    Ok(Model::new(model, Some(path)))
+}

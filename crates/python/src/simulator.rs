@@ -1,0 +1,608 @@
+//! `Simulator`: a model stepping, reduced ([`ReducedRuntime`]) or in full space
+//! ([`FullRuntime`]), behind latent-sim's [`Interactive`] API, with positions read into numpy
+//! arrays.
+//!
+//! Threads: the runtime sits behind a mutex, and every call that waits for it or works long
+//! (a step, a read-back) releases the GIL first. So a thread can step while another draws, a read
+//! never sees half a step (it waits for the step to finish), and the two locks are never held in
+//! opposite orders: the mutex is only ever waited for without the GIL.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, MutexGuard, TryLockError};
+
+use fem_core::Vec3;
+use latent_sim::{FullRuntime, Interactive, Real, ReducedRuntime, RuntimeError};
+use numpy::ndarray::Array2;
+use numpy::{Element, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use crate::errors::{self, Class};
+use crate::model::Model;
+
+/// Either runtime.
+#[derive(Debug)]
+#[allow(clippy::large_enum_variant)] // one per simulator
+enum Runtime {
+    Reduced(ReducedRuntime),
+    Full(FullRuntime),
+}
+
+/// `$body` with `$s` bound to the runtime inside a [`Runtime`].
+macro_rules! each {
+    ($rt:expr, $s:ident => $body:expr) => {
+        match $rt {
+            Runtime::Reduced($s) => $body,
+            Runtime::Full($s) => $body,
+        }
+    };
+}
+
+/// What the mutex guards: the runtime and the figures of the steps taken.
+#[derive(Debug)]
+struct State {
+    runtime: Runtime,
+    timed_steps: usize,
+    seconds: f64,
+    iterations: usize,
+    last: Option<latent_sim::StepStats>,
+}
+
+/// Tells the simulators of a process apart, so that a handle of one is refused by another.
+static NEXT_ID: AtomicU64 = AtomicU64::new(0);
+
+/// The outcome of one step.
+#[pyclass(module = "latent_dynamics", frozen, get_all)]
+#[derive(Debug, Clone, Copy)]
+pub struct StepStats {
+    /// The step just taken (1 for the first after a reset).
+    step: usize,
+    /// The simulated time it reached (s).
+    time: f64,
+    /// Solver iterations the step took.
+    iterations: usize,
+    /// Wall time of the step inside the library (s), without the Python call around it.
+    seconds: f64,
+}
+
+impl From<latent_sim::StepStats> for StepStats {
+    fn from(s: latent_sim::StepStats) -> Self {
+        Self {
+            step: s.step,
+            time: s.time,
+            iterations: s.iterations,
+            seconds: s.seconds,
+        }
+    }
+}
+
+#[pymethods]
+impl StepStats {
+    fn __repr__(&self) -> String {
+        format!(
+            "StepStats(step={}, time={}, iterations={}, seconds={:.3e})",
+            self.step, self.time, self.iterations, self.seconds
+        )
+    }
+}
+
+/// Figures of the steps taken since the simulator was made or ``reset_stats`` was called.
+#[pyclass(module = "latent_dynamics", frozen, get_all)]
+#[derive(Debug, Clone)]
+pub struct RunStats {
+    /// Steps taken.
+    steps: usize,
+    /// Their wall time inside the library (s).
+    seconds: f64,
+    /// Steps per second of wall time (0 before the first step).
+    steps_per_second: f64,
+    /// Mean solver iterations per step (0 before the first step).
+    iterations_per_step: f64,
+    /// The last step's figures (None before the first step).
+    last: Option<StepStats>,
+}
+
+#[pymethods]
+impl RunStats {
+    fn __repr__(&self) -> String {
+        format!(
+            "RunStats(steps={}, seconds={:.4}, steps_per_second={:.1}, iterations_per_step={:.2})",
+            self.steps, self.seconds, self.steps_per_second, self.iterations_per_step
+        )
+    }
+}
+
+/// A grabbed set of vertices, to move or release; valid only in the simulator that made it.
+#[pyclass(module = "latent_dynamics", frozen, eq, hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Handle {
+    handle: latent_sim::Handle,
+    owner: u64,
+}
+
+#[pymethods]
+impl Handle {
+    fn __repr__(&self) -> String {
+        format!("Handle({} of simulator {})", self.handle, self.owner)
+    }
+}
+
+/// A model stepping: the interaction API of latent-sim's runtime.
+///
+/// ``Simulator(model)`` steps the trained model in its latent space with the solver settings
+/// ``cargo xtask run`` measures; ``Simulator(model, full_space=True)`` steps the same mesh,
+/// material, pins and gravity in full space (the reference). Both start at rest, gravity on.
+///
+/// Grab vertices with a spring (``grab``, ``grab_near``), move the spring's target
+/// (``move_handle``), let go (``release``); several handles at once. ``step`` releases the GIL:
+/// another thread may read positions meanwhile (the read waits for the step to finish, so it
+/// never sees half a step).
+#[pyclass(module = "latent_dynamics", frozen)]
+#[derive(Debug)]
+pub struct Simulator {
+    state: Mutex<State>,
+    id: u64,
+    model: Py<Model>,
+    full_space: bool,
+    /// What never changes, kept outside the mutex so that reading it never waits for a step.
+    rest: Vec<Vec3>,
+    surface_vertices: Vec<usize>,
+    surface_triangles: Vec<[u32; 3]>,
+}
+
+impl Simulator {
+    /// Runs `f` on the state: at once when the mutex is free, else waiting for it without the
+    /// GIL (a step in another thread holds it and needs no GIL to finish).
+    fn with<R, F>(&self, py: Python<'_>, f: F) -> PyResult<R>
+    where
+        F: FnOnce(&mut State) -> R + Send,
+        R: Send,
+    {
+        let run = |mut guard: MutexGuard<'_, State>| f(&mut guard);
+        match self.state.try_lock() {
+            Ok(guard) => Ok(run(guard)),
+            Err(TryLockError::WouldBlock) => py
+                .detach(|| self.state.lock().map(run).map_err(|_| ()))
+                .map_err(|()| poisoned()),
+            Err(TryLockError::Poisoned(_)) => Err(poisoned()),
+        }
+    }
+
+    /// Fills an n×3 array of `T` with `read`: `out` itself when given (C-contiguous: written in
+    /// place; otherwise through one buffer), else a new array. The read runs without the GIL.
+    fn read_into<'py, T, F>(
+        &self,
+        py: Python<'py>,
+        rows: usize,
+        out: Option<&Bound<'py, PyAny>>,
+        read: F,
+    ) -> PyResult<Bound<'py, PyArray2<T>>>
+    where
+        T: Element + Real + Send,
+        F: Fn(&mut Runtime, &mut [T]) -> Result<(), RuntimeError> + Send + Sync,
+    {
+        let array = match out {
+            None => PyArray2::<T>::zeros(py, [rows, 3], false),
+            Some(out) => {
+                let array = out.cast::<PyArray2<T>>().map_err(|_| {
+                    Class::InvalidArgument.err(format!(
+                        "out must be a 2-d numpy array of {}, got {}",
+                        numpy::dtype::<T>(py),
+                        describe(out)
+                    ))
+                })?;
+                if array.shape() != [rows, 3] {
+                    return Err(Class::InvalidArgument.err(format!(
+                        "out has shape {:?}, expected ({rows}, 3)",
+                        array.shape()
+                    )));
+                }
+                array.clone()
+            }
+        };
+        let mut view = array
+            .try_readwrite()
+            .map_err(|e| Class::InvalidArgument.err(format!("out cannot be written: {e}")))?;
+        match view.as_slice_mut() {
+            Ok(slice) => self
+                .with(py, |s| read(&mut s.runtime, slice))?
+                .map_err(errors::runtime)?,
+            Err(_) => {
+                let mut buffer = vec![T::from_f64(0.0); 3 * rows];
+                self.with(py, |s| read(&mut s.runtime, &mut buffer))?
+                    .map_err(errors::runtime)?;
+                let mut strided = view.as_array_mut();
+                for (i, mut row) in strided.rows_mut().into_iter().enumerate() {
+                    for c in 0..3 {
+                        row[c] = buffer[3 * i + c];
+                    }
+                }
+            }
+        }
+        drop(view);
+        Ok(array)
+    }
+
+    fn own(&self, handle: &Handle) -> PyResult<latent_sim::Handle> {
+        if handle.owner == self.id {
+            Ok(handle.handle)
+        } else {
+            Err(Class::Handle.err(format!(
+                "handle {} belongs to simulator {}, not to this one ({})",
+                handle.handle, handle.owner, self.id
+            )))
+        }
+    }
+
+    fn wrap(&self, handle: latent_sim::Handle) -> Handle {
+        Handle {
+            handle,
+            owner: self.id,
+        }
+    }
+}
+
+fn poisoned() -> PyErr {
+    Class::Base.err(
+        "an earlier call panicked inside this simulator and its state is lost; make a new \
+         Simulator",
+    )
+}
+
+/// A Python object's type and, for an array, its dtype and dimensions, for messages.
+fn describe(obj: &Bound<'_, PyAny>) -> String {
+    if let Ok(a) = obj.cast::<numpy::PyUntypedArray>() {
+        format!("an array of {} with {} dimension(s)", a.dtype(), a.ndim())
+    } else {
+        obj.get_type()
+            .name()
+            .map_or_else(|_| "an object".into(), |n| n.to_string())
+    }
+}
+
+/// A numpy dtype that is float32 (true) or float64 (false), from anything `numpy.dtype` takes.
+fn is_float32(py: Python<'_>, dtype: &Bound<'_, PyAny>) -> PyResult<bool> {
+    let descr = py
+        .import("numpy")?
+        .getattr("dtype")?
+        .call1((dtype,))
+        .map_err(|e| Class::InvalidArgument.err(format!("dtype: {e}")))?;
+    let descr = descr.cast_into::<numpy::PyArrayDescr>()?;
+    if descr.is_equiv_to(&numpy::dtype::<f32>(py)) {
+        Ok(true)
+    } else if descr.is_equiv_to(&numpy::dtype::<f64>(py)) {
+        Ok(false)
+    } else {
+        Err(Class::InvalidArgument.err(format!("dtype must be float32 or float64, got {descr}")))
+    }
+}
+
+/// Vertex indices from an int or a sequence (or integer array) of them, none negative.
+fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
+    // One index: a Python int or anything with __index__ (a numpy integer).
+    let values: Vec<i64> = if let Ok(v) = vertices.extract::<i64>() {
+        vec![v]
+    } else {
+        vertices.extract().map_err(|_| {
+            Class::InvalidArgument.err(format!(
+                "vertices must be an int or a sequence of ints, got {}",
+                describe(vertices)
+            ))
+        })?
+    };
+    values
+        .into_iter()
+        .map(|v| {
+            usize::try_from(v).map_err(|_| {
+                Class::InvalidArgument.err(format!("vertex {v} does not exist (negative)"))
+            })
+        })
+        .collect()
+}
+
+fn array_n3<'py, T: Element>(py: Python<'py>, rows: Vec<[T; 3]>) -> Bound<'py, PyArray2<T>> {
+    let n = rows.len();
+    let flat: Vec<T> = rows.into_iter().flatten().collect();
+    let array = Array2::from_shape_vec((n, 3), flat).expect("3 values per row");
+    numpy::IntoPyArray::into_pyarray(array, py)
+}
+
+#[pymethods]
+impl Simulator {
+    /// A simulator of ``model`` at rest, gravity on, no handle: reduced (the model's latent
+    /// space, its solver settings), or in full space on the model's mesh when ``full_space``.
+    ///
+    /// Raises ``SolverError`` when a reduced matrix cannot be factorised and
+    /// ``LatentDynamicsError`` when the model is inconsistent.
+    #[new]
+    #[pyo3(signature = (model, full_space = false))]
+    fn new(py: Python<'_>, model: Py<Model>, full_space: bool) -> PyResult<Self> {
+        let reduced = model.get().inner.clone();
+        let runtime = py
+            .detach(|| -> Result<Runtime, RuntimeError> {
+                Ok(if full_space {
+                    Runtime::Full(FullRuntime::from_model(&reduced)?)
+                } else {
+                    Runtime::Reduced(ReducedRuntime::new(&reduced)?)
+                })
+            })
+            .map_err(errors::runtime)?;
+        let (rest, surface) =
+            each!(&runtime, s => (s.rest_positions().to_vec(), s.surface().clone()));
+        Ok(Self {
+            state: Mutex::new(State {
+                runtime,
+                timed_steps: 0,
+                seconds: 0.0,
+                iterations: 0,
+                last: None,
+            }),
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
+            model,
+            full_space,
+            rest,
+            surface_vertices: surface.vertices().to_vec(),
+            surface_triangles: surface.triangles().to_vec(),
+        })
+    }
+
+    /// Advances one time step, without the GIL.
+    ///
+    /// Raises ``SolverError`` when the solve fails (diverges, does not converge, meets an
+    /// inverted element); the state is then the one before the step.
+    fn step(&self, py: Python<'_>) -> PyResult<StepStats> {
+        let result = py
+            .detach(|| {
+                let mut state = self.state.lock().map_err(|_| None)?;
+                let stats = each!(&mut state.runtime, s => s.step()).map_err(Some)?;
+                state.timed_steps += 1;
+                state.seconds += stats.seconds;
+                state.iterations += stats.iterations;
+                state.last = Some(stats);
+                Ok(stats)
+            })
+            .map_err(|e: Option<RuntimeError>| e.map_or_else(poisoned, errors::step))?;
+        Ok(result.into())
+    }
+
+    /// Grabs ``vertices`` (mesh indices: an int, a sequence or an integer array) with a spring
+    /// of total stiffness ``stiffness`` (N/m), its target at their current centroid.
+    ///
+    /// Raises ``InvalidArgumentError`` for no vertex, a vertex past the mesh, a stiffness that
+    /// is not positive, or (reduced) a vertex whose basis rows the model does not keep.
+    fn grab(
+        &self,
+        py: Python<'_>,
+        vertices: &Bound<'_, PyAny>,
+        stiffness: f64,
+    ) -> PyResult<Handle> {
+        let vertices = vertex_list(vertices)?;
+        let handle = self
+            .with(
+                py,
+                |s| each!(&mut s.runtime, r => r.grab(&vertices, stiffness)),
+            )?
+            .map_err(errors::runtime)?;
+        Ok(self.wrap(handle))
+    }
+
+    /// Grabs the surface vertices within ``radius`` of ``point`` (where they are now) with a
+    /// spring of total stiffness ``stiffness`` (N/m), its target at ``point``.
+    ///
+    /// Raises ``HandleError`` when no surface vertex is in reach and ``InvalidArgumentError``
+    /// for a point that is not finite or a radius or stiffness that is not positive.
+    fn grab_near(
+        &self,
+        py: Python<'_>,
+        point: [f64; 3],
+        radius: f64,
+        stiffness: f64,
+    ) -> PyResult<Handle> {
+        let handle = self
+            .with(
+                py,
+                |s| each!(&mut s.runtime, r => r.grab_near(point, radius, stiffness)),
+            )?
+            .map_err(errors::runtime)?;
+        Ok(self.wrap(handle))
+    }
+
+    /// Moves a handle's target to ``target``: its vertices are pulled toward where they were
+    /// grabbed, moved by ``target`` minus the grab point.
+    ///
+    /// Raises ``HandleError`` for a handle released already or of another simulator, and
+    /// ``InvalidArgumentError`` for a target that is not finite.
+    fn move_handle(&self, py: Python<'_>, handle: &Handle, target: [f64; 3]) -> PyResult<()> {
+        let handle = self.own(handle)?;
+        self.with(
+            py,
+            |s| each!(&mut s.runtime, r => r.move_handle(handle, target)),
+        )?
+        .map_err(errors::runtime)
+    }
+
+    /// Lets go of a handle.
+    ///
+    /// Raises ``HandleError`` for a handle released already or of another simulator.
+    fn release(&self, py: Python<'_>, handle: &Handle) -> PyResult<()> {
+        let handle = self.own(handle)?;
+        self.with(py, |s| each!(&mut s.runtime, r => r.release(handle)))?
+            .map_err(errors::runtime)
+    }
+
+    /// Turns gravity on (the model's acceleration) or off.
+    fn set_gravity(&self, py: Python<'_>, enabled: bool) -> PyResult<()> {
+        self.with(py, |s| each!(&mut s.runtime, r => r.set_gravity(enabled)))
+    }
+
+    /// Whether gravity is on.
+    #[getter]
+    fn gravity(&self, py: Python<'_>) -> PyResult<bool> {
+        self.with(py, |s| each!(&s.runtime, r => r.gravity()))
+    }
+
+    /// Back to rest at time 0; handles and the gravity setting stay.
+    fn reset(&self, py: Python<'_>) -> PyResult<()> {
+        self.with(py, |s| each!(&mut s.runtime, r => r.reset()))
+    }
+
+    /// Simulated time (s).
+    #[getter]
+    fn time(&self, py: Python<'_>) -> PyResult<f64> {
+        self.with(py, |s| each!(&s.runtime, r => r.time()))
+    }
+
+    /// Steps taken since rest.
+    #[getter]
+    fn steps(&self, py: Python<'_>) -> PyResult<usize> {
+        self.with(py, |s| each!(&s.runtime, r => r.steps()))
+    }
+
+    /// Figures of the steps taken since the simulator was made or ``reset_stats`` was called:
+    /// steps per second and solver iterations per step.
+    #[getter]
+    fn stats(&self, py: Python<'_>) -> PyResult<RunStats> {
+        self.with(py, |s| {
+            let per = |x: f64, n: usize| if n > 0 { x / n as f64 } else { 0.0 };
+            RunStats {
+                steps: s.timed_steps,
+                seconds: s.seconds,
+                steps_per_second: if s.seconds > 0.0 {
+                    s.timed_steps as f64 / s.seconds
+                } else {
+                    0.0
+                },
+                iterations_per_step: per(s.iterations as f64, s.timed_steps),
+                last: s.last.map(StepStats::from),
+            }
+        })
+    }
+
+    /// Starts the figures of ``stats`` afresh.
+    fn reset_stats(&self, py: Python<'_>) -> PyResult<()> {
+        self.with(py, |s| {
+            s.timed_steps = 0;
+            s.seconds = 0.0;
+            s.iterations = 0;
+            s.last = None;
+        })
+    }
+
+    /// Positions of every vertex, an n×3 float64 array, written into ``out`` when given (an
+    /// n×3 float64 array; in place when C-contiguous, else through one buffer).
+    ///
+    /// A reduced model keeps only the basis rows in use by default (the surface's and the
+    /// evaluated elements'): reading every vertex then raises ``InvalidArgumentError``; read
+    /// ``surface_positions``, or export the model with all rows.
+    #[pyo3(signature = (out = None))]
+    fn positions<'py>(
+        &self,
+        py: Python<'py>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.read_into(
+            py,
+            self.rest.len(),
+            out,
+            |rt, buf| each!(rt, r => r.positions_into(buf)),
+        )
+    }
+
+    /// Positions of the surface vertices (in ``surface_vertices``' order), an m×3 array of
+    /// ``dtype`` (float64 by default, or float32 as a renderer wants), written into ``out``
+    /// when given (whose dtype then decides). A reduced model decodes only the surface's rows.
+    #[pyo3(signature = (dtype = None, out = None))]
+    fn surface_positions<'py>(
+        &self,
+        py: Python<'py>,
+        dtype: Option<&Bound<'py, PyAny>>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let rows = self.surface_vertices.len();
+        let single = match (out, dtype) {
+            (Some(o), None) => {
+                let array = o.cast::<numpy::PyUntypedArray>().map_err(|_| {
+                    Class::InvalidArgument
+                        .err(format!("out must be a numpy array, got {}", describe(o)))
+                })?;
+                is_float32(py, array.dtype().as_any())?
+            }
+            (_, Some(d)) => is_float32(py, d)?,
+            (None, None) => false,
+        };
+        if single {
+            Ok(self
+                .read_into::<f32, _>(
+                    py,
+                    rows,
+                    out,
+                    |rt, buf| each!(rt, r => r.surface_positions_into(buf)),
+                )?
+                .into_any())
+        } else {
+            Ok(self
+                .read_into::<f64, _>(
+                    py,
+                    rows,
+                    out,
+                    |rt, buf| each!(rt, r => r.surface_positions_into(buf)),
+                )?
+                .into_any())
+        }
+    }
+
+    /// Rest positions of every vertex, an n×3 float64 array (a new one each call).
+    #[getter]
+    fn rest_positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        array_n3(py, self.rest.iter().map(|v| [v.x, v.y, v.z]).collect())
+    }
+
+    /// Mesh indices of the surface vertices (increasing), int64: row i of
+    /// ``surface_positions`` is vertex ``surface_vertices[i]``.
+    #[getter]
+    fn surface_vertices<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<i64>> {
+        numpy::PyArray1::from_iter(py, self.surface_vertices.iter().map(|&v| v as i64))
+    }
+
+    /// The surface triangles, an m×3 uint32 array of rows of ``surface_positions``, outward.
+    #[getter]
+    fn surface_triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<u32>> {
+        array_n3(py, self.surface_triangles.clone())
+    }
+
+    /// Vertices of the mesh.
+    #[getter]
+    fn vertex_count(&self) -> usize {
+        self.rest.len()
+    }
+
+    /// Vertices of the surface (rows of ``surface_positions``).
+    #[getter]
+    fn surface_vertex_count(&self) -> usize {
+        self.surface_vertices.len()
+    }
+
+    /// Whether this simulator steps in full space rather than the model's latent space.
+    #[getter]
+    fn full_space(&self) -> bool {
+        self.full_space
+    }
+
+    /// The model this simulator steps.
+    #[getter]
+    fn model(&self, py: Python<'_>) -> Py<Model> {
+        self.model.clone_ref(py)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Simulator({}, {} vertices, {} on the surface)",
+            if self.full_space {
+                "full space"
+            } else {
+                "reduced"
+            },
+            self.rest.len(),
+            self.surface_vertices.len()
+        )
+    }
+}

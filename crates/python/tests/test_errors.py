@@ -1,0 +1,155 @@
+"""Every exception class, raised with the library's message, and the state left usable."""
+
+from __future__ import annotations
+
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+import latent_dynamics as ld
+from conftest import TINY, tip
+
+CLASSES = [
+    ld.ModelFileError,
+    ld.SceneError,
+    ld.SolverError,
+    ld.PipelineError,
+    ld.HandleError,
+    ld.InvalidArgumentError,
+]
+
+
+def test_hierarchy() -> None:
+    assert issubclass(ld.LatentDynamicsError, Exception)
+    for cls in CLASSES:
+        assert issubclass(cls, ld.LatentDynamicsError), cls
+        assert cls.__module__ == "latent_dynamics" and cls.__doc__
+    assert issubclass(ld.SceneError, ValueError)
+    assert issubclass(ld.InvalidArgumentError, ValueError)
+    assert issubclass(ld.HandleError, LookupError)
+    assert not issubclass(ld.SolverError, ValueError)
+
+
+def test_model_file_errors(neural_path: pathlib.Path, tmp_path: pathlib.Path) -> None:
+    missing = tmp_path / "missing.ldm"
+    with pytest.raises(ld.ModelFileError, match="missing.ldm: cannot read"):
+        ld.Model.load(missing)
+    good = neural_path.read_bytes()
+    cases = {
+        "truncated": (good[: len(good) // 2], "truncated"),
+        "corrupted": (good[:-10] + bytes([good[-10] ^ 1]) + good[-9:], "checksum"),
+        "foreign": (b"name = 'a scene, not a model'\n" * 4, "not a latent-dynamics model"),
+        "appended": (good + b"\0", "follow the payload"),
+    }
+    for name, (data, message) in cases.items():
+        path = tmp_path / f"{name}.ldm"
+        path.write_bytes(data)
+        with pytest.raises(ld.ModelFileError, match=message):
+            ld.Model.load(path)
+    model = ld.Model.load(neural_path)
+    not_a_folder = tmp_path / "file.txt"
+    not_a_folder.write_text("a file")
+    with pytest.raises(ld.ModelFileError, match="cannot write"):
+        model.save(not_a_folder / "model.ldm")
+
+
+def test_scene_errors(tmp_path: pathlib.Path) -> None:
+    cache = tmp_path / "cache"
+    with pytest.raises(ld.SceneError, match="cannot read scene file"):
+        ld.run_pipeline(tmp_path / "missing.toml", cache_dir=cache, out_dir=tmp_path)
+    text = TINY.read_text()
+    cases = {
+        "typo": (text.replace("youngs_modulus", "youngs_modulos"), "youngs_modulos"),
+        "negative": (text.replace("youngs_modulus = 1.0e5", "youngs_modulus = -1.0"), "youngs_modulus"),
+        "mesh": (text.replace('generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }', 'path = "nowhere.mesh"'), "nowhere.mesh"),
+    }
+    for name, (scene_text, message) in cases.items():
+        scene = tmp_path / f"{name}.toml"
+        scene.write_text(scene_text)
+        assert scene_text != text
+        with pytest.raises(ld.SceneError, match=message):
+            ld.run_pipeline(scene, cache_dir=cache, out_dir=tmp_path / name)
+        with pytest.raises(ValueError):
+            ld.export_model(scene, "pca", cache_dir=cache, path=tmp_path / "m.ldm")
+
+
+def test_a_failed_step_raises_solver_error_and_keeps_the_state(sim: ld.Simulator) -> None:
+    sim.step()
+    before = sim.positions()
+    # A spring of 1e300 N/m: the step's energy overflows.
+    h = sim.grab(tip(sim), 1e300)
+    with pytest.raises(ld.SolverError, match="did not converge at step 2"):
+        sim.step()
+    assert sim.steps == 1
+    np.testing.assert_array_equal(sim.positions(), before)
+    sim.release(h)
+    sim.step()
+    assert sim.steps == 2
+
+
+def test_a_failed_stage_raises_pipeline_error_with_the_solver_message(tmp_path: pathlib.Path) -> None:
+    scene = tmp_path / "stiff.toml"
+    scene.write_text(TINY.read_text().replace("tolerance = 1.0e-8", "tolerance = 1.0e-15\nmax_iterations = 1"))
+    with pytest.raises(ld.PipelineError, match="stage snapshots: .* did not converge"):
+        ld.export_model(scene, "pca", cache_dir=tmp_path / "cache", path=tmp_path / "m.ldm")
+
+
+def test_pipeline_error(tmp_path: pathlib.Path, cache_dir: pathlib.Path) -> None:
+    with pytest.raises(ld.PipelineError, match="trajectory"):
+        ld.run_pipeline(TINY, cache_dir=cache_dir, out_dir=tmp_path, methods=["pca"], trajectory=99)
+
+
+def test_handle_errors(model: ld.Model) -> None:
+    a, b = ld.Simulator(model), ld.Simulator(model)
+    h = a.grab(tip(a), 100.0)
+    with pytest.raises(ld.HandleError, match="another|not to this one"):
+        b.move_handle(h, (0.0, 0.0, 0.0))
+    with pytest.raises(ld.HandleError):
+        b.release(h)
+    a.release(h)
+    with pytest.raises(ld.HandleError, match="released already"):
+        a.release(h)
+    with pytest.raises(ld.HandleError, match="released already"):
+        a.move_handle(h, (0.0, 0.0, 0.0))
+    with pytest.raises(ld.HandleError, match="no surface vertex within"):
+        a.grab_near((10.0, 10.0, 10.0), 0.1, 100.0)
+    with pytest.raises(LookupError):
+        a.grab_near((10.0, 10.0, 10.0), 0.1, 100.0)
+
+
+def test_invalid_arguments(sim: ld.Simulator) -> None:
+    n, m = sim.vertex_count, sim.surface_vertex_count
+    bad = [
+        (lambda: sim.grab([], 1.0), "at least one vertex"),
+        (lambda: sim.grab([n], 1.0), f"vertex {n} does not exist"),
+        (lambda: sim.grab(-1, 1.0), "negative"),
+        (lambda: sim.grab("12", 1.0), "sequence of ints"),
+        (lambda: sim.grab([0], 0.0), "stiffness must be positive"),
+        (lambda: sim.grab([0], -5.0), "stiffness must be positive"),
+        (lambda: sim.grab([0], math.nan), "stiffness must be positive"),
+        (lambda: sim.grab_near((math.nan, 0.0, 0.0), 0.1, 1.0), "point must be finite"),
+        (lambda: sim.grab_near((0.0, 0.0, 0.0), 0.0, 1.0), "radius must be positive"),
+        (lambda: sim.move_handle(sim.grab([0], 1.0), (0.0, math.inf, 0.0)), "target must be finite"),
+        (lambda: sim.positions(out=np.empty((n, 2))), r"expected \(%d, 3\)" % n),
+        (lambda: sim.positions(out=np.empty((n, 3), dtype=np.float32)), "float64"),
+        (lambda: sim.positions(out=[[0.0] * 3] * n), "numpy array"),
+        (lambda: sim.surface_positions(np.int32), "float32 or float64"),
+        (lambda: sim.surface_positions("no such dtype"), "dtype"),
+        (lambda: sim.surface_positions(out=np.empty((m + 1, 3))), "expected"),
+        (lambda: ld.run_pipeline(TINY, methods=["nerual"]), "unknown method"),
+        (lambda: ld.run_pipeline(TINY, methods=[]), "at least one"),
+        (lambda: ld.export_model(TINY, "full"), "full-space method"),
+    ]
+    for call, message in bad:
+        with pytest.raises(ld.InvalidArgumentError, match=message):
+            call()
+    # Read-only arrays are refused rather than written.
+    frozen = np.empty((m, 3))
+    frozen.flags.writeable = False
+    with pytest.raises(ld.InvalidArgumentError, match="cannot be written"):
+        sim.surface_positions(out=frozen)
+    # The simulator still works after every refusal.
+    sim.step()
+    assert sim.steps == 1

@@ -1,0 +1,84 @@
+"""run_pipeline and export_model: the stages and cache of `cargo xtask`, the report as Python
+objects matching report.json."""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+
+import latent_dynamics as ld
+from conftest import TINY
+
+
+def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -> None:
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    methods = ["full", "pca", "pca-cubature", "neural-cubature"]
+    report = ld.run_pipeline(TINY, out_dir=out, cache_dir=cache, methods=methods)
+    assert report.scene == "tiny" and report.out_dir == out
+    assert [r.method for r in report.rows] == methods
+    assert report.stages and not any(s.cached for s in report.stages)
+    assert {"snapshots", "pca"} <= {s.name for s in report.stages}
+    for s in report.stages:
+        assert s.path.exists() and s.summary and s.seconds >= 0
+    written = json.loads((out / "report.json").read_text())
+    assert [r["method"] for r in written] == methods
+    for row, raw in zip(report.rows, written):
+        assert row.dimension == raw["dim"] and row.elements == raw["cubature_elements"]
+        assert row.ms_per_step == raw["ms_per_step"] and row.ms_per_step > 0
+        assert row.mean_rel_error == raw["mean_rel_error"]
+        assert row.frame_errors == raw["frame_errors"]
+        assert row.failure is None
+    full = report.row("full")
+    assert full.mean_rel_error == 0.0 and full.speedup == 1.0
+    cubature = report.row("pca-cubature")
+    assert cubature.dimension == 6 and 0 < cubature.elements < full.elements
+    assert 0 < cubature.mean_rel_error < 1 and math.isfinite(cubature.iterations)
+    assert report.row("neural-cubature").dimension >= 2
+    assert isinstance(report.warnings, list)
+    assert report.model_path == out / "neural-cubature.ldm"
+    model = ld.Model.load(report.model_path)
+    assert model.method == "neural-cubature"
+    assert any("test trajectory" in name for name, held_out, _ in model.errors if held_out)
+    # Every stage is cached now: the same run loads them all.
+    again = ld.run_pipeline(TINY, out_dir=out, cache_dir=cache, methods=["pca"])
+    assert again.stages and all(s.cached for s in again.stages)
+    assert again.row("pca").mean_rel_error == report.row("pca").mean_rel_error
+
+
+def test_export_writes_a_model_that_loads(tmp_path: pathlib.Path, cache_dir) -> None:
+    used = ld.export_model(TINY, "pca", path=tmp_path / "a.ldm", cache_dir=cache_dir)
+    assert used.path == tmp_path / "a.ldm" and used.path.exists()
+    assert used.method == "pca" and used.elements == used.tet_count
+    loaded = ld.Model.load(used.path)
+    assert (loaded.latent_dim, loaded.vertex_count) == (used.latent_dim, used.vertex_count)
+
+
+def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.Path) -> None:
+    seen: list[ld.Stage] = []
+    model = ld.export_model(
+        TINY, "pca", path=tmp_path / "a.ldm", cache_dir=tmp_path / "cache", on_stage=seen.append
+    )
+    assert [s.name for s in seen] == ["snapshots", "pca"] and not any(s.cached for s in seen)
+    assert model.path.exists()
+
+    called: list[str] = []
+
+    def fail(stage: ld.Stage) -> None:
+        called.append(stage.name)
+        raise RuntimeError(f"stop at {stage.name}")
+
+    try:
+        ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=tmp_path / "cache", methods=["pca"], on_stage=fail)
+    except RuntimeError as e:
+        # The first exception; the run itself went on to the end.
+        assert len(called) > 1 and str(e) == f"stop at {called[0]}"
+    else:
+        raise AssertionError("the callback's exception was not raised")
+    assert (tmp_path / "report.json").exists()
+    try:
+        ld.run_pipeline(TINY, out_dir=tmp_path, methods=["pca"], on_stage=42)
+    except ld.InvalidArgumentError as e:
+        assert "callable" in str(e)
+    else:
+        raise AssertionError("a callback that is not callable was accepted")
