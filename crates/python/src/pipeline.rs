@@ -81,7 +81,7 @@ pub struct Stage {
 impl From<&StageOutcome> for Stage {
     fn from(o: &StageOutcome) -> Self {
         Self {
-            name: o.stage.clone(),
+            name: o.stage.name().to_string(),
             cached: o.cached,
             seconds: o.seconds,
             path: o.path.clone(),
@@ -141,7 +141,7 @@ pub struct MethodRow {
 impl From<&MethodReport> for MethodRow {
     fn from(r: &MethodReport) -> Self {
         Self {
-            method: r.method.clone(),
+            method: r.method.name().to_string(),
             dimension: r.dim,
             elements: r.cubature_elements,
             ms_per_step: r.ms_per_step,
