@@ -3,7 +3,7 @@
 //! cache through every stage and every method, each mesh with another material.
 
 use pipeline::simulate::Method;
-use pipeline::suite::{MATERIALS, markdown, meshes, run_suite};
+use pipeline::suite::{MATERIALS, SuiteMesh, markdown, meshes, run_suite};
 use tests::{no_progress, scratch_dir, shared_dir};
 
 /// Meshes up to this size run in CI (a minute or two each on 2 cores); `cargo xtask suite`
@@ -22,6 +22,7 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
         shared.join("meshes").display()
     );
     let out = scratch_dir("suite");
+    let meshes: Vec<SuiteMesh> = meshes.into_iter().map(SuiteMesh::File).collect();
     let rows = run_suite(&meshes, 1e5, &out, &no_progress, &mut |_| {}).unwrap();
     let table = markdown(&rows);
     println!("{table}");

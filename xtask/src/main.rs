@@ -12,6 +12,7 @@ use pipeline::scene::Scene;
 use pipeline::shard::Shard;
 use pipeline::simulate::{Method, SimulateOptions, Trajectory};
 use pipeline::stress::Condition;
+use pipeline::suite::SuiteMesh;
 
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
@@ -119,6 +120,10 @@ struct SuiteArgs {
     /// Output folder (default: out/suite).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// The long run: also the generated bars of 15,360 and 58,800 tets (the latter takes tens
+    /// of minutes on 2 cores).
+    #[arg(long)]
+    generated: bool,
 }
 
 #[derive(clap::Args)]
@@ -428,9 +433,21 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         max_vertices,
         youngs_modulus,
         out,
+        generated,
     } = args;
     let dir = meshes.unwrap_or_else(|| cx.root.join("../shared/meshes"));
-    let files = pipeline::suite::meshes(&dir, max_vertices)?;
+    let mut files: Vec<SuiteMesh> = match pipeline::suite::meshes(&dir, max_vertices) {
+        Ok(files) => files.into_iter().map(SuiteMesh::File).collect(),
+        // The generated bars run without the folder.
+        Err(e) if generated => {
+            eprintln!("warning: {e:#}; running the generated meshes only");
+            Vec::new()
+        }
+        Err(e) => return Err(e),
+    };
+    if generated {
+        files.extend(pipeline::suite::generated());
+    }
     let out = out.unwrap_or_else(|| cx.root.join("out").join("suite"));
     let progress = |d, t| cx.stage_progress(d, t);
     let rows = pipeline::suite::run_suite(&files, youngs_modulus, &out, &progress, &mut |name| {

@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use fem_core::TetMesh;
 use fem_core::material::MaterialModel;
+use fem_core::mesh::generate::{BoxSpec, box_mesh};
 
 use crate::pipeline::{Pipeline, Progress};
 use crate::run::{MethodReport, RunOptions, run};
@@ -28,47 +29,106 @@ pub const MATERIALS: [MaterialModel; 5] = [
 /// a tolerance of the lowest plane; 2 % is the dinosaur's 5 mm of 25 cm).
 pub const PIN_FRACTION: f64 = 0.02;
 
+/// A mesh of the suite: a file, or a box generated in code (the long run's large meshes).
+#[derive(Debug, Clone, PartialEq)]
+pub enum SuiteMesh {
+    File(PathBuf),
+    Box {
+        name: String,
+        size: [f64; 3],
+        cells: [usize; 3],
+    },
+}
+
+impl SuiteMesh {
+    fn name(&self) -> String {
+        match self {
+            SuiteMesh::File(path) => path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "mesh".into()),
+            SuiteMesh::Box { name, .. } => name.clone(),
+        }
+    }
+
+    /// The scene's `[mesh]` keys.
+    fn section(&self) -> String {
+        match self {
+            SuiteMesh::File(path) => format!("path = {:?}", path.display().to_string()),
+            SuiteMesh::Box { size, cells, .. } => format!(
+                "generate = {{ kind = \"box\", size = [{:?}, {:?}, {:?}], cells = [{}, {}, {}] }}",
+                size[0], size[1], size[2], cells[0], cells[1], cells[2]
+            ),
+        }
+    }
+
+    fn read(&self) -> Result<TetMesh> {
+        match self {
+            SuiteMesh::File(path) => Ok(read(path)?.0),
+            SuiteMesh::Box { size, cells, .. } => Ok(box_mesh(&BoxSpec {
+                size: *size,
+                cells: *cells,
+                ..Default::default()
+            })?),
+        }
+    }
+}
+
+/// The generated meshes of the suite's long run (`cargo xtask suite --generated`): the default
+/// scene's bar (3,321 vertices, 15,360 tets) and a bar of 11,475 vertices and 58,800 tets, the
+/// size at which defaults that do not scale stop (memory of the cubature fit, snapshot time).
+pub fn generated() -> Vec<SuiteMesh> {
+    vec![
+        SuiteMesh::Box {
+            name: "bar-15k".into(),
+            size: [1.0, 0.2, 0.2],
+            cells: [40, 8, 8],
+        },
+        SuiteMesh::Box {
+            name: "bar-60k".into(),
+            size: [1.0, 0.28, 0.28],
+            cells: [50, 14, 14],
+        },
+    ]
+}
+
 /// The minimal scene of a mesh file: its material, Young's modulus `youngs_modulus`, the bottom
 /// [`PIN_FRACTION`] of its height pinned, gravity along −y, h = 0.01 s; every other section at
 /// its default.
 pub fn minimal_scene(mesh: &Path, material: MaterialModel, youngs_modulus: f64) -> Result<Scene> {
-    let (m, _) = read(mesh)?;
-    minimal_scene_of(&m, mesh, material, youngs_modulus)
+    let mesh = SuiteMesh::File(mesh.to_path_buf());
+    minimal_scene_of(&mesh.read()?, &mesh, material, youngs_modulus)
 }
 
 fn read(mesh: &Path) -> Result<(TetMesh, fem_core::mesh::ValidationReport)> {
     fem_core::io::read_mesh(mesh).with_context(|| format!("cannot read mesh {}", mesh.display()))
 }
 
-/// [`minimal_scene`] of the mesh `m` already read from `path`.
+/// [`minimal_scene`] of `mesh`, already read into `m`.
 fn minimal_scene_of(
     m: &TetMesh,
-    path: &Path,
+    mesh: &SuiteMesh,
     material: MaterialModel,
     youngs_modulus: f64,
 ) -> Result<Scene> {
     let (lo, hi) = m.bounding_box();
-    let name = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "mesh".into());
     let model = serde_json::to_value(material)?;
     let model = model.as_str().unwrap_or("stable-neo-hookean");
     let text = format!(
         "name = {name:?}\n\
-         [mesh]\npath = {path:?}\n\
+         [mesh]\n{section}\n\
          [material]\nmodel = {model:?}\nyoungs_modulus = {youngs_modulus:e}\npoisson_ratio = 0.45\n\
          [[pin]]\nplane = {{ axis = \"y\", side = \"min\", tolerance = {tol:e} }}\n\
          [gravity]\nacceleration = [0.0, -9.81, 0.0]\n\
          [time]\nstep = 0.01\n",
-        name = format!("{name}-{model}"),
-        path = path.display().to_string(),
+        name = format!("{}-{model}", mesh.name()),
+        section = mesh.section(),
         tol = PIN_FRACTION * (hi[1] - lo[1]),
     );
     Scene::from_str(
         &text,
         Path::new("."),
-        &format!("minimal scene of {}", path.display()),
+        &format!("minimal scene of {}", mesh.name()),
     )
 }
 
@@ -129,7 +189,7 @@ pub struct SuiteRow {
 /// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`) from an empty cache under
 /// `out/<scene>/`, returning one row a mesh; a scene whose pipeline fails gets a row saying why.
 pub fn run_suite(
-    meshes: &[PathBuf],
+    meshes: &[SuiteMesh],
     youngs_modulus: f64,
     out: &Path,
     progress: Progress<'_>,
@@ -139,7 +199,7 @@ pub fn run_suite(
     for (i, mesh) in meshes.iter().enumerate() {
         // Read once here for the scene's pin height and the table's sizes; the pipeline reads
         // it again as the scene's mesh.
-        let (m, _) = read(mesh)?;
+        let m = mesh.read()?;
         let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
@@ -226,4 +286,30 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The long run's bars are the sizes their documentation gives, and their minimal scenes
+    /// parse with the mesh generated in code, pinned at the bottom 2 % of the height.
+    #[test]
+    fn generated_meshes_have_their_sizes_and_minimal_scenes() {
+        let sizes: Vec<(usize, usize)> = generated()
+            .iter()
+            .map(|g| {
+                let m = g.read().unwrap();
+                (m.num_vertices(), m.num_tets())
+            })
+            .collect();
+        assert_eq!(sizes, [(3321, 15360), (11475, 58800)]);
+        let bar = &generated()[1];
+        let scene = minimal_scene_of(&bar.read().unwrap(), bar, MATERIALS[1], 1e5).unwrap();
+        assert_eq!(scene.name, "bar-60k-neo-hookean");
+        let (model, _) = scene.build_model().unwrap();
+        assert_eq!(model.mesh.num_tets(), 58800);
+        // The bottom layer of vertices (y = 0; 2 % of 0.28 m is above no other layer).
+        assert_eq!(model.pinned.len(), 51 * 15);
+    }
 }
