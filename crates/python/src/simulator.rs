@@ -7,7 +7,7 @@
 //! never sees half a step (it waits for the step to finish), and the two locks are never held in
 //! opposite orders: the mutex is only ever waited for without the GIL.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use fem_core::Vec3;
@@ -140,6 +140,9 @@ impl Handle {
 #[derive(Debug)]
 pub struct Simulator {
     state: Mutex<State>,
+    /// Calls waiting for `state`: a step, once done, lets them have it before its thread can
+    /// take it again (the mutex is not fair, and a stepping loop starved a reader).
+    waiting: AtomicUsize,
     id: u64,
     model: Py<Model>,
     full_space: bool,
@@ -160,9 +163,15 @@ impl Simulator {
         let run = |mut guard: MutexGuard<'_, State>| f(&mut guard);
         match self.state.try_lock() {
             Ok(guard) => Ok(run(guard)),
-            Err(TryLockError::WouldBlock) => py
-                .detach(|| self.state.lock().map(run).map_err(|_| ()))
-                .map_err(|()| poisoned()),
+            Err(TryLockError::WouldBlock) => {
+                self.waiting.fetch_add(1, Ordering::SeqCst);
+                py.detach(|| {
+                    let guard = self.state.lock();
+                    self.waiting.fetch_sub(1, Ordering::SeqCst);
+                    guard.map(run).map_err(|_| ())
+                })
+                .map_err(|()| poisoned())
+            }
             Err(TryLockError::Poisoned(_)) => Err(poisoned()),
         }
     }
@@ -329,6 +338,7 @@ impl Simulator {
         let (rest, surface) =
             each!(&runtime, s => (s.rest_positions().to_vec(), s.surface().clone()));
         Ok(Self {
+            waiting: AtomicUsize::new(0),
             state: Mutex::new(State {
                 runtime,
                 timed_steps: 0,
@@ -352,12 +362,22 @@ impl Simulator {
     fn step(&self, py: Python<'_>) -> PyResult<StepStats> {
         let result = py
             .detach(|| {
-                let mut state = self.state.lock().map_err(|_| None)?;
-                let stats = each!(&mut state.runtime, s => s.step()).map_err(Some)?;
-                state.timed_steps += 1;
-                state.seconds += stats.seconds;
-                state.iterations += stats.iterations;
-                state.last = Some(stats);
+                let stats = {
+                    let mut state = self.state.lock().map_err(|_| None)?;
+                    let stats = each!(&mut state.runtime, s => s.step()).map_err(Some)?;
+                    state.timed_steps += 1;
+                    state.seconds += stats.seconds;
+                    state.iterations += stats.iterations;
+                    state.last = Some(stats);
+                    stats
+                };
+                // Calls that waited for this step go first (for at most a millisecond).
+                let deadline = std::time::Instant::now() + std::time::Duration::from_millis(1);
+                while self.waiting.load(Ordering::SeqCst) > 0
+                    && std::time::Instant::now() < deadline
+                {
+                    std::thread::yield_now();
+                }
                 Ok(stats)
             })
             .map_err(|e: Option<RuntimeError>| e.map_or_else(poisoned, errors::step))?;

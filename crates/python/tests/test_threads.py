@@ -37,27 +37,36 @@ def test_main_thread_reads_while_a_thread_steps(pca_path) -> None:
             failure.append(e)
 
     # With a 100 s switch interval the interpreter never takes the GIL from the thread holding
-    # it: the main thread gets to read while the stepper is mid-loop only if step() lets go.
-    # (The main thread's short sleeps let the stepper have the GIL between its steps.)
+    # it: the main thread runs Python while the stepper is mid-loop only if step() lets go. It
+    # counts how often it ran and now and then reads the state (the read itself waits for a
+    # step to end, with the GIL let go, and on a busy machine may wait several steps: the
+    # count, not the reads, shows that step() lets go).
     interval = sys.getswitchinterval()
     sys.setswitchinterval(100.0)
+    spins = 0
     try:
         thread = threading.Thread(target=stepper)
         thread.start()
         started.wait()
         while thread.is_alive():
-            reads.append((sim.steps, sim.positions()))
-            sim.surface_positions(np.float32)
+            spins += 1
+            if spins % 4 == 0:
+                reads.append((sim.steps, sim.positions()))
+                sim.surface_positions(np.float32)
+            # Lets the stepper have the GIL back when its step ends.
             time.sleep(0.0005)
         thread.join()
     finally:
         sys.setswitchinterval(interval)
     assert not failure, failure
     assert sim.steps == steps and len(frames) == steps + 1
-    # Without the GIL let go in step() there would be none; on a busy machine a waiting thread
-    # wakes late, so not every step lets one in.
+    # Holding the GIL through its steps, the stepper would let the main thread run only when it
+    # ended (once or twice); letting it go in each step, about once a step.
+    assert spins >= 10, f"the main thread ran {spins} times in {steps} steps"
+    # And a read does not wait for the whole loop: a step lets the calls that waited for it
+    # go before its thread steps again.
     during = [s for s, _ in reads if 0 < s < steps]
-    assert during, f"the main thread never read during the loop: {[s for s, _ in reads]}"
+    assert len(during) >= 2, f"reads saw steps {[s for s, _ in reads]} only"
     # Every read is the state after a whole step (never a mix of two), no earlier than the step
     # count read just before it.
     for seen_steps, positions in reads:
