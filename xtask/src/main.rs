@@ -13,6 +13,8 @@ use pipeline::shard::Shard;
 use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
 use pipeline::stress::{Condition, Outcome, stress};
 
+mod view;
+
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
 struct Cli {
@@ -182,6 +184,9 @@ enum Command {
         #[arg(long)]
         all_rows: bool,
     },
+    /// Drag the mesh in a browser: a loopback server stepping the scene's reduced methods and
+    /// full space in real time (running the stages it needs, cached), or a model file's method.
+    View(view::ViewArgs),
     /// Run the stages in order, skipping cached ones.
     Pipeline {
         #[command(flatten)]
@@ -684,6 +689,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             println!("loss curve: {}", dir.join("loss.svg").display());
             Ok(())
         }
+        Command::View(args) => view::view(args, &stage_progress),
         Command::Pipeline { common, until } => {
             let scene = load_scene(common.scene.as_ref())?;
             let mut p = pipeline(&scene, common.cache.as_ref(), &root)?;

@@ -82,7 +82,7 @@
     }
     camera.target = scale(add(lo, hi), 0.5);
     camera.radius = norm(sub(hi, lo)) / 2 || 1;
-    camera.distance = (camera.radius / Math.sin(camera.fov / 2)) * 0.95;
+    camera.distance = (camera.radius / Math.sin(camera.fov / 2)) * 1.05;
   }
   const vertex = (i) => [positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]];
 
@@ -420,6 +420,7 @@
     position: (i) => vertex(i),
     screenOf: (i) => project(vertex(i)),
     handle: () => (drag ? drag.handle : null),
+    target: () => (drag ? drag.target : null),
     // A surface vertex far from the pins that the mouse can pick where it is drawn.
     grabCandidate: () => {
       if (!mesh) return null;

@@ -72,6 +72,19 @@ impl Server {
             source,
         };
         let listener = TcpListener::bind(addr).map_err(bind_error)?;
+        Self::serve(listener, session)
+    }
+
+    /// Serves `session` on a listener bound already (e.g. to try one port, then another).
+    ///
+    /// # Errors
+    /// [`ViewerError::Bind`] when the listener cannot be set up, [`ViewerError::Thread`] when a
+    /// thread cannot start.
+    pub fn serve(listener: TcpListener, session: Session) -> Result<Self, ViewerError> {
+        let bind_error = |source| ViewerError::Bind {
+            addr: "the listener".into(),
+            source,
+        };
         let local = listener.local_addr().map_err(bind_error)?;
         listener.set_nonblocking(true).map_err(bind_error)?;
         let stop = Arc::new(AtomicBool::new(false));
