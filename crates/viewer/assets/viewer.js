@@ -421,7 +421,8 @@
     screenOf: (i) => project(vertex(i)),
     handle: () => (drag ? drag.handle : null),
     target: () => (drag ? drag.target : null),
-    // A surface vertex far from the pins that the mouse can pick where it is drawn.
+    // A surface vertex far from the pins that the mouse can pick where it is drawn, inside the
+    // silhouette (the body around it for 10 pixels), so that a little motion does not matter.
     grabCandidate: () => {
       if (!mesh) return null;
       const pinnedSet = new Set(mesh.pinned);
@@ -435,7 +436,9 @@
         const s = project(vertex(i));
         if (s.x < 320 || s.y < 20 || s.x > canvas.clientWidth - 20 || s.y > canvas.clientHeight - 20) continue;
         const hit = pick(s.x, s.y);
-        if (hit && norm(sub(hit.point, vertex(i))) < 1e-3 * camera.radius) return { vertex: i, x: s.x, y: s.y };
+        if (!hit || norm(sub(hit.point, vertex(i))) > 1e-3 * camera.radius) continue;
+        const around = [[10, 0], [-10, 0], [0, 10], [0, -10]].every(([dx, dy]) => pick(s.x + dx, s.y + dy));
+        if (around) return { vertex: i, x: s.x, y: s.y };
       }
       return null;
     },

@@ -217,6 +217,46 @@ pub fn decode_frame(bytes: &[u8]) -> Option<Frame> {
     })
 }
 
+/// A decoded surface message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mesh {
+    /// Rest positions, 3 per surface vertex.
+    pub rest: Vec<f32>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Pinned surface vertices (indices into the surface's vertices).
+    pub pinned: Vec<u32>,
+}
+
+/// Reads a binary message as the surface message; `None` for anything else.
+pub fn decode_mesh(bytes: &[u8]) -> Option<Mesh> {
+    let u32_at = |i: usize| Some(u32::from_le_bytes(bytes.get(i..i + 4)?.try_into().ok()?));
+    if u32_at(0)? != MESH_KIND {
+        return None;
+    }
+    let (n, m, p) = (
+        u32_at(4)? as usize,
+        u32_at(8)? as usize,
+        u32_at(12)? as usize,
+    );
+    if bytes.len() != 16 + 4 * (3 * n + 3 * m + p) {
+        return None;
+    }
+    let words: Vec<[u8; 4]> = bytes[16..]
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    let (rest, rest_words) = words.split_at(3 * n);
+    let (triangles, pinned) = rest_words.split_at(3 * m);
+    Some(Mesh {
+        rest: rest.iter().map(|w| f32::from_le_bytes(*w)).collect(),
+        triangles: triangles
+            .chunks_exact(3)
+            .map(|t| [0, 1, 2].map(|c| u32::from_le_bytes(t[c])))
+            .collect(),
+        pinned: pinned.iter().map(|w| u32::from_le_bytes(*w)).collect(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -227,6 +267,12 @@ mod tests {
         let f = decode_frame(&encode_frame(42, 0.21, &p)).expect("a frame");
         assert_eq!((f.step, f.time, &f.positions[..]), (42, 0.21, &p[..]));
         assert!(decode_frame(&encode_mesh(&p, &[[0, 1, 0]], &[])).is_none());
+        let mesh = decode_mesh(&encode_mesh(&p, &[[0, 1, 0]], &[1])).expect("a mesh");
+        assert_eq!(
+            (&mesh.rest[..], &mesh.triangles[..], &mesh.pinned[..]),
+            (&p[..], &[[0, 1, 0]][..], &[1][..])
+        );
+        assert!(decode_mesh(&encode_frame(1, 0.0, &p)).is_none());
         assert!(decode_frame(&encode_frame(1, 0.0, &p)[..30]).is_none());
     }
 

@@ -315,7 +315,10 @@ fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
     let before = point(&page.eval(&format!("viewerDebug.position({vertex})"))?)?;
     page.mouse("mouseMoved", x, y, 0)?;
     page.mouse("mousePressed", x, y, 1)?;
-    page.wait_for("viewerDebug.handle() !== null", "a handle from the grab")?;
+    if let Err(e) = page.wait_for("viewerDebug.handle() !== null", "a handle from the grab") {
+        let said = page.eval("document.getElementById('message').textContent")?;
+        return Err(format!("{e} (mouse at {x}, {y}; the page says {said})"));
+    }
     for k in 1..=20 {
         page.mouse("mouseMoved", x, y - 6.0 * f64::from(k), 1)?;
         std::thread::sleep(Duration::from_millis(25));
