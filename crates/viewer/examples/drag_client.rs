@@ -7,7 +7,7 @@
 //! ```
 //!
 //! For each method (default: the current one, then `full`) it switches to it, waits a second,
-//! grabs the surface vertex farthest from the pins and moves the target up and down by a tenth
+//! grabs the surface vertex farthest from the pins where it is and moves the target up and down by a tenth
 //! of the mesh's size at 60 messages a second (a mouse's rate) for SECONDS (default 10). Every
 //! 0.25 s one move carries a `seq`; its latency is the time from sending it to receiving the
 //! first frame of a step that includes it (the server's `applied` reply names that step).
@@ -24,6 +24,8 @@ type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
 struct Client {
     ws: WebSocket<TcpStream>,
+    /// The surface positions of the latest frame.
+    latest: Vec<f32>,
 }
 
 /// What arrived in one read.
@@ -41,6 +43,7 @@ impl Client {
             Ok(Message::Binary(b)) => {
                 let at = Instant::now();
                 if let Some(f) = decode_frame(&b) {
+                    self.latest = f.positions;
                     Ok(Got::Frame { step: f.step, at })
                 } else if let Some(m) = decode_mesh(&b) {
                     Ok(Got::Mesh(m))
@@ -88,7 +91,10 @@ fn main() -> Result<()> {
     ws.get_ref()
         .set_read_timeout(Some(Duration::from_millis(1)))?;
     ws.get_ref().set_nodelay(true)?;
-    let mut c = Client { ws };
+    let mut c = Client {
+        ws,
+        latest: Vec::new(),
+    };
     let (mut hello, mut mesh) = (None, None);
     while hello.is_none() || mesh.is_none() {
         match c.read()? {
@@ -157,12 +163,12 @@ fn main() -> Result<()> {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
     for m in &wanted {
-        measure(&mut c, m, rest(tip), size, seconds)?;
+        measure(&mut c, m, tip, size, seconds)?;
     }
     Ok(())
 }
 
-fn measure(c: &mut Client, method: &str, at: [f64; 3], size: f64, seconds: f64) -> Result<()> {
+fn measure(c: &mut Client, method: &str, tip: usize, size: f64, seconds: f64) -> Result<()> {
     c.send(format!(r#"{{"type":"method","name":"{method}"}}"#))?;
     let settle = Instant::now();
     while settle.elapsed() < Duration::from_secs(1) {
@@ -170,6 +176,8 @@ fn measure(c: &mut Client, method: &str, at: [f64; 3], size: f64, seconds: f64) 
             return Err(message.into());
         }
     }
+    // Where the vertex is now (it sags under gravity), not where it rests.
+    let at = [0, 1, 2].map(|k| f64::from(c.latest.get(3 * tip + k).copied().unwrap_or(f32::NAN)));
     c.send(format!(
         r#"{{"type":"grab","point":[{},{},{}]}}"#,
         at[0], at[1], at[2]

@@ -408,7 +408,19 @@ impl Session {
             }
         }
         let method = &mut self.methods[self.current];
-        match method.simulator.step() {
+        // A solver that panics is a failure like any other: the session stays up and can reset.
+        let stepped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            method.simulator.step().map_err(|e| e.to_string())
+        }))
+        .unwrap_or_else(|panic| {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic".into());
+            Err(format!("the solver panicked: {what}"))
+        });
+        match stepped {
             Ok(stats) => {
                 self.window
                     .push_back((Instant::now(), stats.iterations, stats.seconds));

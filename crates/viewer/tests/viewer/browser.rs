@@ -3,7 +3,8 @@
 //! Without Chromium it says `skipping …` and passes (`.ci/run` installs Debian's `chromium`).
 //!
 //! `VIEWER_BROWSER_URL=http://127.0.0.1:PORT/` drives a server started elsewhere (e.g. `cargo
-//! xtask view`) instead of the tiny beam; the screenshot path is printed either way.
+//! xtask view`) instead of the tiny beam, and `VIEWER_BROWSER_DRAG=PIXELS` drags that far up
+//! (default 120); the screenshot path is printed either way.
 
 use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
@@ -319,8 +320,12 @@ fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
         let said = page.eval("document.getElementById('message').textContent")?;
         return Err(format!("{e} (mouse at {x}, {y}; the page says {said})"));
     }
+    let pixels: f64 = std::env::var("VIEWER_BROWSER_DRAG")
+        .ok()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(120.0);
     for k in 1..=20 {
-        page.mouse("mouseMoved", x, y - 6.0 * f64::from(k), 1)?;
+        page.mouse("mouseMoved", x, y - pixels * f64::from(k) / 20.0, 1)?;
         std::thread::sleep(Duration::from_millis(25));
     }
     std::thread::sleep(Duration::from_millis(1500));
@@ -337,7 +342,7 @@ fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
         .and_then(|s| s.trim().parse().ok())
         .ok_or("the HUD shows no steps/s figure")?;
     let hud = page.eval("viewerDebug.hud()")?;
-    page.mouse("mouseReleased", x, y - 120.0, 0)?;
+    page.mouse("mouseReleased", x, y - pixels, 0)?;
     page.wait_for(
         "viewerDebug.handle() === null && viewerDebug.state().handles === 0",
         "the handle released",

@@ -314,10 +314,12 @@ fn pause_step_gravity_method_and_reset() {
     server.shutdown();
 }
 
-/// A simulator that fails its steps while told to: a solver failure on demand.
+/// A simulator that fails its steps while told to: a solver failure on demand (an error, or a
+/// panic while `panic` is set too).
 struct Flaky {
     inner: Box<dyn Simulator>,
     fail: Arc<AtomicBool>,
+    panic: Arc<AtomicBool>,
 }
 
 impl Simulator for Flaky {
@@ -335,6 +337,7 @@ impl Simulator for Flaky {
     }
     fn step(&mut self) -> Result<StepStats, RuntimeError> {
         if self.fail.load(Ordering::Relaxed) {
+            assert!(!self.panic.load(Ordering::Relaxed), "a solver bug");
             return Err(fem_core::FemError::NotConverged {
                 solver: "L-BFGS",
                 step: self.inner.steps() + 1,
@@ -371,10 +374,14 @@ impl Simulator for Flaky {
 
 #[test]
 fn a_solver_failure_is_shown_and_a_reset_goes_on() {
-    let fail = Arc::new(AtomicBool::new(false));
+    let (fail, panic) = (
+        Arc::new(AtomicBool::new(false)),
+        Arc::new(AtomicBool::new(false)),
+    );
     let flaky = Flaky {
         inner: Box::new(model().simulator().expect("a runtime")),
         fail: Arc::clone(&fail),
+        panic: Arc::clone(&panic),
     };
     let session = Session::new(
         Settings::for_model(model()),
@@ -407,6 +414,25 @@ fn a_solver_failure_is_shown_and_a_reset_goes_on() {
     c.wait_until(
         |c| c.state.as_ref().is_some_and(|s| s.failure.is_none()) && c.step() > 3,
         "stepping again after the reset",
+    );
+    // A solver that panics: the same, and the server goes on.
+    panic.store(true, Ordering::Relaxed);
+    fail.store(true, Ordering::Relaxed);
+    c.wait_until(
+        |c| c.state.as_ref().is_some_and(|s| s.failure.is_some()),
+        "the panic reported",
+    );
+    let s = c.state.clone().expect("a state");
+    assert!(
+        s.status.contains("the solver panicked: a solver bug"),
+        "{}",
+        s.status
+    );
+    fail.store(false, Ordering::Relaxed);
+    c.send(r#"{"type":"reset"}"#);
+    c.wait_until(
+        |c| c.state.as_ref().is_some_and(|s| s.failure.is_none()) && c.step() > 3,
+        "stepping again after the second reset",
     );
     server.shutdown();
 }
