@@ -52,8 +52,8 @@ pub enum ViewerError {
     /// A pinned vertex past the mesh's vertices.
     #[error("pinned vertex {vertex} does not exist (the mesh has {count})")]
     PinnedVertex { vertex: usize, count: usize },
-    /// A setting that must be positive and finite.
-    #[error("the viewer's {what} must be positive and finite, got {value}")]
+    /// A setting that must be positive and finite (and, for a time, at most a year).
+    #[error("the viewer's {what} must be positive and finite (a year at most), got {value}")]
     Setting { what: &'static str, value: f64 },
     /// The address cannot be listened on.
     #[error("cannot listen on {addr}: {source}")]

@@ -26,6 +26,8 @@ use crate::simulator::{Method, Settings};
 
 /// The backlog of steps (in wall time) after which the clock restarts instead of catching up.
 const MAX_BACKLOG: Duration = Duration::from_millis(250);
+/// The longest time step or frame interval accepted.
+const MAX_INTERVAL: Duration = Duration::from_secs(365 * 24 * 3600);
 /// How often the state is sent when nothing changed.
 const STATE_INTERVAL: Duration = Duration::from_millis(250);
 /// The span of the speed figures.
@@ -139,6 +141,18 @@ impl Session {
                 return Err(ViewerError::Setting { what, value });
             }
         }
+        // The step and the frame interval as durations (a year at most).
+        for (what, seconds) in [
+            ("time step", settings.time_step),
+            ("frame interval (1 / max_fps)", 1.0 / settings.max_fps),
+        ] {
+            if Duration::try_from_secs_f64(seconds).map_or(true, |d| d > MAX_INTERVAL) {
+                return Err(ViewerError::Setting {
+                    what,
+                    value: seconds,
+                });
+            }
+        }
         let surface = first.simulator.surface().clone();
         let rest = first.simulator.rest_positions().to_vec();
         for (i, m) in methods.iter().enumerate() {
@@ -198,7 +212,7 @@ impl Session {
         })
     }
 
-    /// The method names, the current one first.
+    /// The method names, in the order offered (the first is the one shown at the start).
     pub fn method_names(&self) -> Vec<String> {
         self.methods.iter().map(|m| m.name.clone()).collect()
     }
@@ -206,12 +220,6 @@ impl Session {
     /// The session's settings.
     pub fn settings(&self) -> &Settings {
         &self.settings
-    }
-
-    /// Starts paused (a client resumes it).
-    pub fn start_paused(mut self) -> Self {
-        self.paused = true;
-        self
     }
 
     fn running(&self) -> bool {

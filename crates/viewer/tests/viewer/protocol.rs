@@ -436,3 +436,59 @@ fn a_solver_failure_is_shown_and_a_reset_goes_on() {
     );
     server.shutdown();
 }
+
+#[test]
+fn a_session_refuses_what_it_cannot_run() {
+    let m = model();
+    let reduced = || Method::new("pca", m.simulator().expect("a runtime"));
+    let err = |settings: Settings, methods: Vec<Method>| {
+        Session::new(settings, methods)
+            .map(drop)
+            .expect_err("refused")
+            .to_string()
+    };
+    let ok = Settings::for_model(m);
+    assert!(err(ok.clone(), vec![]).contains("at least one method"));
+    assert!(err(ok.clone(), vec![reduced(), reduced()]).contains("two methods are named"));
+    for (settings, what) in [
+        (
+            Settings {
+                time_step: 0.0,
+                ..ok.clone()
+            },
+            "time step",
+        ),
+        (
+            Settings {
+                time_step: 1e30,
+                ..ok.clone()
+            },
+            "time step",
+        ),
+        (
+            Settings {
+                stiffness: f64::NAN,
+                ..ok.clone()
+            },
+            "stiffness",
+        ),
+        (
+            Settings {
+                max_fps: 1e-30,
+                ..ok.clone()
+            },
+            "frame interval",
+        ),
+        (
+            Settings {
+                pinned: vec![1 << 40],
+                ..ok.clone()
+            },
+            "pinned vertex",
+        ),
+    ] {
+        let e = err(settings, vec![reduced()]);
+        assert!(e.contains(what), "{e}");
+    }
+    assert!(Session::new(ok, vec![reduced()]).is_ok());
+}
