@@ -24,9 +24,10 @@ pub struct ViewArgs {
     /// Artifact cache folder (default: out/SCENE/cache).
     #[arg(long, conflicts_with = "model")]
     cache: Option<PathBuf>,
-    /// The method shown first.
-    #[arg(long, value_enum, default_value_t = MethodArg::NeuralCubature)]
-    method: MethodArg,
+    /// The method shown first (`full` for full space; default: neural-cubature, or the model
+    /// file's method).
+    #[arg(long, value_enum)]
+    method: Option<MethodArg>,
     /// The reduced methods offered with --scene (full space is always offered).
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::NeuralCubature, MethodArg::Neural, MethodArg::PcaCubature, MethodArg::Pca])]
     methods: Vec<MethodArg>,
@@ -46,8 +47,8 @@ const FULL: &str = "full";
 /// Builds the session, serves it and prints where; returns when the server stops.
 pub fn view(args: ViewArgs, progress: pipeline::pipeline::Progress<'_>) -> Result<()> {
     let root = pipeline::project_root();
-    let first = Method::from(args.method);
-    let (settings, mut methods) = match &args.model {
+    let chosen = args.method.map(Method::from);
+    let (settings, mut methods, default_start) = match &args.model {
         Some(path) => {
             let model = ReducedModel::load(path)
                 .with_context(|| format!("cannot load the model {}", path.display()))?;
@@ -59,19 +60,23 @@ pub fn view(args: ViewArgs, progress: pipeline::pipeline::Progress<'_>) -> Resul
                 model.mesh.num_vertices()
             );
             let methods = vec![
-                viewer::Method::new(name, model.simulator()?),
+                viewer::Method::new(name.clone(), model.simulator()?),
                 viewer::Method::new(FULL, FullRuntime::from_model(&model)?),
             ];
-            (Settings::for_model(&model), methods)
+            (Settings::for_model(&model), methods, name)
         }
         None => {
             let scene = load_scene(args.scene.as_ref())?;
             let mut p = pipeline(&scene, args.cache.as_ref(), &root)?;
             let mut wanted: Vec<Method> = args.methods.iter().map(|&m| Method::from(m)).collect();
-            if !first.is_full() && !wanted.contains(&first) {
-                wanted.insert(0, first);
+            if let Some(m) = chosen
+                && !m.is_full()
+                && !wanted.contains(&m)
+            {
+                wanted.insert(0, m);
             }
             wanted.retain(|m| !m.is_full());
+            let default_start = wanted.first().map(|m| m.name().to_string());
             let mut methods = Vec::new();
             let mut settings = None;
             for m in wanted {
@@ -82,17 +87,17 @@ pub fn view(args: ViewArgs, progress: pipeline::pipeline::Progress<'_>) -> Resul
                 }
                 methods.push(viewer::Method::new(m.name(), model.simulator()?));
             }
-            let Some(settings) = settings else {
+            let (Some(settings), Some(default_start)) = (settings, default_start) else {
                 bail!("--methods names no reduced method; the viewer needs one to build on");
             };
-            (settings, methods)
+            (settings, methods, default_start)
         }
     };
     // The first method is the one shown first; full space last unless asked for.
-    let start = if first.is_full() {
-        FULL.to_string()
-    } else {
-        first.name().to_string()
+    let start = match chosen {
+        Some(m) if m.is_full() => FULL.to_string(),
+        Some(m) => m.name().to_string(),
+        None => default_start,
     };
     let Some(index) = methods.iter().position(|m| m.name == start) else {
         bail!(
@@ -130,9 +135,14 @@ pub fn view(args: ViewArgs, progress: pipeline::pipeline::Progress<'_>) -> Resul
     }
     .with_context(|| format!("cannot listen on {}:{}", args.host, args.port))?;
     let server = Server::serve(listener, session)?;
+    let port = server.local_addr().port();
+    let url = if args.host.is_unspecified() {
+        format!("http://127.0.0.1:{port}/ (from elsewhere: this machine's address, port {port})")
+    } else {
+        server.url()
+    };
     println!(
-        "viewer: open {} in a browser ({}); Ctrl-C stops it",
-        server.url(),
+        "viewer: open {url} in a browser ({}); Ctrl-C stops it",
         names.join(", ")
     );
     server.wait();
