@@ -225,6 +225,9 @@ fn peek_head(stream: &TcpStream) -> Option<Vec<u8>> {
 }
 
 fn connection(mut stream: TcpStream, client: u64, ctx: &Context) {
+    if stream.set_write_timeout(Some(WRITE_TIMEOUT)).is_err() {
+        return;
+    }
     let Some(bytes) = peek_head(&stream) else {
         let _ = http::status(&mut stream, 400, "Bad Request", "no request head\n");
         return;

@@ -406,6 +406,8 @@ fn a_solver_failure_is_shown_and_a_reset_goes_on() {
         s.status
     );
     assert!(s.status.contains("did not converge"), "{}", s.status);
+    // The last good step's frame may still be on its way; after it, nothing moves.
+    c.read_for(Duration::from_millis(300));
     let at = c.step();
     c.read_for(Duration::from_millis(300));
     assert_eq!(c.step(), at, "it stepped on after the failure");
@@ -491,4 +493,62 @@ fn a_session_refuses_what_it_cannot_run() {
         assert!(e.contains(what), "{e}");
     }
     assert!(Session::new(ok, vec![reduced()]).is_ok());
+}
+
+/// The first line of the server's answer to a raw request.
+fn status_line(server: &viewer::Server, request: &str) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(server.local_addr()).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    s.write_all(request.as_bytes()).expect("send");
+    // Up to the end of the first line (a WebSocket's stream goes on).
+    let (mut reply, mut byte) = (Vec::new(), [0u8]);
+    while !reply.ends_with(b"\r\n") && s.read_exact(&mut byte).is_ok() {
+        reply.push(byte[0]);
+    }
+    String::from_utf8_lossy(&reply).trim_end().to_string()
+}
+
+#[test]
+fn the_page_is_served_to_loopback_only_and_same_origin_sockets_only() {
+    let server = serve(session());
+    let host = format!("127.0.0.1:{}", server.local_addr().port());
+    let get = |path: &str, headers: &str| {
+        status_line(
+            &server,
+            &format!("GET {path} HTTP/1.1\r\nHost: {host}\r\n{headers}\r\n"),
+        )
+    };
+    for path in ["/", "/index.html", "/viewer.js", "/viewer.css"] {
+        assert_eq!(get(path, ""), "HTTP/1.1 200 OK", "{path}");
+    }
+    assert_eq!(get("/secret", ""), "HTTP/1.1 404 Not Found");
+    assert_eq!(get("/ws", ""), "HTTP/1.1 426 Upgrade Required");
+    let upgrade = "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n\
+                   Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
+    assert_eq!(
+        get("/ws", &format!("{upgrade}Origin: http://evil.example\r\n")),
+        "HTTP/1.1 403 Forbidden"
+    );
+    assert_eq!(
+        get("/ws", &format!("{upgrade}Origin: http://{host}\r\n")),
+        "HTTP/1.1 101 Switching Protocols"
+    );
+    assert_eq!(
+        status_line(&server, "GET / HTTP/1.1\r\nHost: evil.example\r\n\r\n"),
+        "HTTP/1.1 403 Forbidden"
+    );
+    assert_eq!(
+        status_line(&server, "POST / HTTP/1.1\r\nHost: localhost\r\n\r\n"),
+        "HTTP/1.1 405 Method Not Allowed"
+    );
+    assert_eq!(
+        status_line(&server, "\x16\x03\x01 not http\r\n\r\n"),
+        "HTTP/1.1 400 Bad Request"
+    );
+    // And it still serves a client.
+    let mut c = Client::connect(&server);
+    c.steps_on(2);
+    server.shutdown();
 }
