@@ -14,6 +14,8 @@ use pipeline::simulate::{Method, SimulateOptions, Trajectory};
 use pipeline::stress::Condition;
 use pipeline::suite::SuiteMesh;
 
+mod view;
+
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
 struct Cli {
@@ -61,6 +63,9 @@ enum Command {
     /// Write one reduced method's trained model as a self-contained file (running the stages it
     /// needs, cached as always), for latent-sim's runtime: `ReducedModel::load(path)?.simulator()`.
     Export(ExportArgs),
+    /// Drag the mesh in a browser: a loopback server stepping the scene's reduced methods and
+    /// full space in real time (running the stages it needs, cached), or a model file's method.
+    View(view::ViewArgs),
     /// Run the stages in order, skipping cached ones.
     Pipeline(PipelineArgs),
 }
@@ -361,6 +366,7 @@ fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Run(args) => run(&cx, args),
         Command::Export(args) => export(&cx, args),
+        Command::View(args) => view::view(&cx, args),
         Command::Suite(args) => suite(&cx, args),
         Command::Bench(args) => bench(&cx, args),
         Command::Stress(args) => stress(&cx, args),

@@ -1,0 +1,361 @@
+//! The page in headless Chromium, driven through the DevTools protocol: it loads from the
+//! server, a real mouse drag on the canvas pulls the body, and the HUD shows a steps/s figure.
+//! Without Chromium it says `skipping …` and passes (`.ci/run` installs Debian's `chromium`).
+//!
+//! `VIEWER_BROWSER_URL=http://127.0.0.1:PORT/` drives a server started elsewhere (e.g. `cargo
+//! xtask view`) instead of the tiny beam, and `VIEWER_BROWSER_DRAG=PIXELS` drags that far up
+//! (default 120); the screenshot path is printed either way.
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+use tungstenite::{Message, WebSocket};
+use viewer::{Method, Server, Session, Settings};
+
+use crate::common::model;
+
+type Result<T> = std::result::Result<T, String>;
+
+/// The Chromium binary: `$CHROMIUM`, else the first of the usual names on the PATH.
+fn chromium() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("CHROMIUM") {
+        return Some(PathBuf::from(p));
+    }
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path).find_map(|dir| {
+        [
+            "chromium",
+            "chromium-browser",
+            "google-chrome",
+            "google-chrome-stable",
+        ]
+        .iter()
+        .map(|name| dir.join(name))
+        .find(|p| p.is_file())
+    })
+}
+
+/// A headless Chromium with its DevTools endpoint; killed on drop.
+struct Browser {
+    child: Child,
+    cdp: Cdp,
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        let _ = self.cdp.call(None, "Browser.close", json!({}));
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_secs(3) {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Browser {
+    fn start(binary: &Path, profile: &Path) -> Result<Self> {
+        let mut child = Command::new(binary)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                // WebGL2 on the CPU: SwiftShader through ANGLE.
+                "--use-angle=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--disable-quic",
+                "--no-first-run",
+                "--no-default-browser-check",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--disable-extensions",
+                "--window-size=1280,800",
+                "--remote-debugging-port=0",
+            ])
+            .arg(format!("--user-data-dir={}", profile.display()))
+            .arg("about:blank")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", binary.display()))?;
+        // Chromium logs freely on stderr: read it to the end on a thread, passing on the line
+        // that names the DevTools endpoint.
+        let stderr = child.stderr.take().ok_or("no stderr")?;
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(|l| l.ok()) {
+                if let Some(at) = line.find("ws://") {
+                    let _ = tx.send(line[at..].trim().to_string());
+                }
+            }
+        });
+        let endpoint = match rx.recv_timeout(Duration::from_secs(60)) {
+            Ok(e) => e,
+            Err(_) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err("Chromium printed no DevTools endpoint within 60 s".into());
+            }
+        };
+        let cdp = Cdp::connect(&endpoint)?;
+        Ok(Self { child, cdp })
+    }
+}
+
+/// A DevTools protocol connection (the browser's, with pages attached in flat mode).
+struct Cdp {
+    ws: WebSocket<TcpStream>,
+    next: u64,
+}
+
+impl Cdp {
+    fn connect(endpoint: &str) -> Result<Self> {
+        let host = endpoint
+            .trim_start_matches("ws://")
+            .split('/')
+            .next()
+            .ok_or("endpoint")?;
+        let stream = TcpStream::connect(host).map_err(|e| format!("DevTools at {host}: {e}"))?;
+        stream
+            .set_read_timeout(Some(Duration::from_secs(30)))
+            .map_err(|e| e.to_string())?;
+        let (ws, _) =
+            tungstenite::client(endpoint, stream).map_err(|e| format!("DevTools: {e}"))?;
+        Ok(Self { ws, next: 1 })
+    }
+
+    /// Calls `method` (on the page of `session` when given) and returns its result.
+    fn call(&mut self, session: Option<&str>, method: &str, params: Value) -> Result<Value> {
+        let id = self.next;
+        self.next += 1;
+        let mut message = json!({ "id": id, "method": method, "params": params });
+        if let Some(s) = session {
+            message["sessionId"] = json!(s);
+        }
+        self.ws
+            .send(Message::text(message.to_string()))
+            .map_err(|e| format!("{method}: {e}"))?;
+        loop {
+            let reply = self.ws.read().map_err(|e| format!("{method}: {e}"))?;
+            let Message::Text(text) = reply else { continue };
+            let v: Value = serde_json::from_str(text.as_str()).map_err(|e| e.to_string())?;
+            if v["id"] == json!(id) {
+                if let Some(e) = v.get("error") {
+                    return Err(format!("{method}: {e}"));
+                }
+                return Ok(v["result"].clone());
+            }
+        }
+    }
+}
+
+/// A page attached in flat mode.
+struct Page<'a> {
+    cdp: &'a mut Cdp,
+    session: String,
+}
+
+impl Page<'_> {
+    fn call(&mut self, method: &str, params: Value) -> Result<Value> {
+        self.cdp.call(Some(&self.session), method, params)
+    }
+
+    /// The value of a JavaScript expression on the page.
+    fn eval(&mut self, expression: &str) -> Result<Value> {
+        let r = self.call(
+            "Runtime.evaluate",
+            json!({ "expression": expression, "returnByValue": true }),
+        )?;
+        if let Some(e) = r.get("exceptionDetails") {
+            return Err(format!("{expression}: {e}"));
+        }
+        Ok(r["result"]["value"].clone())
+    }
+
+    fn wait_for(&mut self, expression: &str, what: &str) -> Result<()> {
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_secs(30) {
+            if self.eval(expression)? == json!(true) {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        Err(format!("not {what} within 30 s"))
+    }
+
+    fn mouse(&mut self, kind: &str, x: f64, y: f64, buttons: u32) -> Result<()> {
+        let button = if kind == "mouseMoved" && buttons == 0 {
+            "none"
+        } else {
+            "left"
+        };
+        self.call(
+            "Input.dispatchMouseEvent",
+            json!({ "type": kind, "x": x, "y": y, "button": button, "buttons": buttons,
+                    "clickCount": if kind == "mouseMoved" { 0 } else { 1 } }),
+        )
+        .map(drop)
+    }
+}
+
+fn point(v: &Value) -> Result<[f64; 3]> {
+    let a = v.as_array().filter(|a| a.len() == 3).ok_or("a point")?;
+    let c = |i: usize| a[i].as_f64().ok_or("a number");
+    Ok([c(0)?, c(1)?, c(2)?])
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Standard base64 (the screenshot), without padding checks.
+fn base64(text: &str) -> Vec<u8> {
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => Some(c - b'A'),
+        b'a'..=b'z' => Some(c - b'a' + 26),
+        b'0'..=b'9' => Some(c - b'0' + 52),
+        b'+' => Some(62),
+        b'/' => Some(63),
+        _ => None,
+    };
+    let (mut out, mut acc, mut bits) = (Vec::new(), 0u32, 0);
+    for v in text.bytes().filter_map(value) {
+        acc = (acc << 6) | u32::from(v);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    out
+}
+
+#[test]
+fn a_mouse_drag_on_the_page_pulls_the_body() {
+    let Some(binary) = chromium() else {
+        tests::skip(
+            "the viewer's browser test: no chromium on the PATH (apt-get install chromium, or \
+             set CHROMIUM)",
+        );
+        return;
+    };
+    // Full space first: the drag's effect does not depend on the tiny model's subspace.
+    let server = match std::env::var("VIEWER_BROWSER_URL") {
+        Ok(_) => None,
+        Err(_) => {
+            let m = model();
+            let methods = vec![
+                Method::new(
+                    "full",
+                    latent_sim::FullRuntime::from_model(m).expect("full"),
+                ),
+                Method::new("pca", m.simulator().expect("reduced")),
+            ];
+            let session = Session::new(Settings::for_model(m), methods).expect("a session");
+            Some(Server::bind("127.0.0.1:0", session).expect("a port"))
+        }
+    };
+    let url = std::env::var("VIEWER_BROWSER_URL")
+        .unwrap_or_else(|_| server.as_ref().map(Server::url).unwrap_or_default());
+    let dir = tests::scratch_dir("viewer-browser");
+    let result = drive(&binary, &dir, &url);
+    if let Some(s) = server {
+        s.shutdown();
+    }
+    if let Err(e) = result {
+        panic!("{e}");
+    }
+}
+
+fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
+    let mut browser = Browser::start(binary, &dir.join("profile"))?;
+    let target = browser
+        .cdp
+        .call(None, "Target.createTarget", json!({ "url": "about:blank" }))?;
+    let attached = browser.cdp.call(
+        None,
+        "Target.attachToTarget",
+        json!({ "targetId": target["targetId"], "flatten": true }),
+    )?;
+    let session = attached["sessionId"]
+        .as_str()
+        .ok_or("no session id")?
+        .to_string();
+    let mut page = Page {
+        cdp: &mut browser.cdp,
+        session,
+    };
+    page.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({ "width": 1280, "height": 800, "deviceScaleFactor": 1, "mobile": false }),
+    )?;
+    page.call("Page.navigate", json!({ "url": url }))?;
+    page.wait_for(
+        "Boolean(window.viewerDebug && viewerDebug.ready())",
+        "the page showing the mesh",
+    )?;
+    page.wait_for("viewerDebug.state().steps_per_second > 0", "stepping")?;
+    let candidate = page.eval("viewerDebug.grabCandidate()")?;
+    let vertex = candidate["vertex"]
+        .as_u64()
+        .ok_or_else(|| format!("no surface vertex the mouse can pick on the page: {candidate}"))?;
+    let (x, y) = (
+        candidate["x"].as_f64().ok_or("x")?,
+        candidate["y"].as_f64().ok_or("y")?,
+    );
+    let before = point(&page.eval(&format!("viewerDebug.position({vertex})"))?)?;
+    page.mouse("mouseMoved", x, y, 0)?;
+    page.mouse("mousePressed", x, y, 1)?;
+    if let Err(e) = page.wait_for("viewerDebug.handle() !== null", "a handle from the grab") {
+        let said = page.eval("document.getElementById('message').textContent")?;
+        return Err(format!("{e} (mouse at {x}, {y}; the page says {said})"));
+    }
+    let pixels: f64 = std::env::var("VIEWER_BROWSER_DRAG")
+        .ok()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(120.0);
+    for k in 1..=20 {
+        page.mouse("mouseMoved", x, y - pixels * f64::from(k) / 20.0, 1)?;
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    let during = point(&page.eval(&format!("viewerDebug.position({vertex})"))?)?;
+    let aim = point(&page.eval("viewerDebug.target()")?)?;
+    let shot = page.call("Page.captureScreenshot", json!({ "format": "png" }))?;
+    let png = base64(shot["data"].as_str().ok_or("no screenshot data")?);
+    let path = dir.join("viewer.png");
+    std::fs::write(&path, &png).map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("screenshot: {}", path.display());
+    let sps: f64 = page
+        .eval("document.getElementById('sps').textContent")?
+        .as_str()
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or("the HUD shows no steps/s figure")?;
+    let hud = page.eval("viewerDebug.hud()")?;
+    page.mouse("mouseReleased", x, y - pixels, 0)?;
+    page.wait_for(
+        "viewerDebug.handle() === null && viewerDebug.state().handles === 0",
+        "the handle released",
+    )?;
+    let moved = distance(during, before);
+    let pulled = distance(aim, before);
+    if !(pulled > 0.0 && moved > 0.25 * pulled) {
+        return Err(format!(
+            "the grabbed vertex {vertex} moved {moved:.4} m toward a target {pulled:.4} m away"
+        ));
+    }
+    if !(sps > 0.0 && hud.as_str().is_some_and(|h| h.contains("steps/s"))) {
+        return Err(format!("the HUD shows no steps/s figure: {hud}"));
+    }
+    Ok(())
+}

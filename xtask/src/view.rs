@@ -1,0 +1,154 @@
+//! `cargo xtask view`: the interactive viewer (crates/viewer) on a scene's trained models, or on
+//! a model file, beside full space for the contrast.
+
+use std::net::{IpAddr, SocketAddr, TcpListener};
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use latent_sim::model::Rows;
+use latent_sim::{FullRuntime, ReducedModel};
+use pipeline::simulate::Method;
+use viewer::{Server, Session, Settings};
+
+use super::{Common, MethodArg};
+
+/// The flags of `cargo xtask view`.
+#[derive(clap::Args)]
+pub struct ViewArgs {
+    /// Scene file (TOML); the built-in cantilever when neither this nor --model is given.
+    #[arg(long, conflicts_with = "model")]
+    scene: Option<PathBuf>,
+    /// A model file from `cargo xtask export` (its method, and full space on its mesh).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Artifact cache folder (default: out/SCENE/cache).
+    #[arg(long, conflicts_with = "model")]
+    cache: Option<PathBuf>,
+    /// The method shown first (`full` for full space; default: neural-cubature, or the model
+    /// file's method).
+    #[arg(long, value_enum)]
+    method: Option<MethodArg>,
+    /// The reduced methods offered with --scene (full space is always offered).
+    #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::NeuralCubature, MethodArg::Neural, MethodArg::PcaCubature, MethodArg::Pca])]
+    methods: Vec<MethodArg>,
+    /// Port; 0 picks a free one. When the default port is taken, a free one is used instead.
+    #[arg(long, default_value_t = DEFAULT_PORT)]
+    port: u16,
+    /// Address to listen on. Anything but loopback lets other machines drive the session.
+    #[arg(long, default_value = "127.0.0.1")]
+    host: IpAddr,
+}
+
+const DEFAULT_PORT: u16 = 8080;
+
+/// The name full space goes by on the page.
+const FULL: &str = "full";
+
+/// Builds the session, serves it and prints where; returns when the server stops.
+pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
+    let progress = &|d, t| cx.stage_progress(d, t);
+    let chosen = args.method.map(Method::from);
+    let (settings, mut methods, default_start) = match &args.model {
+        Some(path) => {
+            let model = ReducedModel::load(path)
+                .with_context(|| format!("cannot load the model {}", path.display()))?;
+            let name = model.provenance.method.clone();
+            println!(
+                "{}: {name} model of scene {}, {} vertices",
+                path.display(),
+                model.provenance.scene,
+                model.mesh.num_vertices()
+            );
+            let methods = vec![
+                viewer::Method::new(name.clone(), model.simulator()?),
+                viewer::Method::new(FULL, FullRuntime::from_model(&model)?),
+            ];
+            (Settings::for_model(&model), methods, name)
+        }
+        None => {
+            let common = Common {
+                scene: args.scene.clone(),
+                cache: args.cache.clone(),
+            };
+            let scene = cx.scene(&common)?;
+            let mut p = cx.pipeline(&scene, &common)?;
+            let mut wanted: Vec<Method> = args.methods.iter().map(|&m| Method::from(m)).collect();
+            if let Some(m) = chosen
+                && !m.is_full()
+                && !wanted.contains(&m)
+            {
+                wanted.insert(0, m);
+            }
+            wanted.retain(|m| !m.is_full());
+            let default_start = wanted.first().map(|m| m.name().to_string());
+            let mut methods = Vec::new();
+            let mut settings = None;
+            for m in wanted {
+                let model = pipeline::export::scene_model(&mut p, m, Rows::Used, progress)?;
+                if settings.is_none() {
+                    settings = Some(Settings::for_model(&model));
+                    methods.push(viewer::Method::new(FULL, FullRuntime::from_model(&model)?));
+                }
+                methods.push(viewer::Method::new(m.name(), model.simulator()?));
+            }
+            let (Some(settings), Some(default_start)) = (settings, default_start) else {
+                bail!("--methods names no reduced method; the viewer needs one to build on");
+            };
+            (settings, methods, default_start)
+        }
+    };
+    // The first method is the one shown first; full space last unless asked for.
+    let start = match chosen {
+        Some(m) if m.is_full() => FULL.to_string(),
+        Some(m) => m.name().to_string(),
+        None => default_start,
+    };
+    let Some(index) = methods.iter().position(|m| m.name == start) else {
+        bail!(
+            "--method {start} is not among this session's methods ({})",
+            methods
+                .iter()
+                .map(|m| m.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    let shown = methods.remove(index);
+    methods.insert(0, shown);
+    if let Some(full) = methods.iter().position(|m| m.name == FULL)
+        && full != 0
+    {
+        let f = methods.remove(full);
+        methods.push(f);
+    }
+    let names: Vec<String> = methods.iter().map(|m| m.name.clone()).collect();
+    let session = Session::new(settings, methods)?;
+    if !args.host.is_loopback() {
+        eprintln!(
+            "warning: listening on {}: anyone who can reach this machine on that port can watch \
+             and drive the simulation (the viewer has no authentication)",
+            args.host
+        );
+    }
+    let listener = match TcpListener::bind(SocketAddr::new(args.host, args.port)) {
+        Err(e) if args.port == DEFAULT_PORT && e.kind() == std::io::ErrorKind::AddrInUse => {
+            eprintln!("port {DEFAULT_PORT} is taken; listening on a free port instead");
+            TcpListener::bind(SocketAddr::new(args.host, 0))
+        }
+        other => other,
+    }
+    .with_context(|| format!("cannot listen on {}:{}", args.host, args.port))?;
+    let server = Server::serve(listener, session)?;
+    let port = server.local_addr().port();
+    let url = if args.host.is_unspecified() {
+        format!("http://127.0.0.1:{port}/ (from elsewhere: this machine's address, port {port})")
+    } else {
+        server.url()
+    };
+    println!(
+        "viewer: open {url} in a browser ({}); Ctrl-C stops it",
+        names.join(", ")
+    );
+    server.wait();
+    Ok(())
+}
