@@ -2,8 +2,7 @@
 //! a user would write (mesh, material, bottom pinned, gravity, time step) runs from an empty
 //! cache through every stage and every method, each mesh with another material.
 
-use pipeline::simulate::Method;
-use pipeline::suite::{MATERIALS, SuiteMesh, markdown, meshes, run_suite};
+use pipeline::suite::{MATERIALS, METHODS, SuiteMesh, markdown, meshes, run_suite};
 use tests::{no_progress, scratch_dir, shared_dir};
 
 /// Meshes up to this size run in CI (a minute or two each on 2 cores); `cargo xtask suite`
@@ -35,14 +34,7 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
             "{} should use {material}",
             r.scene
         );
-        for m in [
-            Method::Full,
-            Method::FullLbfgs,
-            Method::Pca,
-            Method::PcaCubature,
-            Method::Neural,
-            Method::NeuralCubature,
-        ] {
+        for m in METHODS {
             let row = r
                 .methods
                 .iter()

@@ -25,6 +25,17 @@ pub const MATERIALS: [MaterialModel; 5] = [
     MaterialModel::Linear,
 ];
 
+/// The methods the suite runs: both full-space solvers (the faster is the speed-ups' base) and
+/// the four reduced methods.
+pub const METHODS: [Method; 6] = [
+    Method::Full,
+    Method::FullLbfgs,
+    Method::Pca,
+    Method::PcaCubature,
+    Method::Neural,
+    Method::NeuralCubature,
+];
+
 /// The fraction of the mesh's height pinned at its bottom (AutoDef pinned the vertices within
 /// a tolerance of the lowest plane; 2 % is the dinosaur's 5 mm of 25 cm).
 pub const PIN_FRACTION: f64 = 0.02;
@@ -213,14 +224,7 @@ pub fn run_suite(
             let opts = RunOptions {
                 out: dir.clone(),
                 every: 0,
-                methods: vec![
-                    Method::Full,
-                    Method::FullLbfgs,
-                    Method::Pca,
-                    Method::PcaCubature,
-                    Method::Neural,
-                    Method::NeuralCubature,
-                ],
+                methods: METHODS.to_vec(),
                 trajectory: 0,
             };
             run(&mut p, &opts, progress, &mut |_, _, _| {})
