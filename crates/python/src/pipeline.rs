@@ -132,6 +132,11 @@ pub struct MethodRow {
     subspace_error: f64,
     /// Mean relative error of one step started from the reference.
     step_error: f64,
+    /// How far the method's trajectory left the training data: the largest part of a pose
+    /// outside the training snapshots' coefficient ranges, relative to the pose (0 for full
+    /// space; above 0.1 ``warnings`` says so), and the time (s) it happened.
+    training_distance: f64,
+    training_distance_time: f64,
     /// The relative error frame by frame.
     frame_errors: Vec<f64>,
     /// Why the method stopped before the last frame (None when it finished).
@@ -156,6 +161,8 @@ impl From<&MethodReport> for MethodRow {
             iterations: r.iterations,
             subspace_error: r.subspace_error,
             step_error: r.step_error,
+            training_distance: r.training_distance,
+            training_distance_time: r.training_distance_time,
             frame_errors: r.frame_errors.clone(),
             failure: r.failure.clone(),
         }

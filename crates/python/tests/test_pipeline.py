@@ -28,6 +28,8 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
         assert row.ms_per_step == raw["ms_per_step"] and row.ms_per_step > 0
         assert row.mean_rel_error == raw["mean_rel_error"]
         assert row.frame_errors == raw["frame_errors"]
+        assert row.training_distance == raw["training_distance"] >= 0.0
+        assert row.training_distance_time == raw["training_distance_time"]
         assert row.failure is None
     full = report.row("full")
     assert full.mean_rel_error == 0.0 and full.speedup == 1.0
