@@ -22,7 +22,7 @@ pub const OUTSIDE_TRAINING: f64 = 0.1;
 
 /// Poses smaller than this fraction of the largest training pose are measured against it
 /// instead of their own size: the relative distance of a nearly zero pose says nothing.
-const SMALL_POSE: f64 = 0.1;
+pub const SMALL_POSE: f64 = 0.1;
 
 /// The ranges of the training snapshots' PCA coefficients.
 #[derive(Debug, Clone)]

@@ -1,13 +1,13 @@
 //! The `latent_dynamics` Python module (DESIGN §13): PyO3 bindings over latent-sim's runtime
 //! and the pipeline, built by maturin as an abi3 wheel (`pip install ./crates/python`).
 //!
-//! * [`model::Model`]: a model file loaded (`Model.load(path)`), with what it is.
-//! * [`simulator::Simulator`]: the model stepping (or its mesh in full space): grab, move and
+//! * `Model`: a model file loaded (`Model.load(path)`), with what it is.
+//! * `Simulator`: the model stepping (or its mesh in full space): grab, move and
 //!   release handles, gravity, reset, step (without the GIL), and positions read into numpy
 //!   arrays with no copy beyond the one into the array.
-//! * [`pipeline::run_pipeline`] and [`pipeline::export_model`]: `cargo xtask run` and `export`
+//! * `run_pipeline` and `export_model`: `cargo xtask run` and `export`
 //!   from Python, with the same stages and cache, and the report as Python objects.
-//! * [`errors`]: the exception classes every library error arrives as.
+//! * The errors module: the exception classes every library error arrives as.
 //!
 //! The compiled module is `latent_dynamics._native`; the package `python/latent_dynamics`
 //! re-exports it with type stubs. Its tests are pytest's (`tests/`).
