@@ -34,7 +34,7 @@ mod simulator;
 
 pub use server::Server;
 pub use session::Session;
-pub use simulator::{Method, Settings, Simulator};
+pub use simulator::{Method, Settings};
 
 /// Errors of setting up a session or a server (nothing a client sends is one: clients get
 /// error replies).

@@ -1,108 +1,13 @@
-//! What the viewer steps: any of latent-sim's interactive simulators, behind an object-safe
-//! trait so that one session can hold reduced and full-space methods side by side.
+//! What the viewer steps: any of latent-sim's interactive simulators, as trait objects
+//! (`Box<dyn Interactive + Send>`) so that one session holds reduced and full-space methods
+//! side by side.
 
-use fem_core::Vec3;
-use latent_sim::{Handle, Interactive, ReducedModel, RuntimeError, StepStats, Surface};
-
-/// [`Interactive`] without its generic read-back, so that simulators of different types fit in
-/// one list (`Box<dyn Simulator>`). Every `Interactive + Send` type is one.
-pub trait Simulator: Send {
-    /// Rest positions, one per vertex.
-    fn rest_positions(&self) -> &[Vec3];
-    /// The boundary surface.
-    fn surface(&self) -> &Surface;
-    /// Steps taken and simulated time.
-    fn steps(&self) -> usize;
-    fn time(&self) -> f64;
-    /// One time step ([`Interactive::step`]).
-    ///
-    /// # Errors
-    /// When the solve fails; the state is then the one before the step.
-    fn step(&mut self) -> Result<StepStats, RuntimeError>;
-    /// [`Interactive::grab`].
-    ///
-    /// # Errors
-    /// As [`Interactive::grab`].
-    fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError>;
-    /// [`Interactive::grab_near`].
-    ///
-    /// # Errors
-    /// As [`Interactive::grab_near`].
-    fn grab_near(
-        &mut self,
-        point: [f64; 3],
-        radius: f64,
-        stiffness: f64,
-    ) -> Result<Handle, RuntimeError>;
-    /// [`Interactive::move_handle`].
-    ///
-    /// # Errors
-    /// As [`Interactive::move_handle`].
-    fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError>;
-    /// [`Interactive::release`].
-    ///
-    /// # Errors
-    /// As [`Interactive::release`].
-    fn release(&mut self, handle: Handle) -> Result<(), RuntimeError>;
-    /// [`Interactive::set_gravity`].
-    fn set_gravity(&mut self, enabled: bool);
-    /// [`Interactive::reset`].
-    fn reset(&mut self);
-    /// The surface positions as `f32` ([`Interactive::surface_positions_into`]).
-    ///
-    /// # Errors
-    /// [`RuntimeError::BufferLength`].
-    fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError>;
-}
-
-impl<T: Interactive + Send> Simulator for T {
-    fn rest_positions(&self) -> &[Vec3] {
-        Interactive::rest_positions(self)
-    }
-    fn surface(&self) -> &Surface {
-        Interactive::surface(self)
-    }
-    fn steps(&self) -> usize {
-        Interactive::steps(self)
-    }
-    fn time(&self) -> f64 {
-        Interactive::time(self)
-    }
-    fn step(&mut self) -> Result<StepStats, RuntimeError> {
-        Interactive::step(self)
-    }
-    fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError> {
-        Interactive::grab(self, vertices, stiffness)
-    }
-    fn grab_near(
-        &mut self,
-        point: [f64; 3],
-        radius: f64,
-        stiffness: f64,
-    ) -> Result<Handle, RuntimeError> {
-        Interactive::grab_near(self, point, radius, stiffness)
-    }
-    fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError> {
-        Interactive::move_handle(self, handle, target)
-    }
-    fn release(&mut self, handle: Handle) -> Result<(), RuntimeError> {
-        Interactive::release(self, handle)
-    }
-    fn set_gravity(&mut self, enabled: bool) {
-        Interactive::set_gravity(self, enabled);
-    }
-    fn reset(&mut self) {
-        Interactive::reset(self);
-    }
-    fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError> {
-        Interactive::surface_positions_into(self, out)
-    }
-}
+use latent_sim::{Interactive, ReducedModel};
 
 /// A simulator and the name a client selects it by (`neural-cubature`, `full`, …).
 pub struct Method {
     pub name: String,
-    pub simulator: Box<dyn Simulator>,
+    pub simulator: Box<dyn Interactive + Send>,
 }
 
 impl std::fmt::Debug for Method {
@@ -113,7 +18,7 @@ impl std::fmt::Debug for Method {
 
 impl Method {
     /// `simulator` under `name`.
-    pub fn new(name: impl Into<String>, simulator: impl Simulator + 'static) -> Self {
+    pub fn new(name: impl Into<String>, simulator: impl Interactive + Send + 'static) -> Self {
         Self {
             name: name.into(),
             simulator: Box::new(simulator),

@@ -218,6 +218,10 @@ impl Interactive for FullRuntime {
         Ok(())
     }
 
+    fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError> {
+        self.surface_positions_into(out)
+    }
+
     fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {
         buffer_length("surface", self.surface_u.len(), out.len())?;
         let (u, rest) = (&self.sim.state.u, &self.sim.model.mesh.vertices);

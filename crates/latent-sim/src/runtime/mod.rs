@@ -174,7 +174,16 @@ pub trait Interactive {
     ///
     /// # Errors
     /// [`RuntimeError::BufferLength`].
-    fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError>;
+    fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError>
+    where
+        Self: Sized;
+    /// [`Interactive::surface_positions_into`] an `f32` buffer, for a trait object
+    /// (`Box<dyn Interactive>`, which cannot call a generic method): simulators of different
+    /// types side by side, as the viewer holds them.
+    ///
+    /// # Errors
+    /// [`RuntimeError::BufferLength`].
+    fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError>;
 }
 
 /// Checks a handle's stiffness, a radius, a point.

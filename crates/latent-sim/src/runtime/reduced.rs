@@ -310,6 +310,10 @@ impl Interactive for ReducedRuntime {
         Ok(())
     }
 
+    fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError> {
+        self.surface_positions_into(out)
+    }
+
     fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {
         buffer_length("surface", self.surface_u.len(), out.len())?;
         self.surface_rows

@@ -5,10 +5,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use fem_core::Vec3;
-use latent_sim::{Handle, RuntimeError, StepStats, Surface};
+use fem_core::forces::ExternalForce;
+use latent_sim::{Handle, Interactive, Real, RuntimeError, StepStats, Surface};
 use tungstenite::Message;
 use viewer::protocol::{Event, MAX_MESSAGE_BYTES};
-use viewer::{Method, Session, Settings, Simulator};
+use viewer::{Method, Session, Settings};
 
 use crate::common::{Client, distance, model, serve, session, tip};
 
@@ -317,12 +318,12 @@ fn pause_step_gravity_method_and_reset() {
 /// A simulator that fails its steps while told to: a solver failure on demand (an error, or a
 /// panic while `panic` is set too).
 struct Flaky {
-    inner: Box<dyn Simulator>,
+    inner: Box<dyn Interactive + Send>,
     fail: Arc<AtomicBool>,
     panic: Arc<AtomicBool>,
 }
 
-impl Simulator for Flaky {
+impl Interactive for Flaky {
     fn rest_positions(&self) -> &[Vec3] {
         self.inner.rest_positions()
     }
@@ -361,11 +362,29 @@ impl Simulator for Flaky {
     fn release(&mut self, h: Handle) -> Result<(), RuntimeError> {
         self.inner.release(h)
     }
+    fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError> {
+        self.inner.add_force(force)
+    }
     fn set_gravity(&mut self, enabled: bool) {
         self.inner.set_gravity(enabled);
     }
+    fn gravity(&self) -> bool {
+        self.inner.gravity()
+    }
     fn reset(&mut self) {
         self.inner.reset();
+    }
+    fn positions_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
+        self.inner.positions_into(out)
+    }
+    /// Through the inner simulator's `f32` read-back (a trait object has no generic one).
+    fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {
+        let mut f32s = vec![0.0; out.len()];
+        self.inner.surface_positions_f32(&mut f32s)?;
+        for (o, x) in out.iter_mut().zip(f32s) {
+            *o = T::from_f64(f64::from(x));
+        }
+        Ok(())
     }
     fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError> {
         self.inner.surface_positions_f32(out)
