@@ -389,6 +389,7 @@ mod tests {
                 speedup: 1.0,
                 mean_rel_error: err,
                 max_rel_error: err,
+                trajectory_error: err,
                 max_vertex_error: err,
                 iterations: 1.0,
                 subspace_error: 0.0,

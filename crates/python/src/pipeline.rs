@@ -124,6 +124,9 @@ pub struct MethodRow {
     /// Mean and largest over frames of the relative error ‖u − u_full‖_M / ‖u_full‖_M.
     mean_rel_error: f64,
     max_rel_error: f64,
+    /// The space–time relative error √(Σ‖u − u_full‖²_M / Σ‖u_full‖²_M) over the frames: not
+    /// dominated by frames where the reference passes near rest.
+    trajectory_error: f64,
     /// Largest distance of a vertex from its full-space position over all frames (m).
     max_vertex_error: f64,
     /// Mean solver iterations per step.
@@ -157,6 +160,7 @@ impl From<&MethodReport> for MethodRow {
             speedup: r.speedup,
             mean_rel_error: r.mean_rel_error,
             max_rel_error: r.max_rel_error,
+            trajectory_error: r.trajectory_error,
             max_vertex_error: r.max_vertex_error,
             iterations: r.iterations,
             subspace_error: r.subspace_error,

@@ -27,12 +27,13 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
         assert row.dimension == raw["dim"] and row.elements == raw["cubature_elements"]
         assert row.ms_per_step == raw["ms_per_step"] and row.ms_per_step > 0
         assert row.mean_rel_error == raw["mean_rel_error"]
+        assert row.trajectory_error == raw["trajectory_error"] >= 0.0
         assert row.frame_errors == raw["frame_errors"]
         assert row.training_distance == raw["training_distance"] >= 0.0
         assert row.training_distance_time == raw["training_distance_time"]
         assert row.failure is None
     full = report.row("full")
-    assert full.mean_rel_error == 0.0 and full.speedup == 1.0
+    assert full.mean_rel_error == 0.0 and full.trajectory_error == 0.0 and full.speedup == 1.0
     cubature = report.row("pca-cubature")
     assert cubature.dimension == 6 and 0 < cubature.elements < full.elements
     assert 0 < cubature.mean_rel_error < 1 and math.isfinite(cubature.iterations)
