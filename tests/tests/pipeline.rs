@@ -140,7 +140,9 @@ fn a_tiny_scene_runs_end_to_end() {
     assert_eq!(rows.len(), 5);
     let (full, pca, cub) = (&rows[0], &rows[1], &rows[2]);
     for neural in &rows[3..] {
-        assert_eq!(neural.dim, 2, "{neural:?}");
+        // d = 2 latent coordinates (TINY's) and the linear directions chosen by default
+        // (gravity's onset, the complement the data asks for), within the 6 PCA coefficients.
+        assert!(neural.dim > 2 && neural.dim <= 6, "{neural:?}");
         assert!(neural.mean_rel_error.is_finite(), "{neural:?}");
     }
     assert!(rows[4].cubature_elements < full.cubature_elements);
@@ -234,7 +236,8 @@ fn a_tiny_scene_runs_end_to_end() {
 #[test]
 fn onset_directions_reach_the_neural_methods() {
     let text = format!(
-        "{TINY}[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[reduced]\nonset_directions = 2\n"
+        "{TINY}[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[reduced]\nonset_directions = 2\n\
+         complement_directions = 0\n"
     );
     let s = scene(&text);
     let out = scratch_dir("pipeline-onset");
@@ -252,6 +255,51 @@ fn onset_directions_reach_the_neural_methods() {
     }
 }
 
+/// Without `[reduced] onset_directions` and `complement_directions` the neural methods run
+/// exactly as with the counts the pipeline chose written in the scene: the default number of
+/// onset directions under gravity and none without, and the complement directions that bring
+/// the autoencoder's loss on the snapshots within the PCA basis's.
+#[test]
+fn linear_directions_default_to_the_counts_chosen() {
+    let s = scene(TINY);
+    let out = scratch_dir("pipeline-linear-defaults");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    assert_eq!(p.onset_directions(), latent_sim::DEFAULT_ONSET_DIRECTIONS);
+    let c = p.complement(&no_progress).unwrap();
+    let count = c.default_count();
+    let (lost, total): (f64, f64) = (
+        c.pca_lost_energy,
+        c.singular_values.iter().map(|r| r * r).sum(),
+    );
+    let missed = |n: usize| c.singular_values[n..].iter().map(|r| r * r).sum::<f64>();
+    assert!(missed(count) <= lost.max(1e-14 * total), "{count}");
+    assert!(
+        count == 0 || missed(count - 1) > lost,
+        "{count} is not the fewest"
+    );
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: vec![Method::Neural, Method::NeuralCubature],
+        trajectory: 0,
+    };
+    let chosen = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let written = scene(&format!(
+        "{TINY}[reduced]\nonset_directions = {}\ncomplement_directions = {count}\n",
+        latent_sim::DEFAULT_ONSET_DIRECTIONS
+    ));
+    let mut p = Pipeline::new(&written, &out.join("cache")).unwrap();
+    let named = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    for (a, b) in chosen.iter().zip(&named) {
+        assert_eq!((a.dim, &a.frame_errors), (b.dim, &b.frame_errors));
+    }
+    let weightless = scene(&format!(
+        "{TINY}[gravity]\nacceleration = [0.0, 0.0, 0.0]\n"
+    ));
+    let p = Pipeline::new(&weightless, &out.join("cache")).unwrap();
+    assert_eq!(p.onset_directions(), 0);
+}
+
 /// `[reduced] complement_directions`: stage `complement` is the SVD of the autoencoder's
 /// residuals over the snapshots (orthonormal directions, singular values in order whose squares
 /// sum to ‖Q − decode(encode(Q))‖²_F), all its directions complete every reconstruction exactly,
@@ -260,7 +308,7 @@ fn onset_directions_reach_the_neural_methods() {
 /// naming the scene and the field.
 #[test]
 fn complement_directions_complete_the_autoencoder() {
-    let text = format!("{TINY}[reduced]\ncomplement_directions = 2\n");
+    let text = format!("{TINY}[reduced]\ncomplement_directions = 2\nonset_directions = 0\n");
     let s = scene(&text);
     let out = scratch_dir("pipeline-complement");
     let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
@@ -306,7 +354,9 @@ fn complement_directions_complete_the_autoencoder() {
         trajectory: 0,
     };
     let with = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
-    let plain = scene(TINY);
+    let plain = scene(&format!(
+        "{TINY}[reduced]\ncomplement_directions = 0\nonset_directions = 0\n"
+    ));
     let mut p0 = Pipeline::new(&plain, &out.join("cache")).unwrap();
     let without = run(&mut p0, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
     let (with, without) = (&with[0], &without[0]);

@@ -166,7 +166,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',')]
     tolerances: Vec<f64>,
     /// Complement-direction counts for the neural methods at the scene's latent dimension
-    /// (default: none; see `[reduced] complement_directions`).
+    /// (default: none beyond the scene's own; see `[reduced] complement_directions`).
     #[arg(long, value_delimiter = ',')]
     complement_dims: Vec<usize>,
     /// Held-out test trajectory to simulate.

@@ -107,7 +107,8 @@ mod simulator;
 mod subspace;
 
 pub use config::{
-    MAX_COMPLEMENT_DIRECTIONS, MAX_ONSET_DIRECTIONS, REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
+    DEFAULT_ONSET_DIRECTIONS, MAX_COMPLEMENT_DIRECTIONS, MAX_ONSET_DIRECTIONS,
+    REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
 };
 
 pub use model::{ModelFileError, ModelFormatError, ReducedModel};

@@ -179,7 +179,7 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
     complement_dims.dedup();
     for c in complement_dims {
         let mut s = scene.clone();
-        s.reduced.complement_directions = c;
+        s.reduced.complement_directions = Some(c);
         for method in [Method::Neural, Method::NeuralCubature] {
             v.push(Variant {
                 method,
@@ -426,16 +426,16 @@ mod tests {
             tolerances: vec![0.1],
             complement_dims: vec![8, 0, 8],
         };
-        let found: Vec<(String, usize)> = variants(&scene, 10, &opts)
+        let found: Vec<(String, Option<usize>)> = variants(&scene, 10, &opts)
             .into_iter()
             .map(|v| (v.label, v.scene.reduced.complement_directions))
             .filter(|(label, _)| label.contains(" c="))
             .collect();
         let want = [
-            ("neural c=0", 0),
-            ("neural-cubature c=0", 0),
-            ("neural c=8", 8),
-            ("neural-cubature c=8", 8),
+            ("neural c=0", Some(0)),
+            ("neural-cubature c=0", Some(0)),
+            ("neural c=8", Some(8)),
+            ("neural-cubature c=8", Some(8)),
         ];
         assert_eq!(
             found,

@@ -136,7 +136,7 @@ pub fn reduced_model(
     let subspace = match &trained {
         Some(t) => SubspaceSource::Neural {
             autoencoder: &t.model,
-            onset_directions: scene.reduced.onset_directions,
+            onset_directions: pipeline.onset_directions(),
             complement: &complement,
         },
         None => SubspaceSource::Linear,

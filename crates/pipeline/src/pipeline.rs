@@ -141,9 +141,14 @@ impl StageSummary for TrainedModel {
 
 impl StageSummary for Complement {
     fn summary(&self) -> String {
+        let c = self.default_count();
         format!(
-            "{} directions of what the autoencoder misses",
-            self.singular_values.len()
+            "{} directions of what the autoencoder misses; the neural methods take the leading \
+             {c} (unless `[reduced] complement_directions` says): without them the autoencoder \
+             misses {:.2}× what the PCA basis misses of the snapshots' energy, with them {:.2}×",
+            self.singular_values.len(),
+            self.missed_with(0),
+            self.missed_with(c)
         )
     }
 }
@@ -208,6 +213,39 @@ pub struct Complement {
     pub directions: Vec<f64>,
     /// The residuals' singular values, largest first (‖R‖_F² = their sum of squares).
     pub singular_values: Vec<f64>,
+    /// What the PCA basis itself leaves out of the snapshots, Σ_{i≥k} σ_i² (M-norm squared,
+    /// the units of ‖R‖_F²).
+    pub pca_lost_energy: f64,
+}
+
+impl Complement {
+    /// The directions a neural method takes when `[reduced] complement_directions` is absent:
+    /// the fewest leading ones after which what the autoencoder still misses in the snapshots,
+    /// Σ_{i≥c} ρ_i², is no more than what the PCA basis leaves out of them. With them the
+    /// neural subspace holds the training data within twice the loss the PCA rule accepted,
+    /// whatever the latent dimension; an autoencoder that already does needs none.
+    pub fn default_count(&self) -> usize {
+        let total: f64 = self.singular_values.iter().map(|r| r * r).sum();
+        // Round-off in the residuals is not worth a direction.
+        let allowed = self.pca_lost_energy.max(1e-14 * total);
+        let mut rest = total;
+        let mut count = 0;
+        for r in &self.singular_values {
+            if rest <= allowed {
+                break;
+            }
+            rest -= r * r;
+            count += 1;
+        }
+        count.min(latent_sim::MAX_COMPLEMENT_DIRECTIONS)
+    }
+
+    /// The part of the snapshots' energy the autoencoder misses with its leading `count`
+    /// complement directions added, relative to what the PCA basis misses.
+    fn missed_with(&self, count: usize) -> f64 {
+        let rest: f64 = self.singular_values.iter().skip(count).map(|r| r * r).sum();
+        rest / self.pca_lost_energy.max(f64::MIN_POSITIVE)
+    }
 }
 
 /// q̂ ← q̂ + V Vᵀ(q − q̂) for orthonormal columns V (k × c, column-major): the autoencoder's
@@ -802,6 +840,11 @@ impl<'a> Pipeline<'a> {
                     .flat_map(|j| (0..k).map(move |i| u[(i, j)]))
                     .collect(),
                 singular_values: svd.S().column_vector().iter().copied().collect(),
+                pca_lost_energy: fit.basis.singular_values()
+                    [k.min(fit.basis.singular_values().len())..]
+                    .iter()
+                    .map(|s| s * s)
+                    .sum(),
             })
         })
     }
@@ -812,26 +855,40 @@ impl<'a> Pipeline<'a> {
             .finish()
     }
 
+    /// The scene's `[reduced] onset_directions`, or when absent
+    /// [`latent_sim::DEFAULT_ONSET_DIRECTIONS`] under gravity and none without.
+    pub fn onset_directions(&self) -> usize {
+        self.scene.reduced.onset_directions.unwrap_or_else(|| {
+            if self.scene.gravity.acceleration.iter().any(|&g| g != 0.0) {
+                latent_sim::DEFAULT_ONSET_DIRECTIONS
+            } else {
+                0
+            }
+        })
+    }
+
     /// The scene's `[reduced] complement_directions` leading [`Complement`] directions, k × c
-    /// column-major (empty, and no stage run, for c = 0).
+    /// column-major, or when absent [`Complement::default_count`] of them (empty, and no stage
+    /// run, for c = 0).
     ///
     /// # Errors
     /// When the residuals have fewer directions than asked for, or a stage fails.
     pub fn complement_columns(&mut self, progress: Progress<'_>) -> Result<Vec<f64>> {
-        let count = self.scene.reduced.complement_directions;
-        if count == 0 {
+        if self.scene.reduced.complement_directions == Some(0) {
             return Ok(Vec::new());
         }
         let c = self.complement(progress)?;
         let available = c.singular_values.len();
-        if count > available {
-            bail!(
+        let count = match self.scene.reduced.complement_directions {
+            Some(count) if count > available => bail!(
                 "{}: reduced.complement_directions = {count}, but the autoencoder's residuals \
                  have only {available} directions (the PCA dimension or the number of \
                  snapshots); use at most {available}",
                 self.scene.source
-            );
-        }
+            ),
+            Some(count) => count,
+            None => c.default_count(),
+        };
         Ok(c.directions[..c.k * count].to_vec())
     }
 
