@@ -95,6 +95,10 @@ pub struct MethodReport {
     /// The time (s) of the frame at `training_distance`.
     #[serde(default)]
     pub training_distance_time: f64,
+    /// Steps that started again from the last state because their extrapolated start inverted
+    /// an element (the classic Neo-Hookean energy is not defined there; zero for full space).
+    #[serde(default)]
+    pub restarts: usize,
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
@@ -228,6 +232,13 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
     );
     s.push_str(&markdown(rows));
     s.push_str(&time_split_markdown(rows));
+    for r in rows.iter().filter(|r| r.restarts > 0) {
+        s.push_str(&format!(
+            "\n{}: {} of its steps started again from the last state (the extrapolated start \
+             inverted an element)\n",
+            r.method, r.restarts
+        ));
+    }
     let warnings = crate::trust::warnings(rows);
     if !warnings.is_empty() {
         s.push_str("\nnot to be trusted:\n");
@@ -369,6 +380,7 @@ pub fn measure(
             precond_ms: 0.0,
             training_distance: 0.0,
             training_distance_time: 0.0,
+            restarts: 0,
             failure: None,
             machine_gfma: None,
         });
@@ -378,6 +390,7 @@ pub fn measure(
     let mut medians = Vec::with_capacity(m.repeats.max(1));
     let mut means = Vec::with_capacity(m.repeats.max(1));
     let mut iterations = Vec::with_capacity(frames);
+    let mut restarts = 0;
     let mut parts = StepParts::default();
     let mut cubature_elements = 0;
     let mut dim = 0;
@@ -430,6 +443,7 @@ pub fn measure(
                 continue;
             }
             iterations.push(info.iterations);
+            restarts += usize::from(info.restarted);
             parts.decode += info.parts.decode;
             parts.elastic += info.parts.elastic;
             parts.vjp += info.parts.vjp;
@@ -519,6 +533,7 @@ pub fn measure(
         step_frame_errors,
         training_distance,
         training_distance_time,
+        restarts,
         failure,
         machine_gfma,
     })

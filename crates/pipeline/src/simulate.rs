@@ -185,6 +185,9 @@ pub struct StepInfo {
     pub iterations: usize,
     /// Where a reduced step's time went (zero for full space).
     pub parts: StepParts,
+    /// Whether a reduced step started again from the last state, its extrapolated start
+    /// having inverted an element (`ReducedStepReport::restarted`).
+    pub restarted: bool,
 }
 
 /// Seconds of one reduced step spent in each part of the solve.
@@ -253,6 +256,7 @@ impl Runner {
                     seconds: r.wall_seconds,
                     iterations: r.iterations,
                     parts: StepParts::default(),
+                    restarted: false,
                 }
             }
             Runner::Reduced(s) => {
@@ -261,6 +265,7 @@ impl Runner {
                     seconds: r.wall_seconds,
                     iterations: r.iterations,
                     parts: StepParts::of(&r),
+                    restarted: r.restarted,
                 }
             }
         })

@@ -58,6 +58,10 @@ pub struct ReducedStepReport {
     pub evaluations: usize,
     /// Whether the L-BFGS preconditioner was rebuilt at the start of this step.
     pub preconditioner_rebuilt: bool,
+    /// Whether the step started again from z_n, the last step's answer, because its
+    /// extrapolated start left the region where the energy is defined (an element inverted
+    /// under the classic Neo-Hookean model).
+    pub restarted: bool,
 }
 
 /// Energies of a reduced state (see [`ReducedSimulator::energy`]).
@@ -428,6 +432,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         }
         let pstart = Instant::now();
         let mut rebuilt = false;
+        let mut restarted = false;
         if self.solver.method == SolverMethod::Lbfgs {
             let d = self.subspace.latent_dim();
             let current = self.precond_active.as_ref().is_some_and(|a| {
@@ -471,6 +476,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                         // An extrapolated start past an inverted element (classic Neo-Hookean)
                         // has no matrix: form it at z_n and start there (see the solve below).
                         if factored.is_err() && z != self.state.z {
+                            restarted = true;
                             z.copy_from_slice(&self.state.z);
                             factored = self.step_objective().factor_gauss_newton(
                                 &z,
@@ -502,6 +508,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             // finite) where z_n, the last step's answer, was inside it: start again from z_n.
             Err(FemError::NonFinite { what, .. }) if z != self.state.z => {
                 tracing::info!("{what} not finite from the extrapolated start; retrying from z_n");
+                restarted = true;
                 self.lbfgs.reset();
                 z.copy_from_slice(&self.state.z);
                 self.solve(&mut z, t, params)?
@@ -559,6 +566,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             vjp_seconds: self.work.timers.vjp,
             evaluations: self.work.timers.evaluations,
             preconditioner_rebuilt: rebuilt,
+            restarted,
         })
     }
 

@@ -956,8 +956,8 @@ fn complement_directions_are_kept_where_new() {
 
 /// Under the classic Neo-Hookean model the energy is not finite past an inverted element. A
 /// state moving so fast that the extrapolated start of the next solve inverts the bar still
-/// steps: the solve starts again from the last answer, where the energy is finite, and ends
-/// with every element upright.
+/// steps: the solve starts again from the last answer, where the energy is finite, ends with
+/// every element upright, and its report counts the restart.
 #[test]
 fn a_start_that_inverts_an_element_is_retried_from_the_last_state() {
     let mut m = model();
@@ -997,10 +997,15 @@ fn a_start_that_inverts_an_element_is_retried_from_the_last_state() {
             !sim.objective(&start, &mut g).is_finite(),
             "{method:?}: the extrapolated start must be outside the energy's domain for this test"
         );
-        sim.step()
+        let report = sim
+            .step()
             .unwrap_or_else(|e| panic!("{method:?}: the step failed: {e}"));
+        assert!(report.restarted, "{method:?}: the report says so");
         assert!(sim.state.q.iter().all(|v| v.is_finite()));
         assert!(sim.energy().elastic.is_finite(), "{method:?}");
+        // A step from rest starts inside the domain and says so.
+        sim.set_state(1, &rest, &rest).unwrap();
+        assert!(!sim.step().unwrap().restarted, "{method:?}");
     }
 }
 
