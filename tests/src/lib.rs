@@ -58,6 +58,7 @@ pub fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
 
 /// A 6×1×1-cell beam whose every stage (snapshots, PCA, autoencoder, cubature, reference) runs
 /// in well under a second: the scene of the end-to-end tests, which vary it by text replacement.
+/// Its full space is Newton's, the reference the tests check full-space L-BFGS against.
 pub const TINY: &str = r#"
 name = "tiny"
 [mesh]
@@ -72,6 +73,7 @@ plane = { axis = "x", side = "min" }
 step = 0.02
 frames = 10
 [solver]
+method = "newton"
 tolerance = 1.0e-8
 [training]
 schedules = 4

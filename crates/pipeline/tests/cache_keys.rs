@@ -183,7 +183,7 @@ fn variants() -> Vec<Variant> {
         // [solver]: the full-space solver makes the snapshots and the reference.
         v(
             "solver.method",
-            add!("solver", "method = \"lbfgs\""),
+            add!("solver", "method = \"newton\""),
             "",
             ALL,
         ),

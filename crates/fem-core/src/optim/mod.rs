@@ -153,10 +153,15 @@ impl SolverConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SolverMethod {
-    /// Newton with projected Hessians and sparse Cholesky: robust reference.
-    #[default]
+    /// Newton with projected Hessians and sparse Cholesky: robust, and redoes the steps L-BFGS
+    /// cannot finish.
     Newton,
-    /// L-BFGS preconditioned by a factorised system matrix ([`LbfgsPreconditioner`]): fast.
+    /// L-BFGS preconditioned by a factorised system matrix ([`LbfgsPreconditioner`]): the
+    /// default. It stops at the same relative gradient as Newton for a fraction of the cost
+    /// (on a 16.6k-DOF beam's training schedules 4.4–5.3 s against 10.9–11.7 s for 60 steps on
+    /// one core), and a step it cannot finish is redone with Newton, so a scene without
+    /// `[solver]` loses no robustness by it.
+    #[default]
     Lbfgs,
 }
 

@@ -65,13 +65,17 @@ impl Half {
     /// column's largest) become zero. Widened, the halves are σ = c·2⁻¹¹² times the values;
     /// returns σ², or None when a value is not finite. An all-zero column gets c = 1.
     pub(super) fn encode_column(values: &[f32], out: &mut [Half]) -> Option<f64> {
-        let mut max = 0.0f32;
-        for v in values {
-            if !v.is_finite() {
-                return None;
-            }
-            max = max.max(v.abs());
+        // The bits of |v| order like |v| for finite values, and the non-finite ones (infinity,
+        // NaN) lie above all of them: one branch-free maximum over integers, which vectorises,
+        // finds the largest value and any non-finite one (the encoding is a pass over the whole
+        // factor after each factorisation).
+        let top = values
+            .iter()
+            .fold(0u32, |m, v| m.max(v.to_bits() & 0x7fff_ffff));
+        if top >= f32::INFINITY.to_bits() {
+            return None;
         }
+        let max = f32::from_bits(top);
         let k = if max > 0.0 {
             (Self::TOP_EXPONENT - f64::from(max).log2().ceil() as i32).min(127)
         } else {
@@ -90,13 +94,13 @@ impl Half {
         let bits = v.to_bits();
         let sign = ((bits >> 16) & 0x8000) as u16;
         let magnitude = bits & 0x7fff_ffff;
-        if magnitude < 0x3880_0000 {
-            return Half(0);
-        }
         // Round the 23-bit mantissa to 10 bits (a carry into the exponent is right), then
-        // rebias the exponent from 127 to 15.
+        // rebias the exponent from 127 to 15. Computed for every value and then selected, so
+        // that the encoding loop has no branch and vectorises; below 2⁻¹⁴ the rebias wraps
+        // and the value is flushed to zero.
         let rounded = (magnitude + 0x0fff + ((magnitude >> 13) & 1)) >> 13;
-        Half(sign | (rounded - (112 << 10)) as u16)
+        let half = sign | rounded.wrapping_sub(112 << 10) as u16;
+        Half(if magnitude < 0x3880_0000 { 0 } else { half })
     }
 
     /// The f32 bit pattern of 2⁻¹¹² times the half's value: sign-extend, shift the exponent and
@@ -200,6 +204,8 @@ mod tests {
         assert_eq!(out, [Half(0); 2]);
         assert!(Half::encode_column(&[1.0, f32::INFINITY], &mut out).is_none());
         assert!(Half::encode_column(&[f32::NAN, 1.0], &mut out).is_none());
+        assert!(Half::encode_column(&[1.0, -f32::INFINITY], &mut out).is_none());
+        assert!(Half::encode_column(&[-f32::NAN, 1.0], &mut out).is_none());
     }
 
     #[test]
