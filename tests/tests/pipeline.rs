@@ -267,14 +267,26 @@ fn linear_directions_default_to_the_counts_chosen() {
     assert_eq!(p.onset_directions(), latent_sim::DEFAULT_ONSET_DIRECTIONS);
     let c = p.complement(&no_progress).unwrap();
     let count = c.default_count();
-    let (lost, total): (f64, f64) = (
-        c.pca_lost_energy,
-        c.singular_values.iter().map(|r| r * r).sum(),
-    );
+    // The snapshots' mass-norm energy and what the basis leaves out of it, recomputed here.
+    let snaps = p.snapshots(&no_progress).unwrap();
+    let fit = p.pca(&no_progress).unwrap();
+    let mass = fit.basis.mass().expect("a mass-orthonormal basis");
+    let mut q = vec![0.0; fit.basis.k()];
+    let (mut energy, mut kept) = (0.0, 0.0);
+    for u in snaps.data.chunks_exact(snaps.dim) {
+        energy += u.iter().zip(mass).map(|(x, m)| m * x * x).sum::<f64>();
+        fit.basis.project(u, &mut q);
+        kept += q.iter().map(|x| x * x).sum::<f64>();
+    }
+    assert!((c.snapshot_energy - energy).abs() <= 1e-12 * energy);
+    assert!((c.pca_lost_energy - (energy - kept)).abs() <= 1e-9 * energy);
+    let allowed = (energy - kept).max(1e-14 * energy);
     let missed = |n: usize| c.singular_values[n..].iter().map(|r| r * r).sum::<f64>();
-    assert!(missed(count) <= lost.max(1e-14 * total), "{count}");
+    let new = fit.basis.k() - 2;
+    assert!(count <= new, "{count} directions, {new} can be new beside d = 2");
+    assert!(count == new || missed(count) <= allowed, "{count}");
     assert!(
-        count == 0 || missed(count - 1) > lost,
+        count == 0 || missed(count - 1) > allowed,
         "{count} is not the fewest"
     );
     let opts = RunOptions {

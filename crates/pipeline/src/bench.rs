@@ -292,12 +292,12 @@ pub fn summary(scene: &Scene, opts: &BenchOptions, rows: &[BenchRow]) -> String 
 /// The sweep as a markdown table (Pareto-optimal variants marked with ★).
 pub fn markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(
-        "| variant | dim | elements | ms/step (median) | spread | mean ms/step | Hz | speed-up | mean rel. error | max rel. error | subspace error | one-step error | iterations | offline s | machine G FMA/s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
+        "| variant | dim | elements | ms/step (median) | spread | mean ms/step | Hz | speed-up | mean rel. error | space-time error | max rel. error | subspace error | one-step error | iterations | offline s | machine G FMA/s | Pareto |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|\n",
     );
     for r in rows {
         let m = &r.report;
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
             match &m.failure {
                 Some(f) => format!("{} (failed at {f})", r.variant),
                 None => r.variant.clone(),
@@ -311,6 +311,7 @@ pub fn markdown(rows: &[BenchRow]) -> String {
             m.hz,
             m.speedup,
             m.mean_rel_error,
+            m.trajectory_error,
             m.max_rel_error,
             m.subspace_error,
             m.step_error,
@@ -403,7 +404,7 @@ mod tests {
                 step_frame_errors: Vec::new(),
                 training_distance: 0.0,
                 training_distance_time: 0.0,
-                restarts: 0,
+                step_restarts: 0,
                 failure: None,
                 machine_gfma: None,
             },

@@ -126,7 +126,8 @@ pub fn reduced_model(
     }
     let complement = if neural {
         let columns = pipeline.complement_columns(progress)?;
-        if !columns.is_empty() {
+        // A source when it gave directions, or chose how many (none, possibly).
+        if !columns.is_empty() || scene.reduced.complement_directions.is_none() {
             stage_keys.push(key(Stage::Complement, pipeline.complement_key()));
         }
         columns

@@ -144,11 +144,12 @@ impl StageSummary for Complement {
         let c = self.default_count();
         format!(
             "{} directions of what the autoencoder misses; the neural methods take the leading \
-             {c} (unless `[reduced] complement_directions` says): without them the autoencoder \
-             misses {:.2}× what the PCA basis misses of the snapshots' energy, with them {:.2}×",
+             {c} (unless `[reduced] complement_directions` says): of the snapshots' energy the \
+             autoencoder misses {:.2e} without them and {:.2e} with them, the PCA basis {:.2e}",
             self.singular_values.len(),
             self.missed_with(0),
-            self.missed_with(c)
+            self.missed_with(c),
+            self.pca_lost_energy / self.snapshot_energy.max(f64::MIN_POSITIVE)
         )
     }
 }
@@ -209,42 +210,63 @@ fn relative_error(data: &cubature::TrainingMatrix, selected: &[usize], weights: 
 pub struct Complement {
     /// The PCA dimension k (each direction's length).
     pub k: usize,
+    /// The autoencoder's latent dimension d: its tangent at rest spans d of the k coefficients,
+    /// so at most k − d directions are new beside it.
+    pub latent_dim: usize,
     /// k × r column-major, orthonormal (r = min(k, snapshots)).
     pub directions: Vec<f64>,
     /// The residuals' singular values, largest first (‖R‖_F² = their sum of squares).
     pub singular_values: Vec<f64>,
-    /// What the PCA basis itself leaves out of the snapshots, Σ_{i≥k} σ_i² (M-norm squared,
-    /// the units of ‖R‖_F²).
+    /// The snapshots' energy ‖S‖²_M, and what the mass-orthonormal PCA basis U leaves out of
+    /// it, ‖S‖²_M − ‖UᵀMS‖²_F (the units of ‖R‖_F²).
+    pub snapshot_energy: f64,
     pub pca_lost_energy: f64,
 }
 
+/// Residual energy below this fraction of the snapshots' is round-off, not worth a direction.
+const COMPLEMENT_ROUND_OFF: f64 = 1e-14;
+
 impl Complement {
-    /// The directions a neural method takes when `[reduced] complement_directions` is absent:
-    /// the fewest leading ones after which what the autoencoder still misses in the snapshots,
-    /// Σ_{i≥c} ρ_i², is no more than what the PCA basis leaves out of them. With them the
-    /// neural subspace holds the training data within twice the loss the PCA rule accepted,
-    /// whatever the latent dimension; an autoencoder that already does needs none.
-    pub fn default_count(&self) -> usize {
-        let total: f64 = self.singular_values.iter().map(|r| r * r).sum();
-        // Round-off in the residuals is not worth a direction.
-        let allowed = self.pca_lost_energy.max(1e-14 * total);
-        let mut rest = total;
-        let mut count = 0;
-        for r in &self.singular_values {
-            if rest <= allowed {
-                break;
-            }
-            rest -= r * r;
-            count += 1;
+    /// Σ_{i≥c} ρ_i² for c = 0, …, r (the last is zero), summed from the smallest up.
+    fn tails(&self) -> Vec<f64> {
+        let mut tails = vec![0.0; self.singular_values.len() + 1];
+        for (i, r) in self.singular_values.iter().enumerate().rev() {
+            tails[i] = tails[i + 1] + r * r;
         }
-        count.min(latent_sim::MAX_COMPLEMENT_DIRECTIONS)
+        tails
     }
 
-    /// The part of the snapshots' energy the autoencoder misses with its leading `count`
-    /// complement directions added, relative to what the PCA basis misses.
-    fn missed_with(&self, count: usize) -> f64 {
-        let rest: f64 = self.singular_values.iter().skip(count).map(|r| r * r).sum();
-        rest / self.pca_lost_energy.max(f64::MIN_POSITIVE)
+    /// What the autoencoder may still miss of the snapshots with its default complement
+    /// directions: what the PCA basis leaves out of them, and at least round-off in their
+    /// energy.
+    pub fn allowed_residual(&self) -> f64 {
+        self.pca_lost_energy
+            .max(COMPLEMENT_ROUND_OFF * self.snapshot_energy)
+    }
+
+    /// The directions a neural method takes when `[reduced] complement_directions` is absent:
+    /// the fewest leading ones after which what the autoencoder still misses of the snapshots,
+    /// Σ_{i≥c} ρ_i², is at most [`Complement::allowed_residual`], and no more than the k − d
+    /// that can be new. With them the neural subspace holds the training data within twice
+    /// the loss the PCA rule accepted, whatever the latent dimension; an autoencoder that
+    /// already does needs none.
+    pub fn default_count(&self) -> usize {
+        let allowed = self.allowed_residual();
+        let count = self
+            .tails()
+            .iter()
+            .position(|&t| t <= allowed)
+            .unwrap_or(self.singular_values.len());
+        count
+            .min(self.k.saturating_sub(self.latent_dim))
+            .min(latent_sim::MAX_COMPLEMENT_DIRECTIONS)
+    }
+
+    /// The fraction of the snapshots' energy the autoencoder misses with its leading `count`
+    /// complement directions added.
+    pub fn missed_with(&self, count: usize) -> f64 {
+        let tails = self.tails();
+        tails[count.min(tails.len() - 1)] / self.snapshot_energy.max(f64::MIN_POSITIVE)
     }
 }
 
@@ -834,17 +856,25 @@ impl<'a> Pipeline<'a> {
             })?;
             let u = svd.U();
             let k = q.nrows();
+            let mass = fit.basis.mass();
+            let snapshot_energy: f64 = snaps
+                .data
+                .chunks_exact(snaps.dim)
+                .map(|s| match mass {
+                    Some(m) => s.iter().zip(m).map(|(x, w)| w * x * x).sum::<f64>(),
+                    None => s.iter().map(|x| x * x).sum(),
+                })
+                .sum();
+            let kept = q.squared_norm_l2();
             Ok(Complement {
                 k,
+                latent_dim: trained.latent_dim,
                 directions: (0..u.ncols())
                     .flat_map(|j| (0..k).map(move |i| u[(i, j)]))
                     .collect(),
                 singular_values: svd.S().column_vector().iter().copied().collect(),
-                pca_lost_energy: fit.basis.singular_values()
-                    [k.min(fit.basis.singular_values().len())..]
-                    .iter()
-                    .map(|s| s * s)
-                    .sum(),
+                snapshot_energy,
+                pca_lost_energy: (snapshot_energy - kept).max(0.0),
             })
         })
     }
@@ -869,7 +899,7 @@ impl<'a> Pipeline<'a> {
 
     /// The scene's `[reduced] complement_directions` leading [`Complement`] directions, k × c
     /// column-major, or when absent [`Complement::default_count`] of them (empty, and no stage
-    /// run, for c = 0).
+    /// run, for an explicit 0).
     ///
     /// # Errors
     /// When the residuals have fewer directions than asked for, or a stage fails.

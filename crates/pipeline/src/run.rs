@@ -65,8 +65,9 @@ pub struct MethodReport {
     /// Mean solver iterations per step.
     pub iterations: f64,
     /// Mean over frames of the relative error of the reference's best representation in this
-    /// method's subspace (u_full projected and, for neural methods, encoded and decoded): the part
-    /// of the error the subspace itself causes, whatever the dynamics do.
+    /// method's subspace (u_full projected and, for neural methods, encoded and decoded and
+    /// completed by the complement directions, the onset directions left out): the part of the
+    /// error the subspace itself causes, whatever the dynamics do.
     pub subspace_error: f64,
     /// Mean over frames of the relative error of one step started from the reference: the
     /// method put in its subspace's representation of the reference at the two steps before
@@ -95,10 +96,12 @@ pub struct MethodReport {
     /// The time (s) of the frame at `training_distance`.
     #[serde(default)]
     pub training_distance_time: f64,
-    /// Steps that started again from the last state because their extrapolated start inverted
-    /// an element (the classic Neo-Hookean energy is not defined there; zero for full space).
+    /// Steps that started again from the last state because they could not be solved from
+    /// their extrapolated start (an element inverted there, where the classic Neo-Hookean
+    /// energy is not defined, or the preconditioner could not be factorised; zero for full
+    /// space).
     #[serde(default)]
-    pub restarts: usize,
+    pub step_restarts: usize,
     /// Why the method stopped before the last frame (its figures cover the frames before).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
@@ -138,13 +141,18 @@ impl ErrorAccumulator {
 
     /// Adds the frame of displacement `u` against the reference's `r` (both every vertex).
     fn add_full(&mut self, mass: &MassMatrix, u: &[f64], r: &[f64]) {
-        if let Some(e) = mass.relative_error(u, r) {
-            self.rel.push(e);
-        }
         let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
         let mut scratch = vec![0.0; u.len()];
-        self.squared_error += mass.half_norm_squared(&diff, &mut scratch);
-        self.squared_size += mass.half_norm_squared(r, &mut scratch);
+        let (error, size) = (
+            mass.half_norm_squared(&diff, &mut scratch),
+            mass.half_norm_squared(r, &mut scratch),
+        );
+        // The ratio of MassMatrix::relative_error, from the norms the sums need too.
+        if size > 0.0 {
+            self.rel.push((error / size).sqrt());
+        }
+        self.squared_error += error;
+        self.squared_size += size;
         for (a, b) in u.chunks_exact(3).zip(r.chunks_exact(3)) {
             let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
             self.max_vertex = self
@@ -232,11 +240,11 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
     );
     s.push_str(&markdown(rows));
     s.push_str(&time_split_markdown(rows));
-    for r in rows.iter().filter(|r| r.restarts > 0) {
+    for r in rows.iter().filter(|r| r.step_restarts > 0) {
         s.push_str(&format!(
-            "\n{}: {} of its steps started again from the last state (the extrapolated start \
-             inverted an element)\n",
-            r.method, r.restarts
+            "\n{}: {} of its steps started again from the last state (not solvable from their \
+             extrapolated start, e.g. an element inverted there)\n",
+            r.method, r.step_restarts
         ));
     }
     let warnings = crate::trust::warnings(rows);
@@ -380,7 +388,7 @@ pub fn measure(
             precond_ms: 0.0,
             training_distance: 0.0,
             training_distance_time: 0.0,
-            restarts: 0,
+            step_restarts: 0,
             failure: None,
             machine_gfma: None,
         });
@@ -390,7 +398,7 @@ pub fn measure(
     let mut medians = Vec::with_capacity(m.repeats.max(1));
     let mut means = Vec::with_capacity(m.repeats.max(1));
     let mut iterations = Vec::with_capacity(frames);
-    let mut restarts = 0;
+    let mut step_restarts = 0;
     let mut parts = StepParts::default();
     let mut cubature_elements = 0;
     let mut dim = 0;
@@ -443,7 +451,7 @@ pub fn measure(
                 continue;
             }
             iterations.push(info.iterations);
-            restarts += usize::from(info.restarted);
+            step_restarts += usize::from(info.restarted);
             parts.decode += info.parts.decode;
             parts.elastic += info.parts.elastic;
             parts.vjp += info.parts.vjp;
@@ -533,7 +541,7 @@ pub fn measure(
         step_frame_errors,
         training_distance,
         training_distance_time,
-        restarts,
+        step_restarts,
         failure,
         machine_gfma,
     })
@@ -555,8 +563,9 @@ fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>>
 
 /// Relative error, frame by frame, of the reference frames' best representation in reduced
 /// `method`'s subspace: u ↦ U UᵀM u for PCA, u ↦ U(f + VVᵀ(q − f)) with f = decode(encode(q))
-/// for the autoencoder (q = UᵀM u, V its complement directions, none by default; the onset
-/// directions are left out), from the frames' coefficients `states` ([`reference_states`]).
+/// for the autoencoder (q = UᵀM u, V its complement directions; the few gravity-onset
+/// directions are left out, so a neural subspace stepped with them holds the frames a little
+/// better than this says), from the frames' coefficients `states` ([`reference_states`]).
 fn subspace_errors(
     pipeline: &mut Pipeline<'_>,
     method: Method,

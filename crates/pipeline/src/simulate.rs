@@ -185,8 +185,8 @@ pub struct StepInfo {
     pub iterations: usize,
     /// Where a reduced step's time went (zero for full space).
     pub parts: StepParts,
-    /// Whether a reduced step started again from the last state, its extrapolated start
-    /// having inverted an element (`ReducedStepReport::restarted`).
+    /// Whether a reduced step started again from the last state, not solvable from its
+    /// extrapolated start (`ReducedStepReport::restarted`).
     pub restarted: bool,
 }
 

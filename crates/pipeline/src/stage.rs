@@ -84,7 +84,8 @@ impl Stage {
             Stage::CubatureNeural => 3,
             Stage::Pca => 1,
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
-            Stage::Complement => 2,
+            // 3: with the snapshots' energy and the latent dimension.
+            Stage::Complement => 3,
         }
     }
 
@@ -153,7 +154,7 @@ mod tests {
                 ("cubature", 2),
                 ("cubature-neural", 3),
                 ("train", 5),
-                ("complement", 2),
+                ("complement", 3),
                 ("reference", 8),
             ]
         );

@@ -140,9 +140,9 @@ pub struct MethodRow {
     /// space; above 0.1 ``warnings`` says so), and the time (s) it happened.
     training_distance: f64,
     training_distance_time: f64,
-    /// Steps that started again from the last state because their extrapolated start
-    /// inverted an element (0 for full space).
-    restarts: usize,
+    /// Steps that started again from the last state, not solvable from their extrapolated
+    /// start (0 for full space).
+    step_restarts: usize,
     /// The relative error frame by frame.
     frame_errors: Vec<f64>,
     /// Why the method stopped before the last frame (None when it finished).
@@ -170,7 +170,7 @@ impl From<&MethodReport> for MethodRow {
             step_error: r.step_error,
             training_distance: r.training_distance,
             training_distance_time: r.training_distance_time,
-            restarts: r.restarts,
+            step_restarts: r.step_restarts,
             frame_errors: r.frame_errors.clone(),
             failure: r.failure.clone(),
         }

@@ -31,7 +31,7 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
         assert row.frame_errors == raw["frame_errors"]
         assert row.training_distance == raw["training_distance"] >= 0.0
         assert row.training_distance_time == raw["training_distance_time"]
-        assert row.restarts == raw["restarts"] >= 0
+        assert row.step_restarts == raw["step_restarts"] >= 0
         assert row.failure is None
     full = report.row("full")
     assert full.mean_rel_error == 0.0 and full.trajectory_error == 0.0 and full.speedup == 1.0

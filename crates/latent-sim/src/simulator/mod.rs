@@ -58,9 +58,10 @@ pub struct ReducedStepReport {
     pub evaluations: usize,
     /// Whether the L-BFGS preconditioner was rebuilt at the start of this step.
     pub preconditioner_rebuilt: bool,
-    /// Whether the step started again from z_n, the last step's answer, because its
-    /// extrapolated start left the region where the energy is defined (an element inverted
-    /// under the classic Neo-Hookean model).
+    /// Whether the step started again from z_n, the last step's answer, because it could not
+    /// be solved from its extrapolated start: the energy was not finite there (an element
+    /// inverted under the classic Neo-Hookean model) or the preconditioner's matrix could not
+    /// be factorised there.
     pub restarted: bool,
 }
 
