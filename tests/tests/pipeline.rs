@@ -283,7 +283,10 @@ fn linear_directions_default_to_the_counts_chosen() {
     let allowed = (energy - kept).max(1e-14 * energy);
     let missed = |n: usize| c.singular_values[n..].iter().map(|r| r * r).sum::<f64>();
     let new = fit.basis.k() - 2;
-    assert!(count <= new, "{count} directions, {new} can be new beside d = 2");
+    assert!(
+        count <= new,
+        "{count} directions, {new} can be new beside d = 2"
+    );
     assert!(count == new || missed(count) <= allowed, "{count}");
     assert!(
         count == 0 || missed(count - 1) > allowed,
