@@ -292,6 +292,15 @@ fn linear_directions_default_to_the_counts_chosen() {
         count == 0 || missed(count - 1) > allowed,
         "{count} is not the fewest"
     );
+    let line = p.linear_directions_summary(&no_progress).unwrap();
+    assert_eq!(
+        line,
+        format!(
+            "neural methods: d = 2 latent coordinates, 2 gravity-onset directions (the default \
+             under gravity), {count} complement directions (what the data asks for, see stage \
+             complement)"
+        )
+    );
     let opts = RunOptions {
         out: out.clone(),
         every: 0,

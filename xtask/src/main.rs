@@ -401,6 +401,13 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     let method_bar = bar(0, "");
     let rows = pipeline::run::run(&mut p, &opts, &progress, &mut method_progress(&method_bar))?;
     method_bar.finish_and_clear();
+    if opts
+        .methods
+        .iter()
+        .any(|m| matches!(m, Method::Neural | Method::NeuralCubature))
+    {
+        println!("{}", p.linear_directions_summary(&progress)?);
+    }
     print!("{}", pipeline::run::summary(&scene, &opts, &rows));
     Ok(())
 }

@@ -885,6 +885,33 @@ impl<'a> Pipeline<'a> {
             .finish()
     }
 
+    /// One line saying what the neural methods get beside their latent coordinates and why:
+    /// the onset and complement directions asked for, by the scene or by default (those the
+    /// decoder already spans at rest are dropped when the model is built, so the methods'
+    /// dimension in the report can be smaller than their sum).
+    ///
+    /// # Errors
+    /// When a stage the counts need fails.
+    pub fn linear_directions_summary(&mut self, progress: Progress<'_>) -> Result<String> {
+        let d = self.train(progress)?.latent_dim;
+        let onset = self.onset_directions();
+        let onset_why = match self.scene.reduced.onset_directions {
+            Some(_) => "as `[reduced] onset_directions` says",
+            None if onset > 0 => "the default under gravity",
+            None => "none without gravity",
+        };
+        let k = self.pca(progress)?.basis.k();
+        let complement = self.complement_columns(progress)?.len() / k;
+        let complement_why = match self.scene.reduced.complement_directions {
+            Some(_) => "as `[reduced] complement_directions` says",
+            None => "what the data asks for, see stage complement",
+        };
+        Ok(format!(
+            "neural methods: d = {d} latent coordinates, {onset} gravity-onset directions \
+             ({onset_why}), {complement} complement directions ({complement_why})"
+        ))
+    }
+
     /// The scene's `[reduced] onset_directions`, or when absent
     /// [`latent_sim::DEFAULT_ONSET_DIRECTIONS`] under gravity and none without.
     pub fn onset_directions(&self) -> usize {
