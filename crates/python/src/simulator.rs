@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use fem_core::Vec3;
+use fem_core::forces::{ExternalForce, ForceKind};
 use latent_sim::{FullRuntime, Interactive, Real, ReducedRuntime, RuntimeError};
 use numpy::ndarray::Array2;
 use numpy::{Element, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
@@ -421,6 +422,67 @@ impl Simulator {
             .with(
                 py,
                 |s| each!(&mut s.runtime, r => r.grab_near(point, radius, stiffness)),
+            )?
+            .map_err(errors::runtime)?;
+        Ok(self.wrap(handle))
+    }
+
+    /// Adds a force given as data, as a scene's ``[[force]]`` is: ``kind`` ``"spring"`` pulls
+    /// ``vertices`` toward their rest centroid moved by the keyframed offset, with total
+    /// stiffness ``stiffness`` (N/m); ``"point"`` spreads the keyframed total force (N) over
+    /// them. ``keyframes`` are ``(t, x, y, z)`` rows (t in seconds of simulation time, not
+    /// decreasing), linear in between and held after the last; the force acts from ``start``
+    /// to ``end``. Returns a handle: ``release`` removes the force, ``move_handle`` moves a
+    /// spring's target.
+    ///
+    /// Raises ``InvalidArgumentError`` for an unknown kind, a spring without a positive
+    /// stiffness, a stiffness given to a point load, keyframes that are empty, not finite or
+    /// out of order, ``end`` before ``start``, or a vertex as ``grab`` refuses it.
+    #[pyo3(signature = (kind, vertices, keyframes, stiffness=None, start=0.0, end=f64::INFINITY))]
+    fn add_force(
+        &self,
+        py: Python<'_>,
+        kind: &str,
+        vertices: &Bound<'_, PyAny>,
+        keyframes: &Bound<'_, PyAny>,
+        stiffness: Option<f64>,
+        start: f64,
+        end: f64,
+    ) -> PyResult<Handle> {
+        let (kind, stiffness) = match (kind, stiffness) {
+            ("spring", Some(k)) => (ForceKind::Spring, k),
+            ("spring", None) => {
+                return Err(Class::InvalidArgument.err("a spring needs a stiffness (N/m)"));
+            }
+            ("point", None) => (ForceKind::Point, 0.0),
+            ("point", Some(_)) => {
+                return Err(Class::InvalidArgument
+                    .err("a point load has no stiffness: its keyframes are the total force (N)"));
+            }
+            (other, _) => {
+                return Err(Class::InvalidArgument.err(format!(
+                    "kind must be \"spring\" or \"point\", got {other:?}"
+                )));
+            }
+        };
+        let keyframes: Vec<[f64; 4]> = keyframes.extract().map_err(|_| {
+            Class::InvalidArgument.err(format!(
+                "keyframes must be rows of (t, x, y, z), got {}",
+                describe(keyframes)
+            ))
+        })?;
+        let force = ExternalForce {
+            kind,
+            vertices: vertex_list(vertices)?,
+            stiffness,
+            keyframes,
+            start,
+            end,
+        };
+        let handle = self
+            .with(
+                py,
+                |s| each!(&mut s.runtime, r => r.add_force(force.clone())),
             )?
             .map_err(errors::runtime)?;
         Ok(self.wrap(handle))

@@ -171,3 +171,59 @@ def test_rows_in_use_model_reads_the_surface_but_not_every_vertex(pca_path) -> N
     assert sim.surface_positions().shape == (sim.surface_vertex_count, 3)
     with pytest.raises(ld.InvalidArgumentError, match="no basis rows"):
         sim.positions()
+
+
+def test_add_force_applies_springs_and_point_loads_as_data(model: ld.Model) -> None:
+    # Full space and the reduced model alike; gravity off so that only the added forces act.
+    for full_space in (True, False):
+        sim = ld.Simulator(model, full_space=full_space)
+        sim.set_gravity(False)
+        v = tip(sim)
+        start = sim.rest_positions[v].copy()
+        rest = sim.rest_positions
+        end_face = np.flatnonzero(rest[:, 0] > rest[:, 0].max() - 1e-9)
+        # A point load of 20 N down spread over the free end, ramped in over 0.1 s (down: the
+        # tiny model's subspace holds the sag its gravity-loaded training made, not much else).
+        load = sim.add_force("point", end_face, [(0.0, 0, 0, 0), (0.1, 0, -20.0, 0)])
+        for _ in range(10):
+            sim.step()
+        pushed = (sim.positions() - rest)[end_face].mean(axis=0)
+        assert pushed[1] < -0.01 and np.abs(pushed[[0, 2]]).max() < 0.3 * -pushed[1], pushed
+        # A point load is not a spring: it has no target to move.
+        with pytest.raises(ld.HandleError):
+            sim.move_handle(load, start)
+        sim.release(load)
+        sim.reset()
+        # A spring pulling the tip 5 cm up from its rest centroid, from t = 0.04 s on.
+        spring = sim.add_force(
+            "spring", np.array([v]), np.array([[0.0, 0.0, 0.05, 0.0]]), stiffness=2000.0,
+            start=0.04,
+        )
+        sim.step()
+        np.testing.assert_allclose(sim.positions()[v], start, atol=1e-12)  # not active yet
+        for _ in range(19):
+            sim.step()
+        lifted = sim.positions()[v, 1] - start[1]
+        assert 0.005 < lifted < 0.06, lifted
+        sim.release(spring)
+
+
+@pytest.mark.parametrize(
+    ("kind", "keyframes", "stiffness", "span", "needle"),
+    [
+        ("wind", [(0, 0, 0, 1)], None, (0.0, 1.0), "kind"),
+        ("spring", [(0, 0, 0, 1)], None, (0.0, 1.0), "stiffness"),
+        ("point", [(0, 0, 0, 1)], 10.0, (0.0, 1.0), "stiffness"),
+        ("spring", [(0, 0, 0, 1)], -1.0, (0.0, 1.0), "stiffness"),
+        ("point", [], None, (0.0, 1.0), "keyframe"),
+        ("point", [(1, 0, 0, 1), (0, 0, 0, 1)], None, (0.0, 1.0), "keyframe"),
+        ("point", [(0, 0, 0)], None, (0.0, 1.0), "keyframes"),
+        ("point", [(0, 0, 0, 1)], None, (1.0, 0.5), "span"),
+    ],
+)
+def test_add_force_refuses_what_cannot_work(
+    sim: ld.Simulator, kind, keyframes, stiffness, span, needle
+) -> None:
+    v = tip(sim)
+    with pytest.raises(ld.InvalidArgumentError, match=needle):
+        sim.add_force(kind, v, keyframes, stiffness=stiffness, start=span[0], end=span[1])

@@ -158,6 +158,17 @@ class Simulator:
         """A spring of total stiffness (N/m) on mesh vertices, its target at their centroid."""
     def grab_near(self, point: _Point, radius: float, stiffness: float) -> Handle:
         """A spring on the surface vertices within radius of point, its target at point."""
+    def add_force(
+        self,
+        kind: str,
+        vertices: _Vertices,
+        keyframes: Union[Sequence[Sequence[float]], npt.NDArray[np.floating]],
+        stiffness: Optional[float] = None,
+        start: float = 0.0,
+        end: float = ...,
+    ) -> Handle:
+        """A spring ("spring", toward the rest centroid plus the keyframed offset) or a point
+        load ("point", the keyframed total force) on mesh vertices, as a scene's [[force]]."""
     def move_handle(self, handle: Handle, target: _Point) -> None: ...
     def release(self, handle: Handle) -> None: ...
     def set_gravity(self, enabled: bool) -> None: ...
