@@ -333,7 +333,7 @@
   $('reset').onclick = () => send({ type: 'reset' });
   $('gravity').onchange = () => send({ type: 'gravity', enabled: $('gravity').checked });
 
-  // ---- mouse: drag the body, or orbit, pan and zoom ----
+  // ---- pointer: drag the body, or orbit, pan and zoom ----
   let drag = null;   // { pending, handle, vertex, planePoint, normal, target, sent, released }
   let orbit = null;  // { x, y, pan }
   function grabSettings() {
@@ -344,7 +344,31 @@
     return out;
   }
   canvas.addEventListener('contextmenu', (e) => e.preventDefault());
-  canvas.addEventListener('mousedown', (e) => {
+  // Pointer events: a mouse, a pen or one finger grabs the body or orbits; two fingers pinch
+  // to zoom (and stop what one finger was doing).
+  const touches = new Map();  // pointerId → { x, y } of each finger down
+  let pinch = null;           // { distance } between the two fingers
+  function fingerDistance() {
+    const [a, b] = [...touches.values()];
+    return Math.hypot(a.x - b.x, a.y - b.y);
+  }
+  function letGo() {
+    if (drag) {
+      if (drag.handle !== null) { send({ type: 'release', handle: drag.handle }); drag = null; }
+      else drag.released = true;
+    }
+    orbit = null;
+  }
+  canvas.addEventListener('pointerdown', (e) => {
+    if (e.pointerType === 'touch') {
+      touches.set(e.pointerId, { x: e.clientX, y: e.clientY });
+      if (touches.size >= 2) {
+        letGo();
+        if (touches.size === 2) pinch = { distance: fingerDistance() };
+        return;
+      }
+    }
+    canvas.setPointerCapture(e.pointerId);
     if (e.button === 0 && !e.shiftKey) {
       const hit = pick(e.offsetX, e.offsetY);
       if (hit) {
@@ -356,7 +380,16 @@
     }
     orbit = { x: e.clientX, y: e.clientY, pan: e.button !== 0 || e.shiftKey };
   });
-  window.addEventListener('mousemove', (e) => {
+  canvas.addEventListener('pointermove', (e) => {
+    if (touches.has(e.pointerId)) {
+      touches.set(e.pointerId, { x: e.clientX, y: e.clientY });
+      if (pinch) {
+        const d = fingerDistance();
+        if (d > 0 && pinch.distance > 0) camera.distance *= pinch.distance / d;
+        pinch.distance = d;
+        return;
+      }
+    }
     if (drag) {
       const rect = canvas.getBoundingClientRect();
       const { origin, dir } = ray(e.clientX - rect.left, e.clientY - rect.top);
@@ -378,13 +411,18 @@
       }
     }
   });
-  window.addEventListener('mouseup', () => {
-    if (drag) {
-      if (drag.handle !== null) { send({ type: 'release', handle: drag.handle }); drag = null; }
-      else drag.released = true;
+  function pointerEnd(e) {
+    const finger = touches.delete(e.pointerId);
+    if (finger && pinch) {
+      // The pinch ends when a finger lifts; the other does nothing until it lifts too.
+      if (touches.size < 2) pinch = null;
+      return;
     }
-    orbit = null;
-  });
+    if (finger && touches.size > 0) return;
+    letGo();
+  }
+  canvas.addEventListener('pointerup', pointerEnd);
+  canvas.addEventListener('pointercancel', pointerEnd);
   canvas.addEventListener('wheel', (e) => {
     e.preventDefault();
     camera.distance *= Math.exp(e.deltaY * 0.001);
@@ -421,6 +459,7 @@
     screenOf: (i) => project(vertex(i)),
     handle: () => (drag ? drag.handle : null),
     target: () => (drag ? drag.target : null),
+    cameraDistance: () => camera.distance,
     // A surface vertex far from the pins that the mouse can pick where it is drawn, inside the
     // silhouette (the body around it for 10 pixels), so that a little motion does not matter.
     grabCandidate: () => {

@@ -206,6 +206,90 @@ impl Page<'_> {
         )
         .map(drop)
     }
+
+    /// One finger: `touchStart`, `touchMove` (at x, y) or `touchEnd`.
+    fn touch(&mut self, kind: &str, x: f64, y: f64) -> Result<()> {
+        let points = if kind == "touchEnd" {
+            json!([])
+        } else {
+            json!([{ "x": x, "y": y, "id": 0 }])
+        };
+        self.call(
+            "Input.dispatchTouchEvent",
+            json!({ "type": kind, "touchPoints": points }),
+        )
+        .map(drop)
+    }
+
+    /// Two fingers at `a` and `b` (`touchStart` or `touchMove`).
+    fn two_fingers(&mut self, kind: &str, a: [f64; 2], b: [f64; 2]) -> Result<()> {
+        let points = json!([{ "x": a[0], "y": a[1], "id": 0 }, { "x": b[0], "y": b[1], "id": 1 }]);
+        self.call(
+            "Input.dispatchTouchEvent",
+            json!({ "type": kind, "touchPoints": points }),
+        )
+        .map(drop)
+    }
+
+    /// Presses, moves to or lets go at (x, y) with `input`.
+    fn press(&mut self, input: Input, x: f64, y: f64) -> Result<()> {
+        match input {
+            Input::Mouse => {
+                self.mouse("mouseMoved", x, y, 0)?;
+                self.mouse("mousePressed", x, y, 1)
+            }
+            Input::Finger => self.touch("touchStart", x, y),
+        }
+    }
+
+    fn move_to(&mut self, input: Input, x: f64, y: f64) -> Result<()> {
+        match input {
+            Input::Mouse => self.mouse("mouseMoved", x, y, 1),
+            Input::Finger => self.touch("touchMove", x, y),
+        }
+    }
+
+    fn let_go(&mut self, input: Input, x: f64, y: f64) -> Result<()> {
+        match input {
+            Input::Mouse => self.mouse("mouseReleased", x, y, 0),
+            Input::Finger => self.touch("touchEnd", x, y),
+        }
+    }
+}
+
+/// How the test drags: the mouse, or one finger on a touch screen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Input {
+    Mouse,
+    Finger,
+}
+
+/// Two fingers spread from 100 to 200 pixels apart below the body: the camera comes twice as
+/// close, and nothing is grabbed.
+fn pinch(page: &mut Page<'_>) -> Result<()> {
+    let distance = |page: &mut Page<'_>| -> Result<f64> {
+        page.eval("viewerDebug.cameraDistance()")?
+            .as_f64()
+            .ok_or_else(|| "no camera distance".to_string())
+    };
+    let before = distance(page)?;
+    let (x, y) = (640.0, 780.0);
+    page.two_fingers("touchStart", [x - 50.0, y], [x + 50.0, y])?;
+    for k in 1..=10 {
+        let half = 50.0 + 5.0 * f64::from(k);
+        page.two_fingers("touchMove", [x - half, y], [x + half, y])?;
+    }
+    page.touch("touchEnd", x, y)?;
+    let ratio = distance(page)? / before;
+    if (ratio - 0.5).abs() > 1e-9 {
+        return Err(format!(
+            "a pinch from 100 to 200 pixels took the camera from {before} to {ratio} times that"
+        ));
+    }
+    if page.eval("viewerDebug.handle()")? != Value::Null {
+        return Err("the pinch grabbed the body".into());
+    }
+    Ok(())
 }
 
 fn point(v: &Value) -> Result<[f64; 3]> {
@@ -240,8 +324,8 @@ fn base64(text: &str) -> Vec<u8> {
     out
 }
 
-#[test]
-fn a_mouse_drag_on_the_page_pulls_the_body() {
+/// Drags the body on the page with `input` through the DevTools protocol.
+fn drag_on_the_page(input: Input) {
     let Some(binary) = chromium() else {
         tests::skip(
             "the viewer's browser test: no chromium on the PATH (apt-get install chromium, or \
@@ -267,8 +351,8 @@ fn a_mouse_drag_on_the_page_pulls_the_body() {
     };
     let url = std::env::var("VIEWER_BROWSER_URL")
         .unwrap_or_else(|_| server.as_ref().map(Server::url).unwrap_or_default());
-    let dir = tests::scratch_dir("viewer-browser");
-    let result = drive(&binary, &dir, &url);
+    let dir = tests::scratch_dir(&format!("viewer-browser-{input:?}"));
+    let result = drive(&binary, &dir, &url, input);
     if let Some(s) = server {
         s.shutdown();
     }
@@ -277,7 +361,18 @@ fn a_mouse_drag_on_the_page_pulls_the_body() {
     }
 }
 
-fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
+#[test]
+fn a_mouse_drag_on_the_page_pulls_the_body() {
+    drag_on_the_page(Input::Mouse);
+}
+
+/// A touch screen: one finger grabs and pulls as the mouse does.
+#[test]
+fn a_finger_drag_on_the_page_pulls_the_body() {
+    drag_on_the_page(Input::Finger);
+}
+
+fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
     let mut browser = Browser::start(binary, &dir.join("profile"))?;
     let target = browser
         .cdp
@@ -299,6 +394,12 @@ fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
         "Emulation.setDeviceMetricsOverride",
         json!({ "width": 1280, "height": 800, "deviceScaleFactor": 1, "mobile": false }),
     )?;
+    if input == Input::Finger {
+        page.call(
+            "Emulation.setTouchEmulationEnabled",
+            json!({ "enabled": true, "maxTouchPoints": 2 }),
+        )?;
+    }
     page.call("Page.navigate", json!({ "url": url }))?;
     page.wait_for(
         "Boolean(window.viewerDebug && viewerDebug.ready())",
@@ -314,18 +415,17 @@ fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
         candidate["y"].as_f64().ok_or("y")?,
     );
     let before = point(&page.eval(&format!("viewerDebug.position({vertex})"))?)?;
-    page.mouse("mouseMoved", x, y, 0)?;
-    page.mouse("mousePressed", x, y, 1)?;
+    page.press(input, x, y)?;
     if let Err(e) = page.wait_for("viewerDebug.handle() !== null", "a handle from the grab") {
         let said = page.eval("document.getElementById('message').textContent")?;
-        return Err(format!("{e} (mouse at {x}, {y}; the page says {said})"));
+        return Err(format!("{e} ({input:?} at {x}, {y}; the page says {said})"));
     }
     let pixels: f64 = std::env::var("VIEWER_BROWSER_DRAG")
         .ok()
         .and_then(|p| p.parse().ok())
         .unwrap_or(120.0);
     for k in 1..=20 {
-        page.mouse("mouseMoved", x, y - pixels * f64::from(k) / 20.0, 1)?;
+        page.move_to(input, x, y - pixels * f64::from(k) / 20.0)?;
         std::thread::sleep(Duration::from_millis(25));
     }
     std::thread::sleep(Duration::from_millis(1500));
@@ -342,11 +442,14 @@ fn drive(binary: &Path, dir: &Path, url: &str) -> Result<()> {
         .and_then(|s| s.trim().parse().ok())
         .ok_or("the HUD shows no steps/s figure")?;
     let hud = page.eval("viewerDebug.hud()")?;
-    page.mouse("mouseReleased", x, y - pixels, 0)?;
+    page.let_go(input, x, y - pixels)?;
     page.wait_for(
         "viewerDebug.handle() === null && viewerDebug.state().handles === 0",
         "the handle released",
     )?;
+    if input == Input::Finger {
+        pinch(&mut page)?;
+    }
     let moved = distance(during, before);
     let pulled = distance(aim, before);
     if !(pulled > 0.0 && moved > 0.25 * pulled) {
