@@ -120,11 +120,19 @@ impl MassMatrix {
     /// The error metric of every report (DESIGN §9): ‖u − r‖_M / ‖r‖_M for full displacement
     /// vectors u and reference r, or `None` where the reference is at rest (‖r‖_M = 0).
     pub fn relative_error(&self, u: &[f64], r: &[f64]) -> Option<f64> {
+        let (num, den) = self.error_and_size(u, r);
+        (den > 0.0).then(|| (num / den).sqrt())
+    }
+
+    /// ½‖u − r‖²_M and ½‖r‖²_M, the two terms of [`MassMatrix::relative_error`] (summed over
+    /// frames they give a trajectory's space–time error).
+    pub fn error_and_size(&self, u: &[f64], r: &[f64]) -> (f64, f64) {
         let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
         let mut scratch = vec![0.0; u.len()];
-        let num = self.half_norm_squared(&diff, &mut scratch);
-        let den = self.half_norm_squared(r, &mut scratch);
-        (den > 0.0).then(|| (num / den).sqrt())
+        (
+            self.half_norm_squared(&diff, &mut scratch),
+            self.half_norm_squared(r, &mut scratch),
+        )
     }
 }
 

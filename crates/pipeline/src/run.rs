@@ -141,13 +141,8 @@ impl ErrorAccumulator {
 
     /// Adds the frame of displacement `u` against the reference's `r` (both every vertex).
     fn add_full(&mut self, mass: &MassMatrix, u: &[f64], r: &[f64]) {
-        let diff: Vec<f64> = u.iter().zip(r).map(|(a, b)| a - b).collect();
-        let mut scratch = vec![0.0; u.len()];
-        let (error, size) = (
-            mass.half_norm_squared(&diff, &mut scratch),
-            mass.half_norm_squared(r, &mut scratch),
-        );
-        // The ratio of MassMatrix::relative_error, from the norms the sums need too.
+        let (error, size) = mass.error_and_size(u, r);
+        // MassMatrix::relative_error, from the two terms the sums need too.
         if size > 0.0 {
             self.rel.push((error / size).sqrt());
         }

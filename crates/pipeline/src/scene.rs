@@ -194,7 +194,7 @@ impl Scene {
             None
         } else if self.time.quasi_static {
             Some("a quasi-static solve has no equilibrium".into())
-        } else if self.gravity.acceleration.iter().any(|&g| g != 0.0) {
+        } else if self.gravity.is_on() {
             Some(format!(
                 "it falls freely under gravity {:?}",
                 self.gravity.acceleration

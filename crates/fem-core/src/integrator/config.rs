@@ -55,6 +55,13 @@ pub struct GravityConfig {
     pub acceleration: [f64; 3],
 }
 
+impl GravityConfig {
+    /// Whether there is any gravity (an acceleration other than zero).
+    pub fn is_on(&self) -> bool {
+        self.acceleration.iter().any(|&g| g != 0.0)
+    }
+}
+
 impl Default for GravityConfig {
     fn default() -> Self {
         Self {
