@@ -856,15 +856,8 @@ impl<'a> Pipeline<'a> {
             })?;
             let u = svd.U();
             let k = q.nrows();
-            let mass = fit.basis.mass();
-            let snapshot_energy: f64 = snaps
-                .data
-                .chunks_exact(snaps.dim)
-                .map(|s| match mass {
-                    Some(m) => s.iter().zip(m).map(|(x, w)| w * x * x).sum::<f64>(),
-                    None => s.iter().map(|x| x * x).sum(),
-                })
-                .sum();
+            // ‖S‖²_M = Σσ² over every singular value of M^{1/2}S the fit keeps.
+            let snapshot_energy: f64 = fit.basis.singular_values().iter().map(|s| s * s).sum();
             let kept = q.squared_norm_l2();
             Ok(Complement {
                 k,
@@ -900,8 +893,7 @@ impl<'a> Pipeline<'a> {
             None if onset > 0 => "the default under gravity",
             None => "none without gravity",
         };
-        let k = self.pca(progress)?.basis.k();
-        let complement = self.complement_columns(progress)?.len() / k;
+        let complement = self.complement_count(progress)?;
         let complement_why = match self.scene.reduced.complement_directions {
             Some(_) => "as `[reduced] complement_directions` says",
             None => "what the data asks for, see stage complement",
@@ -916,7 +908,7 @@ impl<'a> Pipeline<'a> {
     /// [`latent_sim::DEFAULT_ONSET_DIRECTIONS`] under gravity and none without.
     pub fn onset_directions(&self) -> usize {
         self.scene.reduced.onset_directions.unwrap_or_else(|| {
-            if self.scene.gravity.acceleration.iter().any(|&g| g != 0.0) {
+            if self.scene.gravity.is_on() {
                 latent_sim::DEFAULT_ONSET_DIRECTIONS
             } else {
                 0
@@ -924,19 +916,19 @@ impl<'a> Pipeline<'a> {
         })
     }
 
-    /// The scene's `[reduced] complement_directions` leading [`Complement`] directions, k × c
-    /// column-major, or when absent [`Complement::default_count`] of them (empty, and no stage
-    /// run, for an explicit 0).
+    /// How many [`Complement`] directions the neural methods take: the scene's `[reduced]
+    /// complement_directions`, or when absent [`Complement::default_count`] (no stage run for
+    /// an explicit 0).
     ///
     /// # Errors
     /// When the residuals have fewer directions than asked for, or a stage fails.
-    pub fn complement_columns(&mut self, progress: Progress<'_>) -> Result<Vec<f64>> {
+    pub fn complement_count(&mut self, progress: Progress<'_>) -> Result<usize> {
         if self.scene.reduced.complement_directions == Some(0) {
-            return Ok(Vec::new());
+            return Ok(0);
         }
         let c = self.complement(progress)?;
         let available = c.singular_values.len();
-        let count = match self.scene.reduced.complement_directions {
+        Ok(match self.scene.reduced.complement_directions {
             Some(count) if count > available => bail!(
                 "{}: reduced.complement_directions = {count}, but the autoencoder's residuals \
                  have only {available} directions (the PCA dimension or the number of \
@@ -945,7 +937,20 @@ impl<'a> Pipeline<'a> {
             ),
             Some(count) => count,
             None => c.default_count(),
-        };
+        })
+    }
+
+    /// The leading [`Pipeline::complement_count`] [`Complement`] directions, k × c
+    /// column-major (empty, and no stage run, for an explicit 0).
+    ///
+    /// # Errors
+    /// As [`Pipeline::complement_count`].
+    pub fn complement_columns(&mut self, progress: Progress<'_>) -> Result<Vec<f64>> {
+        let count = self.complement_count(progress)?;
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        let c = self.complement(progress)?;
         Ok(c.directions[..c.k * count].to_vec())
     }
 
