@@ -207,23 +207,14 @@ impl Page<'_> {
         .map(drop)
     }
 
-    /// One finger: `touchStart`, `touchMove` (at x, y) or `touchEnd`.
-    fn touch(&mut self, kind: &str, x: f64, y: f64) -> Result<()> {
-        let points = if kind == "touchEnd" {
-            json!([])
-        } else {
-            json!([{ "x": x, "y": y, "id": 0 }])
-        };
-        self.call(
-            "Input.dispatchTouchEvent",
-            json!({ "type": kind, "touchPoints": points }),
-        )
-        .map(drop)
-    }
-
-    /// Two fingers at `a` and `b` (`touchStart` or `touchMove`).
-    fn two_fingers(&mut self, kind: &str, a: [f64; 2], b: [f64; 2]) -> Result<()> {
-        let points = json!([{ "x": a[0], "y": a[1], "id": 0 }, { "x": b[0], "y": b[1], "id": 1 }]);
+    /// Fingers at `points` (finger i has id i): `touchStart`, `touchMove`, or `touchEnd`
+    /// with none left.
+    fn touch(&mut self, kind: &str, points: &[[f64; 2]]) -> Result<()> {
+        let points: Vec<Value> = points
+            .iter()
+            .enumerate()
+            .map(|(id, p)| json!({ "x": p[0], "y": p[1], "id": id }))
+            .collect();
         self.call(
             "Input.dispatchTouchEvent",
             json!({ "type": kind, "touchPoints": points }),
@@ -238,21 +229,21 @@ impl Page<'_> {
                 self.mouse("mouseMoved", x, y, 0)?;
                 self.mouse("mousePressed", x, y, 1)
             }
-            Input::Finger => self.touch("touchStart", x, y),
+            Input::Finger => self.touch("touchStart", &[[x, y]]),
         }
     }
 
     fn move_to(&mut self, input: Input, x: f64, y: f64) -> Result<()> {
         match input {
             Input::Mouse => self.mouse("mouseMoved", x, y, 1),
-            Input::Finger => self.touch("touchMove", x, y),
+            Input::Finger => self.touch("touchMove", &[[x, y]]),
         }
     }
 
     fn let_go(&mut self, input: Input, x: f64, y: f64) -> Result<()> {
         match input {
             Input::Mouse => self.mouse("mouseReleased", x, y, 0),
-            Input::Finger => self.touch("touchEnd", x, y),
+            Input::Finger => self.touch("touchEnd", &[]),
         }
     }
 }
@@ -274,12 +265,12 @@ fn pinch(page: &mut Page<'_>) -> Result<()> {
     };
     let before = distance(page)?;
     let (x, y) = (640.0, 780.0);
-    page.two_fingers("touchStart", [x - 50.0, y], [x + 50.0, y])?;
+    page.touch("touchStart", &[[x - 50.0, y], [x + 50.0, y]])?;
     for k in 1..=10 {
         let half = 50.0 + 5.0 * f64::from(k);
-        page.two_fingers("touchMove", [x - half, y], [x + half, y])?;
+        page.touch("touchMove", &[[x - half, y], [x + half, y]])?;
     }
-    page.touch("touchEnd", x, y)?;
+    page.touch("touchEnd", &[])?;
     let ratio = distance(page)? / before;
     if (ratio - 0.5).abs() > 1e-9 {
         return Err(format!(
