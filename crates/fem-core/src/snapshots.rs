@@ -15,11 +15,11 @@ use std::sync::Mutex;
 
 use rayon::prelude::*;
 
-use crate::FemError;
 use crate::forces::{ExternalForce, ForceKind};
 use crate::integrator::{FullSpaceModel, NewtonParts, Simulator, TimeConfig};
 use crate::optim::SolverConfig;
 use crate::rng::SplitMix64;
+use crate::{FemError, Mat3, Vec3};
 
 /// Kinds of generated schedules.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -334,6 +334,25 @@ impl StiffnessProbe {
         vertices: &[usize],
         direction: [f64; 3],
     ) -> f64 {
+        let mean = Vec3::from(direction).dot(&self.mean_response(model, vertices, direction));
+        if mean > 0.0 { 1.0 / mean } else { 0.0 }
+    }
+
+    /// The patch's compliance G A⁻¹ Gᵀ (3×3, symmetric): column c is the mean displacement of
+    /// `vertices` under a unit total load along axis c spread evenly over them (G averages the
+    /// patch's vertices; pinned components take no load and do not move).
+    pub fn patch_compliance(&self, model: &FullSpaceModel, vertices: &[usize]) -> Mat3 {
+        let mut c = Mat3::zeros();
+        for axis in 0..3 {
+            let mut load = [0.0; 3];
+            load[axis] = 1.0;
+            c.set_column(axis, &self.mean_response(model, vertices, load));
+        }
+        (c + c.transpose()) * 0.5
+    }
+
+    /// Mean displacement of `vertices` under the total load `load` spread evenly over them.
+    fn mean_response(&self, model: &FullSpaceModel, vertices: &[usize], load: [f64; 3]) -> Vec3 {
         let n = model.dofs.num_free();
         let mut x = vec![0.0; n];
         let share = 1.0 / vertices.len() as f64;
@@ -341,21 +360,21 @@ impl StiffnessProbe {
             for c in 0..3 {
                 let r = model.dofs.index[3 * v + c];
                 if r != crate::constraints::FIXED {
-                    x[r] = direction[c] * share;
+                    x[r] = load[c] * share;
                 }
             }
         }
         self.chol.solve_in_place(&mut x);
-        let mut mean = 0.0;
+        let mut mean = Vec3::zeros();
         for &v in vertices {
             for c in 0..3 {
                 let r = model.dofs.index[3 * v + c];
                 if r != crate::constraints::FIXED {
-                    mean += direction[c] * x[r] * share;
+                    mean[c] += x[r] * share;
                 }
             }
         }
-        if mean > 0.0 { 1.0 / mean } else { 0.0 }
+        mean
     }
 }
 

@@ -89,7 +89,7 @@
 //! #         ReducedModel::build(ModelSource {
 //! #             model: &model, material: &material, time: &time, basis: &basis, cubature: None,
 //! #             subspace: SubspaceSource::Linear, solver: Default::default(),
-//! #             preconditioning: Default::default(), full_solver: Default::default(),
+//! #             preconditioning: Default::default(), spring_compliance: true, full_solver: Default::default(),
 //! #             rows: Rows::Used, provenance: Default::default(),
 //! #         }).unwrap()
 //! #     }

@@ -254,6 +254,11 @@ pub struct ReducedSpace {
     /// and linear functions of q, and no force vertex is ever decoded.
     pub(crate) force_gram: Vec<Vec<f64>>,
     force_sums: Vec<Vec<f64>>,
+    /// Per force, R = K/k_f: a spring pulls its patch's mean ū towards its target w with the
+    /// 3×3 stiffness K instead of k_f I (the identity unless
+    /// [`Self::set_spring_compliance`] softened it). Its `force_gram` then holds
+    /// G + S(R − I)Sᵀ/n.
+    force_pull: Vec<Mat3>,
     /// How the elastic energy is evaluated (chosen by [`ReducedSpace::new`]).
     elastic_path: ElasticPath,
 }
@@ -500,6 +505,7 @@ impl ReducedSpace {
             element_scales: Vec::new(),
             force_gram: Vec::with_capacity(model.forces.len()),
             force_sums: Vec::with_capacity(model.forces.len()),
+            force_pull: Vec::with_capacity(model.forces.len()),
             elastic_path: ElasticPath::Vertices,
         };
         space.packed = PackedRows::new(&space, &space.touched);
@@ -517,10 +523,19 @@ impl ReducedSpace {
     /// [`ReducedError::NoBasisRows`] when a vertex of `f` has no rows in this space (or does
     /// not exist).
     pub fn push_force(&mut self, f: &ExternalForce) -> Result<(), ReducedError> {
-        let k = self.k;
         if let Some(&vertex) = f.vertices.iter().find(|&&v| !self.has_rows(v)) {
             return Err(ReducedError::NoBasisRows { vertex });
         }
+        let (gram, sums) = self.force_terms(f);
+        self.force_gram.push(gram);
+        self.force_sums.push(sums);
+        self.force_pull.push(Mat3::identity());
+        Ok(())
+    }
+
+    /// Σ_v U_vᵀU_v (k×k) and Σ_v U_vᵀ (k×3) over the vertices of `f` (which have rows).
+    fn force_terms(&self, f: &ExternalForce) -> (Vec<f64>, Vec<f64>) {
+        let k = self.k;
         let (mut gram, mut sums) = (vec![0.0; k * k], vec![0.0; 3 * k]);
         for &v in &f.vertices {
             let block = self.rows_of(v);
@@ -532,9 +547,7 @@ impl ReducedSpace {
                 }
             }
         }
-        self.force_gram.push(gram);
-        self.force_sums.push(sums);
-        Ok(())
+        (gram, sums)
     }
 
     /// Removes the terms of force `index` (the later ones move down by one). Does nothing when
@@ -543,7 +556,98 @@ impl ReducedSpace {
         if index < self.force_gram.len() {
             self.force_gram.remove(index);
             self.force_sums.remove(index);
+            self.force_pull.remove(index);
         }
+    }
+
+    /// The compliance Ĉ = G U Â⁻¹ UᵀGᵀ of force `index`'s patch (`f`, the model's force at that
+    /// index) in the basis, with Â = UᵀK₀U + UᵀMU/h² the implicit step's reduced operator at
+    /// rest (UᵀK₀U alone when `h` is None, a quasi-static step) and G the mean over the patch's
+    /// vertices: the mean displacement of the patch the basis allows under a unit load spread
+    /// over it. None when Â cannot be factorised or there is no such force.
+    pub fn patch_compliance(
+        &self,
+        index: usize,
+        f: &ExternalForce,
+        h: Option<f64>,
+    ) -> Option<Mat3> {
+        let (k, sums) = (self.k, self.force_sums.get(index)?);
+        let mass_scale = h.map_or(0.0, |h| 1.0 / (h * h));
+        let a: Vec<f64> = self
+            .rest_stiffness
+            .iter()
+            .zip(&self.mass)
+            .map(|(kk, m)| kk + mass_scale * m)
+            .collect();
+        let mut factor = crate::dense_factor::DenseFactor::default();
+        if !factor.try_factor(&a, k, 0.0) {
+            return None;
+        }
+        // UᵀGᵀ = S/n, S the k×3 sums.
+        let mut x = sums.clone();
+        for c in 0..3 {
+            factor.solve_in_place(&mut x[c * k..(c + 1) * k]);
+        }
+        let share = 1.0 / f.vertices.len().max(1) as f64;
+        Some(Mat3::from_fn(|r, c| {
+            share * share * dot(&sums[r * k..(r + 1) * k], &x[c * k..(c + 1) * k])
+        }))
+    }
+
+    /// Sets how spring `index` (`f`, the model's force at that index) pulls its patch: with
+    /// `missing` = C, the patch compliance the subspace lacks, its mean is pulled with K =
+    /// (I/k_f + C)⁻¹ instead of k_f I, the stiffness of the spring in series with what the
+    /// subspace cannot deform; with None as the model's spring. Each call starts from the
+    /// spring's own terms, so calls do not compound.
+    pub fn set_spring_compliance(
+        &mut self,
+        index: usize,
+        f: &ExternalForce,
+        missing: Option<&Mat3>,
+    ) {
+        if index >= self.force_gram.len() {
+            return;
+        }
+        let (mut gram, sums) = self.force_terms(f);
+        let mut pull = Mat3::identity();
+        let ks = f.stiffness;
+        if let Some(c) = missing.filter(|_| f.kind == ForceKind::Spring && ks > 0.0)
+            && let Some(stiff) = (Mat3::identity() / ks + c).try_inverse()
+        {
+            // G' = Σ_v (U_v − Ū)ᵀ(U_v − Ū) + S R Sᵀ/n (Ū = Sᵀ/n the patch's mean rows): the
+            // spread about the mean and the softened pull on it, each a sum of squares, so
+            // that G' stays semidefinite however stiff the spring (G + S(R − I)Sᵀ/n, the same
+            // matrix, cancels to round-off of either sign).
+            let k = self.k;
+            let n = f.vertices.len() as f64;
+            pull = stiff / ks;
+            gram.fill(0.0);
+            let mut centred = vec![0.0; k];
+            for &v in &f.vertices {
+                let block = self.rows_of(v);
+                for c in 0..3 {
+                    for ((x, r), s) in centred
+                        .iter_mut()
+                        .zip(&block[c * k..(c + 1) * k])
+                        .zip(&sums[c * k..(c + 1) * k])
+                    {
+                        *x = r - s / n;
+                    }
+                    for (b, &xb) in centred.iter().enumerate() {
+                        axpy(xb, &centred, &mut gram[b * k..(b + 1) * k]);
+                    }
+                }
+            }
+            for b in 0..k {
+                for r in 0..3 {
+                    let w: f64 = (0..3).map(|c| pull[(r, c)] * sums[c * k + b]).sum::<f64>() / n;
+                    axpy(w, &sums[r * k..(r + 1) * k], &mut gram[b * k..(b + 1) * k]);
+                }
+            }
+        }
+        self.force_gram[index] = gram;
+        self.force_sums[index] = sums;
+        self.force_pull[index] = pull;
     }
 
     /// Whether the space holds the rows of vertex `v`.
@@ -686,7 +790,9 @@ impl ReducedSpace {
     ///
     /// A spring pulls each of its n vertices towards the offset v(t) with stiffness κ = k_f/n:
     /// ½κ Σ_v |U_v q − v|² = ½κ (qᵀGq − 2 qᵀSv + n|v|²), gradient κ(Gq − Sv), with G = Σ_v U_vᵀU_v
-    /// and S = Σ_v U_vᵀ precomputed. A point load f(t) spread over n vertices: −qᵀSf/n.
+    /// and S = Σ_v U_vᵀ precomputed. A softened spring ([`Self::set_spring_compliance`]) has v
+    /// replaced by Rv in the linear and constant terms and its own G. A point load f(t) spread
+    /// over n vertices: −qᵀSf/n.
     pub fn force_energy_gradient(
         &self,
         model: &FullSpaceModel,
@@ -723,13 +829,14 @@ impl ReducedSpace {
                     axpy(qj, &self.force_gram[force][j * k..(j + 1) * k], gq);
                 }
                 let quadratic = dot(q, gq);
+                let pulled = self.force_pull[force] * value;
                 let mut linear = 0.0;
                 for c in 0..3 {
-                    linear += value[c] * dot(column(c), q);
-                    axpy(-value[c], column(c), gq);
+                    linear += pulled[c] * dot(column(c), q);
+                    axpy(-pulled[c], column(c), gq);
                 }
                 axpy(kappa, gq, grad_q);
-                let constant = n * value.norm_squared();
+                let constant = n * value.dot(&pulled);
                 let energy = 0.5 * kappa * (quadratic - 2.0 * linear + constant);
                 let size = 0.5 * kappa * (quadratic.abs() + 2.0 * linear.abs() + constant);
                 (energy, size)

@@ -151,6 +151,7 @@ pub fn reduced_model(
         subspace,
         solver,
         preconditioning: scene.reduced.preconditioner,
+        spring_compliance: scene.reduced.spring_compliance,
         full_solver: scene.solver.clone(),
         rows,
         provenance: Provenance {

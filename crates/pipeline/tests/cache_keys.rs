@@ -243,6 +243,12 @@ fn variants() -> Vec<Variant> {
             "[reduced]\ncomplement_directions = 2\n\n[training]",
             NONE,
         ),
+        v(
+            "reduced.spring_compliance",
+            "[training]",
+            "[reduced]\nspring_compliance = false\n\n[training]",
+            NONE,
+        ),
         // [[force]]: the scene's own loads; stages use the generated schedules instead.
         v(
             "force",

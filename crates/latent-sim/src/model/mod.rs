@@ -44,6 +44,9 @@ pub struct ReducedModel {
     /// Each reduced step's solve, as `cargo xtask run` measures it (`[reduced]` over `[solver]`).
     pub solver: SolverSettings,
     pub preconditioning: Preconditioning,
+    /// Whether springs pull through the patch compliance the basis lacks
+    /// ([`crate::ReducedSimulator::set_spring_compliance`]; `[reduced] spring_compliance`).
+    pub spring_compliance: bool,
     /// The scene's full-space `[solver]`, for [`crate::FullRuntime::from_model`].
     pub full_solver: SolverSettings,
     /// Basis rows of the vertices in use and the reduced matrices of the whole basis.
@@ -180,6 +183,7 @@ pub struct ModelSource<'a> {
     pub subspace: SubspaceSource<'a>,
     pub solver: SolverConfig,
     pub preconditioning: Preconditioning,
+    pub spring_compliance: bool,
     pub full_solver: SolverConfig,
     pub rows: Rows,
     pub provenance: Provenance,
@@ -202,6 +206,7 @@ impl ReducedModel {
             subspace,
             solver,
             preconditioning,
+            spring_compliance,
             full_solver,
             rows,
             provenance,
@@ -242,6 +247,7 @@ impl ReducedModel {
             quasi_static: time.quasi_static,
             solver: SolverSettings::from(&solver),
             preconditioning,
+            spring_compliance,
             full_solver: SolverSettings::from(&full_solver),
             space: space.parts(&keep),
             cubature: cubature.cloned(),

@@ -112,6 +112,7 @@ impl ReducedRuntime {
             }
         };
         each!(&mut sim, s => s.preconditioning = model.preconditioning);
+        each!(&mut sim, s => s.set_spring_compliance(model.spring_compliance));
         Ok(Self {
             sim,
             surface_u: vec![0.0; 3 * surface.vertices().len()],

@@ -22,7 +22,7 @@ mod springs;
 pub(crate) use kernels::sandwich;
 use preconditioner::PRECOND_EXTRA_ITERATIONS;
 pub use preconditioner::{PRECOND_MAX_AGE, Preconditioning};
-use springs::SpringTerm;
+use springs::{SpringCompliance, SpringTerm};
 
 /// Latent state: z, and the PCA coefficients q and their velocity q̇ carried between steps.
 #[derive(Debug, Clone, PartialEq)]
@@ -114,6 +114,9 @@ pub struct ReducedSimulator<S: Subspace> {
     /// z̈_n = (ż_n − ż_{n−1})/h, a start hint valid when `zddot_step` is the state's step.
     zddot: Vec<f64>,
     zddot_step: Option<usize>,
+    /// Whether springs pull with the patch compliance the subspace lacks added in series
+    /// ([`Self::set_spring_compliance`]), and the factor that measures it.
+    compliance: SpringCompliance,
 }
 
 /// Reusable buffers of one step.
@@ -235,6 +238,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             next_q: vec![0.0; k],
             zddot: vec![0.0; d],
             zddot_step: None,
+            compliance: SpringCompliance::default(),
             model,
             space,
             subspace,
@@ -245,6 +249,9 @@ impl<S: Subspace> ReducedSimulator<S> {
         let z = sim.state.z.clone();
         sim.subspace.jacobian(&z, &mut sim.work.jac);
         sim.work.jacobian_scale = rms_column_norm(&sim.work.jac, k);
+        for index in 0..sim.model.forces.len() {
+            sim.soften_spring(index);
+        }
         Ok(sim)
     }
 
@@ -320,8 +327,10 @@ impl<S: Subspace> ReducedSimulator<S> {
     pub fn add_force(&mut self, force: ExternalForce) -> Result<usize, ReducedError> {
         self.space.push_force(&force)?;
         self.model.forces.push(force);
+        let index = self.model.forces.len() - 1;
+        self.soften_spring(index);
         self.forces_changed();
-        Ok(self.model.forces.len() - 1)
+        Ok(index)
     }
 
     /// Removes force `index` (the later ones move down by one) and returns it.

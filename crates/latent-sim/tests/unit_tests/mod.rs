@@ -5,6 +5,7 @@ mod load_check;
 mod model_file;
 mod models;
 mod runtime;
+mod spring_compliance;
 
 use cubature::CubatureRule;
 use fem_core::Vec3;

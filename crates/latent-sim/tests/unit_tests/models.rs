@@ -209,6 +209,7 @@ pub fn build_with_rule(
         subspace,
         solver: solver(),
         preconditioning: Default::default(),
+        spring_compliance: true,
         full_solver: solver(),
         rows,
         provenance: Provenance {
