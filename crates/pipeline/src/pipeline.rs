@@ -191,6 +191,30 @@ pub struct FittedCubature {
     pub fit_seconds: f64,
 }
 
+/// W F with FFᵀ = (WᵀÂW)⁺ (`w` k×m, `a` = Â k×k): the tangent whose reduced forces Fᵀ Wᵀ f
+/// measure a force error by the step displacement it makes, δfᵀ(WᵀÂW)⁻¹δf. F = V Λ^{-1/2} from
+/// the eigenpairs of WᵀÂW; directions with eigenvalues below 10⁻¹² of the largest (W not of full
+/// rank) are dropped, their columns left zero.
+fn whitened(w: faer::MatRef<'_, f64>, a: faer::MatRef<'_, f64>) -> faer::Mat<f64> {
+    let wa = w.transpose() * a * w;
+    let m = wa.nrows();
+    let sym = faer::Mat::<f64>::from_fn(m, m, |r, c| 0.5 * (wa[(r, c)] + wa[(c, r)]));
+    let Ok(eigen) = sym.self_adjoint_eigen(faer::Side::Lower) else {
+        return w.to_owned();
+    };
+    let (vectors, values) = (eigen.U(), eigen.S());
+    let top = (0..m).map(|c| values[c]).fold(0.0, f64::max);
+    let f = faer::Mat::<f64>::from_fn(m, m, |r, c| {
+        let l = values[c];
+        if l > 1e-12 * top {
+            vectors[(r, c)] / l.sqrt()
+        } else {
+            0.0
+        }
+    });
+    w * f
+}
+
 /// ‖A_S w − b‖ / ‖b‖ of elements `selected` with `weights` on `data`.
 fn relative_error(data: &cubature::TrainingMatrix, selected: &[usize], weights: &[f64]) -> f64 {
     let mut r: Vec<f64> = data.b().iter().map(|b| -b).collect();
@@ -622,14 +646,16 @@ impl<'a> Pipeline<'a> {
     }
 
     /// Stage `cubature`: a weighted element set reproducing the PCA subspace's reduced elastic
-    /// forces over the snapshots, with its error on the held-out test trajectory.
+    /// forces over the snapshots, with its error on the held-out test trajectory. Forces are
+    /// compared in the step's compliance norm, δfᵀ(WᵀÂW)⁻¹δf (docs/numerics.md).
     pub fn cubature(&mut self, progress: Progress<'_>) -> Result<Arc<FittedCubature>> {
         let key = self.cubature_key();
         self.stage(Stage::Cubature, key, |p| p.fit_cubature(false, progress))
     }
 
     /// Stage `cubature-neural`: the same for the autoencoder's subspace, with reduced forces
-    /// J(z)ᵀUᵀf at the decoded poses z = encode(q).
+    /// WᵀUᵀf at the decoded poses z = encode(q), W = [J(z) | V] the decoder's Jacobian and the
+    /// complement directions beside it.
     pub fn cubature_neural(&mut self, progress: Progress<'_>) -> Result<Arc<FittedCubature>> {
         let key = self.cubature_neural_key();
         self.stage(Stage::CubatureNeural, key, |p| {
@@ -638,12 +664,16 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn cubature_neural_key(&self) -> u64 {
-        // The complement directions are left out: fitted with them, their forces (stiff
-        // directions, large for small displacements) dominate the relative error and the rule
-        // neglects the decoder's tangent.
+        // The complement directions are fitted beside the decoder's tangent (in the step's
+        // compliance norm their stiffness no longer lets them dominate).
         let mut key = KeyBuilder::new(Stage::CubatureNeural)
             .mix_key(self.cubature_key())
             .mix_key(self.train_key());
+        if self.scene.reduced.complement_directions != Some(0) {
+            key = key
+                .mix_key(self.complement_key())
+                .mix(&self.scene.reduced.complement_directions);
+        }
         // Mixed in only when given, so that the keys of scenes without it stay as they were.
         if let Some(t) = self.scene.cubature.neural_tolerance {
             key = key.mix(&t);
@@ -695,14 +725,44 @@ impl<'a> Pipeline<'a> {
             }
             (decoded, jacobians)
         };
+        // The forces are fitted in the norm of the displacement they make in one step: each
+        // pose's tangent W (I, or [J | C] with the complement directions C beside the decoder's
+        // Jacobian) is replaced by W F with FFᵀ = (WᵀÂW)⁻¹, so the rule's relative error is
+        // ‖δf‖ in (WᵀÂW)⁻¹ over ‖f‖ in it. The two gravity-onset directions are left out of the
+        // fit: with them the suite's neural rules took 5–18 % more elements and ended 0.1–0.4
+        // points further off on three meshes of four (docs/numerics.md).
+        let step = self.reduced_step_operator(&columns, k)?;
+        let beside = if neural {
+            self.complement_columns(progress)?
+        } else {
+            Vec::new()
+        };
+        let linear_tangent = whitened(faer::Mat::<f64>::identity(k, k).as_ref(), step.as_ref());
+        let tangents = |jacobians: &[faer::Mat<f64>], poses: usize| -> Vec<faer::Mat<f64>> {
+            if jacobians.is_empty() {
+                return vec![linear_tangent.clone(); poses];
+            }
+            let c = beside.len() / k;
+            jacobians
+                .iter()
+                .map(|j| {
+                    let d = j.ncols();
+                    let w = faer::Mat::<f64>::from_fn(k, d + c, |r, col| {
+                        if col < d {
+                            j[(r, col)]
+                        } else {
+                            beside[(col - d) * k + r]
+                        }
+                    });
+                    whitened(w.as_ref(), step.as_ref())
+                })
+                .collect()
+        };
         let build = |frames: faer::MatRef<'_, f64>| -> Result<cubature::TrainingMatrix> {
             let (q, jac) = poses(frames);
-            let refs: Vec<faer::MatRef<'_, f64>> = jac.iter().map(|m| m.as_ref()).collect();
-            let p = if refs.is_empty() {
-                cubature::Poses::linear(q.as_ref())
-            } else {
-                cubature::Poses::nonlinear(q.as_ref(), &refs)
-            };
+            let tangents = tangents(&jac, q.ncols());
+            let refs: Vec<faer::MatRef<'_, f64>> = tangents.iter().map(|m| m.as_ref()).collect();
+            let p = cubature::Poses::nonlinear(q.as_ref(), &refs);
             cubature::TrainingMatrix::build(&self.model, &columns, k, p, cfg).map_err(err)
         };
         let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
@@ -732,6 +792,25 @@ impl<'a> Pipeline<'a> {
             held_out_curve,
             fit_seconds,
         })
+    }
+
+    /// Â = UᵀAU (k×k) for the basis columns U (free DOFs × k, column-major), A = K₀ + M/h² the
+    /// implicit step's operator at rest (K₀ alone for a quasi-static scene).
+    fn reduced_step_operator(&self, columns: &[f64], k: usize) -> Result<faer::Mat<f64>> {
+        let h = if self.scene.time.quasi_static {
+            f64::INFINITY
+        } else {
+            self.scene.time.step
+        };
+        let op = fem_core::step_norm::StepOperator::new(&self.model, h)
+            .with_context(|| format!("{}: stage cubature", self.scene.source))?;
+        let n = self.model.dofs.num_free();
+        let mut au = vec![0.0; n * k];
+        au.par_chunks_mut(n)
+            .zip(columns.par_chunks(n))
+            .for_each(|(y, x)| op.apply(x, y));
+        let u = faer::MatRef::from_column_major_slice(columns, n, k);
+        Ok(u.transpose() * faer::MatRef::from_column_major_slice(&au, n, k))
     }
 
     /// Stage `train`: the autoencoder on the snapshots' PCA coefficients, the basis frozen.
@@ -1045,4 +1124,42 @@ pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
     (0..basis.k())
         .flat_map(|j| basis.column(j).iter().copied())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::whitened;
+
+    /// The whitened tangent is Â-orthonormal on W's range, and a column W repeats is dropped
+    /// (its direction left zero), not blown up.
+    #[test]
+    fn a_whitened_tangent_is_orthonormal_in_the_step_operator() {
+        let a = faer::Mat::<f64>::from_fn(4, 4, |i, j| {
+            if i == j {
+                4.0 + i as f64
+            } else {
+                1.0 / (1.0 + (i + j) as f64)
+            }
+        });
+        let w = faer::Mat::<f64>::from_fn(4, 3, |i, j| match j {
+            0 => 1.0 + i as f64,
+            1 => (i as f64 - 1.5).powi(2),
+            _ => 1.0 + i as f64 + (i as f64 - 1.5).powi(2),
+        });
+        let t = whitened(w.as_ref(), a.as_ref());
+        let g = t.transpose() * &a * &t;
+        let mut ones = 0;
+        for i in 0..3 {
+            for j in 0..3 {
+                let want = if i == j && g[(i, i)] > 0.5 { 1.0 } else { 0.0 };
+                assert!(
+                    (g[(i, j)] - want).abs() < 1e-9,
+                    "TᵀÂT[{i},{j}] = {}",
+                    g[(i, j)]
+                );
+            }
+            ones += usize::from(g[(i, i)] > 0.5);
+        }
+        assert_eq!(ones, 2, "W has rank 2");
+    }
 }

@@ -79,9 +79,12 @@ impl Stage {
             //    (round-off).
             Stage::Snapshots | Stage::SnapshotsShard | Stage::Reference => 8,
             // 2: the held-out error along the greedy path is stored with the rule.
-            Stage::Cubature => 2,
+            // 3: forces fitted in the step's compliance norm (other rules).
+            Stage::Cubature => 3,
             // 3: the decoder's Jacobian from SIMD kernels (round-off).
-            Stage::CubatureNeural => 3,
+            // 4: forces fitted in the step's compliance norm, with the complement directions
+            //    beside the decoder's Jacobian (other rules).
+            Stage::CubatureNeural => 4,
             Stage::Pca => 1,
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
             // 3: with the snapshots' energy and the latent dimension.
@@ -151,8 +154,8 @@ mod tests {
                 ("snapshots", 8),
                 ("snapshots-shard", 8),
                 ("pca", 1),
-                ("cubature", 2),
-                ("cubature-neural", 3),
+                ("cubature", 3),
+                ("cubature-neural", 4),
                 ("train", 5),
                 ("complement", 3),
                 ("reference", 8),

@@ -241,7 +241,7 @@ fn variants() -> Vec<Variant> {
             "reduced.complement_directions",
             "[training]",
             "[reduced]\ncomplement_directions = 2\n\n[training]",
-            NONE,
+            &[Stage::CubatureNeural],
         ),
         v(
             "reduced.spring_compliance",
