@@ -737,11 +737,19 @@ impl<'a> Pipeline<'a> {
         } else {
             Vec::new()
         };
-        let linear_tangent = whitened(faer::Mat::<f64>::identity(k, k).as_ref(), step.as_ref());
-        let tangents = |jacobians: &[faer::Mat<f64>], poses: usize| -> Vec<faer::Mat<f64>> {
-            if jacobians.is_empty() {
-                return vec![linear_tangent.clone(); poses];
+        // For PCA the whitening is one change of basis: U F with coefficients FᵀÂq (Â is
+        // positive definite, so F is invertible and UF·FᵀÂq = Uq), and no pose needs a tangent.
+        let whitened_basis = (!neural).then(|| {
+            let f = whitened(faer::Mat::<f64>::identity(k, k).as_ref(), step.as_ref());
+            let nf = columns.len() / k;
+            let uf = faer::MatRef::from_column_major_slice(&columns, nf, k) * &f;
+            let mut flat = Vec::with_capacity(nf * k);
+            for c in 0..k {
+                flat.extend((0..nf).map(|r| uf[(r, c)]));
             }
+            (flat, f.transpose() * &step)
+        });
+        let tangents = |jacobians: &[faer::Mat<f64>]| -> Vec<faer::Mat<f64>> {
             let c = beside.len() / k;
             jacobians
                 .iter()
@@ -760,7 +768,12 @@ impl<'a> Pipeline<'a> {
         };
         let build = |frames: faer::MatRef<'_, f64>| -> Result<cubature::TrainingMatrix> {
             let (q, jac) = poses(frames);
-            let tangents = tangents(&jac, q.ncols());
+            if let Some((basis, to)) = &whitened_basis {
+                let q = to * &q;
+                let p = cubature::Poses::linear(q.as_ref());
+                return cubature::TrainingMatrix::build(&self.model, basis, k, p, cfg).map_err(err);
+            }
+            let tangents = tangents(&jac);
             let refs: Vec<faer::MatRef<'_, f64>> = tangents.iter().map(|m| m.as_ref()).collect();
             let p = cubature::Poses::nonlinear(q.as_ref(), &refs);
             cubature::TrainingMatrix::build(&self.model, &columns, k, p, cfg).map_err(err)
