@@ -29,7 +29,7 @@ use crate::Subspace;
 use crate::reduced::{ReducedSpace, axpy};
 
 /// Whether springs are softened, and the factor of the full step's operator at rest that
-/// measures the patch compliance (built at the first spring, shared by clones).
+/// measures the patch compliance (built when the first spring needs it).
 #[derive(Debug)]
 pub(super) struct SpringCompliance {
     pub(super) on: bool,
