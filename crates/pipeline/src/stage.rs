@@ -84,7 +84,8 @@ impl Stage {
             // 3: the decoder's Jacobian from SIMD kernels (round-off).
             // 4: forces fitted in the step's compliance norm, with the complement directions
             //    beside the decoder's Jacobian (other rules).
-            Stage::CubatureNeural => 4,
+            // 5: poses completed by the complement directions (other rules).
+            Stage::CubatureNeural => 5,
             // 2: the default explained energy 1 − 10⁻⁷ instead of 1 − 10⁻⁶ (scenes naming no rule).
             Stage::Pca => 2,
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
@@ -156,7 +157,7 @@ mod tests {
                 ("snapshots-shard", 8),
                 ("pca", 2),
                 ("cubature", 3),
-                ("cubature-neural", 4),
+                ("cubature-neural", 5),
                 ("train", 5),
                 ("complement", 3),
                 ("reference", 8),
