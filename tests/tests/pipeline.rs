@@ -7,6 +7,21 @@ use pipeline::simulate::Method;
 use pipeline::stage::Stage;
 use tests::{TINY, no_progress, scene, scratch_dir};
 
+/// `methods` on test trajectory 0, writing no frames under `out`: their report rows.
+fn run_methods(
+    p: &mut Pipeline<'_>,
+    out: &std::path::Path,
+    methods: &[Method],
+) -> Vec<pipeline::run::MethodReport> {
+    let opts = RunOptions {
+        out: out.to_path_buf(),
+        every: 0,
+        methods: methods.to_vec(),
+        trajectory: 0,
+    };
+    run(p, &opts, &no_progress, &mut |_, _, _| {}).unwrap()
+}
+
 fn stages(p: &Pipeline<'_>) -> Vec<(Stage, bool)> {
     p.outcomes.iter().map(|o| (o.stage, o.cached)).collect()
 }
@@ -242,13 +257,7 @@ fn onset_directions_reach_the_neural_methods() {
     let s = scene(&text);
     let out = scratch_dir("pipeline-onset");
     let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
-    let opts = RunOptions {
-        out: out.clone(),
-        every: 0,
-        methods: vec![Method::Neural, Method::NeuralCubature],
-        trajectory: 0,
-    };
-    let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let rows = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);
     for r in &rows {
         assert_eq!(r.dim, 4, "{r:?}");
         assert!(r.failure.is_none() && r.mean_rel_error.is_finite(), "{r:?}");
@@ -301,19 +310,13 @@ fn linear_directions_default_to_the_counts_chosen() {
              complement)"
         )
     );
-    let opts = RunOptions {
-        out: out.clone(),
-        every: 0,
-        methods: vec![Method::Neural, Method::NeuralCubature],
-        trajectory: 0,
-    };
-    let chosen = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let chosen = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);
     let written = scene(&format!(
         "{TINY}[reduced]\nonset_directions = {}\ncomplement_directions = {count}\n",
         latent_sim::DEFAULT_ONSET_DIRECTIONS
     ));
     let mut p = Pipeline::new(&written, &out.join("cache")).unwrap();
-    let named = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let named = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);
     for (a, b) in chosen.iter().zip(&named) {
         assert_eq!((a.dim, &a.frame_errors), (b.dim, &b.frame_errors));
     }
@@ -371,18 +374,12 @@ fn complement_directions_complete_the_autoencoder() {
         "{residual:e} against {sigma2:e}"
     );
 
-    let opts = RunOptions {
-        out: out.clone(),
-        every: 0,
-        methods: vec![Method::Neural],
-        trajectory: 0,
-    };
-    let with = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let with = run_methods(&mut p, &out, &[Method::Neural]);
     let plain = scene(&format!(
         "{TINY}[reduced]\ncomplement_directions = 0\nonset_directions = 0\n"
     ));
     let mut p0 = Pipeline::new(&plain, &out.join("cache")).unwrap();
-    let without = run(&mut p0, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let without = run_methods(&mut p0, &out, &[Method::Neural]);
     let (with, without) = (&with[0], &without[0]);
     assert!(
         with.failure.is_none() && with.mean_rel_error.is_finite(),

@@ -749,11 +749,7 @@ impl<'a> Pipeline<'a> {
             let f = whitened(faer::Mat::<f64>::identity(k, k).as_ref(), step.as_ref());
             let nf = columns.len() / k;
             let uf = faer::MatRef::from_column_major_slice(&columns, nf, k) * &f;
-            let mut flat = Vec::with_capacity(nf * k);
-            for c in 0..k {
-                flat.extend((0..nf).map(|r| uf[(r, c)]));
-            }
-            (flat, f.transpose() * &step)
+            (column_major(uf.as_ref()), f.transpose() * &step)
         });
         let tangents = |jacobians: &[faer::Mat<f64>]| -> Vec<faer::Mat<f64>> {
             let c = beside.len() / k;
@@ -960,9 +956,7 @@ impl<'a> Pipeline<'a> {
             Ok(Complement {
                 k,
                 latent_dim: trained.latent_dim,
-                directions: (0..u.ncols())
-                    .flat_map(|j| (0..k).map(move |i| u[(i, j)]))
-                    .collect(),
+                directions: column_major(u),
                 singular_values: svd.S().column_vector().iter().copied().collect(),
                 snapshot_energy,
                 pca_lost_energy: (snapshot_energy - kept).max(0.0),
@@ -1136,6 +1130,13 @@ fn max_vertex_distance(
         }
     }
     worst.sqrt()
+}
+
+/// A matrix's entries column after column.
+fn column_major(m: faer::MatRef<'_, f64>) -> Vec<f64> {
+    (0..m.ncols())
+        .flat_map(|j| (0..m.nrows()).map(move |i| m[(i, j)]))
+        .collect()
 }
 
 /// U as one column-major slice (n_free × k).

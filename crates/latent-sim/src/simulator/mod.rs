@@ -249,9 +249,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let z = sim.state.z.clone();
         sim.subspace.jacobian(&z, &mut sim.work.jac);
         sim.work.jacobian_scale = rms_column_norm(&sim.work.jac, k);
-        for index in 0..sim.model.forces.len() {
-            sim.soften_spring(index);
-        }
+        sim.soften_springs();
         Ok(sim)
     }
 

@@ -56,10 +56,15 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// spring needs it.
     pub fn set_spring_compliance(&mut self, on: bool) {
         self.compliance.on = on;
+        self.soften_springs();
+        self.forces_changed();
+    }
+
+    /// [`Self::soften_spring`] for every force.
+    pub(super) fn soften_springs(&mut self) {
         for index in 0..self.model.forces.len() {
             self.soften_spring(index);
         }
-        self.forces_changed();
     }
 
     /// See [`Self::set_spring_compliance`].
