@@ -10,7 +10,7 @@ use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use fem_core::optim::{SolverConfig, SolverMethod};
 use latent_sim::{LinearSubspace, ReducedSimulator};
 
-use super::{reduced_space, small_basis};
+use super::{full_rank_basis, reduced_space, small_basis};
 use crate::unit_tests::models::time;
 
 fn newton() -> SolverConfig {
@@ -120,10 +120,7 @@ fn a_softened_spring_pulls_the_reduced_body_with_the_full_steps_force() {
 fn softening_is_the_default_and_vanishes_for_a_complete_basis() {
     let (m, corner) = cornered(4e3, [0.0, 0.02, 0.01]);
     let n = m.dofs.num_free();
-    let mut complete = vec![0.0; n * n];
-    for (j, &d) in m.dofs.free.iter().enumerate() {
-        complete[j * n + j] = 1.0 / m.mass.lumped[d / 3].sqrt();
-    }
+    let complete = full_rank_basis(&m);
     let k = 5;
     let basis = small_basis(&m, k);
     for (basis, k, lacks) in [(complete, n, false), (basis, k, true)] {
