@@ -430,3 +430,25 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
         "{e}"
     );
 }
+
+/// When every training schedule fails at its first step, the snapshots stage says so, with the
+/// solver's error and what to change (a schedule failing later only ends that schedule: see
+/// fem-core's `a_schedule_whose_solve_fails_keeps_its_earlier_frames`).
+#[test]
+fn snapshots_that_never_start_are_an_error_that_says_what_to_change() {
+    let s = scene(&TINY.replace(
+        "tolerance = 1.0e-8",
+        "tolerance = 1.0e-15\nmax_iterations = 1",
+    ));
+    let cache = scratch_dir("pipeline-no-frames");
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let err = format!("{:#}", p.snapshots(&no_progress).unwrap_err());
+    for part in [
+        "tiny.toml",
+        "every training schedule",
+        "did not converge",
+        "[solver] max_iterations",
+    ] {
+        assert!(err.contains(part), "{part:?} missing from: {err}");
+    }
+}

@@ -342,19 +342,36 @@ impl StiffnessProbe {
     /// `vertices` under a unit total load along axis c spread evenly over them (G averages the
     /// patch's vertices; pinned components take no load and do not move).
     pub fn patch_compliance(&self, model: &FullSpaceModel, vertices: &[usize]) -> Mat3 {
+        self.patch_response(model, vertices).0
+    }
+
+    /// [`Self::patch_compliance`] and the displacements behind it: A⁻¹Gᵀ on the free DOFs,
+    /// column-major (free DOFs × 3), column c the response to a unit total load along axis c
+    /// spread evenly over `vertices`.
+    pub fn patch_response(&self, model: &FullSpaceModel, vertices: &[usize]) -> (Mat3, Vec<f64>) {
+        let n = model.dofs.num_free();
+        let mut columns = vec![0.0; 3 * n];
         let mut c = Mat3::zeros();
         for axis in 0..3 {
             let mut load = [0.0; 3];
             load[axis] = 1.0;
-            c.set_column(axis, &self.mean_response(model, vertices, load));
+            let x = &mut columns[axis * n..(axis + 1) * n];
+            self.response(model, vertices, load, x);
+            c.set_column(axis, &patch_mean(model, vertices, x));
         }
-        (c + c.transpose()) * 0.5
+        ((c + c.transpose()) * 0.5, columns)
     }
 
     /// Mean displacement of `vertices` under the total load `load` spread evenly over them.
     fn mean_response(&self, model: &FullSpaceModel, vertices: &[usize], load: [f64; 3]) -> Vec3 {
-        let n = model.dofs.num_free();
-        let mut x = vec![0.0; n];
+        let mut x = vec![0.0; model.dofs.num_free()];
+        self.response(model, vertices, load, &mut x);
+        patch_mean(model, vertices, &x)
+    }
+
+    /// A⁻¹ times the total load `load` spread evenly over `vertices`, into `x` (free DOFs).
+    fn response(&self, model: &FullSpaceModel, vertices: &[usize], load: [f64; 3], x: &mut [f64]) {
+        x.fill(0.0);
         let share = 1.0 / vertices.len() as f64;
         for &v in vertices {
             for c in 0..3 {
@@ -364,18 +381,23 @@ impl StiffnessProbe {
                 }
             }
         }
-        self.chol.solve_in_place(&mut x);
-        let mut mean = Vec3::zeros();
-        for &v in vertices {
-            for c in 0..3 {
-                let r = model.dofs.index[3 * v + c];
-                if r != crate::constraints::FIXED {
-                    mean[c] += x[r] * share;
-                }
+        self.chol.solve_in_place(x);
+    }
+}
+
+/// The mean over `vertices` of the free-DOF displacement `x` (pinned components count as 0).
+fn patch_mean(model: &FullSpaceModel, vertices: &[usize], x: &[f64]) -> Vec3 {
+    let share = 1.0 / vertices.len() as f64;
+    let mut mean = Vec3::zeros();
+    for &v in vertices {
+        for c in 0..3 {
+            let r = model.dofs.index[3 * v + c];
+            if r != crate::constraints::FIXED {
+                mean[c] += x[r] * share;
             }
         }
-        mean
     }
+    mean
 }
 
 /// Free-DOF displacements of every frame of the simulated schedules, one column per frame.
@@ -385,15 +407,31 @@ pub struct SnapshotSet {
     pub dim: usize,
     /// Schedule indices in this set, increasing.
     pub schedules: Vec<usize>,
-    /// Frames recorded per schedule.
+    /// Frames each schedule was to record.
     pub frames_per_schedule: usize,
-    /// Column-major dim × (schedules · frames) displacements.
+    /// Frames recorded per schedule, in the order of `schedules`: `frames_per_schedule`, or fewer
+    /// where the full-space solve failed partway (see `stopped`).
+    pub frames: Vec<usize>,
+    /// The schedules whose full-space solve failed, each with the error: the frames before it
+    /// are kept, the rest of the schedule is not simulated.
+    pub stopped: Vec<StoppedSchedule>,
+    /// Column-major dim × Σ frames displacements, schedule after schedule.
     pub data: Vec<f64>,
+}
+
+/// A schedule whose full-space solve failed at step `frames + 1`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StoppedSchedule {
+    pub index: usize,
+    /// Frames recorded before the failure.
+    pub frames: usize,
+    /// The solver's error.
+    pub error: String,
 }
 
 impl SnapshotSet {
     pub fn num_frames(&self) -> usize {
-        self.schedules.len() * self.frames_per_schedule
+        self.frames.iter().sum()
     }
 
     /// Frame `j` (column) as a slice.
@@ -406,15 +444,20 @@ impl SnapshotSet {
         let first = parts.first().ok_or("no snapshot sets to merge")?;
         let (dim, fps) = (first.dim, first.frames_per_schedule);
         let mut blocks: Vec<(usize, &[f64])> = Vec::new();
+        let mut stopped = Vec::new();
         for p in &parts {
             if p.dim != dim || p.frames_per_schedule != fps {
                 return Err("shards come from different meshes or settings".into());
             }
-            for (k, &s) in p.schedules.iter().enumerate() {
-                blocks.push((s, &p.data[k * fps * dim..(k + 1) * fps * dim]));
+            let mut start = 0;
+            for (&s, &n) in p.schedules.iter().zip(&p.frames) {
+                blocks.push((s, &p.data[start * dim..(start + n) * dim]));
+                start += n;
             }
+            stopped.extend(p.stopped.iter().cloned());
         }
         blocks.sort_by_key(|b| b.0);
+        stopped.sort_by_key(|s: &StoppedSchedule| s.index);
         if blocks.windows(2).any(|w| w[0].0 == w[1].0) {
             return Err("a schedule appears in two shards".into());
         }
@@ -422,6 +465,8 @@ impl SnapshotSet {
             dim,
             schedules: blocks.iter().map(|b| b.0).collect(),
             frames_per_schedule: fps,
+            frames: blocks.iter().map(|b| b.1.len() / dim.max(1)).collect(),
+            stopped,
             data: blocks.iter().flat_map(|b| b.1.iter().copied()).collect(),
         })
     }
@@ -436,6 +481,22 @@ pub fn simulate_schedule(
     solver: &SolverConfig,
     frames: usize,
 ) -> Result<Vec<Vec<f64>>, FemError> {
+    let mut out = Vec::with_capacity(frames);
+    record_schedule(model, forces, gravity_scale, time, solver, frames, &mut out)?;
+    Ok(out)
+}
+
+/// Simulates one schedule from rest, appending each frame's free-DOF displacement to `out`, so
+/// that the frames before a failed step are there for the caller.
+fn record_schedule(
+    model: &FullSpaceModel,
+    forces: Vec<ExternalForce>,
+    gravity_scale: f64,
+    time: &TimeConfig,
+    solver: &SolverConfig,
+    frames: usize,
+    out: &mut Vec<Vec<f64>>,
+) -> Result<(), FemError> {
     let mut m = model.clone();
     m.forces = forces;
     for g in m.gravity_load.iter_mut() {
@@ -447,15 +508,29 @@ pub fn simulate_schedule(
         ..time.clone()
     };
     let mut sim = Simulator::new(m, time, solver.clone())?;
-    let mut out = Vec::with_capacity(frames);
     let mut free = vec![0.0; sim.model.dofs.num_free()];
     for _ in 0..frames {
         sim.step()?;
         sim.model.dofs.gather(&sim.state.u, &mut free);
         out.push(free.clone());
     }
-    Ok(out)
+    Ok(())
 }
+
+/// Whether `e` is a failure of the solve itself (not converged, no descent, a non-finite value,
+/// an inverted element), after which a schedule's earlier frames are still good data.
+fn is_solve_failure(e: &FemError) -> bool {
+    matches!(
+        e,
+        FemError::NotConverged { .. }
+            | FemError::LineSearchFailed { .. }
+            | FemError::NonFinite { .. }
+            | FemError::InvertedElement { .. }
+    )
+}
+
+/// A schedule's frames, and the solve failure that ended it early, if one did.
+type Recorded = (Vec<Vec<f64>>, Option<FemError>);
 
 /// Simulates the schedules `shard.0, shard.0 + shard.1, …` of `config` in parallel.
 /// `progress(done)` is called (from any thread) after each finished schedule.
@@ -474,40 +549,61 @@ pub fn generate(
     // out of order).
     let done = Mutex::new(0);
     let probe = StiffnessProbe::new(model, config.frames_per_schedule as f64 * time.step)?;
-    let results: Vec<Result<Vec<Vec<f64>>, FemError>> = schedules
+    let results: Vec<Result<Recorded, FemError>> = schedules
         .par_iter()
         .with_max_len(1)
         .map(|&s| {
             let forces = config.schedule(model, &probe, s, time.step);
-            let r = simulate_schedule(
+            let mut frames = Vec::with_capacity(config.frames_per_schedule);
+            let r = record_schedule(
                 model,
                 forces,
                 config.gravity_scale,
                 time,
                 solver,
                 config.frames_per_schedule,
-            )
-            .map_err(|e| FemError::Schedule {
-                index: s,
-                source: Box::new(e),
-            });
+                &mut frames,
+            );
             let mut count = done.lock().unwrap_or_else(|e| e.into_inner());
             *count += 1;
             progress(*count);
-            r
+            match r {
+                Ok(()) => Ok((frames, None)),
+                // A solve that fails partway (a grab that turns the body inside out, a
+                // stagnating Newton solve far from rest) ends the schedule, not the family: the
+                // frames before it are poses the full simulation reached.
+                Err(e) if is_solve_failure(&e) => Ok((frames, Some(e))),
+                Err(e) => Err(FemError::Schedule {
+                    index: s,
+                    source: Box::new(e),
+                }),
+            }
         })
         .collect();
     let dim = model.dofs.num_free();
     let mut data = Vec::with_capacity(dim * schedules.len() * config.frames_per_schedule);
-    for r in results {
-        for frame in r? {
-            data.extend_from_slice(&frame);
+    let mut recorded = Vec::with_capacity(schedules.len());
+    let mut stopped = Vec::new();
+    for (&s, r) in schedules.iter().zip(results) {
+        let (frames, failure) = r?;
+        recorded.push(frames.len());
+        for frame in &frames {
+            data.extend_from_slice(frame);
+        }
+        if let Some(e) = failure {
+            stopped.push(StoppedSchedule {
+                index: s,
+                frames: frames.len(),
+                error: e.to_string(),
+            });
         }
     }
     Ok(SnapshotSet {
         dim,
         schedules,
         frames_per_schedule: config.frames_per_schedule,
+        frames: recorded,
+        stopped,
         data,
     })
 }

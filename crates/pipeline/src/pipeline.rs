@@ -72,12 +72,23 @@ pub trait StageSummary {
 
 impl StageSummary for SnapshotSet {
     fn summary(&self) -> String {
-        format!(
+        let mut s = format!(
             "{} schedules × {} frames = {} training poses",
             self.schedules.len(),
             self.frames_per_schedule,
             self.num_frames()
-        )
+        );
+        if let Some(first) = self.stopped.first() {
+            s += &format!(
+                "; {} of them stopped early where the full-space solve failed, their earlier \
+                 frames kept (schedule {} after {} frames: {})",
+                self.stopped.len(),
+                first.index,
+                first.frames,
+                first.error
+            );
+        }
+        s
     }
 }
 
@@ -535,8 +546,25 @@ impl<'a> Pipeline<'a> {
         let key = self.snapshots_key();
         self.stage(Stage::Snapshots, key, |p| {
             let cfg = p.scene.training();
-            p.simulate_shard(&cfg, (0, 1), progress)
+            let set = p.simulate_shard(&cfg, (0, 1), progress)?;
+            p.some_frames(set)
         })
+    }
+
+    /// `set`, or an error saying why it holds no frame at all (every schedule failed at its
+    /// first step) and what to change.
+    fn some_frames(&self, set: SnapshotSet) -> Result<SnapshotSet> {
+        match set.stopped.first() {
+            Some(s) if set.num_frames() == 0 => bail!(
+                "{}: stage snapshots: every training schedule's full-space solve failed at its \
+                 first step (schedule {}: {}); milder loads (`[training] offset`, `stiffness`), a \
+                 smaller `[time] step` or a larger `[solver] max_iterations` would let it start",
+                self.scene.source,
+                s.index,
+                s.error
+            ),
+            _ => Ok(set),
+        }
     }
 
     fn simulate_shard(
@@ -602,7 +630,9 @@ impl<'a> Pipeline<'a> {
                 .with_context(|| format!("shard {index}/{count} is missing or unusable; run `cargo xtask snapshots --shard {index}/{count}`"))?;
                 parts.push(part);
             }
-            SnapshotSet::merge(parts).map_err(|e| anyhow::anyhow!("merging shards: {e}"))
+            let set =
+                SnapshotSet::merge(parts).map_err(|e| anyhow::anyhow!("merging shards: {e}"))?;
+            p.some_frames(set)
         })
     }
 

@@ -77,7 +77,10 @@ impl Stage {
             //    (iterates within tolerance).
             // 8: the substitutions multiply by the diagonal's reciprocals instead of dividing
             //    (round-off).
-            Stage::Snapshots | Stage::SnapshotsShard | Stage::Reference => 8,
+            // 9 (not the reference): a schedule whose solve fails partway keeps its earlier
+            //    frames, and the set says which stopped.
+            Stage::Snapshots | Stage::SnapshotsShard => 9,
+            Stage::Reference => 8,
             // 2: the held-out error along the greedy path is stored with the rule.
             // 3: forces fitted in the step's compliance norm (other rules).
             Stage::Cubature => 3,
@@ -153,8 +156,8 @@ mod tests {
         assert_eq!(
             found,
             [
-                ("snapshots", 8),
-                ("snapshots-shard", 8),
+                ("snapshots", 9),
+                ("snapshots-shard", 9),
                 ("pca", 2),
                 ("cubature", 3),
                 ("cubature-neural", 5),

@@ -495,3 +495,85 @@ fn spread_patches_cover_the_surface_and_change_nothing_else() {
         );
     }
 }
+
+/// A training schedule whose full-space solve fails partway ends there, not the family: its
+/// earlier frames are kept (the same as a solver that does not fail computes), the set says which
+/// schedule stopped and why, and shards merge to the same set.
+#[test]
+fn a_schedule_whose_solve_fails_keeps_its_earlier_frames() {
+    use fem_core::snapshots::{ScheduleConfig, ScheduleKind, generate, simulate_schedule};
+    let m = model(
+        beam([10, 2, 2]),
+        MaterialModel::StableNeoHookean,
+        1e5,
+        [0.0, -9.81, 0.0],
+        vec![],
+    );
+    // Pulls two to three bar lengths away with a stiff spring, and a cap of 4 iterations (16 in
+    // the retry with the other solver): most steps need more.
+    let family = ScheduleConfig {
+        schedules: 4,
+        frames_per_schedule: 30,
+        kinds: vec![ScheduleKind::Pull],
+        offset: [2.0, 3.0],
+        stiffness: [5.0, 10.0],
+        ..ScheduleConfig::training()
+    };
+    let time = dynamic(family.frames_per_schedule);
+    let capped = SolverConfig {
+        method: SolverMethod::Newton,
+        tolerance: 1e-6,
+        max_iterations: 4,
+        ..Default::default()
+    };
+    let set = generate(&m, &family, &time, &capped, (0, 1), &|_| {}).unwrap();
+    assert_eq!(set.schedules, vec![0, 1, 2, 3]);
+    assert!(!set.stopped.is_empty(), "the cap stops some schedule");
+    for s in &set.stopped {
+        assert!(s.frames < family.frames_per_schedule);
+        assert_eq!(set.frames[s.index], s.frames);
+        assert!(s.error.contains("did not converge") || s.error.contains("line search"));
+    }
+    assert_eq!(set.num_frames(), set.frames.iter().sum::<usize>());
+    assert_eq!(set.data.len(), set.dim * set.num_frames());
+
+    // The kept frames are the ones a solver without the cap reaches.
+    let s = set.stopped.iter().max_by_key(|s| s.frames).unwrap();
+    assert!(s.frames > 0, "the test wants a schedule stopped partway");
+    let probe =
+        fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)
+            .unwrap();
+    let whole = simulate_schedule(
+        &m,
+        family.schedule(&m, &probe, s.index, time.step),
+        1.0,
+        &time,
+        &solver(SolverMethod::Newton, 1e-9),
+        family.frames_per_schedule,
+    )
+    .unwrap();
+    let start: usize = set.frames[..s.index].iter().sum();
+    for (j, reference) in whole.iter().take(s.frames).enumerate() {
+        let kept = set.frame(start + j);
+        let scale = reference.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let diff = kept
+            .iter()
+            .zip(reference)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            diff <= 1e-6 * scale.max(1e-12),
+            "frame {j} of schedule {}: {diff:e} from the uncapped solve ({scale:e})",
+            s.index
+        );
+    }
+
+    let shards: Vec<_> = (0..2)
+        .map(|i| generate(&m, &family, &time, &capped, (i, 2), &|_| {}).unwrap())
+        .collect();
+    assert_eq!(
+        fem_core::snapshots::SnapshotSet::merge(shards).unwrap(),
+        set
+    );
+}
