@@ -12,7 +12,7 @@ use fem_core::constraints::FIXED;
 use fem_core::forces::{ExternalForce, ForceKind};
 use fem_core::integrator::FullSpaceModel;
 use fem_core::material::Material;
-use fem_core::{Mat3, with_material};
+use fem_core::{Mat3, Vec3, with_material};
 use pca::PcaBasis;
 use pulp::{Arch, Simd, WithSimd};
 use simd_kernels::rows::{add_combination, dot_rows};
@@ -571,6 +571,18 @@ impl ReducedSpace {
         f: &ExternalForce,
         h: Option<f64>,
     ) -> Option<Mat3> {
+        self.patch_response(index, f, h).map(|(c, _)| c)
+    }
+
+    /// [`Self::patch_compliance`] and the coefficients behind it, Â⁻¹UᵀGᵀ (k×3,
+    /// column-major): column c is the basis's response to a unit total load along axis c spread
+    /// evenly over the patch.
+    pub fn patch_response(
+        &self,
+        index: usize,
+        f: &ExternalForce,
+        h: Option<f64>,
+    ) -> Option<(Mat3, Vec<f64>)> {
         let (k, sums) = (self.k, self.force_sums.get(index)?);
         let mass_scale = h.map_or(0.0, |h| 1.0 / (h * h));
         let a: Vec<f64> = self
@@ -584,14 +596,23 @@ impl ReducedSpace {
             return None;
         }
         // UᵀGᵀ = S/n, S the k×3 sums.
-        let mut x = sums.clone();
+        let share = 1.0 / f.vertices.len().max(1) as f64;
+        let mut x: Vec<f64> = sums.iter().map(|s| s * share).collect();
         for c in 0..3 {
             factor.solve_in_place(&mut x[c * k..(c + 1) * k]);
         }
-        let share = 1.0 / f.vertices.len().max(1) as f64;
-        Some(Mat3::from_fn(|r, c| {
-            share * share * dot(&sums[r * k..(r + 1) * k], &x[c * k..(c + 1) * k])
-        }))
+        let compliance =
+            Mat3::from_fn(|r, c| share * dot(&sums[r * k..(r + 1) * k], &x[c * k..(c + 1) * k]));
+        Some((compliance, x))
+    }
+
+    /// The mean displacement U q over force `index`'s patch of `n` vertices (zero when there is
+    /// no such force).
+    pub fn patch_mean(&self, index: usize, n: usize, q: &[f64]) -> Vec3 {
+        let (k, share) = (self.k, 1.0 / n.max(1) as f64);
+        self.force_sums.get(index).map_or(Vec3::zeros(), |sums| {
+            Vec3::from_fn(|c, _| share * dot(&sums[c * k..(c + 1) * k], q))
+        })
     }
 
     /// Sets how spring `index` (`f`, the model's force at that index) pulls its patch: with
@@ -648,6 +669,12 @@ impl ReducedSpace {
         self.force_gram[index] = gram;
         self.force_sums[index] = sums;
         self.force_pull[index] = pull;
+    }
+
+    /// R = K/k_f, how force `index` pulls its patch's mean (see [`Self::set_spring_compliance`];
+    /// the identity for a spring as the model has it, None when there is no such force).
+    pub fn spring_pull(&self, index: usize) -> Option<Mat3> {
+        self.force_pull.get(index).copied()
     }
 
     /// Whether the space holds the rows of vertex `v`.

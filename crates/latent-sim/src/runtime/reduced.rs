@@ -162,7 +162,7 @@ impl ReducedRuntime {
         if let Some(vertex) = (0..out.len() / 3).find(|&v| !space.has_rows(v)) {
             return Err(ReducedError::NoBasisRows { vertex }.into());
         }
-        space.reconstruct(&self.sim.state().q, out);
+        each!(&self.sim, s => s.displacement_into(out));
         Ok(())
     }
 

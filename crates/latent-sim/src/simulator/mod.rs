@@ -343,6 +343,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             });
         }
         self.space.remove_force(index);
+        self.remove_dent(index);
         self.forces_changed();
         Ok(self.model.forces.remove(index))
     }
@@ -710,11 +711,17 @@ impl<S: Subspace> ReducedSimulator<S> {
         }
     }
 
-    /// The full displacement u = Uq of the current state (3 per vertex).
+    /// The full displacement of the current state (3 per vertex): u = Uq, plus the dent each
+    /// softened spring makes in its patch (see [`Self::set_spring_compliance`]).
     pub fn full_displacement(&self) -> Vec<f64> {
         let mut u = vec![0.0; self.model.num_full()];
-        self.space.reconstruct(&self.state.q, &mut u);
+        self.displacement_into(&mut u);
         u
+    }
+
+    /// [`Self::full_displacement`] into `u` (of the model's full length).
+    pub fn displacement_into(&self, u: &mut [f64]) {
+        self.displacement_with_dents(u);
     }
 }
 

@@ -175,3 +175,62 @@ fn softening_is_the_default_and_vanishes_for_a_complete_basis() {
         }
     }
 }
+
+/// The same step, displaced: the reduced step's force F on the patch is the full one's, and the
+/// displacement the simulator reports adds back the dent the basis lacks, U(q − Â⁻¹UᵀGᵀF) +
+/// A⁻¹GᵀF, which for a linear body is the full step's displacement A⁻¹GᵀF itself. Uq alone
+/// misses it; without softening nothing is added; a removed spring takes its dent with it.
+#[test]
+fn the_reported_displacement_holds_the_dent_the_basis_lacks() {
+    let (ks, w) = (4e3, [0.0, 0.02, 0.01]);
+    let (m, _) = cornered(ks, w);
+    let mut full = Simulator::new(m.clone(), time(1), newton()).unwrap();
+    full.step().unwrap();
+    let k = 5;
+    let basis = small_basis(&m, k);
+    let space = reduced_space(&m, &basis, k, None).unwrap();
+    let distance = |u: &[f64]| {
+        let d: f64 = u
+            .iter()
+            .zip(&full.state.u)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum();
+        let s: f64 = full.state.u.iter().map(|b| b * b).sum();
+        (d / s).sqrt()
+    };
+    let stepped = |on: bool| {
+        let mut red = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            LinearSubspace::new(k),
+            time(1),
+            newton(),
+        )
+        .unwrap();
+        red.set_spring_compliance(on);
+        red.step().unwrap();
+        red
+    };
+    let mut red = stepped(true);
+    let mut uq = vec![0.0; m.num_full()];
+    red.space.reconstruct(&red.state.q, &mut uq);
+    let (dented, bare) = (distance(&red.full_displacement()), distance(&uq));
+    assert!(
+        dented < 1e-7,
+        "with the dent: {dented:.2e} from the full step"
+    );
+    assert!(bare > 1e-2, "Uq alone: only {bare:.2e} from the full step");
+
+    let plain = stepped(false);
+    let mut uq_plain = vec![0.0; m.num_full()];
+    plain.space.reconstruct(&plain.state.q, &mut uq_plain);
+    assert_eq!(plain.full_displacement(), uq_plain, "no softening, no dent");
+
+    red.remove_force(0).unwrap();
+    red.space.reconstruct(&red.state.q, &mut uq);
+    assert_eq!(
+        red.full_displacement(),
+        uq,
+        "the removed spring's dent is gone"
+    );
+}
