@@ -120,7 +120,7 @@ pub use runtime::{
     StepStats, Surface,
 };
 pub use simulator::{
-    PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
+    ActiveDent, PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
     ReducedStepReport,
 };
 pub use subspace::{LinearSubspace, Subspace};

@@ -1,6 +1,7 @@
 //! The runtime of a trained model: [`ReducedRuntime`], built by [`ReducedModel::simulator`].
 
 use fem_core::Vec3;
+use fem_core::constraints::FIXED;
 use fem_core::forces::ExternalForce;
 use fem_core::integrator::FullSpaceModel;
 use fem_core::optim::SolverConfig;
@@ -196,20 +197,44 @@ impl Backend for ReducedRuntime {
         let rows = space
             .vertex_rows(v)
             .ok_or(ReducedError::NoBasisRows { vertex: v })?;
-        let (q, k) = (&self.sim.state().q, space.k);
+        let (q, dents) = each!(&self.sim, s => s.dents());
+        let k = space.k;
+        let index = &self.sim.model().dofs.index;
         let row = |c: usize| -> f64 {
-            rows[c * k..(c + 1) * k]
+            let r = index[3 * v + c];
+            let dent = if r == FIXED {
+                0.0
+            } else {
+                dents.iter().map(|d| d.at(r)).sum()
+            };
+            dent + rows[c * k..(c + 1) * k]
                 .iter()
-                .zip(q)
+                .zip(&q)
                 .map(|(a, b)| a * b)
-                .sum()
+                .sum::<f64>()
         };
         Ok(Vec3::new(row(0), row(1), row(2)))
     }
 
     fn surface_displacements(&mut self) -> &[f64] {
-        self.surface_rows
-            .apply(&self.sim.state().q, &mut self.surface_u);
+        let (q, dents) = each!(&self.sim, s => s.dents());
+        self.surface_rows.apply(&q, &mut self.surface_u);
+        if !dents.is_empty() {
+            let index = &self.sim.model().dofs.index;
+            for (&v, u) in self
+                .surface
+                .vertices()
+                .iter()
+                .zip(self.surface_u.chunks_exact_mut(3))
+            {
+                for (c, uc) in u.iter_mut().enumerate() {
+                    let r = index[3 * v + c];
+                    if r != FIXED {
+                        *uc += dents.iter().map(|d| d.at(r)).sum::<f64>();
+                    }
+                }
+            }
+        }
         &self.surface_u
     }
 
@@ -317,8 +342,7 @@ impl Interactive for ReducedRuntime {
 
     fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {
         buffer_length("surface", self.surface_u.len(), out.len())?;
-        self.surface_rows
-            .apply(&self.sim.state().q, &mut self.surface_u);
+        self.surface_displacements();
         let rest = &self.sim.model().mesh.vertices;
         for ((o, u), &v) in out
             .chunks_exact_mut(3)

@@ -18,6 +18,7 @@ mod gauss_newton;
 mod kernels;
 mod preconditioner;
 mod springs;
+pub use springs::ActiveDent;
 
 pub(crate) use kernels::sandwich;
 use preconditioner::PRECOND_EXTRA_ITERATIONS;

@@ -27,10 +27,10 @@
 
 use std::sync::Arc;
 
-use fem_core::Mat3;
 use fem_core::forces::ForceKind;
 use fem_core::integrator::FullSpaceModel;
 use fem_core::snapshots::StiffnessProbe;
+use fem_core::{Mat3, Vec3};
 
 use super::ReducedSimulator;
 use crate::Subspace;
@@ -57,6 +57,25 @@ impl Default for SpringCompliance {
             dents: Vec::new(),
             failed: false,
         }
+    }
+}
+
+/// An active softened spring's dent: its pull f on the patch and A⁻¹Gᵀ (free DOFs × 3,
+/// column-major), whose product is the displacement the full step's response adds.
+#[derive(Debug, Clone, Copy)]
+pub struct ActiveDent<'a> {
+    pull: Vec3,
+    response: &'a [f64],
+}
+
+impl ActiveDent<'_> {
+    /// The dent's displacement at free DOF `r`.
+    #[inline]
+    pub fn at(&self, r: usize) -> f64 {
+        let n = self.response.len() / 3;
+        (0..3)
+            .map(|c| self.pull[c] * self.response[c * n + r])
+            .sum()
     }
 }
 
@@ -117,9 +136,23 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// The displacement of every vertex (3 per vertex) into `u`: Uq plus the dents of the
     /// active softened springs (see the module's notes).
     pub(super) fn displacement_with_dents(&self, u: &mut [f64]) {
+        let (shifted, dents) = self.dents();
+        self.space.reconstruct(&shifted, u);
+        if dents.is_empty() {
+            return;
+        }
+        for (&d, r) in self.model.dofs.free.iter().enumerate().map(|(r, d)| (d, r)) {
+            u[d] += dents.iter().map(|dent| dent.at(r)).sum::<f64>();
+        }
+    }
+
+    /// What the reported displacement is made of: the coefficients to decode, q less the basis's
+    /// share of each active softened spring's pull, and the dents to add, the pulls' full-space
+    /// responses (see the module's notes).
+    pub fn dents(&self) -> (Vec<f64>, Vec<ActiveDent<'_>>) {
         let (q, t, k) = (&self.state.q, self.state.time, self.space.k);
         let mut shifted = q.clone();
-        let mut pulls = Vec::new();
+        let mut active = Vec::new();
         for (index, dent) in self.compliance.dents.iter().enumerate() {
             let (Some(dent), Some(f)) = (dent, self.model.forces.get(index)) else {
                 continue;
@@ -134,18 +167,12 @@ impl<S: Subspace> ReducedSimulator<S> {
             for c in 0..3 {
                 axpy(-pull[c], &dent.basis[c * k..(c + 1) * k], &mut shifted);
             }
-            pulls.push((pull, dent));
+            active.push(ActiveDent {
+                pull,
+                response: &dent.full,
+            });
         }
-        self.space.reconstruct(&shifted, u);
-        let free = &self.model.dofs.free;
-        for (pull, dent) in pulls {
-            let n = free.len();
-            for c in 0..3 {
-                for (&d, x) in free.iter().zip(&dent.full[c * n..(c + 1) * n]) {
-                    u[d] += pull[c] * x;
-                }
-            }
-        }
+        (shifted, active)
     }
 
     /// C − Ĉ at force `index`'s patch, with its negative eigenvalues (round-off where the
