@@ -9,11 +9,14 @@ use crate::run::MethodReport;
 pub const UNTRUSTED_ERROR: f64 = 0.2;
 
 /// A subspace whose best representation of the test trajectory is further than this from it
-/// does not hold the test's motion: the training data missed it.
+/// does not hold the test's motion: the training data missed it. Warned of only when the
+/// method's own error is that large too: the displacement a reduced method reports adds the
+/// dents its springs make outside the subspace, so it can be closer to the full trajectory than
+/// the subspace is (AutoDef's bar: 3.7 % subspace error, `pca` 1.5 %).
 pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 
 /// Warnings for the reduced methods of a run, in row order; empty when every one is within
-/// [`UNTRUSTED_ERROR`], its subspace within [`UNCOVERED_SUBSPACE_ERROR`] and its trajectory
+/// [`UNTRUSTED_ERROR`], its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`] and its trajectory
 /// within [`OUTSIDE_TRAINING`] of the training poses.
 pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
     let mut out = Vec::new();
@@ -25,7 +28,9 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
                 r.method
             ));
         }
-        if r.subspace_error > UNCOVERED_SUBSPACE_ERROR {
+        if r.subspace_error > UNCOVERED_SUBSPACE_ERROR
+            && r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR
+        {
             out.push(format!(
                 "{}: its subspace alone is {:.1} % from the test trajectory, so the training \
                  data does not cover the test's motion: add schedules or the test's kinds \
@@ -109,6 +114,9 @@ mod tests {
             w[2]
         );
         assert!(warnings(&rows[..3]).is_empty());
+        // A method closer to the full trajectory than its subspace (the springs' dents) is
+        // not warned of for the subspace.
+        assert!(warnings(&[row(Method::Pca, 0.02, 0.22)]).is_empty());
         let far = MethodReport {
             training_distance: 0.8,
             training_distance_time: 0.25,
