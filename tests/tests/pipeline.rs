@@ -452,3 +452,49 @@ fn snapshots_that_never_start_are_an_error_that_says_what_to_change() {
         assert!(err.contains(part), "{part:?} missing from: {err}");
     }
 }
+
+/// A held-out test whose full-space solve fails partway is compared over the frames it reached:
+/// the reference keeps them and says why it stopped, and every method runs that many frames.
+/// (A drag one to two lengths away with a cap of 4 iterations, 16 in the retry: the solve
+/// stops 10³ above its tolerance around step 10.)
+#[test]
+fn a_reference_that_fails_partway_is_compared_over_the_frames_it_reached() {
+    let s = scene(
+        &TINY
+            .replace(
+                "tolerance = 1.0e-8",
+                "tolerance = 1.0e-8\nmax_iterations = 4",
+            )
+            .replace(
+                "[test]\nframes_per_schedule = 12",
+                "[test]\nframes_per_schedule = 20\noffset = [1.0, 2.0]\nstiffness = [2.0, 4.0]",
+            ),
+    );
+    let cache = scratch_dir("pipeline-reference-stops");
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let r = p.reference(0, &no_progress).unwrap();
+    let e = r
+        .stopped
+        .as_deref()
+        .expect("the capped solver stops the test drag");
+    assert!(e.contains("did not converge"), "{e}");
+    assert!(
+        !r.frames.is_empty() && r.frames.len() < 20,
+        "{}",
+        r.frames.len()
+    );
+    let out = scratch_dir("pipeline-reference-stops-out");
+    let rows = run_methods(&mut p, &out, &[Method::Full, Method::Pca]);
+    assert_eq!(rows[1].frame_errors.len(), r.frames.len());
+    let summary = p
+        .outcomes
+        .iter()
+        .find(|o| o.stage == Stage::Reference)
+        .unwrap()
+        .summary
+        .clone();
+    assert!(
+        summary.contains("compared over these frames only"),
+        "{summary}"
+    );
+}

@@ -97,4 +97,17 @@ impl FemError {
             _ => Err(FemError::Many(errors)),
         }
     }
+
+    /// Whether this is a failure of a step's solve itself (not converged, no descent, a
+    /// non-finite value, an inverted element), after which the frames a trajectory reached
+    /// before are still good.
+    pub fn is_solve_failure(&self) -> bool {
+        matches!(
+            self,
+            FemError::NotConverged { .. }
+                | FemError::LineSearchFailed { .. }
+                | FemError::NonFinite { .. }
+                | FemError::InvertedElement { .. }
+        )
+    }
 }

@@ -517,18 +517,6 @@ fn record_schedule(
     Ok(())
 }
 
-/// Whether `e` is a failure of the solve itself (not converged, no descent, a non-finite value,
-/// an inverted element), after which a schedule's earlier frames are still good data.
-fn is_solve_failure(e: &FemError) -> bool {
-    matches!(
-        e,
-        FemError::NotConverged { .. }
-            | FemError::LineSearchFailed { .. }
-            | FemError::NonFinite { .. }
-            | FemError::InvertedElement { .. }
-    )
-}
-
 /// A schedule's frames, and the solve failure that ended it early, if one did.
 type Recorded = (Vec<Vec<f64>>, Option<FemError>);
 
@@ -572,7 +560,7 @@ pub fn generate(
                 // A solve that fails partway (a grab that turns the body inside out, a
                 // stagnating Newton solve far from rest) ends the schedule, not the family: the
                 // frames before it are poses the full simulation reached.
-                Err(e) if is_solve_failure(&e) => Ok((frames, Some(e))),
+                Err(e) if e.is_solve_failure() => Ok((frames, Some(e))),
                 Err(e) => Err(FemError::Schedule {
                     index: s,
                     source: Box::new(e),

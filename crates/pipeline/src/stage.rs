@@ -80,7 +80,8 @@ impl Stage {
             // 9 (not the reference): a schedule whose solve fails partway keeps its earlier
             //    frames, and the set says which stopped.
             Stage::Snapshots | Stage::SnapshotsShard => 9,
-            Stage::Reference => 8,
+            // 9: a solve that fails partway keeps the frames before it (`stopped`).
+            Stage::Reference => 9,
             // 2: the held-out error along the greedy path is stored with the rule.
             // 3: forces fitted in the step's compliance norm (other rules).
             Stage::Cubature => 3,
@@ -163,7 +164,7 @@ mod tests {
                 ("cubature-neural", 5),
                 ("train", 5),
                 ("complement", 3),
-                ("reference", 8),
+                ("reference", 9),
             ]
         );
         for s in Stage::ALL {
