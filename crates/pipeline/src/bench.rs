@@ -404,6 +404,7 @@ mod tests {
                 step_frame_errors: Vec::new(),
                 training_distance: 0.0,
                 training_distance_time: 0.0,
+                training_seconds: 0.0,
                 step_restarts: 0,
                 failure: None,
                 machine_gfma: None,

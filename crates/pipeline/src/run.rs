@@ -96,6 +96,10 @@ pub struct MethodReport {
     /// The time (s) of the frame at `training_distance`.
     #[serde(default)]
     pub training_distance_time: f64,
+    /// How long each training schedule lasts (s; zero for full space): a test frame later than
+    /// this is a time no schedule reached, e.g. a body still sagging or toppling under gravity.
+    #[serde(default)]
+    pub training_seconds: f64,
     /// Steps that started again from the last state because they could not be solved from
     /// their extrapolated start (an element inverted there, where the classic Neo-Hookean
     /// energy is not defined, or the preconditioner could not be factorised; zero for full
@@ -383,6 +387,7 @@ pub fn measure(
             precond_ms: 0.0,
             training_distance: 0.0,
             training_distance_time: 0.0,
+            training_seconds: 0.0,
             step_restarts: 0,
             failure: None,
             machine_gfma: None,
@@ -499,8 +504,10 @@ pub fn measure(
         };
         (subspace, step)
     };
-    let (mut training_distance, mut training_distance_time) = (0.0, 0.0);
+    let (mut training_distance, mut training_distance_time, mut training_seconds) = (0.0, 0.0, 0.0);
     if !poses.is_empty() {
+        training_seconds =
+            pipeline.scene.training().frames_per_schedule as f64 * pipeline.scene.time.step;
         let training = crate::coverage::TrainingPoses::shared(pipeline, stage_progress)?;
         for (k, q) in poses.iter().enumerate() {
             let d = training.distance(q);
@@ -536,6 +543,7 @@ pub fn measure(
         step_frame_errors,
         training_distance,
         training_distance_time,
+        training_seconds,
         step_restarts,
         failure,
         machine_gfma,

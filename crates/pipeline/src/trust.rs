@@ -40,11 +40,25 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
             ));
         }
         if r.training_distance > OUTSIDE_TRAINING {
+            // A time no schedule reached: a body that keeps moving under gravity (sagging,
+            // toppling) goes where the shorter schedules never took it.
+            let what = if r.training_seconds > 0.0
+                && r.training_distance_time > r.training_seconds + 1e-9
+            {
+                format!(
+                    "later than any training schedule lasts ({:.2} s): longer schedules \
+                     (`[training] frames_per_schedule`, at least the test's frames) reach such \
+                     times",
+                    r.training_seconds
+                )
+            } else {
+                "add training schedules that reach such poses (`[training] schedules`, \
+                 `kinds`, larger amplitudes)"
+                    .to_string()
+            };
             out.push(format!(
                 "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
-                 poses, so the decoder and the cubature rule extrapolate there: add training \
-                 schedules that reach such poses (`[training] schedules`, `kinds`, larger \
-                 amplitudes)",
+                 poses, so the decoder and the cubature rule extrapolate there, {what}",
                 r.method,
                 r.training_distance_time,
                 pct(r.training_distance)
@@ -130,5 +144,21 @@ mod tests {
             w[0]
         );
         assert!(w[0].contains("extrapolate"), "{}", w[0]);
+        assert!(w[0].contains("`[training] schedules`"), "{}", w[0]);
+        // Far from training later than the schedules last: the schedules' length is named.
+        let late = MethodReport {
+            training_distance: 0.3,
+            training_distance_time: 0.8,
+            training_seconds: 0.6,
+            ..row(Method::Pca, 0.03, 0.01)
+        };
+        let w = warnings(&[late]);
+        assert_eq!(w.len(), 1, "{w:#?}");
+        assert!(
+            w[0].contains("later than any training schedule lasts (0.60 s)")
+                && w[0].contains("`[training] frames_per_schedule`"),
+            "{}",
+            w[0]
+        );
     }
 }
