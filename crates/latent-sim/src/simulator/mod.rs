@@ -298,6 +298,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         self.lbfgs.reset();
         self.precond_active = None;
         self.precond_use.restart();
+        self.settle_dents();
         Ok(())
     }
 
@@ -315,6 +316,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         self.zddot_step = None;
         self.lbfgs.reset();
         self.precond_use.restart();
+        self.clear_dents();
         self.forces_changed();
     }
 
@@ -564,6 +566,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         self.next_z = std::mem::replace(&mut self.state.z, z);
         self.state.step += 1;
         self.state.time = t;
+        self.settle_dents();
         Ok(ReducedStepReport {
             step: self.state.step,
             time: t,

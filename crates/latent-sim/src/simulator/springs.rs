@@ -80,11 +80,14 @@ impl ActiveDent<'_> {
 }
 
 /// The displacement of a spring's patch per unit of pull that the basis lacks: A⁻¹Gᵀ on the
-/// free DOFs (free DOFs × 3, column-major) and the basis's own response Â⁻¹UᵀGᵀ (k × 3).
+/// free DOFs (free DOFs × 3, column-major) and the basis's own response Â⁻¹UᵀGᵀ (k × 3); and
+/// the pull the spring exerted in the last step's state (None before its first step or when
+/// it was inactive).
 #[derive(Debug)]
 struct Dent {
     full: Vec<f64>,
     basis: Vec<f64>,
+    pull: Option<Vec3>,
 }
 
 impl<S: Subspace> ReducedSimulator<S> {
@@ -147,23 +150,14 @@ impl<S: Subspace> ReducedSimulator<S> {
     }
 
     /// What the reported displacement is made of: the coefficients to decode, q less the basis's
-    /// share of each active softened spring's pull, and the dents to add, the pulls' full-space
-    /// responses (see the module's notes).
+    /// share of each softened spring's pull at the last step, and the dents to add, the pulls'
+    /// full-space responses (see the module's notes).
     pub fn dents(&self) -> (Vec<f64>, Vec<ActiveDent<'_>>) {
-        let (q, t, k) = (&self.state.q, self.state.time, self.space.k);
-        let mut shifted = q.clone();
+        let k = self.space.k;
+        let mut shifted = self.state.q.clone();
         let mut active = Vec::new();
-        for (index, dent) in self.compliance.dents.iter().enumerate() {
-            let (Some(dent), Some(f)) = (dent, self.model.forces.get(index)) else {
-                continue;
-            };
-            if !f.is_active(t) || f.vertices.is_empty() {
-                continue;
-            }
-            let mean = self.space.patch_mean(index, f.vertices.len(), q);
-            let pull = self.space.spring_pull(index).unwrap_or_else(Mat3::identity)
-                * (f.value(t) - mean)
-                * f.stiffness;
+        for dent in self.compliance.dents.iter().flatten() {
+            let Some(pull) = dent.pull else { continue };
             for c in 0..3 {
                 axpy(-pull[c], &dent.basis[c * k..(c + 1) * k], &mut shifted);
             }
@@ -173,6 +167,32 @@ impl<S: Subspace> ReducedSimulator<S> {
             });
         }
         (shifted, active)
+    }
+
+    /// Records each softened spring's pull on its patch in the current state, at the state's
+    /// time: what the dents show until the next step. A dent belongs to a state the step
+    /// computed (or [`Self::set_state`] gave), so moving a handle, adding a spring or a failed
+    /// step changes no reported position.
+    pub(super) fn settle_dents(&mut self) {
+        let (q, t) = (&self.state.q, self.state.time);
+        for (index, dent) in self.compliance.dents.iter_mut().enumerate() {
+            let (Some(dent), Some(f)) = (dent, self.model.forces.get(index)) else {
+                continue;
+            };
+            dent.pull = (f.is_active(t) && !f.vertices.is_empty()).then(|| {
+                let mean = self.space.patch_mean(index, f.vertices.len(), q);
+                self.space.spring_pull(index).unwrap_or_else(Mat3::identity)
+                    * (f.value(t) - mean)
+                    * f.stiffness
+            });
+        }
+    }
+
+    /// Forgets every dent's pull (a state at rest, as after [`Self::reset`]).
+    pub(super) fn clear_dents(&mut self) {
+        for dent in self.compliance.dents.iter_mut().flatten() {
+            dent.pull = None;
+        }
     }
 
     /// C − Ĉ at force `index`'s patch, with its negative eigenvalues (round-off where the
@@ -202,6 +222,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let dent = Dent {
             full: columns,
             basis,
+            pull: None,
         };
         c.iter().all(|x| x.is_finite()).then_some((c, dent))
     }

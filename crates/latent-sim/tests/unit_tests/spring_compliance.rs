@@ -179,7 +179,8 @@ fn softening_is_the_default_and_vanishes_for_a_complete_basis() {
 /// The same step, displaced: the reduced step's force F on the patch is the full one's, and the
 /// displacement the simulator reports adds back the dent the basis lacks, U(q − Â⁻¹UᵀGᵀF) +
 /// A⁻¹GᵀF, which for a linear body is the full step's displacement A⁻¹GᵀF itself. Uq alone
-/// misses it; without softening nothing is added; a removed spring takes its dent with it.
+/// misses it; without softening nothing is added; a moved target or a new spring shows only
+/// after a step; a removed spring takes its dent with it.
 #[test]
 fn the_reported_displacement_holds_the_dent_the_basis_lacks() {
     let (ks, w) = (4e3, [0.0, 0.02, 0.01]);
@@ -225,6 +226,16 @@ fn the_reported_displacement_holds_the_dent_the_basis_lacks() {
     let mut uq_plain = vec![0.0; m.num_full()];
     plain.space.reconstruct(&plain.state.q, &mut uq_plain);
     assert_eq!(plain.full_displacement(), uq_plain, "no softening, no dent");
+
+    // The dent belongs to the state the step computed: moving the target or adding a spring
+    // changes no reported position until the next step.
+    let stepped_u = red.full_displacement();
+    red.set_force_keyframes(0, &[[0.0, 0.0, -0.05, 0.0]])
+        .unwrap();
+    let again = red.model.forces[0].clone();
+    red.add_force(again).unwrap();
+    assert_eq!(red.full_displacement(), stepped_u, "no step, no new dent");
+    red.remove_force(1).unwrap();
 
     red.remove_force(0).unwrap();
     red.space.reconstruct(&red.state.q, &mut uq);
