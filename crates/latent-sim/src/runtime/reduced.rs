@@ -11,8 +11,8 @@ use super::{Handle, Interactive, Real, RuntimeError, StepStats, Surface, buffer_
 use crate::model::{ReducedModel, SubspaceParts};
 use crate::reduced::PackedRows;
 use crate::{
-    Augmented, LinearSubspace, NeuralSubspace, ReducedEnergy, ReducedError, ReducedSimulator,
-    ReducedSpace, ReducedState, ReducedStepReport, Subspace,
+    ActiveDent, Augmented, LinearSubspace, NeuralSubspace, ReducedEnergy, ReducedError,
+    ReducedSimulator, ReducedSpace, ReducedState, ReducedStepReport, Subspace,
 };
 
 /// The reduced simulator of a model, with its subspace's type.
@@ -183,6 +183,15 @@ impl ReducedRuntime {
     }
 }
 
+/// Component `c` of vertex `v`'s displacement from the dents (`index`: the model's DOF
+/// numbering; a pinned component has none).
+fn dent_at(dents: &[ActiveDent<'_>], index: &[usize], v: usize, c: usize) -> f64 {
+    match index[3 * v + c] {
+        FIXED => 0.0,
+        r => dents.iter().map(|d| d.at(r)).sum(),
+    }
+}
+
 impl Backend for ReducedRuntime {
     fn rest(&self) -> &[Vec3] {
         &self.sim.model().mesh.vertices
@@ -201,17 +210,12 @@ impl Backend for ReducedRuntime {
         let k = space.k;
         let index = &self.sim.model().dofs.index;
         let row = |c: usize| -> f64 {
-            let r = index[3 * v + c];
-            let dent = if r == FIXED {
-                0.0
-            } else {
-                dents.iter().map(|d| d.at(r)).sum()
-            };
-            dent + rows[c * k..(c + 1) * k]
-                .iter()
-                .zip(&q)
-                .map(|(a, b)| a * b)
-                .sum::<f64>()
+            dent_at(&dents, index, v, c)
+                + rows[c * k..(c + 1) * k]
+                    .iter()
+                    .zip(&q)
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
         };
         Ok(Vec3::new(row(0), row(1), row(2)))
     }
@@ -228,10 +232,7 @@ impl Backend for ReducedRuntime {
                 .zip(self.surface_u.chunks_exact_mut(3))
             {
                 for (c, uc) in u.iter_mut().enumerate() {
-                    let r = index[3 * v + c];
-                    if r != FIXED {
-                        *uc += dents.iter().map(|d| d.at(r)).sum::<f64>();
-                    }
+                    *uc += dent_at(&dents, index, v, c);
                 }
             }
         }

@@ -144,7 +144,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         if dents.is_empty() {
             return;
         }
-        for (&d, r) in self.model.dofs.free.iter().enumerate().map(|(r, d)| (d, r)) {
+        for (r, &d) in self.model.dofs.free.iter().enumerate() {
             u[d] += dents.iter().map(|dent| dent.at(r)).sum::<f64>();
         }
     }
