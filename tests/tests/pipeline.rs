@@ -498,3 +498,80 @@ fn a_reference_that_fails_partway_is_compared_over_the_frames_it_reached() {
         "{summary}"
     );
 }
+
+/// When the scene leaves the schedules at their default length (60 frames) and the test lasts
+/// longer (80 here), every fourth schedule starts from the body's state under gravity alone
+/// at frame 20 if it is still moving after 60 (a soft beam swinging down), so that they reach
+/// the test's last frame. Not when it has come to rest (a stiff beam) nor when the scene sets
+/// the length; the stage's line says why.
+#[test]
+fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
+    use fem_core::integrator::{Simulator, TimeConfig};
+    use fem_core::snapshots::{MovingStart, generate_from};
+    let with = |name: &str, youngs: &str, length: &str| {
+        let text = TINY
+            .replace("youngs_modulus = 1.0e5", youngs)
+            .replace(
+                "[time]",
+                "[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[time]",
+            )
+            .replace(
+                "[training]\nschedules = 4\nframes_per_schedule = 8",
+                &format!("[training]\nschedules = 4\n{length}"),
+            )
+            .replace(
+                "[test]\nframes_per_schedule = 12",
+                "[test]\nframes_per_schedule = 80",
+            );
+        let s = scene(&text);
+        let cache = scratch_dir(&format!("pipeline-later-start-{name}"));
+        let mut p = Pipeline::new(&s, &cache).unwrap();
+        let set = p.snapshots(&no_progress).unwrap();
+        let line = p.outcomes.last().unwrap().summary.clone();
+        let model = p.model.clone();
+        drop(p);
+        (s, model, set, line)
+    };
+    let (s, model, set, line) = with("soft", "youngs_modulus = 2.0e4", "");
+    let why = set
+        .later_start
+        .clone()
+        .expect("a soft beam still swings after 60 frames");
+    assert_eq!(set.schedules, [0, 1, 2, 3], "{line}");
+    assert_eq!(set.frames, [60; 4], "{line}");
+    assert!(why.contains("at 0.40 s") && why.contains("(80)"), "{why}");
+    assert!(line.contains(&why), "{line}");
+    // The same frames as the family started by hand from 20 frames of a plain run with no grab.
+    let time = TimeConfig {
+        frames: 20,
+        ..s.time.clone()
+    };
+    let mut sim = Simulator::new(model.clone(), time, s.solver.clone()).unwrap();
+    for _ in 0..20 {
+        sim.step().unwrap();
+    }
+    let start = MovingStart {
+        u: sim.state.u.clone(),
+        v: sim.state.v.clone(),
+    };
+    let cfg = s.training();
+    let by_hand = generate_from(
+        &model,
+        &cfg,
+        &s.time,
+        &s.solver,
+        (0, 1),
+        Some(&start),
+        &|_| {},
+    )
+    .unwrap();
+    let scale = by_hand.data.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(scale > 1e-3, "the beam moves: {scale}");
+    for (a, b) in set.data.iter().zip(&by_hand.data) {
+        assert!((a - b).abs() <= 1e-9 * scale, "{a} against {b}");
+    }
+    let (_, _, set, line) = with("stiff", "youngs_modulus = 1.0e9", "");
+    assert_eq!(set.later_start, None, "at rest: {line}");
+    let (_, _, set, _) = with("set", "youngs_modulus = 2.0e4", "frames_per_schedule = 60");
+    assert_eq!(set.later_start, None, "the scene's length");
+}

@@ -78,6 +78,9 @@ impl StageSummary for SnapshotSet {
             self.frames_per_schedule,
             self.num_frames()
         );
+        if let Some(why) = &self.later_start {
+            s += &format!(" ({why})");
+        }
         if let Some(first) = self.stopped.first() {
             s += &format!(
                 "; {} of them stopped early where the full-space solve failed, their earlier \
@@ -183,6 +186,11 @@ impl StageSummary for Reference {
         s
     }
 }
+
+/// A body whose kinetic energy under gravity alone has fallen to this fraction of its peak by
+/// the default schedule length is taken as at rest there (its training schedules all start
+/// from rest).
+pub const SETTLED_KINETIC: f64 = 1e-4;
 
 /// Progress of a long stage: `(done, total)`.
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
@@ -441,9 +449,14 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn snapshots_key(&self) -> u64 {
-        self.physics_key(Stage::Snapshots)
-            .mix(&self.scene.training())
-            .finish()
+        let key = self
+            .physics_key(Stage::Snapshots)
+            .mix(&self.scene.training());
+        // Schedules left at the default length may start later to reach the test's last frame.
+        match self.scene.training.frames_per_schedule {
+            None => key.mix(&self.scene.test().frames_per_schedule).finish(),
+            Some(_) => key.finish(),
+        }
     }
 
     pub fn pca_key(&self) -> u64 {
@@ -556,10 +569,70 @@ impl<'a> Pipeline<'a> {
     pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<Arc<SnapshotSet>> {
         let key = self.snapshots_key();
         self.stage(Stage::Snapshots, key, |p| {
-            let cfg = p.scene.training();
-            let set = p.simulate_shard(&cfg, (0, 1), progress)?;
+            let set = p.simulate_shard(&p.scene.training(), (0, 1), progress)?;
             p.some_frames(set)
         })
+    }
+
+    /// Where every fourth training schedule starts, when not at rest: the scene leaves
+    /// `[training] frames_per_schedule` at its default, the held-out test outlasts it, and
+    /// under gravity alone the body is still moving when the schedules end (sagging, swinging
+    /// or toppling on). The test's later frames then ride on poses that schedules from rest
+    /// never reach, so a quarter of them start from the body's state under gravity alone at frame
+    /// `test − training` and end at the test's last frame. Costs one full-space run, cut short
+    /// once the body is at rest when the schedules end. The state, with the reason the
+    /// `snapshots` line prints.
+    fn later_start(&self) -> Result<Option<(snapshots::MovingStart, String)>> {
+        let cfg = self.scene.training();
+        let until = self.scene.test().frames_per_schedule;
+        let from = cfg.frames_per_schedule;
+        let g = self.model.gravity * cfg.gravity_scale;
+        if self.scene.training.frames_per_schedule.is_some()
+            || until <= from
+            || g.norm() == 0.0
+            || self.scene.time.quasi_static
+        {
+            return Ok(None);
+        }
+        let mut model = self.model.clone();
+        model.forces.clear();
+        for x in model.gravity_load.iter_mut() {
+            *x *= cfg.gravity_scale;
+        }
+        model.gravity = g;
+        let (at, last) = (until - from, from.max(until - from));
+        let time = TimeConfig {
+            frames: last,
+            ..self.scene.time.clone()
+        };
+        let mut sim = Simulator::new(model, time, self.scene.solver.clone())?;
+        let (mut start, mut peak_kinetic) = (None, 0.0f64);
+        for frame in 1..=last {
+            let Ok(report) = sim.step() else {
+                // A body the solver cannot follow under its own weight alone: its schedules
+                // start from rest.
+                return Ok(None);
+            };
+            peak_kinetic = peak_kinetic.max(report.kinetic_energy);
+            if frame == from && report.kinetic_energy <= SETTLED_KINETIC * peak_kinetic {
+                // At rest when the schedules end (a stable equilibrium): it stays there.
+                return Ok(None);
+            }
+            if frame == at {
+                start = Some(snapshots::MovingStart {
+                    u: sim.state.u.clone(),
+                    v: sim.state.v.clone(),
+                });
+            }
+        }
+        let why = format!(
+            "every {}th starts from the body falling under gravity alone at {:.2} s, since it \
+             still moves when they end, and runs to the test's last frame ({until}); `[training] \
+             frames_per_schedule` set starts them all at rest",
+            snapshots::LATER_EVERY,
+            at as f64 * self.scene.time.step
+        );
+        Ok(start.map(|s| (s, why)))
     }
 
     /// `set`, or an error saying why it holds no frame at all (every schedule failed at its
@@ -585,15 +658,18 @@ impl<'a> Pipeline<'a> {
         progress: Progress<'_>,
     ) -> Result<SnapshotSet> {
         let total = shard_len(cfg.schedules, shard);
-        let set = snapshots::generate(
+        let later = self.later_start()?;
+        let mut set = snapshots::generate_from(
             &self.model,
             cfg,
             &self.scene.time,
             &self.scene.solver,
             shard,
+            later.as_ref().map(|l| &l.0),
             &|done| progress(done, total),
         )
         .map_err(|e| anyhow::anyhow!("{}: stage snapshots: {e}", self.scene.source))?;
+        set.later_start = later.map(|l| l.1);
         Ok(set)
     }
 
@@ -613,8 +689,7 @@ impl<'a> Pipeline<'a> {
             .mix(&(index, count))
             .finish();
         self.stage(Stage::SnapshotsShard, key, |p| {
-            let cfg = p.scene.training();
-            p.simulate_shard(&cfg, (index, count), progress)
+            p.simulate_shard(&p.scene.training(), (index, count), progress)
         })?;
         Ok(self.path(Stage::SnapshotsShard, key))
     }

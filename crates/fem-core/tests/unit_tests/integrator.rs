@@ -577,3 +577,67 @@ fn a_schedule_whose_solve_fails_keeps_its_earlier_frames() {
         set
     );
 }
+
+/// `generate_from` starts every fourth schedule from the given state (its grab timed from
+/// there) and the others from rest, each the same as a simulator started there by hand.
+#[test]
+fn every_fourth_schedule_starts_from_the_moving_state_given() {
+    use fem_core::snapshots::{MovingStart, ScheduleConfig, generate, generate_from};
+    let m = model(
+        beam([8, 2, 2]),
+        MaterialModel::StableNeoHookean,
+        2e4,
+        [0.0, -9.81, 0.0],
+        vec![],
+    );
+    let family = ScheduleConfig {
+        schedules: 4,
+        frames_per_schedule: 10,
+        ..ScheduleConfig::training()
+    };
+    let time = dynamic(family.frames_per_schedule);
+    let newton = solver(SolverMethod::Newton, 1e-10);
+    let mut fall = Simulator::new(m.clone(), dynamic(7), newton.clone()).unwrap();
+    for _ in 0..7 {
+        fall.step().unwrap();
+    }
+    let start = MovingStart {
+        u: fall.state.u.clone(),
+        v: fall.state.v.clone(),
+    };
+    let set = generate_from(&m, &family, &time, &newton, (0, 1), Some(&start), &|_| {}).unwrap();
+    let rest = generate(&m, &family, &time, &newton, (0, 1), &|_| {}).unwrap();
+    let probe =
+        fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)
+            .unwrap();
+    let frames = family.frames_per_schedule;
+    for s in 0..4 {
+        let mut with = m.clone();
+        with.forces = family.schedule(&m, &probe, s, time.step);
+        let mut sim = Simulator::new(with, time.clone(), newton.clone()).unwrap();
+        let later = s % fem_core::snapshots::LATER_EVERY == fem_core::snapshots::LATER_EVERY - 1;
+        if later {
+            sim.state.u.copy_from_slice(&start.u);
+            sim.state.v.copy_from_slice(&start.v);
+        }
+        let mut free = vec![0.0; set.dim];
+        for f in 0..frames {
+            sim.step().unwrap();
+            sim.model.dofs.gather(&sim.state.u, &mut free);
+            let kept = set.frame(s * frames + f);
+            let from_rest = rest.frame(s * frames + f);
+            let diff = kept
+                .iter()
+                .zip(&free)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(diff <= 1e-9, "schedule {s} frame {f}: {diff:e}");
+            let moved = kept
+                .iter()
+                .zip(from_rest)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert_eq!(moved > 1e-4, later, "schedule {s} frame {f}: {moved:e}");
+        }
+    }
+}
