@@ -528,11 +528,17 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
         let mut p = Pipeline::new(&s, &cache).unwrap();
         let set = p.snapshots(&no_progress).unwrap();
         let line = p.outcomes.last().unwrap().summary.clone();
+        // The latest time a schedule reaches, as the trust warnings see it.
+        let reaches = run_methods(&mut p, &cache.join("out"), &[Method::Pca])[0].training_seconds;
         let model = p.model.clone();
         drop(p);
-        (s, model, set, line)
+        (s, model, set, line, reaches)
     };
-    let (s, model, set, line) = with("soft", "youngs_modulus = 2.0e4", "");
+    let (s, model, set, line, reaches) = with("soft", "youngs_modulus = 2.0e4", "");
+    assert!(
+        (reaches - 80.0 * 0.02).abs() < 1e-9,
+        "to the test's end: {reaches}"
+    );
     let why = set
         .later_start
         .clone()
@@ -570,8 +576,12 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
     for (a, b) in set.data.iter().zip(&by_hand.data) {
         assert!((a - b).abs() <= 1e-9 * scale, "{a} against {b}");
     }
-    let (_, _, set, line) = with("stiff", "youngs_modulus = 1.0e9", "");
+    let (_, _, set, line, reaches) = with("stiff", "youngs_modulus = 1.0e9", "");
     assert_eq!(set.later_start, None, "at rest: {line}");
-    let (_, _, set, _) = with("set", "youngs_modulus = 2.0e4", "frames_per_schedule = 60");
+    assert!(
+        (reaches - 60.0 * 0.02).abs() < 1e-9,
+        "the schedules' end: {reaches}"
+    );
+    let (_, _, set, _, _) = with("set", "youngs_modulus = 2.0e4", "frames_per_schedule = 60");
     assert_eq!(set.later_start, None, "the scene's length");
 }

@@ -96,8 +96,9 @@ pub struct MethodReport {
     /// The time (s) of the frame at `training_distance`.
     #[serde(default)]
     pub training_distance_time: f64,
-    /// How long each training schedule lasts (s; zero for full space): a test frame later than
-    /// this is a time no schedule reached, e.g. a body still sagging or toppling under gravity.
+    /// The latest time a training schedule reaches (s; zero for full space): a test frame
+    /// later than this is a time no schedule reached, e.g. a body still sagging or toppling
+    /// under gravity (the test's end when some schedules start from the body's fall).
     #[serde(default)]
     pub training_seconds: f64,
     /// Steps that started again from the last state because they could not be solved from
@@ -506,9 +507,14 @@ pub fn measure(
     };
     let (mut training_distance, mut training_distance_time, mut training_seconds) = (0.0, 0.0, 0.0);
     if !poses.is_empty() {
-        training_seconds =
-            pipeline.scene.training().frames_per_schedule as f64 * pipeline.scene.time.step;
         let training = crate::coverage::TrainingPoses::shared(pipeline, stage_progress)?;
+        // Schedules started from the body's fall run to the test's last frame.
+        let snaps = pipeline.snapshots(stage_progress)?;
+        let frames = match snaps.later_start {
+            Some(_) => pipeline.scene.test().frames_per_schedule,
+            None => snaps.frames_per_schedule,
+        };
+        training_seconds = frames as f64 * pipeline.scene.time.step;
         for (k, q) in poses.iter().enumerate() {
             let d = training.distance(q);
             if d > training_distance {
