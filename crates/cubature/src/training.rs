@@ -19,7 +19,8 @@
 //! failure. Poses where an element's force is not finite (inverted under a material undefined
 //! there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
 
-use faer::MatRef;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
 use fem_core::constraints::FIXED;
 use fem_core::integrator::FullSpaceModel;
 use fem_core::rng::SplitMix64;
@@ -244,12 +245,16 @@ impl TrainingMatrix {
                         let out = &mut column[p * dim..(p + 1) * dim];
                         match &jacobians {
                             None => out.copy_from_slice(g),
-                            Some(js) => {
-                                for (c, o) in out.iter_mut().enumerate() {
-                                    *o =
-                                        js[p].col(c).iter().zip(g.iter()).map(|(x, y)| x * y).sum();
-                                }
-                            }
+                            // Jᵀg through faer's SIMD kernels: this product was two thirds
+                            // of the neural rule's stage as a scalar dot per coordinate.
+                            Some(js) => matmul(
+                                MatMut::from_column_major_slice_mut(out, dim, 1),
+                                Accum::Replace,
+                                js[p].transpose(),
+                                MatRef::from_column_major_slice(g, k, 1),
+                                1.0,
+                                Par::Seq,
+                            ),
                         }
                     }
                 },
