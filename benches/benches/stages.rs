@@ -8,6 +8,10 @@
 //! * `cubature/build` and `cubature/fit`: the training matrix of 150 poses and the greedy + NNLS
 //!   fit to the default 2 % on a 20 × 4 × 4-cell beam (the default scene's mesh, 1,920 tets) with
 //!   a 10-mode smooth basis: the cubature tests' fixture.
+//! * `cubature/build-nonlinear`: the neural rule's training matrix on the same beam and poses,
+//!   at the sizes of a 27k-tet minimal scene's neural methods: k = 60 reduced coordinates (the 10
+//!   modes and 50 more columns the poses leave at zero) and Jacobians of 60 × 50, so each
+//!   element and pose costs the product Jᵀ(U_eᵀf) of the stage.
 //!
 //! ```sh
 //! cargo bench -p benches --bench stages
@@ -97,6 +101,33 @@ fn bench_cubature(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1));
     group.bench_function("build", |b| b.iter(build));
     group.bench_function("fit", |b| b.iter(|| fit(&data, &config).expect("a fit")));
+
+    let (wide, d) = (60, 50);
+    let nf = model.dofs.num_free();
+    let mut rng = SplitMix64::new(5);
+    let mut basis_wide = basis.clone();
+    basis_wide.extend((0..(wide - k) * nf).map(|_| rng.range(-1.0, 1.0)));
+    let q = Mat::from_fn(
+        wide,
+        poses.ncols(),
+        |i, j| if i < k { poses[(i, j)] } else { 0.0 },
+    );
+    let jacobians: Vec<Mat<f64>> = (0..poses.ncols())
+        .map(|_| Mat::from_fn(wide, d, |_, _| rng.range(-1.0, 1.0)))
+        .collect();
+    let refs: Vec<_> = jacobians.iter().map(|j| j.as_ref()).collect();
+    group.bench_function("build-nonlinear", |b| {
+        b.iter(|| {
+            TrainingMatrix::build(
+                &model,
+                &basis_wide,
+                wide,
+                Poses::nonlinear(q.as_ref(), &refs),
+                &config,
+            )
+            .expect("a valid training matrix")
+        })
+    });
     group.finish();
 }
 
