@@ -256,8 +256,8 @@ acceleration = [0.0, 0.0, 0.0]
 [[force]]
 kind = "spring"
 select = { plane = { axis = "x", side = "max" } }
-stiffness = 1.0e4
-keyframes = [[0.1, 0.0, 0.0, 0.0], [0.2, 0.0, 0.3, 0.0]]
+stiffness = 1.0e5
+keyframes = [[0.1, 0.0, 0.0, 0.0], [0.2, 0.0, 1.0, 0.0]]
 start = 0.1
 end = 1.0
 "#;

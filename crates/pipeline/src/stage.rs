@@ -81,9 +81,11 @@ impl Stage {
             //    frames, and the set says which stopped.
             // 10: with default-length schedules, every fourth starts later when the body is
             //     still moving under gravity after them (`later_start`).
-            Stage::Snapshots | Stage::SnapshotsShard => 10,
+            // 11 (and the reference's 10): a step one full-space solver cannot finish goes on
+            //     with the other from where the first stopped, not from the step's start.
+            Stage::Snapshots | Stage::SnapshotsShard => 11,
             // 9: a solve that fails partway keeps the frames before it (`stopped`).
-            Stage::Reference => 9,
+            Stage::Reference => 10,
             // 2: the held-out error along the greedy path is stored with the rule.
             // 3: forces fitted in the step's compliance norm (other rules).
             Stage::Cubature => 3,
@@ -159,14 +161,14 @@ mod tests {
         assert_eq!(
             found,
             [
-                ("snapshots", 10),
-                ("snapshots-shard", 10),
+                ("snapshots", 11),
+                ("snapshots-shard", 11),
                 ("pca", 2),
                 ("cubature", 3),
                 ("cubature-neural", 5),
                 ("train", 5),
                 ("complement", 3),
-                ("reference", 9),
+                ("reference", 10),
             ]
         );
         for s in Stage::ALL {

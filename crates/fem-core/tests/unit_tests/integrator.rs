@@ -641,3 +641,46 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
         }
     }
 }
+
+/// A step L-BFGS cannot finish within its cap is finished by Newton from where L-BFGS stopped:
+/// the trajectory is the one Newton alone computes, and each step's iterations count both.
+#[test]
+fn a_step_lbfgs_cannot_finish_is_finished_by_newton_from_where_it_stopped() {
+    let m = model(
+        beam([10, 2, 2]),
+        MaterialModel::StableNeoHookean,
+        1e5,
+        [0.0, -9.81, 0.0],
+        vec![],
+    );
+    let capped = SolverConfig {
+        method: SolverMethod::Lbfgs,
+        tolerance: 1e-9,
+        max_iterations: 2,
+        ..Default::default()
+    };
+    let mut retried = Simulator::new(m.clone(), dynamic(8), capped).unwrap();
+    let mut newton = Simulator::new(m, dynamic(8), solver(SolverMethod::Newton, 1e-9)).unwrap();
+    let mut more = 0;
+    for _ in 0..8 {
+        let r = retried.step().unwrap();
+        let n = newton.step().unwrap();
+        if r.iterations > 2 {
+            more += 1;
+            // Two L-BFGS iterations, then fewer Newton iterations than from the step's start
+            // (3 in all against Newton's 2–3 alone; 4–5 when the retry started over).
+            assert!(
+                r.iterations < 2 + n.iterations,
+                "{} against Newton's {}",
+                r.iterations,
+                n.iterations
+            );
+        }
+    }
+    assert!(more > 0, "the cap makes some step need the retry");
+    let scale = newton.state.u.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    assert!(scale > 1e-3, "the beam sags: {scale}");
+    for (a, b) in retried.state.u.iter().zip(&newton.state.u) {
+        assert!((a - b).abs() <= 1e-6 * scale, "{a} against {b}");
+    }
+}
