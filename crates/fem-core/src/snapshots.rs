@@ -415,8 +415,8 @@ pub struct SnapshotSet {
     /// The schedules whose full-space solve failed, each with the error: the frames before it
     /// are kept, the rest of the schedule is not simulated.
     pub stopped: Vec<StoppedSchedule>,
-    /// Why the odd-numbered schedules start from a [`MovingStart`] instead of rest, when they
-    /// do (the pipeline's default when the test outlasts the schedules while the body is still
+    /// Why every [`LATER_EVERY`]th schedule starts from a [`MovingStart`] instead of rest, when
+    /// they do (the pipeline's default when the test outlasts the schedules while the body is still
     /// moving under its weight).
     pub later_start: Option<String>,
     /// Column-major dim × Σ frames displacements, schedule after schedule.
@@ -500,8 +500,8 @@ pub fn simulate_schedule(
     Ok(out)
 }
 
-/// Simulates one schedule from rest, appending each frame's free-DOF displacement to `out`, so
-/// that the frames before a failed step are there for the caller.
+/// Simulates one schedule from rest (or from `start`), appending each frame's free-DOF
+/// displacement to `out`, so that the frames before a failed step are there for the caller.
 #[allow(clippy::too_many_arguments)]
 fn record_schedule(
     model: &FullSpaceModel,
@@ -515,10 +515,7 @@ fn record_schedule(
 ) -> Result<(), FemError> {
     let mut m = model.clone();
     m.forces = forces;
-    for g in m.gravity_load.iter_mut() {
-        *g *= gravity_scale;
-    }
-    m.gravity *= gravity_scale;
+    m.scale_gravity(gravity_scale);
     let time = TimeConfig {
         frames,
         ..time.clone()

@@ -586,20 +586,16 @@ impl<'a> Pipeline<'a> {
         let cfg = self.scene.training();
         let until = self.scene.test().frames_per_schedule;
         let from = cfg.frames_per_schedule;
-        let g = self.model.gravity * cfg.gravity_scale;
         if self.scene.training.frames_per_schedule.is_some()
             || until <= from
-            || g.norm() == 0.0
+            || (self.model.gravity * cfg.gravity_scale).norm() == 0.0
             || self.scene.time.quasi_static
         {
             return Ok(None);
         }
         let mut model = self.model.clone();
         model.forces.clear();
-        for x in model.gravity_load.iter_mut() {
-            *x *= cfg.gravity_scale;
-        }
-        model.gravity = g;
+        model.scale_gravity(cfg.gravity_scale);
         let (at, last) = (until - from, from.max(until - from));
         let time = TimeConfig {
             frames: last,
@@ -1224,10 +1220,7 @@ impl<'a> Pipeline<'a> {
             cfg.frames_per_schedule as f64 * self.scene.time.step,
         )?;
         model.forces = cfg.schedule(&self.model, &probe, trajectory, self.scene.time.step);
-        for g in model.gravity_load.iter_mut() {
-            *g *= cfg.gravity_scale;
-        }
-        model.gravity *= cfg.gravity_scale;
+        model.scale_gravity(cfg.gravity_scale);
         Ok(model)
     }
 }

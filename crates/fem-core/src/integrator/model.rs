@@ -77,6 +77,15 @@ impl FullSpaceModel {
         3 * self.mesh.num_vertices()
     }
 
+    /// Scales gravity, its acceleration and the nodal load it makes, by `factor` (a schedule
+    /// family's `gravity_scale`).
+    pub fn scale_gravity(&mut self, factor: f64) {
+        for g in self.gravity_load.iter_mut() {
+            *g *= factor;
+        }
+        self.gravity *= factor;
+    }
+
     /// Elastic energy V(u) over all elements.
     pub fn elastic_energy(&self, u: &[f64], buf: &mut AssemblyBuffers) -> f64 {
         with_material!(&self.material, |m| assembly::energy(

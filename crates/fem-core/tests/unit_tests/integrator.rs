@@ -611,6 +611,12 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
         fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)
             .unwrap();
     let frames = family.frames_per_schedule;
+    let farthest = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
     for s in 0..4 {
         let mut with = m.clone();
         with.forces = family.schedule(&m, &probe, s, time.step);
@@ -626,17 +632,9 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
             sim.model.dofs.gather(&sim.state.u, &mut free);
             let kept = set.frame(s * frames + f);
             let from_rest = rest.frame(s * frames + f);
-            let diff = kept
-                .iter()
-                .zip(&free)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let diff = farthest(kept, &free);
             assert!(diff <= 1e-9, "schedule {s} frame {f}: {diff:e}");
-            let moved = kept
-                .iter()
-                .zip(from_rest)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
+            let moved = farthest(kept, from_rest);
             assert_eq!(moved > 1e-4, later, "schedule {s} frame {f}: {moved:e}");
         }
     }
