@@ -79,6 +79,11 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         SolverMethod::Newton => base(Method::FullLbfgs, "full-lbfgs".into()),
         SolverMethod::Lbfgs => base(Method::FullNewton, "full-newton".into()),
     });
+    let tolerances = if opts.tolerances.is_empty() {
+        DEFAULT_TOLERANCES.to_vec()
+    } else {
+        opts.tolerances.clone()
+    };
     let mut latent_dims = opts.latent_dims.clone();
     if latent_dims.is_empty() {
         let d = scene
@@ -116,8 +121,9 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             solver: None,
         });
         // With cubature at the scene's tolerance too, so that the reduced methods are compared at
-        // equal error on speed (the scene's own k is in the tolerance sweep below).
-        if k < chosen_k {
+        // equal error on speed. At the scene's own k this is the scene's own `pca-cubature`,
+        // unless the tolerance sweep below already has its tolerance.
+        if k < chosen_k || !tolerances.contains(&scene.cubature.tolerance) {
             v.push(Variant {
                 method: Method::PcaCubature,
                 label: format!("pca-cubature k={k}"),
@@ -126,11 +132,6 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             });
         }
     }
-    let tolerances = if opts.tolerances.is_empty() {
-        DEFAULT_TOLERANCES.to_vec()
-    } else {
-        opts.tolerances.clone()
-    };
     for &method in &[Method::PcaCubature, Method::NeuralCubature] {
         for &tol in &tolerances {
             let mut s = scene.clone();
@@ -170,9 +171,21 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
         v.push(Variant {
             method: Method::NeuralCubature,
             label: format!("neural-cubature d={d}"),
-            scene: s,
+            scene: s.clone(),
             solver: None,
         });
+        // The autoencoder alone at its size (only the onset directions beside it): the
+        // complement directions the scene adds by default bring every d back to about PCA's
+        // count, which hides what a small latent space buys at low cost.
+        if scene.reduced.complement_directions != Some(0) {
+            s.reduced.complement_directions = Some(0);
+            v.push(Variant {
+                method: Method::NeuralCubature,
+                label: format!("neural-cubature d={d} c=0"),
+                scene: s,
+                solver: None,
+            });
+        }
     }
     let mut complement_dims = opts.complement_dims.clone();
     complement_dims.sort_unstable();
@@ -432,7 +445,7 @@ mod tests {
         let found: Vec<(String, Option<usize>)> = variants(&scene, 10, &opts)
             .into_iter()
             .map(|v| (v.label, v.scene.reduced.complement_directions))
-            .filter(|(label, _)| label.contains(" c="))
+            .filter(|(label, _)| label.contains(" c=") && !label.contains(" d="))
             .collect();
         let want = [
             ("neural c=0", Some(0)),
@@ -452,8 +465,76 @@ mod tests {
         assert!(
             variants(&scene, 10, &none)
                 .iter()
-                .all(|v| !v.label.contains(" c="))
+                .all(|v| !v.label.contains(" c=") || v.label.contains(" d="))
         );
+    }
+
+    /// The scene's own `pca-cubature` (its k, its tolerance) is a row, once.
+    #[test]
+    fn the_scenes_own_pca_cubature_is_a_row() {
+        let scene = Scene::builtin();
+        let own = scene.cubature.tolerance;
+        let mut opts = BenchOptions {
+            out: PathBuf::new(),
+            cache: PathBuf::new(),
+            trajectory: 0,
+            repeats: 1,
+            pca_dims: vec![4, 10],
+            latent_dims: vec![2],
+            tolerances: vec![0.1],
+            complement_dims: Vec::new(),
+        };
+        let own_rows = |opts: &BenchOptions| {
+            variants(&scene, 10, opts)
+                .into_iter()
+                .filter(|v| {
+                    v.method == Method::PcaCubature
+                        && v.solver.is_none()
+                        && v.scene.cubature.tolerance == own
+                        && v.scene.pca.dimension == Some(10)
+                })
+                .count()
+                + variants(&scene, 10, opts)
+                    .into_iter()
+                    .filter(|v| v.label == format!("pca-cubature tol={own}"))
+                    .count()
+        };
+        assert_eq!(own_rows(&opts), 1, "as `pca-cubature k=10`");
+        opts.tolerances = vec![0.1, own];
+        assert_eq!(own_rows(&opts), 1, "as `pca-cubature tol={own}`");
+    }
+
+    /// Each swept latent dimension also runs `neural-cubature` without complement directions,
+    /// unless the scene already has none.
+    #[test]
+    fn latent_sizes_also_run_without_complement_directions() {
+        let mut scene = Scene::builtin();
+        let opts = BenchOptions {
+            out: PathBuf::new(),
+            cache: PathBuf::new(),
+            trajectory: 0,
+            repeats: 1,
+            pca_dims: vec![4],
+            latent_dims: vec![3, 2],
+            tolerances: vec![0.1],
+            complement_dims: Vec::new(),
+        };
+        let bare = |scene: &Scene| -> Vec<(String, Option<usize>)> {
+            variants(scene, 10, &opts)
+                .into_iter()
+                .filter(|v| v.label.ends_with(" c=0"))
+                .map(|v| (v.label, v.scene.reduced.complement_directions))
+                .collect()
+        };
+        assert_eq!(
+            bare(&scene),
+            [
+                ("neural-cubature d=2 c=0".to_string(), Some(0)),
+                ("neural-cubature d=3 c=0".to_string(), Some(0)),
+            ]
+        );
+        scene.reduced.complement_directions = Some(0);
+        assert!(bare(&scene).is_empty(), "the plain d rows are already bare");
     }
 
     #[test]
