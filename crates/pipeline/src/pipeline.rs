@@ -397,10 +397,25 @@ impl std::fmt::Debug for Pipeline<'_> {
     }
 }
 
+/// Logs a warning the first time this process meets it (a bench builds one pipeline per
+/// variant of the same scene).
+fn warn_once(message: &str) {
+    static SEEN: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+    let mut seen = SEEN.lock().unwrap_or_else(|e| e.into_inner());
+    if !seen.iter().any(|m| m == message) {
+        tracing::warn!("{message}");
+        seen.push(message.to_string());
+    }
+}
+
 impl<'a> Pipeline<'a> {
     /// Builds the scene's model; `cache` is the folder for artifacts.
     pub fn new(scene: &'a Scene, cache: &Path) -> Result<Self> {
         let (model, _) = scene.build_model()?;
+        let (lo, hi) = model.mesh.bounding_box();
+        if let Some(w) = fem_core::mesh::size_warning((hi - lo).norm()) {
+            warn_once(&format!("{}: {w}", scene.source));
+        }
         let mut bytes =
             Vec::with_capacity(model.mesh.num_vertices() * 24 + model.mesh.num_tets() * 32);
         for v in &model.mesh.vertices {

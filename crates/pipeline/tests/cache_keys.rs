@@ -136,6 +136,12 @@ fn variants() -> Vec<Variant> {
             "size = [1.0, 0.2, 0.25]",
             ALL,
         ),
+        v(
+            "mesh.scale",
+            "cells = [5, 1, 1] }",
+            "cells = [5, 1, 1] }\nscale = 0.9",
+            ALL,
+        ),
         // [material]
         v("material.youngs_modulus", "1.0e5", "2.0e5", ALL),
         v(

@@ -408,6 +408,11 @@ fn mesh_sections_are_checked_when_read() {
         "cells = [100000, 100000, 100000]",
     ));
     assert_names(&err, &["mesh.generate.cells", "more than"]);
+    let err = read_error(&edit(
+        "cells = [4, 1, 1] }",
+        "cells = [4, 1, 1] }\nscale = -0.001",
+    ));
+    assert_names(&err, &["mesh.scale", "positive finite factor", "-0.001"]);
 }
 
 #[test]

@@ -6,7 +6,7 @@ use super::generate::{BoxSpec, box_mesh};
 use super::{TetMesh, ValidationReport, validate};
 use crate::FemError;
 
-/// Exactly one of `path` (relative to the scene file) and `generate`.
+/// Exactly one of `path` (relative to the scene file) and `generate`, and an optional `scale`.
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshConfig {
@@ -14,6 +14,35 @@ pub struct MeshConfig {
     pub path: Option<PathBuf>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub generate: Option<BoxSpec>,
+    /// Multiplies every coordinate as the mesh is read or generated: 0.001 for a mesh in
+    /// millimetres, 0.01 in centimetres. A scene is in SI units (metres, Pa, kg/m³), so every
+    /// other length in it (pin tolerances and planes, spheres) is in the scaled mesh's metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+}
+
+/// A body whose bounding-box diagonal is outside this range (metres) is worth a warning: its
+/// coordinates are likely in other units than the scene's SI ones.
+pub const PLAUSIBLE_SIZE: (f64, f64) = (1e-3, 50.0);
+
+/// What to say of a body `diagonal` metres across, when that is outside [`PLAUSIBLE_SIZE`].
+pub fn size_warning(diagonal: f64) -> Option<String> {
+    let (small, large) = PLAUSIBLE_SIZE;
+    if diagonal > large {
+        Some(format!(
+            "the mesh is {diagonal:.3e} m across (its bounding box's diagonal). A scene is in SI \
+             units (metres, Pa, kg/m³), so it is simulated as a body of that size: if its \
+             coordinates are millimetres, set `[mesh] scale = 0.001` (centimetres: 0.01)"
+        ))
+    } else if diagonal < small {
+        Some(format!(
+            "the mesh is {diagonal:.3e} m across (its bounding box's diagonal). A scene is in SI \
+             units (metres, Pa, kg/m³), so it is simulated as a body of that size: if its \
+             coordinates are in larger units, set `[mesh] scale` to the metres per unit"
+        ))
+    } else {
+        None
+    }
 }
 
 impl MeshConfig {
@@ -41,10 +70,40 @@ impl MeshConfig {
                 reason: "give exactly one of `path` and `generate`".into(),
             }),
         }
+        if let Some(scale) = self.scale
+            && !(scale.is_finite() && scale > 0.0)
+        {
+            errors.push(FemError::InvalidConfig {
+                field: "mesh.scale".into(),
+                reason: format!(
+                    "must be a positive finite factor (0.001 for a mesh in millimetres), got \
+                     {scale}"
+                ),
+            });
+        }
     }
 
-    /// Reads or generates the mesh and validates it.
+    /// Reads or generates the mesh, validates it and applies `scale`.
     pub fn load(&self, base_dir: &Path) -> Result<(TetMesh, ValidationReport), FemError> {
+        let (mut mesh, report) = self.load_unscaled(base_dir)?;
+        match self.scale {
+            None => {}
+            Some(scale) if scale.is_finite() && scale > 0.0 => {
+                for v in &mut mesh.vertices {
+                    *v *= scale;
+                }
+            }
+            Some(scale) => {
+                return Err(FemError::InvalidConfig {
+                    field: "mesh.scale".into(),
+                    reason: format!("must be a positive finite factor, got {scale}"),
+                });
+            }
+        }
+        Ok((mesh, report))
+    }
+
+    fn load_unscaled(&self, base_dir: &Path) -> Result<(TetMesh, ValidationReport), FemError> {
         match (&self.path, &self.generate) {
             (Some(_), None) => {
                 let path = self.resolved_path(base_dir).expect("path is set");
@@ -59,6 +118,58 @@ impl MeshConfig {
                 field: "mesh".into(),
                 reason: "give exactly one of `path` and `generate`".into(),
             }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn boxed(scale: Option<f64>) -> MeshConfig {
+        MeshConfig {
+            generate: Some(BoxSpec {
+                kind: Default::default(),
+                size: [300.0, 100.0, 100.0],
+                cells: [3, 1, 1],
+                origin: [0.0; 3],
+            }),
+            scale,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn scale_multiplies_every_coordinate() {
+        let (plain, _) = boxed(None).load(Path::new(".")).unwrap();
+        let (mm, _) = boxed(Some(0.001)).load(Path::new(".")).unwrap();
+        assert_eq!(plain.tets, mm.tets);
+        for (a, b) in plain.vertices.iter().zip(&mm.vertices) {
+            assert!((a * 0.001 - b).norm() <= 1e-15 * a.norm().max(1.0));
+        }
+        let (lo, hi) = mm.bounding_box();
+        assert!(((hi - lo).norm() - (0.3f64.powi(2) + 0.02).sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_scale_that_is_not_a_positive_factor_is_named() {
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let mut errors = Vec::new();
+            boxed(Some(bad)).check(Path::new("."), &mut errors);
+            let text: Vec<String> = errors.iter().map(|e| e.to_string()).collect();
+            assert_eq!(errors.len(), 1, "{bad}: {text:?}");
+            assert!(text[0].contains("mesh.scale"), "{text:?}");
+            assert!(boxed(Some(bad)).load(Path::new(".")).is_err());
+        }
+    }
+
+    #[test]
+    fn sizes_far_from_a_body_in_metres_are_warned_of() {
+        let big = size_warning(331.7).unwrap();
+        assert!(big.contains("`[mesh] scale = 0.001`"), "{big}");
+        assert!(size_warning(2e-4).unwrap().contains("`[mesh] scale`"));
+        for fine in [0.3, 1.7, 20.0] {
+            assert_eq!(size_warning(fine), None, "{fine}");
         }
     }
 }

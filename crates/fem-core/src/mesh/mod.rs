@@ -4,7 +4,7 @@ mod config;
 pub mod generate;
 mod validate;
 
-pub use config::MeshConfig;
+pub use config::{MeshConfig, PLAUSIBLE_SIZE, size_warning};
 
 pub use validate::{ValidationReport, validate, validate_located};
 
