@@ -42,7 +42,7 @@ fn main() -> Result<()> {
             .join("cache"),
     };
     let mut p = Pipeline::new(&scene, &cache)?;
-    let reference = p.reference(0, &mut |_, _| {})?;
+    let reference = p.reference(0, &|_, _| {})?;
     let frames = reference.frames.len();
     if frame >= frames {
         bail!("FRAME = {frame} is past the reference's {frames} frames");
