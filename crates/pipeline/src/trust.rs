@@ -56,9 +56,20 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
                  `kinds`, larger amplitudes)"
                     .to_string()
             };
+            // Where the run has measured the trajectory close to the full one, say so: the
+            // extrapolation held on this test, which is not the same as holding on the next.
+            let held = if r.mean_rel_error <= UNCOVERED_SUBSPACE_ERROR {
+                format!(
+                    " (on this test it stays {:.1} % from the full trajectory: the \
+                     extrapolation held here, a harder pull may not)",
+                    pct(r.mean_rel_error)
+                )
+            } else {
+                String::new()
+            };
             out.push(format!(
                 "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
-                 poses, so the decoder and the cubature rule extrapolate there, {what}",
+                 poses, so the decoder and the cubature rule extrapolate there{held}, {what}",
                 r.method,
                 r.training_distance_time,
                 pct(r.training_distance)
@@ -145,6 +156,18 @@ mod tests {
         );
         assert!(w[0].contains("extrapolate"), "{}", w[0]);
         assert!(w[0].contains("`[training] schedules`"), "{}", w[0]);
+        assert!(
+            w[0].contains("it stays 3.0 % from the full trajectory"),
+            "a measured small error is said: {}",
+            w[0]
+        );
+        let far_and_off = MethodReport {
+            training_distance: 0.8,
+            training_distance_time: 0.25,
+            ..row(Method::NeuralCubature, 0.12, 0.01)
+        };
+        let w = warnings(&[far_and_off]);
+        assert!(!w[0].contains("held here"), "{}", w[0]);
         // Far from training later than the schedules last: the schedules' length is named.
         let late = MethodReport {
             training_distance: 0.3,
