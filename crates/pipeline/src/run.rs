@@ -116,6 +116,77 @@ pub struct MethodReport {
     /// earlier (`run`'s full space, timed when the cached reference was computed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub machine_gfma: Option<f64>,
+    /// On the `full` row, when a reduced method drifts from the full trajectory: how much the
+    /// full trajectory itself amplifies a small error ([`sensitivity`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<Sensitivity>,
+}
+
+/// How much the full-space test trajectory amplifies a small error: the state (displacement
+/// and velocity) scaled by 1 − `change` at `time`, then simulated on with the same solver and
+/// compared with the reference as every method is.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Sensitivity {
+    /// When the state was changed (s).
+    pub time: f64,
+    /// The relative change of the state.
+    pub change: f64,
+    /// Mean over the frames from the change on of ‖u − u_full‖_M / ‖u_full‖_M.
+    pub mean_error: f64,
+    /// The same at the last frame.
+    pub last_error: f64,
+}
+
+/// The relative change [`sensitivity`] makes: about a reduced method's one-step error.
+pub const SENSITIVITY_CHANGE: f64 = 0.01;
+
+/// Where in the test trajectory [`sensitivity`] changes the state (fraction of its frames):
+/// late enough that the test's forces have acted, early enough to leave time to grow.
+pub const SENSITIVITY_AT: f64 = 0.3;
+
+/// Simulates test trajectory `trajectory` in full space with its state scaled by 1 − `change`
+/// after frame `frame`, and measures it against the cached reference. With `change` = 0 the
+/// reference is reproduced exactly.
+pub fn sensitivity(
+    pipeline: &mut Pipeline<'_>,
+    trajectory: usize,
+    frame: usize,
+    change: f64,
+    stage_progress: Progress<'_>,
+) -> Result<Sensitivity> {
+    let reference = pipeline.reference(trajectory, stage_progress)?;
+    let frames = reference.frames.len();
+    anyhow::ensure!(
+        frame < frames,
+        "frame {frame} is past the reference's {frames} frames"
+    );
+    let scene = pipeline.scene;
+    let time = fem_core::integrator::TimeConfig {
+        frames,
+        ..scene.time.clone()
+    };
+    let mut sim = fem_core::integrator::Simulator::new(
+        pipeline.test_model(trajectory)?,
+        time,
+        scene.solver.clone(),
+    )?;
+    let mut errors = ErrorAccumulator::default();
+    for (k, r) in reference.frames.iter().enumerate() {
+        if k == frame {
+            sim.state.u.iter_mut().for_each(|x| *x *= 1.0 - change);
+            sim.state.v.iter_mut().for_each(|x| *x *= 1.0 - change);
+        }
+        sim.step()?;
+        if k >= frame {
+            errors.add(&sim.model, &sim.state.u, r);
+        }
+    }
+    Ok(Sensitivity {
+        time: frame as f64 * scene.time.step,
+        change,
+        mean_error: mean(&errors.rel),
+        last_error: errors.rel.last().copied().unwrap_or(0.0),
+    })
 }
 
 /// Errors of a trajectory against the reference, frame by frame.
@@ -193,6 +264,25 @@ pub fn run(
         rows.push(measure(pipeline, &m, stage_progress, progress)?);
     }
     set_speedups(&mut rows);
+    if crate::trust::drifts(&rows)
+        && let Some(full) = rows.iter().position(|r| r.method.is_full())
+    {
+        let frames = pipeline
+            .reference(opts.trajectory, stage_progress)?
+            .frames
+            .len();
+        let frame = (SENSITIVITY_AT * frames as f64) as usize;
+        match sensitivity(
+            pipeline,
+            opts.trajectory,
+            frame,
+            SENSITIVITY_CHANGE,
+            stage_progress,
+        ) {
+            Ok(s) => rows[full].sensitivity = Some(s),
+            Err(e) => tracing::warn!("the test trajectory's sensitivity was not measured: {e:#}"),
+        }
+    }
     write_json(&opts.out.join("report.json"), &rows)?;
     if let Some(method) = crate::export::run_method(&opts.methods) {
         let mut model = crate::export::scene_model(pipeline, method, Rows::Used, stage_progress)?;
@@ -392,6 +482,7 @@ pub fn measure(
             step_restarts: 0,
             failure: None,
             machine_gfma: None,
+            sensitivity: None,
         });
     }
     let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
@@ -553,6 +644,7 @@ pub fn measure(
         step_restarts,
         failure,
         machine_gfma,
+        sensitivity: None,
     })
 }
 

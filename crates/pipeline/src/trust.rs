@@ -15,6 +15,60 @@ pub const UNTRUSTED_ERROR: f64 = 0.2;
 /// the subspace is (AutoDef's bar: 3.7 % subspace error, `pca` 1.5 %).
 pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 
+/// Whether a reduced method drifts from the full trajectory: more than
+/// [`UNCOVERED_SUBSPACE_ERROR`] off while its subspace holds the test four times better. Then
+/// `run` measures how much the full trajectory itself amplifies a small error
+/// ([`crate::run::sensitivity`]), which [`warnings`] reports.
+pub fn drifts(rows: &[MethodReport]) -> bool {
+    rows.iter().any(|r| {
+        !r.method.is_full()
+            && r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR
+            && r.subspace_error <= r.mean_rel_error / 4.0
+    })
+}
+
+/// A full trajectory that turns an error into twice as much or more by its end amplifies
+/// errors.
+pub const AMPLIFYING: f64 = 2.0;
+
+/// What the full row's sensitivity says of the drifting methods.
+fn sensitivity_warning(rows: &[MethodReport]) -> Option<String> {
+    let s = rows.iter().find_map(|r| r.sensitivity)?;
+    let pct = |x: f64| 100.0 * x;
+    let changed = format!(
+        "the full trajectory with its state changed by {:.0} % at t = {:.2} s ends {:.1} % from \
+         the unchanged one ({:.1} % on average from then on)",
+        pct(s.change),
+        s.time,
+        pct(s.last_error),
+        pct(s.mean_error)
+    );
+    let steps: Vec<f64> = (rows.iter())
+        .filter(|r| !r.method.is_full() && r.failure.is_none() && r.step_error > 0.0)
+        .map(|r| r.step_error)
+        .collect();
+    let steps = match (
+        steps.iter().copied().reduce(f64::min),
+        steps.iter().copied().reduce(f64::max),
+    ) {
+        (Some(lo), Some(hi)) => format!("{:.1}–{:.1} %", pct(lo), pct(hi)),
+        _ => "some".to_string(),
+    };
+    Some(if s.last_error >= AMPLIFYING * s.change {
+        format!(
+            "the test amplifies errors: {changed}. The reduced steps are each {steps} off (one-step \
+             error), so every method drifts further than its subspace error says, and the \
+             trajectory errors compare how each is perturbed more than how good it is: compare \
+             the one-step errors, or test a gentler pull (`[test] stiffness`, `offset`)"
+        )
+    } else {
+        format!(
+            "the test does not amplify errors ({changed}): the drift comes from the reduced \
+             steps themselves, each {steps} off (one-step error)"
+        )
+    })
+}
+
 /// Warnings for the reduced methods of a run, in row order; empty when every one is within
 /// [`UNTRUSTED_ERROR`], its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`] and its trajectory
 /// within [`OUTSIDE_TRAINING`] of the training poses.
@@ -96,6 +150,7 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
             ));
         }
     }
+    out.extend(sensitivity_warning(rows));
     out
 }
 
@@ -112,6 +167,61 @@ mod tests {
             step_error: 0.07,
             ..Default::default()
         }
+    }
+
+    /// The full row's sensitivity becomes one warning, which says whether the test amplifies
+    /// errors and quotes the reduced methods' one-step errors.
+    #[test]
+    fn a_measured_sensitivity_says_whether_the_test_amplifies() {
+        let drifting = MethodReport {
+            step_error: 0.004,
+            ..row(Method::Pca, 0.12, 0.002)
+        };
+        let other = MethodReport {
+            step_error: 0.02,
+            ..row(Method::NeuralCubature, 0.3, 0.003)
+        };
+        assert!(drifts(std::slice::from_ref(&drifting)));
+        assert!(!drifts(&[row(Method::Pca, 0.04, 0.002)]), "within 5 %");
+        assert!(
+            !drifts(&[row(Method::Pca, 0.12, 0.06)]),
+            "the subspace misses it"
+        );
+        assert!(!drifts(&[row(Method::Full, 0.12, 0.0)]));
+        let full = |last: f64| MethodReport {
+            sensitivity: Some(crate::run::Sensitivity {
+                time: 0.3,
+                change: 0.01,
+                mean_error: last / 2.0,
+                last_error: last,
+            }),
+            ..row(Method::Full, 0.0, 0.0)
+        };
+        let rows = [full(0.051), drifting.clone(), other.clone()];
+        let w = warnings(&rows);
+        let last = w.last().unwrap();
+        assert!(last.starts_with("the test amplifies errors"), "{last}");
+        assert!(
+            last.contains("ends 5.1 %") && last.contains("t = 0.30 s"),
+            "{last}"
+        );
+        assert!(
+            last.contains("0.4–2.0 %"),
+            "the one-step errors' range: {last}"
+        );
+        let rows = [full(0.003), drifting, other];
+        let w = warnings(&rows);
+        let last = w.last().unwrap();
+        assert!(
+            last.starts_with("the test does not amplify errors"),
+            "{last}"
+        );
+        assert!(
+            !warnings(&[row(Method::Full, 0.0, 0.0), row(Method::Pca, 0.01, 0.004)])
+                .iter()
+                .any(|w| w.contains("amplif")),
+            "no sensitivity measured, nothing said"
+        );
     }
 
     #[test]
