@@ -246,8 +246,28 @@ pub fn run_suite(
     Ok(rows)
 }
 
+/// Where `neural` stands against `linear` on the error–cost plane (mean error, median ms per
+/// step): `ahead` when at least as good on both and better on one, `behind` the other way round,
+/// otherwise on a frontier with it, saying which way.
+pub fn standing(neural: &MethodReport, linear: &MethodReport) -> &'static str {
+    if neural.failure.is_some() || linear.failure.is_some() {
+        return "—";
+    }
+    let faster = neural.ms_per_step.total_cmp(&linear.ms_per_step);
+    let closer = neural.mean_rel_error.total_cmp(&linear.mean_rel_error);
+    use std::cmp::Ordering::{Equal, Greater, Less};
+    match (faster, closer) {
+        (Equal, Equal) => "tied",
+        (Less | Equal, Less | Equal) => "ahead",
+        (Greater | Equal, Greater | Equal) => "behind",
+        (Less, Greater) => "frontier: faster, less accurate",
+        (Greater, Less) => "frontier: more accurate, slower",
+    }
+}
+
 /// The suite's table: per mesh, every reduced method's mean error (its space–time error in
-/// parentheses) and speed-up, and the pipeline's time from an empty cache.
+/// parentheses) and speed-up, the pipeline's time from an empty cache, and where
+/// `neural-cubature` stands against `pca-cubature` ([`standing`]).
 pub fn markdown(rows: &[SuiteRow]) -> String {
     let reduced = [
         Method::Pca,
@@ -259,9 +279,10 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
     for m in reduced {
         s += &format!(" {m} error (space-time) | {m} speed-up |");
     }
+    s += " neural-cubature against pca-cubature |";
     s += "\n|---|---:|---:|---:|";
     s += &"---:|---:|".repeat(reduced.len());
-    s += "\n";
+    s += "---|\n";
     for r in rows {
         s += &format!(
             "| {} | {} | {} | {:.0} |",
@@ -279,6 +300,11 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
                 }
                 None => s += " — | — |",
             }
+        }
+        let find = |m: Method| r.methods.iter().find(|x| x.method == m);
+        match (find(Method::NeuralCubature), find(Method::PcaCubature)) {
+            (Some(n), Some(p)) => s += &format!(" {} |", standing(n, p)),
+            _ => s += " — |",
         }
         s += "\n";
         if let Some(f) = &r.failure {
@@ -300,6 +326,34 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn standing_reads_the_error_cost_plane() {
+        let at = |ms: f64, error: f64| MethodReport {
+            ms_per_step: ms,
+            mean_rel_error: error,
+            ..Default::default()
+        };
+        let p = at(0.1, 0.02);
+        assert_eq!(standing(&at(0.1, 0.02), &p), "tied");
+        assert_eq!(standing(&at(0.08, 0.02), &p), "ahead");
+        assert_eq!(standing(&at(0.1, 0.01), &p), "ahead");
+        assert_eq!(standing(&at(0.2, 0.03), &p), "behind");
+        assert_eq!(standing(&at(0.1, 0.03), &p), "behind");
+        assert_eq!(
+            standing(&at(0.05, 0.03), &p),
+            "frontier: faster, less accurate"
+        );
+        assert_eq!(
+            standing(&at(0.2, 0.01), &p),
+            "frontier: more accurate, slower"
+        );
+        let failed = MethodReport {
+            failure: Some("frame 3".into()),
+            ..at(0.05, 0.01)
+        };
+        assert_eq!(standing(&failed, &p), "—");
+    }
 
     /// The long run's bars are the sizes their documentation gives, and their minimal scenes
     /// parse with the mesh generated in code, pinned at the bottom 2 % of the height.
