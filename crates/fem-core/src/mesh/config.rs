@@ -28,21 +28,17 @@ pub const PLAUSIBLE_SIZE: (f64, f64) = (1e-3, 50.0);
 /// What to say of a body `diagonal` metres across, when that is outside [`PLAUSIBLE_SIZE`].
 pub fn size_warning(diagonal: f64) -> Option<String> {
     let (small, large) = PLAUSIBLE_SIZE;
-    if diagonal > large {
-        Some(format!(
-            "the mesh is {diagonal:.3e} m across (its bounding box's diagonal). A scene is in SI \
-             units (metres, Pa, kg/m³), so it is simulated as a body of that size: if its \
-             coordinates are millimetres, set `[mesh] scale = 0.001` (centimetres: 0.01)"
-        ))
+    let hint = if diagonal > large {
+        "if its coordinates are millimetres, set `[mesh] scale = 0.001` (centimetres: 0.01)"
     } else if diagonal < small {
-        Some(format!(
-            "the mesh is {diagonal:.3e} m across (its bounding box's diagonal). A scene is in SI \
-             units (metres, Pa, kg/m³), so it is simulated as a body of that size: if its \
-             coordinates are in larger units, set `[mesh] scale` to the metres per unit"
-        ))
+        "if its coordinates are in larger units, set `[mesh] scale` to the metres per unit"
     } else {
-        None
-    }
+        return None;
+    };
+    Some(format!(
+        "the mesh is {diagonal:.3e} m across (its bounding box's diagonal). A scene is in SI \
+         units (metres, Pa, kg/m³), so it is simulated as a body of that size: {hint}"
+    ))
 }
 
 impl MeshConfig {
@@ -70,35 +66,33 @@ impl MeshConfig {
                 reason: "give exactly one of `path` and `generate`".into(),
             }),
         }
-        if let Some(scale) = self.scale
-            && !(scale.is_finite() && scale > 0.0)
-        {
-            errors.push(FemError::InvalidConfig {
+        if let Err(e) = self.checked_scale() {
+            errors.push(e);
+        }
+    }
+
+    /// The factor `scale` multiplies coordinates by (1 when absent), or the error naming it.
+    fn checked_scale(&self) -> Result<f64, FemError> {
+        match self.scale {
+            None => Ok(1.0),
+            Some(scale) if scale.is_finite() && scale > 0.0 => Ok(scale),
+            Some(scale) => Err(FemError::InvalidConfig {
                 field: "mesh.scale".into(),
                 reason: format!(
                     "must be a positive finite factor (0.001 for a mesh in millimetres), got \
                      {scale}"
                 ),
-            });
+            }),
         }
     }
 
     /// Reads or generates the mesh, validates it and applies `scale`.
     pub fn load(&self, base_dir: &Path) -> Result<(TetMesh, ValidationReport), FemError> {
+        let scale = self.checked_scale()?;
         let (mut mesh, report) = self.load_unscaled(base_dir)?;
-        match self.scale {
-            None => {}
-            Some(scale) if scale.is_finite() && scale > 0.0 => {
-                for v in &mut mesh.vertices {
-                    *v *= scale;
-                }
-            }
-            Some(scale) => {
-                return Err(FemError::InvalidConfig {
-                    field: "mesh.scale".into(),
-                    reason: format!("must be a positive finite factor, got {scale}"),
-                });
-            }
+        // × 1 is exact: an unscaled mesh keeps its coordinates, and its cache keys, bit for bit.
+        for v in &mut mesh.vertices {
+            *v *= scale;
         }
         Ok((mesh, report))
     }
