@@ -388,6 +388,20 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
 mod tests {
     use super::*;
 
+    /// Options of one small sweep; each test changes what it is about.
+    fn options() -> BenchOptions {
+        BenchOptions {
+            out: PathBuf::new(),
+            cache: PathBuf::new(),
+            trajectory: 0,
+            repeats: 1,
+            pca_dims: vec![4],
+            latent_dims: vec![2],
+            tolerances: vec![0.1],
+            complement_dims: Vec::new(),
+        }
+    }
+
     fn row(ms: f64, err: f64) -> BenchRow {
         BenchRow {
             variant: String::new(),
@@ -434,14 +448,8 @@ mod tests {
     fn complement_counts_become_neural_variants() {
         let scene = Scene::builtin();
         let opts = BenchOptions {
-            out: PathBuf::new(),
-            cache: PathBuf::new(),
-            trajectory: 0,
-            repeats: 1,
-            pca_dims: vec![4],
-            latent_dims: vec![2],
-            tolerances: vec![0.1],
             complement_dims: vec![8, 0, 8],
+            ..options()
         };
         let found: Vec<(String, Option<usize>)> = variants(&scene, 10, &opts)
             .into_iter()
@@ -476,29 +484,20 @@ mod tests {
         let scene = Scene::builtin();
         let own = scene.cubature.tolerance;
         let mut opts = BenchOptions {
-            out: PathBuf::new(),
-            cache: PathBuf::new(),
-            trajectory: 0,
-            repeats: 1,
             pca_dims: vec![4, 10],
-            latent_dims: vec![2],
-            tolerances: vec![0.1],
-            complement_dims: Vec::new(),
+            ..options()
         };
         let own_rows = |opts: &BenchOptions| {
             variants(&scene, 10, opts)
                 .into_iter()
                 .filter(|v| {
-                    v.method == Method::PcaCubature
+                    let at_own_k = v.method == Method::PcaCubature
                         && v.solver.is_none()
                         && v.scene.cubature.tolerance == own
-                        && v.scene.pca.dimension == Some(10)
+                        && v.scene.pca.dimension == Some(10);
+                    at_own_k || v.label == format!("pca-cubature tol={own}")
                 })
                 .count()
-                + variants(&scene, 10, opts)
-                    .into_iter()
-                    .filter(|v| v.label == format!("pca-cubature tol={own}"))
-                    .count()
         };
         assert_eq!(own_rows(&opts), 1, "as `pca-cubature k=10`");
         opts.tolerances = vec![0.1, own];
@@ -511,14 +510,8 @@ mod tests {
     fn latent_sizes_also_run_without_complement_directions() {
         let mut scene = Scene::builtin();
         let opts = BenchOptions {
-            out: PathBuf::new(),
-            cache: PathBuf::new(),
-            trajectory: 0,
-            repeats: 1,
-            pca_dims: vec![4],
             latent_dims: vec![3, 2],
-            tolerances: vec![0.1],
-            complement_dims: Vec::new(),
+            ..options()
         };
         let bare = |scene: &Scene| -> Vec<(String, Option<usize>)> {
             variants(scene, 10, &opts)
