@@ -12,6 +12,9 @@
 //!   it with SIGKILL as soon as a write is under way, and checks the target still loads whole.
 
 use std::path::{Path, PathBuf};
+
+mod common;
+use common::scratch;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -47,15 +50,6 @@ hidden = [8]
 epochs = 20
 batch_size = 8
 "#;
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir()
-        .join(format!("xtask-artifact-safety-{}", std::process::id()))
-        .join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn no_progress(_: usize, _: usize) {}
 

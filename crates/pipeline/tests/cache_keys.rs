@@ -9,6 +9,9 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+mod common;
+use common::scratch;
+
 use fem_core::TetMesh;
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
@@ -501,15 +504,6 @@ fn edited(variant: &Variant) -> String {
         variant.field
     );
     BASE.replacen(&from, &to, 1)
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir()
-        .join(format!("pipeline-cache-keys-{}", std::process::id()))
-        .join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 fn no_progress(_: usize, _: usize) {}

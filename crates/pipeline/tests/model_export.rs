@@ -2,7 +2,10 @@
 //! its report, and a model loaded from its file, driven by the held-out trajectory's forces
 //! through latent-sim's runtime, steps bit for bit as `run` and `simulate` step the method.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+mod common;
+use common::scratch;
 
 use latent_sim::model::Rows;
 use latent_sim::{Interactive, ReducedModel};
@@ -41,15 +44,6 @@ hidden = [8]
 epochs = 30
 batch_size = 8
 "#;
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir()
-        .join(format!("pipeline-model-export-{}", std::process::id()))
-        .join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 fn no_progress(_: usize, _: usize) {}
 

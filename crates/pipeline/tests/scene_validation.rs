@@ -6,6 +6,9 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+mod common;
+use common::scratch;
+
 use fem_core::TetMesh;
 use fem_core::mesh::generate::{BoxSpec, box_mesh};
 use pipeline::scene::Scene;
@@ -80,15 +83,6 @@ fn assert_names(err: &str, needles: &[&str]) {
     for n in needles {
         assert!(err.contains(n), "'{n}' missing from: {err}");
     }
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir()
-        .join(format!("xtask-scene-validation-{}", std::process::id()))
-        .join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 fn write_medit(path: &Path, mesh: &TetMesh) {

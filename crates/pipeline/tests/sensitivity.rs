@@ -1,7 +1,10 @@
 //! `run::sensitivity` against the cached reference: an unchanged state reproduces it exactly, a
 //! changed one does not, and the change shows from the frame it was made at.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+mod common;
+use common::scratch;
 
 use pipeline::pipeline::Pipeline;
 use pipeline::run::sensitivity;
@@ -22,13 +25,6 @@ step = 0.01
 [test]
 frames_per_schedule = 40
 "#;
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("ld-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 #[test]
 fn an_unchanged_state_reproduces_the_reference_and_a_changed_one_does_not() {
