@@ -23,9 +23,9 @@ pub enum MeshError {
     /// The mesh was read but is not a usable tetrahedral mesh.
     #[error("{path}: invalid mesh: {reason}")]
     Invalid { path: PathBuf, reason: String },
-    /// The file extension does not name a supported format.
-    #[error("{path}: unsupported mesh format (expected .mesh, .msh or .vtk)")]
-    UnsupportedFormat { path: PathBuf },
+    /// The file extension does not name a supported format; `hint` says what to do instead.
+    #[error("{path}: unsupported mesh format: {hint}")]
+    UnsupportedFormat { path: PathBuf, hint: String },
 }
 
 /// Errors of the physics and solvers.

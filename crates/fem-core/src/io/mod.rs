@@ -1,8 +1,9 @@
-//! Mesh readers (MEDIT `.mesh`, Gmsh `.msh` 2.2 ASCII and 4.1, legacy VTK) and writers
-//! (VTU frames with point data `displacement`, `.pvd` series) for ParaView.
+//! Mesh readers (MEDIT `.mesh`, Gmsh `.msh` 2.2 ASCII and 4.1, legacy VTK, TetGen `.node` /
+//! `.ele`) and writers (VTU frames with point data `displacement`, `.pvd` series) for ParaView.
 
 pub mod gmsh;
 pub mod medit;
+pub mod tetgen;
 pub mod vtk;
 pub mod vtu;
 
@@ -15,18 +16,38 @@ use crate::mesh::{TetMesh, ValidationReport, validate_located};
 pub const MAX_ENTITIES: usize = 50_000_000;
 
 /// Reads a tetrahedral mesh, choosing the format by extension, and validates it. A tet that
-/// validation refuses is named with its line in the file (text formats).
+/// validation refuses is named with its line in the file (text formats). A TetGen mesh is named
+/// by either of its two files; both are read.
 pub fn read_mesh(path: &Path) -> Result<(TetMesh, ValidationReport), MeshError> {
-    format_of(path)?;
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    parse_mesh(&bytes, path)
+    let read = |path: &Path| {
+        std::fs::read(path).map_err(|source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    };
+    if let Format::TetGen = format_of(path)? {
+        let (node, ele) = tetgen::pair_paths(path);
+        return parse_tetgen(&read(&node)?, &node, &read(&ele)?, &ele);
+    }
+    parse_mesh(&read(path)?, path)
+}
+
+/// [`read_mesh`] on the content of a TetGen mesh's `.node` file (`node_path` names it in
+/// errors) and `.ele` file (`ele_path`, which also names validation's errors).
+pub fn parse_tetgen(
+    node: &[u8],
+    node_path: &Path,
+    ele: &[u8],
+    ele_path: &Path,
+) -> Result<(TetMesh, ValidationReport), MeshError> {
+    let (node, ele) = (String::from_utf8_lossy(node), String::from_utf8_lossy(ele));
+    let mut mesh = tetgen::parse(&node, node_path, &ele, ele_path)?;
+    let report = validate_located(&mut mesh, ele_path, &|t| tetgen::tet_line(&ele, t))?;
+    Ok((mesh, report))
 }
 
 /// [`read_mesh`] on the content of a file: `path` chooses the format by its extension and names
-/// the source in errors.
+/// the source in errors. A TetGen mesh is two files: see [`parse_tetgen`].
 pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<(TetMesh, ValidationReport), MeshError> {
     let text = || String::from_utf8_lossy(bytes);
     let (mut mesh, line_of_tet): (TetMesh, Box<dyn Fn(usize) -> Option<usize>>) =
@@ -43,6 +64,14 @@ pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<(TetMesh, ValidationRepor
                 vtk::parse(&text(), path)?,
                 Box::new(move |t| vtk::tet_line(&text(), t)),
             ),
+            Format::TetGen => {
+                return Err(MeshError::Invalid {
+                    path: path.to_path_buf(),
+                    reason: "a TetGen mesh is two files, NAME.node and NAME.ele: read them \
+                             together (read_mesh, parse_tetgen)"
+                        .into(),
+                });
+            }
         };
     let report = validate_located(&mut mesh, path, &line_of_tet)?;
     Ok((mesh, report))
@@ -53,6 +82,7 @@ enum Format {
     Medit,
     Gmsh,
     Vtk,
+    TetGen,
 }
 
 fn format_of(path: &Path) -> Result<Format, MeshError> {
@@ -64,9 +94,33 @@ fn format_of(path: &Path) -> Result<Format, MeshError> {
         Some("mesh") => Ok(Format::Medit),
         Some("msh") => Ok(Format::Gmsh),
         Some("vtk") => Ok(Format::Vtk),
-        _ => Err(MeshError::UnsupportedFormat {
+        Some("node" | "ele") => Ok(Format::TetGen),
+        ext => Err(MeshError::UnsupportedFormat {
             path: path.to_path_buf(),
+            hint: unsupported_hint(ext),
         }),
+    }
+}
+
+/// What to do with a file of extension `ext` that no reader takes.
+fn unsupported_hint(ext: Option<&str>) -> String {
+    const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, legacy VTK .vtk and TetGen .node/.ele";
+    match ext {
+        Some("obj" | "stl" | "off" | "ply" | "poly" | "smesh") => format!(
+            "a surface mesh: the simulation needs a tetrahedral (volume) mesh. Tetrahedralize it \
+             first, e.g. `tetgen -pqg FILE` (writes FILE.1.mesh beside it; TetGen reads .off, \
+             .ply, .stl, .poly and .smesh) or fTetWild (`FloatTetwild_bin -i FILE -o \
+             out.msh`, any of these formats), then set [mesh] path to the result ({READ})"
+        ),
+        Some("vtu") => format!(
+            "a VTK XML file, which is not read: save it as legacy VTK from ParaView (File > Save \
+             Data, type .vtk, ASCII) or convert it (`meshio convert FILE out.vtk`) ({READ})"
+        ),
+        Some("meshb") => format!(
+            "binary MEDIT, which is not read: write ASCII .mesh instead (e.g. `meshio convert \
+             FILE out.mesh`) ({READ})"
+        ),
+        _ => format!("{READ}; other formats convert with e.g. `meshio convert FILE out.msh`"),
     }
 }
 

@@ -426,7 +426,7 @@ fn missing_files_and_unknown_extensions_are_typed_errors() {
     let odd = dir().join("mesh.obj");
     std::fs::write(&odd, "v 0 0 0\n").unwrap();
     match read_mesh(&odd) {
-        Err(MeshError::UnsupportedFormat { path }) => assert_eq!(path, odd),
+        Err(MeshError::UnsupportedFormat { path, .. }) => assert_eq!(path, odd),
         other => panic!("{other:?}"),
     }
 }

@@ -20,6 +20,7 @@
 
 mod check;
 mod mutate;
+mod tetgen;
 mod writers;
 
 use std::io::Write;

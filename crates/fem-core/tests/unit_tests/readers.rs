@@ -498,3 +498,87 @@ fn vtu_and_pvd_are_well_formed_and_values_round_trip_exactly() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `mesh` as a TetGen pair `NAME.node` / `NAME.ele` in `dir`, numbered from `base`, with a
+/// comment, one point attribute, boundary markers and region attributes, as `tetgen` writes
+/// them; returns the `.ele` path.
+fn write_tetgen(dir: &Path, name: &str, mesh: &TetMesh, base: usize) -> PathBuf {
+    use std::fmt::Write;
+    let mut node = format!("# {name}\n{} 3 1 1\n", mesh.num_vertices());
+    for (i, p) in mesh.vertices.iter().enumerate() {
+        writeln!(
+            node,
+            "{} {:e} {:e} {:e} 0.5 {}",
+            i + base,
+            p.x,
+            p.y,
+            p.z,
+            i % 2
+        )
+        .unwrap();
+    }
+    let mut ele = format!("{} 4 1\n", mesh.num_tets());
+    for (i, t) in mesh.tets.iter().enumerate() {
+        let [a, b, c, d] = t.map(|v| v + base);
+        writeln!(ele, "  {} {a} {b} {c} {d} -1", i + base).unwrap();
+    }
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join(format!("{name}.node")), node).unwrap();
+    let ele_path = dir.join(format!("{name}.ele"));
+    std::fs::write(&ele_path, ele).unwrap();
+    ele_path
+}
+
+#[test]
+fn tetgen_pairs_read_from_either_file_as_the_mesh_they_hold() {
+    use fem_core::mesh::generate::{BoxSpec, box_mesh};
+    let dir = std::env::temp_dir().join(format!("fem-core-tetgen-{}", std::process::id()));
+    let spec = BoxSpec {
+        size: [0.3, 0.1, 0.2],
+        cells: [3, 2, 2],
+        ..BoxSpec::default()
+    };
+    let mut meshes = vec![("box".to_string(), box_mesh(&spec).unwrap())];
+    // The real meshes too, when shared/ is there.
+    if let Some(shared) = super::shared_dir("TetGen copies of the shared meshes") {
+        for name in ["X_25cm_very_low", "25cm_bar_2k_tets"] {
+            let (mesh, _) = read(&shared.join(format!("meshes/{name}.mesh")));
+            meshes.push((name.to_string(), mesh));
+        }
+    }
+    for (name, mesh) in &meshes {
+        for base in [0, 1] {
+            let ele = write_tetgen(&dir, &format!("{name}.{base}"), mesh, base);
+            for path in [ele.clone(), ele.with_extension("node")] {
+                let (read_back, report) = read(&path);
+                assert_eq!(report.flipped_tets, 0, "{name}");
+                assert_same_mesh(name, mesh, &read_back, 0.0);
+            }
+        }
+    }
+    // A pair with a file missing names the missing file.
+    let lone = write_tetgen(&dir, "lone", &meshes[0].1, 1);
+    std::fs::remove_file(lone.with_extension("node")).unwrap();
+    match fem_core::io::read_mesh(&lone) {
+        Err(fem_core::MeshError::Io { path, .. }) => assert_eq!(path, lone.with_extension("node")),
+        other => panic!("{other:?}"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_surface_mesh_is_refused_with_what_to_do() {
+    let e = fem_core::io::read_mesh(Path::new("bunny.obj"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("bunny.obj: unsupported mesh format: a surface mesh")
+            && e.contains("tetgen -pqg")
+            && e.contains("[mesh] path"),
+        "{e}"
+    );
+    let e = fem_core::io::read_mesh(Path::new("frame.vtu"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("legacy VTK"), "{e}");
+}
