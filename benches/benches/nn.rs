@@ -147,7 +147,7 @@ fn bench_decoder(c: &mut Criterion, decoder: &Decoder) {
 fn train_config() -> AutoencoderConfig {
     AutoencoderConfig {
         latent_dim: Some(LATENT),
-        hidden: vec![200, 200],
+        hidden: Some(vec![200, 200]),
         activation: Activation::Elu,
         epochs: 1000,
         batch_size: 256,

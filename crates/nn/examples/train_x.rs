@@ -20,7 +20,7 @@ fn main() -> Result<(), nn::NnError> {
     let data = TanhManifold::autodef_x().sample(2_000, 7);
     let config = AutoencoderConfig {
         latent_dim: Some(6),
-        hidden: vec![200, 200],
+        hidden: Some(vec![200, 200]),
         activation: Activation::Elu,
         epochs,
         batch_size: 256,

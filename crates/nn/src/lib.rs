@@ -26,7 +26,7 @@
 //!     [t, t * t, (2.0 * t).sin()][i]
 //! });
 //! let config = AutoencoderConfig {
-//!     hidden: vec![16],
+//!     hidden: Some(vec![16]),
 //!     epochs: 200,
 //!     batch_size: 32,
 //!     learning_rate: 1e-2,
@@ -83,7 +83,7 @@ pub use activation::Activation;
 pub use adam::{Adam, AdamParams};
 pub use autoencoder::{Autoencoder, AutoencoderGradient, AutoencoderWorkspace, CHUNK};
 pub use batch::{MlpBatchWorkspace, MlpGradient};
-pub use config::{AutoencoderConfig, DEFAULT_LATENT_DIM, LatentRule};
+pub use config::{AutoencoderConfig, DEFAULT_HIDDEN_RANGE, DEFAULT_LATENT_DIM, LatentRule};
 pub use error::NnError;
 pub use mlp::{Mlp, MlpWorkspace};
 pub use rng::SplitMix64;

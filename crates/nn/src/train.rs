@@ -231,7 +231,7 @@ impl Trainer {
         let model = Autoencoder::with_architecture(
             k,
             latent_dim,
-            &config.hidden,
+            &config.hidden_widths(k),
             config.activation,
             scaling,
             init_seed,

@@ -137,13 +137,26 @@ impl StageSummary for FittedCubature {
 impl StageSummary for TrainedModel {
     fn summary(&self) -> String {
         format!(
-            "d = {} of k = {}{}; worst vertex error over the snapshots {:.3e} (PCA with {} \
-             coefficients: {:.3e}); {} epochs",
+            "d = {} of k = {}{}; hidden layers {:?}{}; worst vertex error over the snapshots \
+             {:.3e} (PCA with {} coefficients: {:.3e}); {} epochs",
             self.latent_dim,
             self.pca_k,
             match &self.latent_choice {
                 Some(why) => format!(" ({why})"),
                 None => String::new(),
+            },
+            self.model
+                .encoder()
+                .sizes()
+                .get(1..self.model.encoder().sizes().len() - 1)
+                .unwrap_or(&[]),
+            if self.hidden_chosen {
+                format!(
+                    " (the default, k within {:?}; `[autoencoder] hidden` sets them)",
+                    nn::DEFAULT_HIDDEN_RANGE
+                )
+            } else {
+                String::new()
             },
             self.max_vertex_error,
             self.latent_dim,
@@ -357,6 +370,9 @@ pub struct TrainedModel {
     /// Why the latent dimension is what it is, when the scene did not name it.
     #[serde(default)]
     pub latent_choice: Option<String>,
+    /// Whether the hidden widths are the default's (the scene did not name them).
+    #[serde(default)]
+    pub hidden_chosen: bool,
 }
 
 /// The latent dimension when `[autoencoder]` names no rule: half the PCA dimension, at least
@@ -1049,6 +1065,7 @@ impl<'a> Pipeline<'a> {
                 pca_k_matching,
                 train_seconds,
                 latent_choice,
+                hidden_chosen: p.scene.autoencoder.hidden.is_none(),
             })
         })
     }

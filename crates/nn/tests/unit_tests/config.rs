@@ -17,7 +17,16 @@ fn error_fields(config: &AutoencoderConfig) -> Vec<String> {
 #[test]
 fn defaults_are_valid_and_match_the_documentation() {
     let c = AutoencoderConfig::default();
-    assert_eq!(c.hidden, vec![200, 200]);
+    // Two layers as wide as the input, within [64, 200], unless the section says.
+    assert_eq!(c.hidden, None);
+    assert_eq!(c.hidden_widths(50), vec![64, 64]);
+    assert_eq!(c.hidden_widths(93), vec![93, 93]);
+    assert_eq!(c.hidden_widths(274), vec![200, 200]);
+    let given = AutoencoderConfig {
+        hidden: Some(vec![7]),
+        ..AutoencoderConfig::default()
+    };
+    assert_eq!(given.hidden_widths(50), vec![7]);
     assert_eq!(c.activation, Activation::Elu);
     assert_eq!((c.epochs, c.batch_size, c.patience), (1000, 256, 100));
     assert_eq!(c.learning_rate, 1e-3);
@@ -112,7 +121,7 @@ fn invalid_values_name_their_field() {
         ),
         (
             AutoencoderConfig {
-                hidden: vec![10, 0],
+                hidden: Some(vec![10, 0]),
                 ..d()
             },
             "autoencoder.hidden",

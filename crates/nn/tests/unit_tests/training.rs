@@ -27,7 +27,7 @@ fn learns_a_nonlinear_manifold_far_better_than_pca() {
     let data = manifold_data(1000, 42);
     let linear = pca_mse(&data, 2);
     let config = AutoencoderConfig {
-        hidden: vec![32, 32],
+        hidden: Some(vec![32, 32]),
         epochs: 1000,
         batch_size: 32,
         learning_rate: 3e-3,
@@ -53,7 +53,7 @@ fn learns_a_nonlinear_manifold_far_better_than_pca() {
 fn training_is_bit_reproducible() {
     let data = manifold_data(300, 7);
     let config = AutoencoderConfig {
-        hidden: vec![16, 16],
+        hidden: Some(vec![16, 16]),
         epochs: 15,
         batch_size: 100,
         patience: 0,
@@ -86,7 +86,7 @@ fn training_is_bit_reproducible() {
 fn restarts_keep_the_network_with_the_lowest_validation_loss() {
     let data = manifold_data(300, 7);
     let config = AutoencoderConfig {
-        hidden: vec![16, 16],
+        hidden: Some(vec![16, 16]),
         epochs: 20,
         batch_size: 50,
         patience: 0,
@@ -151,7 +151,7 @@ fn early_stopping_restores_the_best_weights() {
     let mut rng = Rng::new(3);
     let data = Mat::from_fn(6, 60, |_, _| rng.range(-1.0, 1.0));
     let config = AutoencoderConfig {
-        hidden: vec![64],
+        hidden: Some(vec![64]),
         epochs: 3000,
         batch_size: 16,
         learning_rate: 1e-2,
@@ -200,7 +200,7 @@ fn early_stopping_restores_the_best_weights() {
 fn without_validation_the_training_loss_is_monitored() {
     let data = manifold_data(50, 9);
     let config = AutoencoderConfig {
-        hidden: vec![8],
+        hidden: Some(vec![8]),
         epochs: 30,
         batch_size: 10,
         validation_fraction: 0.0,
@@ -224,7 +224,7 @@ fn latent_search_stops_at_the_first_dimension_meeting_the_tolerance() {
     let config = AutoencoderConfig {
         latent_dims: Some([1, 4]),
         max_vertex_error: Some(0.5),
-        hidden: vec![8],
+        hidden: Some(vec![8]),
         epochs: 3,
         batch_size: 40,
         ..AutoencoderConfig::default()
@@ -291,7 +291,7 @@ fn bad_data_is_an_error() {
     let diverge = AutoencoderConfig {
         learning_rate: 1e300,
         epochs: 50,
-        hidden: vec![4],
+        hidden: Some(vec![4]),
         ..AutoencoderConfig::default()
     };
     assert!(matches!(
@@ -303,7 +303,7 @@ fn bad_data_is_an_error() {
 /// Adam at a rate of 1e-2 on 150 samples in one batch, no validation split, seed 3.
 fn one_batch_config(hidden: Vec<usize>, epochs: usize) -> AutoencoderConfig {
     AutoencoderConfig {
-        hidden,
+        hidden: Some(hidden),
         epochs,
         batch_size: 150,
         learning_rate: 1e-2,
@@ -414,7 +414,7 @@ fn the_skip_starts_at_pca_and_the_origin_is_anchored() {
     let v = x.svd().unwrap().U().to_owned();
     let q = v.transpose() * &x;
     let config = AutoencoderConfig {
-        hidden: vec![32, 32],
+        hidden: Some(vec![32, 32]),
         epochs: 1000,
         batch_size: 32,
         learning_rate: 3e-3,
