@@ -4,6 +4,9 @@
 //! * `nn_decoder`: the decoder 6 → 200 → 200 → 49 (ELU, f64) at one latent point: forward,
 //!   VJP Jᵀv (with its own forward pass, and `vjp_cached` after a forward), JVP Jw and the full
 //!   49 × 6 Jacobian, in ns per call.
+//! * `nn_decoder_width`: a decode and its VJP (`forward` then `vjp_cached`, what a reduced
+//!   L-BFGS iteration runs) of the decoder 25 → w → w → 50, the catapult's minimal scene's shape
+//!   (k = 50, d = 25), at the default widths for k = 50 and 100 (64 and 100) and AutoDef's 200.
 //! * `nn_train`: one epoch of the 49 → 200 → 200 → 6 → 200 → 200 → 49 autoencoder (Adam lr 10⁻³,
 //!   batch 256, no validation split) on 2,000 samples of
 //!   [`nn::synthetic::TanhManifold::autodef_x`] (seed 7) per iteration, inside rayon pools of 1 and
@@ -139,6 +142,29 @@ fn bench_decoder(c: &mut Criterion, decoder: &Decoder) {
         .measurement_time(Duration::from_secs(2));
     for (name, mut op) in decoder.operations() {
         group.bench_function(name, |b| b.iter(&mut op));
+    }
+    group.finish();
+}
+
+/// A decode and its VJP at hidden widths 64, 100 and 200 of a k = 50, d = 25 decoder.
+fn bench_decoder_width(c: &mut Criterion) {
+    let mut group = c.benchmark_group("nn_decoder_width");
+    group
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2));
+    let (d, k) = (25, 50);
+    let z: Vec<f64> = (0..d).map(|i| 0.3 * (i as f64 * 0.7).sin()).collect();
+    let v: Vec<f64> = (0..k).map(|i| (i as f64 * 0.37).sin()).collect();
+    for width in [64, 100, 200] {
+        let mlp = Mlp::new(&[d, width, width, k], Activation::Elu, 1).expect("a valid shape");
+        let (mut y, mut g, mut ws) = (vec![0.0; k], vec![0.0; d], mlp.workspace());
+        group.bench_function(format!("forward+vjp_cached/{width}"), |b| {
+            b.iter(|| {
+                mlp.forward(black_box(&z), &mut y, &mut ws);
+                mlp.vjp_cached(black_box(&v), &mut g, &mut ws);
+                black_box(&g);
+            })
+        });
     }
     group.finish();
 }
@@ -440,6 +466,7 @@ fn main() {
     let pools: Vec<(usize, ThreadPool)> = THREADS.iter().map(|&t| (t, pool(t))).collect();
     let mut c = Criterion::default().configure_from_args();
     bench_decoder(&mut c, &decoder);
+    bench_decoder_width(&mut c);
     bench_train(&mut c, &pools);
     c.final_summary();
     summary(&decoder, &pools);
