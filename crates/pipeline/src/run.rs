@@ -337,13 +337,7 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
             r.method, r.step_restarts
         ));
     }
-    let warnings = crate::trust::warnings(rows);
-    if !warnings.is_empty() {
-        s.push_str("\nnot to be trusted:\n");
-        for w in &warnings {
-            s.push_str(&format!("- {w}\n"));
-        }
-    }
+    s.push_str(&crate::trust::assess(rows).text(""));
     s.push_str(&format!(
         "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg); frames: {}/<method>/series.pvd\n",
         opts.out.join("report.json").display(),

@@ -312,13 +312,7 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
         }
     }
     for r in rows {
-        let warnings = crate::trust::warnings(&r.methods);
-        if !warnings.is_empty() {
-            s += &format!("\n{}, not to be trusted:\n", r.scene);
-            for w in warnings {
-                s += &format!("- {w}\n");
-            }
-        }
+        s += &crate::trust::assess(&r.methods).text(&format!("{}, ", r.scene));
     }
     s
 }

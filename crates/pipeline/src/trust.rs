@@ -69,11 +69,49 @@ fn sensitivity_warning(rows: &[MethodReport]) -> Option<String> {
     })
 }
 
-/// Warnings for the reduced methods of a run, in row order; empty when every one is within
-/// [`UNTRUSTED_ERROR`], its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`] and its trajectory
-/// within [`OUTSIDE_TRAINING`] of the training poses.
+/// What a run's figures say of its reduced methods, in row order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Assessment {
+    /// Figures not to be trusted: a method that stopped, a subspace that misses the test, a
+    /// trajectory over [`UNTRUSTED_ERROR`] off, one that left the training poses and ended over
+    /// [`UNCOVERED_SUBSPACE_ERROR`] off, and what the test's own sensitivity says of them.
+    pub untrusted: Vec<String>,
+    /// Figures that held but may not hold elsewhere: a trajectory that left the training poses
+    /// and still ended within [`UNCOVERED_SUBSPACE_ERROR`] of the full one.
+    pub caveats: Vec<String>,
+}
+
+impl Assessment {
+    /// The two lists as the text `run` and `suite` print under `heading` (e.g. a scene's name
+    /// and a colon, or nothing): "not to be trusted" first; empty when both are.
+    pub fn text(&self, heading: &str) -> String {
+        let mut s = String::new();
+        for (title, list) in [
+            ("not to be trusted", &self.untrusted),
+            ("held on this test, may not on others", &self.caveats),
+        ] {
+            if !list.is_empty() {
+                s.push_str(&format!("\n{heading}{title}:\n"));
+                for w in list {
+                    s.push_str(&format!("- {w}\n"));
+                }
+            }
+        }
+        s
+    }
+}
+
+/// The warnings of [`assess`] that say a figure is not to be trusted.
 pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
+    assess(rows).untrusted
+}
+
+/// Warnings and caveats for the reduced methods of a run; both empty when every method is
+/// within [`UNTRUSTED_ERROR`], its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`] and
+/// its trajectory within [`OUTSIDE_TRAINING`] of the training poses.
+pub fn assess(rows: &[MethodReport]) -> Assessment {
     let mut out = Vec::new();
+    let mut caveats = Vec::new();
     for r in rows.iter().filter(|r| !r.method.is_full()) {
         let pct = |x: f64| 100.0 * x;
         if let Some(f) = &r.failure {
@@ -121,13 +159,18 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
             } else {
                 String::new()
             };
-            out.push(format!(
+            let warning = format!(
                 "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
                  poses, so the decoder and the cubature rule extrapolate there{held}, {what}",
                 r.method,
                 r.training_distance_time,
                 pct(r.training_distance)
-            ));
+            );
+            if held.is_empty() {
+                out.push(warning);
+            } else {
+                caveats.push(warning);
+            }
         }
         if r.mean_rel_error > UNTRUSTED_ERROR {
             let why = if r.subspace_error <= r.mean_rel_error / 4.0 {
@@ -151,7 +194,10 @@ pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
         }
     }
     out.extend(sensitivity_warning(rows));
-    out
+    Assessment {
+        untrusted: out,
+        caveats,
+    }
 }
 
 #[cfg(test)]
@@ -257,7 +303,10 @@ mod tests {
             training_distance_time: 0.25,
             ..row(Method::NeuralCubature, 0.03, 0.01)
         };
-        let w = warnings(&[far]);
+        // It held on this test: a caveat, not a warning.
+        let a = assess(&[far]);
+        assert!(a.untrusted.is_empty(), "{a:#?}");
+        let w = a.caveats;
         assert_eq!(w.len(), 1, "{w:#?}");
         assert!(
             w[0].starts_with("neural-cubature: at t = 0.250 s its pose goes 80 %"),
@@ -276,8 +325,15 @@ mod tests {
             training_distance_time: 0.25,
             ..row(Method::NeuralCubature, 0.12, 0.01)
         };
-        let w = warnings(&[far_and_off]);
+        let a = assess(std::slice::from_ref(&far_and_off));
+        assert!(a.caveats.is_empty(), "{a:#?}");
+        let w = a.untrusted;
         assert!(!w[0].contains("held here"), "{}", w[0]);
+        let text = assess(&[far_and_off]).text("");
+        assert!(
+            text.starts_with("\nnot to be trusted:\n- neural-cubature"),
+            "{text}"
+        );
         // Far from training later than the schedules last: the schedules' length is named.
         let late = MethodReport {
             training_distance: 0.3,
@@ -285,7 +341,7 @@ mod tests {
             training_seconds: 0.6,
             ..row(Method::Pca, 0.03, 0.01)
         };
-        let w = warnings(&[late]);
+        let w = assess(&[late]).caveats;
         assert_eq!(w.len(), 1, "{w:#?}");
         assert!(
             w[0].contains("later than any training schedule lasts (0.60 s)")

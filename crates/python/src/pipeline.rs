@@ -200,6 +200,9 @@ pub struct Report {
     /// The run's "not to be trusted" warnings (empty when every reduced method is within
     /// bounds).
     warnings: Vec<String>,
+    /// What held on this test and may not on others (a trajectory that left the training
+    /// poses and still ended close to the full one).
+    caveats: Vec<String>,
     /// The folder of ``report.json``, ``report.md``, ``report.svg``, ``errors.csv``, ...
     out_dir: PathBuf,
     /// The model file the run wrote (None when no reduced method ran).
@@ -343,11 +346,13 @@ pub fn run_pipeline(
             pipeline::run::run(&mut p, &opts, &quiet, &mut |_, _, _| {}).map_err(Failure::Run)?;
         let model_path =
             pipeline::export::run_method(&methods).map(|m| pipeline::export::model_path(&out, m));
+        let assessment = pipeline::trust::assess(&rows);
         Ok(Report {
             scene: scene.name.clone(),
             rows: rows.iter().map(MethodRow::from).collect(),
             stages: p.outcomes.iter().map(Stage::from).collect(),
-            warnings: pipeline::trust::warnings(&rows),
+            warnings: assessment.untrusted,
+            caveats: assessment.caveats,
             out_dir: out,
             model_path,
         })

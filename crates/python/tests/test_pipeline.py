@@ -40,6 +40,7 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     assert 0 < cubature.mean_rel_error < 1 and math.isfinite(cubature.iterations)
     assert report.row("neural-cubature").dimension >= 2
     assert isinstance(report.warnings, list)
+    assert isinstance(report.caveats, list)
     assert report.model_path == out / "neural-cubature.ldm"
     model = ld.Model.load(report.model_path)
     assert model.method == "neural-cubature"
