@@ -403,14 +403,16 @@ fn complement_directions_complete_the_autoencoder() {
 }
 
 /// Without `[autoencoder] latent_dim` the latent dimension is half the PCA dimension within
-/// [6, k], and the stage says so; a latent dimension above k is an error that names the field
-/// and the values that work, before any training.
+/// [6, k], without `hidden` the two hidden layers are k wide within [64, 200], and the stage
+/// says so; a latent dimension above k is an error that names the field and the values that
+/// work, before any training.
 #[test]
 fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
     let defaulted = TINY
         .replace("dimension = 6", "dimension = 5")
         .replace("latent_dim = 2\n", "epochs = 20\n")
-        .replace("epochs = 150\n", "");
+        .replace("epochs = 150\n", "")
+        .replace("hidden = [16, 16]\n", "");
     let s = scene(&defaulted);
     let mut p = Pipeline::new(&s, &scratch_dir("pipeline-latent-default")).unwrap();
     let trained = p.train(&no_progress).unwrap();
@@ -418,8 +420,13 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
     assert_eq!(pipeline::pipeline::default_latent_dim(5), 5);
     assert_eq!(pipeline::pipeline::default_latent_dim(22), 11);
     assert_eq!(pipeline::pipeline::default_latent_dim(9), 6);
+    assert_eq!(trained.model.hidden_widths(), [64, 64]);
     let line = &p.outcomes.last().unwrap().summary;
     assert!(line.starts_with("d = 5 of k = 5 (the default"), "{line}");
+    assert!(
+        line.contains("hidden layers [64, 64] (the default, k within [64, 200]"),
+        "{line}"
+    );
 
     let too_wide = TINY.replace("latent_dim = 2", "latent_dim = 8");
     let s = scene(&too_wide);

@@ -210,6 +210,12 @@ impl Autoencoder {
         self.encoder.output_dim()
     }
 
+    /// The encoder's hidden layer widths (the decoder's, reversed).
+    pub fn hidden_widths(&self) -> &[usize] {
+        let sizes = self.encoder.sizes();
+        &sizes[1..sizes.len() - 1]
+    }
+
     pub fn encoder(&self) -> &Mlp {
         &self.encoder
     }

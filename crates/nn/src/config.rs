@@ -4,7 +4,7 @@
 //! ```toml
 //! [autoencoder]
 //! latent_dim = 6                 # or: latent_dims = [3, 12] with max_vertex_error = 1e-3
-//! hidden = [200, 200]            # default: two layers as wide as the input, within [64, 200]
+//! # hidden = [200, 200]          # default: two layers as wide as the input, within [64, 200]
 //! activation = "elu"             # elu | tanh | softplus | identity | relu (relu: not for simulation)
 //! epochs = 1000
 //! batch_size = 256
@@ -151,7 +151,7 @@ impl AutoencoderConfig {
     /// which every reduced L-BFGS iteration runs, cost in proportion to the widths. AutoDef used
     /// [200, 200] and [100, 100]; on four meshes of the suite (k = 50–93) the 64- and 100-wide
     /// networks ended as close to the full trajectory as the 200-wide one (within the spread
-    /// of training, ±0.5 points) at a half to a third of the decode time.
+    /// of training, ±0.5 points) at a half to a fifth of the decode time.
     pub fn hidden_widths(&self, input_dim: usize) -> Vec<usize> {
         self.hidden.clone().unwrap_or_else(|| {
             let [lo, hi] = DEFAULT_HIDDEN_RANGE;

@@ -145,11 +145,7 @@ impl StageSummary for TrainedModel {
                 Some(why) => format!(" ({why})"),
                 None => String::new(),
             },
-            self.model
-                .encoder()
-                .sizes()
-                .get(1..self.model.encoder().sizes().len() - 1)
-                .unwrap_or(&[]),
+            self.model.hidden_widths(),
             if self.hidden_chosen {
                 format!(
                     " (the default, k within {:?}; `[autoencoder] hidden` sets them)",

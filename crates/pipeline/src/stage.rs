@@ -63,7 +63,9 @@ impl Stage {
             // 2: inputs centred with one common scale instead of per-feature standardisation.
             // 3: the training gradient sums in a different (still fixed) order.
             // 5: without `[autoencoder] latent_dim`, d is half the PCA dimension (was 6).
-            Stage::Train => 5,
+            // 6: the artifact says whether the hidden widths are the default's (a new field, which
+            //    the stored format cannot default: scenes that name `hidden` keep their key).
+            Stage::Train => 6,
             // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
             // 3: sequential sparse factorisation on small pools (round-off), current-state
             //    L-BFGS preconditioner (iterates within tolerance).
@@ -166,7 +168,7 @@ mod tests {
                 ("pca", 2),
                 ("cubature", 3),
                 ("cubature-neural", 5),
-                ("train", 5),
+                ("train", 6),
                 ("complement", 3),
                 ("reference", 10),
             ]

@@ -48,8 +48,9 @@ impl TrainedModel {
     /// the snapshots beside PCA's at the same dimension and the PCA dimension that matches it.
     pub fn describe(&self) -> String {
         format!(
-            "autoencoder {k} → {d} → {k}: best epoch {} of {}{}, {:.1} s\n\
+            "autoencoder {k} → {d} → {k}, hidden layers {:?}: best epoch {} of {}{}, {:.1} s\n\
              max vertex error over the snapshots: autoencoder (d = {d}) {:.3e}, PCA with {d} columns {:.3e}; PCA needs {} columns to match\n",
+            self.model.hidden_widths(),
             self.best_epoch,
             self.history.len(),
             if self.stopped_early {

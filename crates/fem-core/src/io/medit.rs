@@ -63,14 +63,14 @@ pub(crate) fn tet_line(text: &str, t: usize) -> Option<usize> {
 
 /// A token and the 1-based line it came from.
 #[derive(Debug, Clone, Copy)]
-struct Token<'a> {
-    text: &'a str,
-    line: usize,
+pub(super) struct Token<'a> {
+    pub(super) text: &'a str,
+    pub(super) line: usize,
 }
 
 /// Whitespace-separated tokens with `#` comments removed, tracking line numbers.
 #[derive(Debug)]
-struct Tokens<'a> {
+pub(super) struct Tokens<'a> {
     lines: std::str::Lines<'a>,
     current: std::str::SplitWhitespace<'a>,
     line: usize,
@@ -78,7 +78,7 @@ struct Tokens<'a> {
 }
 
 impl<'a> Tokens<'a> {
-    fn new(text: &'a str) -> Self {
+    pub(super) fn new(text: &'a str) -> Self {
         Self {
             lines: text.lines(),
             current: "".split_whitespace(),
@@ -87,7 +87,7 @@ impl<'a> Tokens<'a> {
         }
     }
 
-    fn next(&mut self) -> Option<Token<'a>> {
+    pub(super) fn next(&mut self) -> Option<Token<'a>> {
         if let Some(t) = self.peeked.take() {
             return Some(t);
         }
@@ -113,7 +113,7 @@ impl<'a> Tokens<'a> {
     }
 
     /// Line of the last token read (for errors at end of file).
-    fn last_line(&self) -> usize {
+    pub(super) fn last_line(&self) -> usize {
         self.line.max(1)
     }
 }
@@ -411,7 +411,7 @@ impl<'a> Parser<'a> {
 }
 
 /// Parses a real, also accepting the Fortran exponent letter `D`.
-fn parse_f64(s: &str) -> Option<f64> {
+pub(super) fn parse_f64(s: &str) -> Option<f64> {
     s.parse::<f64>()
         .ok()
         .or_else(|| s.replace(['d', 'D'], "e").parse().ok())

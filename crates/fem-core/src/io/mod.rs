@@ -110,7 +110,8 @@ fn unsupported_hint(ext: Option<&str>) -> String {
             "a surface mesh: the simulation needs a tetrahedral (volume) mesh. Tetrahedralize it \
              first, e.g. `tetgen -pqg FILE` (writes FILE.1.mesh beside it; TetGen reads .off, \
              .ply, .stl, .poly and .smesh) or fTetWild (`FloatTetwild_bin -i FILE -o \
-             out.msh`, any of these formats), then set [mesh] path to the result ({READ})"
+             out.msh`; it reads .obj, .off, .stl and .ply), then set [mesh] path to the result \
+             ({READ})"
         ),
         Some("vtu") => format!(
             "a VTK XML file, which is not read: save it as legacy VTK from ParaView (File > Save \

@@ -18,15 +18,27 @@
 use std::path::{Path, PathBuf};
 
 use super::MAX_ENTITIES;
+use super::medit::{Token, Tokens, parse_f64};
 use crate::{MeshError, TetMesh, Vec3};
 
-/// The `.node` and `.ele` files of the TetGen mesh that `path` (either of them) names.
+/// The `.node` and `.ele` files of the TetGen mesh that `path` (either of them) names, with the
+/// letter case of its extension (`M.NODE` pairs with `M.ELE`).
 pub fn pair_paths(path: &Path) -> (PathBuf, PathBuf) {
-    (path.with_extension("node"), path.with_extension("ele"))
+    let upper = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.chars().all(|c| c.is_ascii_uppercase()));
+    let (node, ele) = if upper {
+        ("NODE", "ELE")
+    } else {
+        ("node", "ele")
+    };
+    (path.with_extension(node), path.with_extension(ele))
 }
 
 /// Parses a TetGen mesh from the text of its `.node` file (`node_path` names it in errors) and
-/// of its `.ele` file (`ele_path`).
+/// of its `.ele` file (`ele_path`). Of a 10-node mesh the mid-edge points, which no corner
+/// uses, are left out.
 pub fn parse(
     node: &str,
     node_path: &Path,
@@ -34,152 +46,145 @@ pub fn parse(
     ele_path: &Path,
 ) -> Result<TetMesh, MeshError> {
     let (vertices, base) = read_nodes(node, node_path)?;
-    let tets = read_tets(ele, ele_path, base, vertices.len())?;
-    Ok(TetMesh { vertices, tets })
+    let (tets, per_tet) = read_tets(ele, ele_path, base, vertices.len())?;
+    let mut mesh = TetMesh { vertices, tets };
+    if per_tet == 10 {
+        drop_unused_vertices(&mut mesh);
+    }
+    Ok(mesh)
 }
 
-/// 1-based line of tet `t` (0-based) in the `.ele` text that [`parse`] read, for messages about
-/// a tet that validation refuses.
+/// 1-based line of tet `t` (0-based) in the `.ele` text that [`parse`] read (the line of its
+/// number), for messages about a tet that validation refuses.
 pub(crate) fn tet_line(ele: &str, t: usize) -> Option<usize> {
-    // The header is the first data line, then one line per tet.
-    data_lines(ele).nth(t.checked_add(1)?).map(|l| l.number)
+    let mut tokens = Tokens::new(ele);
+    let _count = tokens.next()?;
+    let per_tet: usize = tokens.next()?.text.parse().ok()?;
+    let region: usize = tokens.next()?.text.parse().ok()?;
+    let skip = t.checked_mul(1 + per_tet + region)?;
+    for _ in 0..skip {
+        tokens.next()?;
+    }
+    tokens.next().map(|tok| tok.line)
 }
 
-/// A line with content: its 1-based number and its tokens, comments removed.
-struct Line<'a> {
-    number: usize,
-    tokens: Vec<&'a str>,
-}
-
-fn data_lines(text: &str) -> impl Iterator<Item = Line<'_>> {
-    text.lines().enumerate().filter_map(|(i, line)| {
-        let content = line.find('#').map_or(line, |at| &line[..at]);
-        let tokens: Vec<&str> = content.split_whitespace().collect();
-        (!tokens.is_empty()).then_some(Line {
-            number: i + 1,
-            tokens,
-        })
-    })
-}
-
-/// Errors of one file, with the line the last problem was found at.
+/// One file's tokens, with errors that name the file and a line.
 struct File<'a> {
+    tokens: Tokens<'a>,
     path: &'a Path,
-    lines: usize,
 }
 
-impl File<'_> {
+impl<'a> File<'a> {
+    fn new(text: &'a str, path: &'a Path) -> Self {
+        Self {
+            tokens: Tokens::new(text),
+            path,
+        }
+    }
+
     fn error(&self, line: usize, reason: impl Into<String>) -> MeshError {
         MeshError::Parse {
             path: self.path.to_path_buf(),
-            line: line.max(1),
+            line,
             reason: reason.into(),
         }
     }
 
-    /// Token `i` of `line` as an integer, `what` naming it in the error.
-    fn integer(&self, line: &Line<'_>, i: usize, what: &str) -> Result<usize, MeshError> {
-        let Some(token) = line.tokens.get(i) else {
-            return Err(self.error(line.number, format!("missing {what}")));
-        };
-        token.parse::<usize>().map_err(|_| {
+    /// The next token, or an end-of-file error saying what was expected.
+    fn token(&mut self, what: &dyn Fn() -> String) -> Result<Token<'a>, MeshError> {
+        self.tokens.next().ok_or_else(|| {
             self.error(
-                line.number,
-                format!("expected {what} (a non-negative integer), found '{token}'"),
+                self.tokens.last_line(),
+                format!(
+                    "unexpected end of file: expected {} (truncated file?)",
+                    what()
+                ),
             )
         })
     }
 
-    /// The header's count, checked against [`MAX_ENTITIES`].
-    fn count(&self, line: &Line<'_>, what: &str) -> Result<usize, MeshError> {
-        let n = self.integer(line, 0, what)?;
+    fn integer(&mut self, what: &dyn Fn() -> String) -> Result<(usize, usize), MeshError> {
+        let t = self.token(what)?;
+        t.text.parse::<usize>().map(|v| (v, t.line)).map_err(|_| {
+            self.error(
+                t.line,
+                format!(
+                    "expected {} (a non-negative integer), found '{}'",
+                    what(),
+                    t.text
+                ),
+            )
+        })
+    }
+
+    /// A header's count, checked against [`MAX_ENTITIES`].
+    fn count(&mut self, what: &str) -> Result<usize, MeshError> {
+        let (n, line) = self.integer(&|| format!("the number of {what}"))?;
         if n > MAX_ENTITIES {
             return Err(self.error(
-                line.number,
-                format!("{what} {n} is more than this reader accepts ({MAX_ENTITIES})"),
+                line,
+                format!("{n} {what} is more than this reader accepts ({MAX_ENTITIES})"),
             ));
         }
         Ok(n)
     }
 
-    fn truncated(&self, what: &str, read: usize, declared: usize) -> MeshError {
-        self.error(
-            self.lines,
-            format!(
-                "unexpected end of file: the header declares {declared} {what}, the file has \
-                 {read} (truncated file?)"
-            ),
-        )
+    /// A header flag that is 0 or 1.
+    fn flag(&mut self, what: &str) -> Result<usize, MeshError> {
+        let (v, line) = self.integer(&|| format!("the number of {what} (0 or 1)"))?;
+        if v > 1 {
+            return Err(self.error(
+                line,
+                format!("the number of {what} must be 0 or 1, found {v}"),
+            ));
+        }
+        Ok(v)
+    }
+
+    fn skip(&mut self, n: usize, what: &dyn Fn() -> String) -> Result<(), MeshError> {
+        for _ in 0..n {
+            self.token(what)?;
+        }
+        Ok(())
     }
 }
 
 /// The points of a `.node` file, and the number of its first point (0 or 1).
 fn read_nodes(text: &str, path: &Path) -> Result<(Vec<Vec3>, usize), MeshError> {
-    let file = File {
-        path,
-        lines: text.lines().count(),
-    };
-    let mut lines = data_lines(text);
-    let Some(header) = lines.next() else {
-        return Err(file.error(
-            1,
-            "empty file: expected the header `<points> 3 <attributes> <markers>`",
-        ));
-    };
-    let n = file.count(&header, "the number of points")?;
-    let dimension = file.integer(&header, 1, "the dimension")?;
+    let mut file = File::new(text, path);
+    let n = file.count("points")?;
+    let (dimension, line) = file.integer(&|| "the dimension".into())?;
     if dimension != 3 {
         return Err(file.error(
-            header.number,
+            line,
             format!("the dimension is {dimension}; a tetrahedral mesh needs 3"),
         ));
     }
-    let attributes = file.integer(&header, 2, "the number of attributes")?;
-    let markers = file.integer(&header, 3, "the number of boundary markers (0 or 1)")?;
-    if markers > 1 {
+    let (attributes, line) = file.integer(&|| "the number of attributes".into())?;
+    if attributes > MAX_ENTITIES {
         return Err(file.error(
-            header.number,
-            format!("the number of boundary markers must be 0 or 1, found {markers}"),
+            line,
+            format!("{attributes} attributes per point is too many"),
         ));
     }
-    let width = 4usize
-        .checked_add(attributes)
-        .and_then(|w| w.checked_add(markers))
-        .ok_or_else(|| {
-            file.error(
-                header.number,
-                format!("{attributes} attributes per point is more than a file can hold"),
-            )
-        })?;
+    let markers = file.flag("boundary markers")?;
     // A header may lie about its count: never reserve more than the text could hold.
     let mut vertices = Vec::with_capacity(n.min(text.len() / 8));
     let mut base = 0;
     for i in 0..n {
-        let Some(line) = lines.next() else {
-            return Err(file.truncated("points", i, n));
-        };
-        if line.tokens.len() < width {
+        let what = || format!("point {} of {n}", base + i);
+        let (number, line) = file.integer(&what)?;
+        if i == 0 && number > 1 {
             return Err(file.error(
-                line.number,
-                format!(
-                    "a point needs {width} values (number, x, y, z, {attributes} attributes, \
-                     {markers} markers), found {}",
-                    line.tokens.len()
-                ),
+                line,
+                format!("the first point is numbered {number}; TetGen numbers from 0 or 1"),
             ));
         }
-        let number = file.integer(&line, 0, "the point number")?;
         if i == 0 {
-            if number > 1 {
-                return Err(file.error(
-                    line.number,
-                    format!("the first point is numbered {number}; TetGen numbers from 0 or 1"),
-                ));
-            }
             base = number;
         } else if number != base + i {
             return Err(file.error(
-                line.number,
+                line,
                 format!(
                     "points must be numbered consecutively: expected {}, found {number}",
                     base + i
@@ -188,82 +193,91 @@ fn read_nodes(text: &str, path: &Path) -> Result<(Vec<Vec3>, usize), MeshError> 
         }
         let mut xyz = [0.0; 3];
         for (c, value) in xyz.iter_mut().enumerate() {
-            let token = line.tokens[1 + c];
-            *value = token.parse::<f64>().map_err(|_| {
+            let axis = ["x", "y", "z"][c];
+            let t = file.token(&|| format!("the {axis} coordinate of point {number}"))?;
+            *value = parse_f64(t.text).filter(|v| v.is_finite()).ok_or_else(|| {
                 file.error(
-                    line.number,
+                    t.line,
                     format!(
-                        "expected the {} coordinate of point {number} (a number), found '{token}'",
-                        ["x", "y", "z"][c]
+                        "expected the {axis} coordinate of point {number} (a finite number), \
+                         found '{}'",
+                        t.text
                     ),
                 )
             })?;
         }
+        file.skip(attributes + markers, &|| {
+            format!("the attributes and marker of point {number}")
+        })?;
         vertices.push(Vec3::new(xyz[0], xyz[1], xyz[2]));
     }
     Ok((vertices, base))
 }
 
-/// The tets of an `.ele` file, as 0-based indices into the `points` points numbered from `base`.
+/// The tets of an `.ele` file, as 0-based indices into the `points` points numbered from
+/// `base`, and the nodes per tet (4 or 10).
 fn read_tets(
     text: &str,
     path: &Path,
     base: usize,
     points: usize,
-) -> Result<Vec<[usize; 4]>, MeshError> {
-    let file = File {
-        path,
-        lines: text.lines().count(),
-    };
-    let mut lines = data_lines(text);
-    let Some(header) = lines.next() else {
-        return Err(file.error(
-            1,
-            "empty file: expected the header `<tets> <nodes per tet> <region attribute>`",
-        ));
-    };
-    let n = file.count(&header, "the number of tets")?;
-    let per_tet = file.integer(&header, 1, "the number of nodes per tet")?;
+) -> Result<(Vec<[usize; 4]>, usize), MeshError> {
+    let mut file = File::new(text, path);
+    let n = file.count("tets")?;
+    let (per_tet, line) = file.integer(&|| "the number of nodes per tet".into())?;
     if per_tet != 4 && per_tet != 10 {
         return Err(file.error(
-            header.number,
+            line,
             format!("a tet has 4 nodes (10 with `-o2`), the header says {per_tet}"),
         ));
     }
+    let region = file.flag("region attributes")?;
     let mut tets = Vec::with_capacity(n.min(text.len() / 10));
     for i in 0..n {
-        let Some(line) = lines.next() else {
-            return Err(file.truncated("tets", i, n));
-        };
-        if line.tokens.len() < 1 + per_tet {
-            return Err(file.error(
-                line.number,
-                format!(
-                    "a tet needs its number and {per_tet} nodes, found {} values",
-                    line.tokens.len()
-                ),
-            ));
-        }
-        file.integer(&line, 0, "the tet number")?;
+        file.integer(&|| format!("the number of tet {} of {n}", i + 1))?;
         let mut tet = [0; 4];
         for (c, corner) in tet.iter_mut().enumerate() {
-            let node = file.integer(&line, 1 + c, "a node number")?;
+            let (node, line) = file.integer(&|| format!("node {} of tet {}", c + 1, i + 1))?;
             *corner = node
                 .checked_sub(base)
                 .filter(|&v| v < points)
                 .ok_or_else(|| {
+                    let range = match points {
+                        0 => "the .node file has no points".to_string(),
+                        _ => format!("numbered {base} to {}", base + points - 1),
+                    };
                     file.error(
-                        line.number,
-                        format!(
-                            "node {node} is not a point of the .node file (numbered {base} to {})",
-                            (base + points).saturating_sub(1)
-                        ),
+                        line,
+                        format!("node {node} is not a point of the .node file ({range})"),
                     )
                 })?;
         }
+        file.skip(per_tet - 4 + region, &|| {
+            format!("the other nodes and region of tet {}", i + 1)
+        })?;
         tets.push(tet);
     }
-    Ok(tets)
+    Ok((tets, per_tet))
+}
+
+/// Leaves out the vertices no tet uses, renumbering the rest in order.
+fn drop_unused_vertices(mesh: &mut TetMesh) {
+    const UNUSED: usize = usize::MAX;
+    let mut new_index = vec![UNUSED; mesh.vertices.len()];
+    for &v in mesh.tets.iter().flatten() {
+        new_index[v] = 0;
+    }
+    for (kept, slot) in new_index.iter_mut().filter(|s| **s != UNUSED).enumerate() {
+        *slot = kept;
+    }
+    let mut i = 0;
+    mesh.vertices.retain(|_| {
+        i += 1;
+        new_index[i - 1] != UNUSED
+    });
+    for v in mesh.tets.iter_mut().flatten() {
+        *v = new_index[*v];
+    }
 }
 
 #[cfg(test)]
@@ -293,6 +307,12 @@ mod tests {
         let ele = "1 10 0\n0 0 1 2 3 0 0 0 0 0 0\n";
         let mesh = read(node, ele).unwrap();
         assert_eq!(mesh.tets, vec![[0, 1, 2, 3]]);
+        // The mid-edge points of a 10-node mesh are left out, the corners renumbered.
+        let node = "6 3 0 0\n0 0 0 0\n1 0.5 0 0\n2 1 0 0\n3 0 1 0\n4 9 9 9\n5 0 0 1\n";
+        let ele = "1 10 0\n0 0 2 3 5 1 4 4 4 4 4\n";
+        let mesh = read(node, ele).unwrap();
+        assert_eq!(mesh.tets, vec![[0, 1, 2, 3]]);
+        assert_eq!(mesh.vertices[1], Vec3::new(1.0, 0.0, 0.0));
     }
 
     #[test]
@@ -317,6 +337,12 @@ mod tests {
                 "y coordinate",
             ),
             (
+                NODE.replace("2 1 0 0 1", "2 1 inf 0 1"),
+                ELE.to_string(),
+                "m.node:4:",
+                "a finite number",
+            ),
+            (
                 NODE.to_string(),
                 ELE.replace("1 3 2 5", "1 3 2 6"),
                 "m.ele:3:",
@@ -326,7 +352,7 @@ mod tests {
                 NODE.to_string(),
                 ELE.replace("2 4 1", "3 4 1"),
                 "m.ele:3:",
-                "declares 3 tets",
+                "tet 3 of 3",
             ),
             (
                 NODE.to_string(),
@@ -338,7 +364,7 @@ mod tests {
                 NODE.to_string(),
                 "# nothing\n".to_string(),
                 "m.ele:1:",
-                "empty file",
+                "the number of tets",
             ),
         ];
         for (node, ele, at, what) in cases {
@@ -354,6 +380,16 @@ mod tests {
         let e = read("1000000 3 0 0\n0 0 0 0\n", ELE)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("declares 1000000 points"), "{e}");
+        assert!(
+            e.contains("end of file") && e.contains("point 1 of 1000000"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_pair_keeps_the_letter_case_of_the_name_given() {
+        let pair = |p: &str| pair_paths(Path::new(p));
+        assert_eq!(pair("a/m.1.ele"), ("a/m.1.node".into(), "a/m.1.ele".into()));
+        assert_eq!(pair("M.NODE"), ("M.NODE".into(), "M.ELE".into()));
     }
 }
