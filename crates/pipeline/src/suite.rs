@@ -54,10 +54,18 @@ pub enum SuiteMesh {
 impl SuiteMesh {
     fn name(&self) -> String {
         match self {
-            SuiteMesh::File(path) => path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "mesh".into()),
+            // MEDIT files by their stem, as before; other formats with their extension, so
+            // that `beam.mesh` and `beam.msh` in one folder run apart.
+            SuiteMesh::File(path) => {
+                let stem = path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "mesh".into());
+                match path.extension().map(|e| e.to_string_lossy().to_lowercase()) {
+                    Some(ext) if ext != "mesh" => format!("{stem}-{ext}"),
+                    _ => stem,
+                }
+            }
             SuiteMesh::Box { name, .. } => name.clone(),
         }
     }
@@ -143,8 +151,8 @@ fn minimal_scene_of(
     )
 }
 
-/// The `.mesh` files of folder `dir`, sorted, leaving out those with more vertices than
-/// `max_vertices`.
+/// The mesh files of folder `dir` that the readers take (`.mesh`, `.msh`, `.vtk`, and a TetGen
+/// pair by its `.ele` file), sorted, leaving out those with more vertices than `max_vertices`.
 ///
 /// # Errors
 /// When the folder cannot be read, a mesh cannot be read to count its vertices, or no mesh is
@@ -153,7 +161,7 @@ pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| anyhow::anyhow!("cannot read mesh folder {}: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "mesh"))
+        .filter(|p| p.is_file() && fem_core::io::is_mesh_file(p))
         .collect();
     files.sort();
     if let Some(max) = max_vertices {
@@ -167,7 +175,10 @@ pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
         files = kept;
     }
     if files.is_empty() {
-        anyhow::bail!("no .mesh files to run in {}", dir.display());
+        anyhow::bail!(
+            "no mesh files to run in {} (.mesh, .msh, .vtk or TetGen .node/.ele)",
+            dir.display()
+        );
     }
     Ok(files)
 }
@@ -347,6 +358,40 @@ mod tests {
             ..at(0.05, 0.01)
         };
         assert_eq!(standing(&failed, &p), "—");
+    }
+
+    /// A folder's meshes in every readable format, a TetGen pair once; surface meshes and
+    /// other files left out; names that keep `beam.mesh` and `beam.msh` apart.
+    #[test]
+    fn a_folder_lists_every_readable_mesh_once() {
+        let dir = std::env::temp_dir().join(format!("suite-meshes-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let medit = "MeshVersionFormatted 1\nDimension 3\nVertices\n4\n0 0 0 0\n1 0 0 0\n\
+                     0 1 0 0\n0 0 1 0\nTetrahedra\n1\n1 2 3 4 0\nEnd\n";
+        let node = "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n";
+        let files = [
+            ("beam.mesh", medit),
+            ("beam.msh", "not read here"),
+            ("part.1.node", node),
+            ("part.1.ele", "1 4 0\n1 1 2 3 4\n"),
+            ("bunny.obj", "v 0 0 0\n"),
+            ("notes.txt", "x"),
+        ];
+        for (name, text) in files {
+            std::fs::write(dir.join(name), text).unwrap();
+        }
+        let found = meshes(&dir, None).unwrap();
+        let names: Vec<String> = found
+            .iter()
+            .map(|p| SuiteMesh::File(p.clone()).name())
+            .collect();
+        assert_eq!(names, ["beam", "beam-msh", "part.1-ele"]);
+        // Counting vertices reads them: the TetGen pair reads whole.
+        let unreadable = meshes(&dir, Some(4)).unwrap_err().to_string();
+        assert!(unreadable.contains("beam.msh"), "{unreadable}");
+        std::fs::remove_file(dir.join("beam.msh")).unwrap();
+        assert_eq!(meshes(&dir, Some(4)).unwrap().len(), 2);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// The long run's bars are the sizes their documentation gives, and their minimal scenes

@@ -102,6 +102,15 @@ fn format_of(path: &Path) -> Result<Format, MeshError> {
     }
 }
 
+/// Whether [`read_mesh`] reads `path` by its extension, counting a TetGen pair once (by its
+/// `.ele` file): for listing the meshes of a folder.
+pub fn is_mesh_file(path: &Path) -> bool {
+    let node = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("node"));
+    format_of(path).is_ok() && !node
+}
+
 /// What to do with a file of extension `ext` that no reader takes.
 fn unsupported_hint(ext: Option<&str>) -> String {
     const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, legacy VTK .vtk and TetGen .node/.ele";
