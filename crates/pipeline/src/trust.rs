@@ -18,7 +18,7 @@ pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 /// Whether a reduced method drifts from the full trajectory: more than
 /// [`UNCOVERED_SUBSPACE_ERROR`] off while its subspace holds the test four times better. Then
 /// `run` measures how much the full trajectory itself amplifies a small error
-/// ([`crate::run::sensitivity`]), which [`warnings`] reports.
+/// ([`crate::run::sensitivity`]), which [`assess`] reports.
 pub fn drifts(rows: &[MethodReport]) -> bool {
     rows.iter().any(|r| {
         !r.method.is_full()
@@ -99,11 +99,6 @@ impl Assessment {
         }
         s
     }
-}
-
-/// The warnings of [`assess`] that say a figure is not to be trusted.
-pub fn warnings(rows: &[MethodReport]) -> Vec<String> {
-    assess(rows).untrusted
 }
 
 /// Warnings and caveats for the reduced methods of a run; both empty when every method is
@@ -244,7 +239,7 @@ mod tests {
             ..row(Method::Full, 0.0, 0.0)
         };
         let rows = [full(0.051), drifting.clone(), other.clone()];
-        let w = warnings(&rows);
+        let w = assess(&rows).untrusted;
         let last = w.last().unwrap();
         assert!(last.starts_with("the test amplifies errors"), "{last}");
         assert!(
@@ -256,14 +251,15 @@ mod tests {
             "the one-step errors' range: {last}"
         );
         let rows = [full(0.003), drifting, other];
-        let w = warnings(&rows);
+        let w = assess(&rows).untrusted;
         let last = w.last().unwrap();
         assert!(
             last.starts_with("the test does not amplify errors"),
             "{last}"
         );
         assert!(
-            !warnings(&[row(Method::Full, 0.0, 0.0), row(Method::Pca, 0.01, 0.004)])
+            !assess(&[row(Method::Full, 0.0, 0.0), row(Method::Pca, 0.01, 0.004)])
+                .untrusted
                 .iter()
                 .any(|w| w.contains("amplif")),
             "no sensitivity measured, nothing said"
@@ -279,7 +275,7 @@ mod tests {
             row(Method::PcaCubature, 0.92, 0.023),
             row(Method::Neural, 0.3, 0.22),
         ];
-        let w = warnings(&rows);
+        let w = assess(&rows).untrusted;
         assert_eq!(w.len(), 3, "{w:#?}");
         assert!(w[0].starts_with("pca-cubature: 92 %"), "{}", w[0]);
         assert!(w[0].contains("drift") && w[0].contains("2.3 %"), "{}", w[0]);
@@ -294,10 +290,10 @@ mod tests {
             "{}",
             w[2]
         );
-        assert!(warnings(&rows[..3]).is_empty());
+        assert!(assess(&rows[..3]).untrusted.is_empty());
         // A method closer to the full trajectory than its subspace (the springs' dents) is
         // not warned of for the subspace.
-        assert!(warnings(&[row(Method::Pca, 0.02, 0.22)]).is_empty());
+        assert!(assess(&[row(Method::Pca, 0.02, 0.22)]).untrusted.is_empty());
         let far = MethodReport {
             training_distance: 0.8,
             training_distance_time: 0.25,

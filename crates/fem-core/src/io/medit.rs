@@ -31,12 +31,7 @@ pub fn read(path: &Path) -> Result<TetMesh, MeshError> {
 
 /// Parses the text of a MEDIT `.mesh` file; `path` only names the source in errors.
 pub fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
-    Parser {
-        tokens: Tokens::new(text),
-        path,
-        text_len: text.len(),
-    }
-    .run()
+    Parser::new(text, path).run()
 }
 
 /// 1-based line of tetrahedron `t` (0-based, counted over every `Tetrahedra` section) in a file
@@ -113,7 +108,7 @@ impl<'a> Tokens<'a> {
     }
 
     /// Line of the last token read (for errors at end of file).
-    pub(super) fn last_line(&self) -> usize {
+    fn last_line(&self) -> usize {
         self.line.max(1)
     }
 }
@@ -148,15 +143,25 @@ fn entry_width(keyword: &str) -> Option<usize> {
     })
 }
 
+/// A token stream with the errors of a text mesh format: the file, the line and what was
+/// expected (shared with the TetGen reader).
 #[derive(Debug)]
-struct Parser<'a> {
+pub(super) struct Parser<'a> {
     tokens: Tokens<'a>,
     path: &'a Path,
     text_len: usize,
 }
 
 impl<'a> Parser<'a> {
-    fn error(&self, line: usize, reason: impl Into<String>) -> MeshError {
+    pub(super) fn new(text: &'a str, path: &'a Path) -> Self {
+        Self {
+            tokens: Tokens::new(text),
+            path,
+            text_len: text.len(),
+        }
+    }
+
+    pub(super) fn error(&self, line: usize, reason: impl Into<String>) -> MeshError {
         MeshError::Parse {
             path: self.path.to_path_buf(),
             line,
@@ -165,7 +170,7 @@ impl<'a> Parser<'a> {
     }
 
     /// The next token, or an error saying what was expected at the end of the file.
-    fn expect(&mut self, what: &dyn Fn() -> String) -> Result<Token<'a>, MeshError> {
+    pub(super) fn expect(&mut self, what: &dyn Fn() -> String) -> Result<Token<'a>, MeshError> {
         match self.tokens.next() {
             Some(t) => Ok(t),
             None => Err(self.error(
@@ -178,7 +183,10 @@ impl<'a> Parser<'a> {
         }
     }
 
-    fn read_usize(&mut self, what: &dyn Fn() -> String) -> Result<(usize, usize), MeshError> {
+    pub(super) fn read_usize(
+        &mut self,
+        what: &dyn Fn() -> String,
+    ) -> Result<(usize, usize), MeshError> {
         let t = self.expect(what)?;
         match t.text.parse::<usize>() {
             Ok(v) => Ok((v, t.line)),
@@ -204,7 +212,7 @@ impl<'a> Parser<'a> {
         Ok(n)
     }
 
-    fn read_coordinate(&mut self, what: &dyn Fn() -> String) -> Result<f64, MeshError> {
+    pub(super) fn read_coordinate(&mut self, what: &dyn Fn() -> String) -> Result<f64, MeshError> {
         let t = self.expect(what)?;
         let value = parse_f64(t.text).ok_or_else(|| {
             self.error(
@@ -411,7 +419,7 @@ impl<'a> Parser<'a> {
 }
 
 /// Parses a real, also accepting the Fortran exponent letter `D`.
-pub(super) fn parse_f64(s: &str) -> Option<f64> {
+fn parse_f64(s: &str) -> Option<f64> {
     s.parse::<f64>()
         .ok()
         .or_else(|| s.replace(['d', 'D'], "e").parse().ok())

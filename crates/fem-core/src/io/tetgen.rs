@@ -18,7 +18,7 @@
 use std::path::{Path, PathBuf};
 
 use super::MAX_ENTITIES;
-use super::medit::{Token, Tokens, parse_f64};
+use super::medit::{Parser, Tokens};
 use crate::{MeshError, TetMesh, Vec3};
 
 /// The `.node` and `.ele` files of the TetGen mesh that `path` (either of them) names, with the
@@ -68,112 +68,63 @@ pub(crate) fn tet_line(ele: &str, t: usize) -> Option<usize> {
     tokens.next().map(|tok| tok.line)
 }
 
-/// One file's tokens, with errors that name the file and a line.
-struct File<'a> {
-    tokens: Tokens<'a>,
-    path: &'a Path,
+/// A header's count, checked against [`MAX_ENTITIES`].
+fn count(file: &mut Parser<'_>, what: &str) -> Result<usize, MeshError> {
+    let (n, line) = file.read_usize(&|| format!("the number of {what}"))?;
+    if n > MAX_ENTITIES {
+        return Err(file.error(
+            line,
+            format!("{n} {what} is more than this reader accepts ({MAX_ENTITIES})"),
+        ));
+    }
+    Ok(n)
 }
 
-impl<'a> File<'a> {
-    fn new(text: &'a str, path: &'a Path) -> Self {
-        Self {
-            tokens: Tokens::new(text),
-            path,
-        }
-    }
-
-    fn error(&self, line: usize, reason: impl Into<String>) -> MeshError {
-        MeshError::Parse {
-            path: self.path.to_path_buf(),
+/// A header flag that is 0 or 1.
+fn flag(file: &mut Parser<'_>, what: &str) -> Result<usize, MeshError> {
+    let (v, line) = file.read_usize(&|| format!("the number of {what} (0 or 1)"))?;
+    if v > 1 {
+        return Err(file.error(
             line,
-            reason: reason.into(),
-        }
+            format!("the number of {what} must be 0 or 1, found {v}"),
+        ));
     }
+    Ok(v)
+}
 
-    /// The next token, or an end-of-file error saying what was expected.
-    fn token(&mut self, what: &dyn Fn() -> String) -> Result<Token<'a>, MeshError> {
-        self.tokens.next().ok_or_else(|| {
-            self.error(
-                self.tokens.last_line(),
-                format!(
-                    "unexpected end of file: expected {} (truncated file?)",
-                    what()
-                ),
-            )
-        })
+/// Skips `n` tokens (attributes, markers, extra nodes), each named by `what` if missing.
+fn skip(file: &mut Parser<'_>, n: usize, what: &dyn Fn() -> String) -> Result<(), MeshError> {
+    for _ in 0..n {
+        file.expect(what)?;
     }
-
-    fn integer(&mut self, what: &dyn Fn() -> String) -> Result<(usize, usize), MeshError> {
-        let t = self.token(what)?;
-        t.text.parse::<usize>().map(|v| (v, t.line)).map_err(|_| {
-            self.error(
-                t.line,
-                format!(
-                    "expected {} (a non-negative integer), found '{}'",
-                    what(),
-                    t.text
-                ),
-            )
-        })
-    }
-
-    /// A header's count, checked against [`MAX_ENTITIES`].
-    fn count(&mut self, what: &str) -> Result<usize, MeshError> {
-        let (n, line) = self.integer(&|| format!("the number of {what}"))?;
-        if n > MAX_ENTITIES {
-            return Err(self.error(
-                line,
-                format!("{n} {what} is more than this reader accepts ({MAX_ENTITIES})"),
-            ));
-        }
-        Ok(n)
-    }
-
-    /// A header flag that is 0 or 1.
-    fn flag(&mut self, what: &str) -> Result<usize, MeshError> {
-        let (v, line) = self.integer(&|| format!("the number of {what} (0 or 1)"))?;
-        if v > 1 {
-            return Err(self.error(
-                line,
-                format!("the number of {what} must be 0 or 1, found {v}"),
-            ));
-        }
-        Ok(v)
-    }
-
-    fn skip(&mut self, n: usize, what: &dyn Fn() -> String) -> Result<(), MeshError> {
-        for _ in 0..n {
-            self.token(what)?;
-        }
-        Ok(())
-    }
+    Ok(())
 }
 
 /// The points of a `.node` file, and the number of its first point (0 or 1).
 fn read_nodes(text: &str, path: &Path) -> Result<(Vec<Vec3>, usize), MeshError> {
-    let mut file = File::new(text, path);
-    let n = file.count("points")?;
-    let (dimension, line) = file.integer(&|| "the dimension".into())?;
+    let mut file = Parser::new(text, path);
+    let n = count(&mut file, "points")?;
+    let (dimension, line) = file.read_usize(&|| "the dimension".into())?;
     if dimension != 3 {
         return Err(file.error(
             line,
             format!("the dimension is {dimension}; a tetrahedral mesh needs 3"),
         ));
     }
-    let (attributes, line) = file.integer(&|| "the number of attributes".into())?;
+    let (attributes, line) = file.read_usize(&|| "the number of attributes".into())?;
     if attributes > MAX_ENTITIES {
         return Err(file.error(
             line,
             format!("{attributes} attributes per point is too many"),
         ));
     }
-    let markers = file.flag("boundary markers")?;
+    let markers = flag(&mut file, "boundary markers")?;
     // A header may lie about its count: never reserve more than the text could hold.
     let mut vertices = Vec::with_capacity(n.min(text.len() / 8));
     let mut base = 0;
     for i in 0..n {
         let what = || format!("point {} of {n}", base + i);
-        let (number, line) = file.integer(&what)?;
+        let (number, line) = file.read_usize(&what)?;
         if i == 0 && number > 1 {
             return Err(file.error(
                 line,
@@ -194,19 +145,10 @@ fn read_nodes(text: &str, path: &Path) -> Result<(Vec<Vec3>, usize), MeshError> 
         let mut xyz = [0.0; 3];
         for (c, value) in xyz.iter_mut().enumerate() {
             let axis = ["x", "y", "z"][c];
-            let t = file.token(&|| format!("the {axis} coordinate of point {number}"))?;
-            *value = parse_f64(t.text).filter(|v| v.is_finite()).ok_or_else(|| {
-                file.error(
-                    t.line,
-                    format!(
-                        "expected the {axis} coordinate of point {number} (a finite number), \
-                         found '{}'",
-                        t.text
-                    ),
-                )
-            })?;
+            *value =
+                file.read_coordinate(&|| format!("the {axis} coordinate of point {number}"))?;
         }
-        file.skip(attributes + markers, &|| {
+        skip(&mut file, attributes + markers, &|| {
             format!("the attributes and marker of point {number}")
         })?;
         vertices.push(Vec3::new(xyz[0], xyz[1], xyz[2]));
@@ -222,22 +164,22 @@ fn read_tets(
     base: usize,
     points: usize,
 ) -> Result<(Vec<[usize; 4]>, usize), MeshError> {
-    let mut file = File::new(text, path);
-    let n = file.count("tets")?;
-    let (per_tet, line) = file.integer(&|| "the number of nodes per tet".into())?;
+    let mut file = Parser::new(text, path);
+    let n = count(&mut file, "tets")?;
+    let (per_tet, line) = file.read_usize(&|| "the number of nodes per tet".into())?;
     if per_tet != 4 && per_tet != 10 {
         return Err(file.error(
             line,
             format!("a tet has 4 nodes (10 with `-o2`), the header says {per_tet}"),
         ));
     }
-    let region = file.flag("region attributes")?;
+    let region = flag(&mut file, "region attributes")?;
     let mut tets = Vec::with_capacity(n.min(text.len() / 10));
     for i in 0..n {
-        file.integer(&|| format!("the number of tet {} of {n}", i + 1))?;
+        file.read_usize(&|| format!("the number of tet {} of {n}", i + 1))?;
         let mut tet = [0; 4];
         for (c, corner) in tet.iter_mut().enumerate() {
-            let (node, line) = file.integer(&|| format!("node {} of tet {}", c + 1, i + 1))?;
+            let (node, line) = file.read_usize(&|| format!("node {} of tet {}", c + 1, i + 1))?;
             *corner = node
                 .checked_sub(base)
                 .filter(|&v| v < points)
@@ -252,7 +194,7 @@ fn read_tets(
                     )
                 })?;
         }
-        file.skip(per_tet - 4 + region, &|| {
+        skip(&mut file, per_tet - 4 + region, &|| {
             format!("the other nodes and region of tet {}", i + 1)
         })?;
         tets.push(tet);
@@ -340,7 +282,7 @@ mod tests {
                 NODE.replace("2 1 0 0 1", "2 1 inf 0 1"),
                 ELE.to_string(),
                 "m.node:4:",
-                "a finite number",
+                "is not finite",
             ),
             (
                 NODE.to_string(),
