@@ -1,7 +1,8 @@
 //! Full-space FEM throughput: elastic assembly (energy + gradient, projected Hessian) per element,
 //! the sparse Cholesky's factorisation and solves (f64, and the f32 factor L-BFGS's preconditioner
 //! uses where it passes its check), and the cost of one implicit Euler step with Newton and with
-//! L-BFGS.
+//! L-BFGS; and per material, the element kernels ψ and P, and the projected tangent, on
+//! deformation gradients like a moving body's.
 //!
 //! Two meshes: `catapult` (shared/meshes/catapult_low.mesh, skipped with a printed reason when the
 //! shared folder is absent) and `beam10k`, a generated 1 × 0.1 × 0.1 m beam of 10,000 vertices.
@@ -21,12 +22,12 @@ use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::{Axis, DofMap, Side, VertexSelection};
 use fem_core::element::Elements;
 use fem_core::integrator::{FullSpaceModel, Simulator, TimeConfig};
-use fem_core::material::MaterialConfig;
+use fem_core::material::{Material, MaterialConfig, MaterialModel};
 use fem_core::mesh::generate::box_mesh;
 use fem_core::optim::{SolverConfig, SolverMethod};
 use fem_core::sparse::HessianPattern;
 use fem_core::sparse_cholesky::SparseCholesky;
-use fem_core::{TetMesh, Vec3, with_material};
+use fem_core::{Mat3, TetMesh, Vec3, rng::SplitMix64, with_material};
 use rayon::{ThreadPool, ThreadPoolBuilder};
 
 /// Thread counts of the assembly benchmarks.
@@ -316,11 +317,69 @@ fn bench_step(c: &mut Criterion, cases: &[Case]) {
     group.finish();
 }
 
+/// Deformation gradients F = R(I + G) with R a random rotation and G's entries uniform in
+/// ±0.05 (strains up to about 10 %, a third of them compressive in some direction).
+fn deformation_gradients(count: usize) -> Vec<Mat3> {
+    let mut rng = SplitMix64::new(20_261_127);
+    (0..count)
+        .map(|_| {
+            let axis = Vec3::from(rng.unit_vector());
+            let rotation = nalgebra::Rotation3::from_scaled_axis(axis * rng.range(0.0, 3.0));
+            let g = Mat3::from_fn(|_, _| rng.range(-0.05, 0.05));
+            rotation.matrix() * (Mat3::identity() + g)
+        })
+        .collect()
+}
+
+fn material_name<M: Material>(_: &M) -> &'static str {
+    M::NAME
+}
+
+/// Each material's ψ with P (what an energy-and-gradient pass evaluates per element) and its
+/// projected tangent (Newton's and the preconditioners' per-element Hessian), per F.
+fn bench_materials(c: &mut Criterion) {
+    const COUNT: usize = 4096;
+    let fs = deformation_gradients(COUNT);
+    let mut group = c.benchmark_group("material");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(2))
+        .throughput(Throughput::Elements(COUNT as u64));
+    for model in [
+        MaterialModel::Linear,
+        MaterialModel::Corotated,
+        MaterialModel::Stvk,
+        MaterialModel::NeoHookean,
+        MaterialModel::StableNeoHookean,
+    ] {
+        let config = MaterialConfig {
+            model,
+            ..MaterialConfig::default()
+        };
+        with_material!(&config.build(), |m| {
+            let name = material_name(m);
+            group.bench_function(format!("psi_pk1/{name}"), |b| {
+                b.iter(|| fs.iter().map(|f| m.psi_pk1(black_box(f)).0).sum::<f64>())
+            });
+            group.bench_function(format!("dpdf_projected/{name}"), |b| {
+                b.iter(|| {
+                    fs.iter()
+                        .map(|f| m.dpdf_projected(black_box(f))[0])
+                        .sum::<f64>()
+                })
+            });
+        });
+    }
+    group.finish();
+}
+
 fn main() {
     let cases = cases();
     let mut c = Criterion::default().configure_from_args();
     bench_assembly(&mut c, &cases);
     bench_sparse(&mut c, &cases);
     bench_step(&mut c, &cases);
+    bench_materials(&mut c);
     c.final_summary();
 }

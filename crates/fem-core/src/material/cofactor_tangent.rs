@@ -59,7 +59,7 @@ pub(super) fn scaling_block(s: &crate::Vec3, mu: f64, a: f64, c: f64) -> Mat3 {
 /// [`project_psd`] is used.
 #[allow(non_snake_case)]
 pub(super) fn project(
-    mut m: Mat9,
+    m: Mat9,
     F: &Mat3,
     mu: f64,
     coefficients: impl Fn(f64) -> (f64, f64),
@@ -70,17 +70,33 @@ pub(super) fn project(
     let svd = signed_svd(F);
     let s = &svd.sigma;
     let (a, c) = coefficients(s[0] * s[1] * s[2]);
+    subtract_negative_modes(
+        m,
+        &svd,
+        twist_flip(&svd, mu, c),
+        &scaling_block(s, mu, a, c),
+    )
+}
+
+/// `m` minus its negative eigenpairs, given its eigensystem in the SVD frame of F: the six
+/// twist and flip pairs `(eigenvalue, w)` of [`twist_flip`]'s shape and the 3×3 scaling block
+/// of [`scaling_block`]'s. If the 3×3 eigenproblem fails, the generic [`project_psd`] is used.
+pub(super) fn subtract_negative_modes(
+    mut m: Mat9,
+    svd: &SignedSvd,
+    pairs: [(f64, Mat3); 6],
+    block: &Mat3,
+) -> Mat9 {
     // Negative eigenpairs (λ, q) as (−λ, q); all found before m changes, so the fallback sees
     // the exact tangent. q = w/√2 for twist and flip, so λ q qᵀ = (λ/2) w wᵀ.
     let mut negative: [(f64, Mat3); 9] = [(0.0, Mat3::zeros()); 9];
     let mut count = 0;
-    for (val, w) in twist_flip(&svd, mu, c) {
+    for (val, w) in pairs {
         if val < 0.0 {
             negative[count] = (-0.5 * val, w);
             count += 1;
         }
     }
-    let block = scaling_block(s, mu, a, c);
     // Sylvester's criterion; on failure (indefinite or borderline) decompose.
     let pd = block[(0, 0)] > 0.0
         && block[(0, 0)] * block[(1, 1)] - block[(0, 1)] * block[(0, 1)] > 0.0

@@ -375,9 +375,13 @@ fn check_extreme<M: Material>(m: M) {
         assert!(a.iter().all(|x| x.is_finite()), "{what}");
         let p = m.dpdf_projected(&f);
         assert_symmetric_psd(&p, &what);
-        // Whatever the projection's implementation, it is the clamped eigen-decomposition.
-        let err = rel(&p, &project_psd(&a), 1e-300);
-        assert!(err <= 1e-9, "{what}: projection rel err {err:e}");
+        // Whatever the projection's implementation, it is the clamped eigen-decomposition, to
+        // within that decomposition's own error, about ε‖∂P/∂F‖ (‖∂P/∂F‖ ~ μ·10⁸ on the
+        // corotated singular set, where the projection is O(μ)).
+        let reference = project_psd(&a);
+        let err = rel(&p, &reference, 1e-300);
+        let tolerance = 1e-9_f64.max(1e-15 * a.norm() / reference.norm());
+        assert!(err <= tolerance, "{what}: projection rel err {err:e}");
     }
 }
 
