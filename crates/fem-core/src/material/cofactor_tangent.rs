@@ -1,4 +1,6 @@
-//! Analytic eigensystem and PSD projection of the tangents of energies ψ(F) = μ/2 I₁ + h(J).
+//! Analytic eigensystem and PSD projection of the tangents of energies ψ(F) = μ/2 I₁ + h(J);
+//! [`clamped_from_modes`] serves any isotropic energy whose eigensystem is given in the same
+//! frame (the corotated and StVK tangents too).
 //!
 //! Both Neo-Hookean models of this module have this form, so their tangents are
 //! ∂P/∂F = μ I₉ + a vec(cof) vec(cof)ᵀ + c ∂cof/∂F with a = h''(J), c = h'(J) and
@@ -21,6 +23,10 @@ use super::stable_neo_hookean::{add_outer_upper, mirror_upper};
 use super::{Mat9, project_psd};
 use crate::Mat3;
 
+/// The index pairs (i, j) of the twist and flip modes, in [`twist_flip`]'s order: pair k has
+/// third index k.
+pub(super) const PAIRS: [(usize, usize); 3] = [(1, 2), (0, 2), (0, 1)];
+
 /// The twist and flip eigenpairs: `(eigenvalue, w)` with unit eigenvector vec(w)/√2.
 pub(super) fn twist_flip(svd: &SignedSvd, mu: f64, c: f64) -> [(f64, Mat3); 6] {
     let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
@@ -29,9 +35,9 @@ pub(super) fn twist_flip(svd: &SignedSvd, mu: f64, c: f64) -> [(f64, Mat3); 6] {
         let b = u.column(j) * v.column(i).transpose();
         [(mu + c * s[k], a - b), (mu - c * s[k], a + b)]
     };
-    let [t0, f0] = pair(1, 2, 0);
-    let [t1, f1] = pair(0, 2, 1);
-    let [t2, f2] = pair(0, 1, 2);
+    let [t0, f0] = pair(PAIRS[0].0, PAIRS[0].1, 0);
+    let [t1, f1] = pair(PAIRS[1].0, PAIRS[1].1, 1);
+    let [t2, f2] = pair(PAIRS[2].0, PAIRS[2].1, 2);
     [t0, t1, t2, f0, f1, f2]
 }
 
@@ -51,7 +57,8 @@ pub(super) fn scaling_block(s: &crate::Vec3, mu: f64, a: f64, c: f64) -> Mat3 {
 }
 
 /// The projection onto the PSD cone of the exact tangent `m` = μ I₉ + a ggᵀ + c ∂cof/∂F of F:
-/// `m` minus its negative eigenpairs. `coefficients(J)` gives (a, c) at J = σ₀σ₁σ₂.
+/// its eigensystem with the negative eigenvalues clamped to zero ([`clamped_from_modes`]).
+/// `coefficients(J)` gives (a, c) at J = σ₀σ₁σ₂.
 ///
 /// A positive definite `m` (the common case: most elements are not near a buckling mode) is
 /// recognised by a Cholesky-type factorisation and returned unchanged, without the SVD.
@@ -70,61 +77,85 @@ pub(super) fn project(
     let svd = signed_svd(F);
     let s = &svd.sigma;
     let (a, c) = coefficients(s[0] * s[1] * s[2]);
-    subtract_negative_modes(
-        m,
+    clamped_from_modes(
+        &m,
         &svd,
         twist_flip(&svd, mu, c),
         &scaling_block(s, mu, a, c),
     )
 }
 
-/// `m` minus its negative eigenpairs, given its eigensystem in the SVD frame of F: the six
-/// twist and flip pairs `(eigenvalue, w)` of [`twist_flip`]'s shape and the 3×3 scaling block
-/// of [`scaling_block`]'s. If the 3×3 eigenproblem fails, the generic [`project_psd`] is used.
-pub(super) fn subtract_negative_modes(
-    mut m: Mat9,
+/// The projection of the tangent `m` onto the PSD cone from its eigensystem in the SVD frame
+/// of F: the six twist and flip pairs `(eigenvalue, w)` of [`twist_flip`]'s shape and the 3×3
+/// scaling block of [`scaling_block`]'s, with the negative eigenvalues clamped to zero.
+///
+/// Either `m` minus its negative modes or the sum of its positive ones, whichever has the
+/// smaller eigenvalues in total: that is both the cheaper (fewer rank-one terms, as a rule)
+/// and the more accurate, since each way errs by rounding in the scale of what it adds or
+/// removes. A crushed StVK element has nine negative modes, and near the corotated singular
+/// set one twist is ~μ·10⁸; either would leave the result to cancellation if subtracted. If
+/// the 3×3 eigenproblem fails, the generic [`project_psd`] is used.
+pub(super) fn clamped_from_modes(
+    m: &Mat9,
     svd: &SignedSvd,
     pairs: [(f64, Mat3); 6],
     block: &Mat3,
 ) -> Mat9 {
-    // Negative eigenpairs (λ, q) as (−λ, q); all found before m changes, so the fallback sees
-    // the exact tangent. q = w/√2 for twist and flip, so λ q qᵀ = (λ/2) w wᵀ.
-    let mut negative: [(f64, Mat3); 9] = [(0.0, Mat3::zeros()); 9];
-    let mut count = 0;
-    for (val, w) in pairs {
-        if val < 0.0 {
-            negative[count] = (-0.5 * val, w);
-            count += 1;
-        }
-    }
+    // The scaling modes live in the span of d_i = u_i v_iᵀ, where the tangent is
+    // Σ_ij B_ij vec(d_i) vec(d_j)ᵀ.
+    let d = [0, 1, 2].map(|i| svd.u.column(i) * svd.v.column(i).transpose());
     // Sylvester's criterion; on failure (indefinite or borderline) decompose.
-    let pd = block[(0, 0)] > 0.0
+    let block_pd = block[(0, 0)] > 0.0
         && block[(0, 0)] * block[(1, 1)] - block[(0, 1)] * block[(0, 1)] > 0.0
         && block.determinant() > 0.0;
-    if !pd {
+    // Modes as (eigenvalue, q) with unit vec(q) for the scaling ones; twist and flip keep
+    // w = √2 q, so their rank-one term is (λ/2) w wᵀ.
+    let mut scaling: [(f64, Mat3); 3] = [(0.0, Mat3::zeros()); 3];
+    if !block_pd {
         let Some(eig) = block.try_symmetric_eigen(f64::EPSILON, 1000) else {
-            return project_psd(&m);
+            return project_psd(m);
         };
-        for i in 0..3 {
-            let val = eig.eigenvalues[i];
-            if val < 0.0 {
-                let e = eig.eigenvectors.column(i);
-                let mut q = Mat3::zeros();
-                for j in 0..3 {
-                    q += svd.u.column(j) * svd.v.column(j).transpose() * e[j];
+        for (mode, (val, e)) in scaling
+            .iter_mut()
+            .zip(eig.eigenvalues.iter().zip(eig.eigenvectors.column_iter()))
+        {
+            *mode = (*val, d[0] * e[0] + d[1] * e[1] + d[2] * e[2]);
+        }
+    }
+    let negative: f64 = pairs
+        .iter()
+        .chain(&scaling)
+        .map(|(v, _)| (-v).max(0.0))
+        .sum();
+    let positive: f64 = pairs
+        .iter()
+        .chain(&scaling)
+        .map(|(v, _)| v.max(0.0))
+        .sum::<f64>()
+        + if block_pd { block.trace() } else { 0.0 };
+    let half = |(val, w): &(f64, Mat3)| (0.5 * val, *w);
+    let modes = pairs.iter().map(half).chain(scaling);
+    let mut out;
+    if negative <= positive {
+        out = *m;
+        for (val, q) in modes.filter(|(v, _)| *v < 0.0) {
+            add_outer_upper(&mut out, &q, &q, -val);
+        }
+    } else {
+        out = Mat9::zeros();
+        for (val, q) in modes.filter(|(v, _)| *v > 0.0) {
+            add_outer_upper(&mut out, &q, &q, val);
+        }
+        if block_pd {
+            for (i, di) in d.iter().enumerate() {
+                for (j, dj) in d.iter().enumerate() {
+                    add_outer_upper(&mut out, di, dj, block[(i, j)]);
                 }
-                negative[count] = (-val, q);
-                count += 1;
             }
         }
     }
-    if count > 0 {
-        for (scale, q) in &negative[..count] {
-            add_outer_upper(&mut m, q, q, *scale);
-        }
-        mirror_upper(&mut m);
-    }
-    m
+    mirror_upper(&mut out);
+    out
 }
 
 /// Whether the symmetric matrix `m` is positive definite (in floating point): a right-looking

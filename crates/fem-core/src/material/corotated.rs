@@ -2,7 +2,7 @@
 //! the materials of this module.
 
 use super::cofactor_tangent::{
-    is_positive_definite, scaling_block, subtract_negative_modes, twist_flip,
+    PAIRS, clamped_from_modes, is_positive_definite, scaling_block, twist_flip,
 };
 use super::stable_neo_hookean::{
     add_cofactor_hessian, add_outer_upper, cofactor, det, det_from_cofactor, mirror_upper,
@@ -95,37 +95,33 @@ impl Material for Corotated {
     }
 
     fn dpdf(&self, F: &Mat3) -> Mat9 {
-        self.tangent(F, &signed_svd(F), false)
+        self.tangent(F, &signed_svd(F))
     }
 
     /// Analytic projection: the tangent's eigensystem in the SVD frame (see the type's
-    /// documentation) has its negative eigenpairs removed, which equals the clamped
+    /// documentation) with its negative eigenvalues clamped to zero, which equals the clamped
     /// eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD (and a 3×3
-    /// eigenproblem only when the scaling block is indefinite). Twists are clamped as the
-    /// tangent is built, so the ~μ/(σ_i + σ_j) terms near the singular set never enter it to be
-    /// cancelled. Non-finite F yields the (non-finite) tangent unchanged.
+    /// eigenproblem only when the scaling block is indefinite). Non-finite F yields the
+    /// (non-finite) tangent unchanged.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
         let svd = signed_svd(F);
-        let m = self.tangent(F, &svd, true);
+        let m = self.tangent(F, &svd);
         if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
             return m;
         }
         // 2μ I₉ and the λ terms have the eigensystem of the Neo-Hookean tangents with
-        // (μ, a, c) = (2μ, λ, λ(J − 1)); the twists are no longer negative.
+        // (μ, a, c) = (2μ, λ, λ(J − 1)); −2μ ∂R/∂F adds −4μ/(σ_i + σ_j) to each twist
+        // (w wᵀ with ‖w‖² = 2).
         let s = &svd.sigma;
         let c = self.lambda * (s[0] * s[1] * s[2] - 1.0);
         let mut pairs = twist_flip(&svd, 2.0 * self.mu, c);
-        for twist in &mut pairs[..3] {
-            twist.0 = 0.0;
+        for (twist, (i, j)) in pairs.iter_mut().zip(PAIRS) {
+            twist.0 -= 4.0 * self.mu / rotation_denominator(s, i, j);
         }
         let block = scaling_block(s, 2.0 * self.mu, self.lambda, c);
-        subtract_negative_modes(m, &svd, pairs, &block)
+        clamped_from_modes(&m, &svd, pairs, &block)
     }
 }
-
-/// The pairs (i, j) of ∂R/∂F's terms, in the order of `twist_flip`'s twists: pair k has
-/// third index k.
-const ROTATION_PAIRS: [(usize, usize); 3] = [(1, 2), (0, 2), (0, 1)];
 
 /// σ_i + σ_j, clamped from below (see [`Corotated`]); `max` also maps NaN to the floor.
 fn rotation_denominator(s: &Vec3, i: usize, j: usize) -> f64 {
@@ -133,29 +129,19 @@ fn rotation_denominator(s: &Vec3, i: usize, j: usize) -> f64 {
 }
 
 impl Corotated {
-    /// ∂P/∂F at F, whose rotation-variant SVD is `svd`; with `clamp_twists`, each twist whose
-    /// eigenvalue 2μ + λ(J − 1)σ_k − 4μ/(σ_i + σ_j) is negative gets zero instead.
+    /// ∂P/∂F at F, whose rotation-variant SVD is `svd`.
     #[allow(non_snake_case)]
-    fn tangent(&self, F: &Mat3, svd: &SignedSvd, clamp_twists: bool) -> Mat9 {
+    fn tangent(&self, F: &Mat3, svd: &SignedSvd) -> Mat9 {
         let (mu, lambda) = (self.mu, self.lambda);
         let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
         let cof = cofactor(F);
         let J = det_from_cofactor(F, &cof);
         let mut m = Mat9::zeros();
         add_outer_upper(&mut m, &cof, &cof, lambda);
-        // The twist (u_i v_jᵀ − u_j v_iᵀ)/√2 has eigenvalue 2μ + λ(J − 1)σ_k from the other
-        // terms, and −2μ/(σ_i + σ_j) w wᵀ adds −4μ/(σ_i + σ_j) to it (‖w‖² = 2).
-        for (k, (i, j)) in ROTATION_PAIRS.into_iter().enumerate() {
+        for (i, j) in PAIRS {
             let w = u.column(i) * v.column(j).transpose() - u.column(j) * v.column(i).transpose();
             // w is NaN when the denominator is.
-            let denom = rotation_denominator(s, i, j);
-            let others = 2.0 * mu + lambda * (J - 1.0) * s[k];
-            let coefficient = if clamp_twists && others - 4.0 * mu / denom < 0.0 {
-                -0.5 * others
-            } else {
-                -2.0 * mu / denom
-            };
-            add_outer_upper(&mut m, &w, &w, coefficient);
+            add_outer_upper(&mut m, &w, &w, -2.0 * mu / rotation_denominator(s, i, j));
         }
         mirror_upper(&mut m);
         for a in 0..9 {

@@ -1,5 +1,7 @@
 //! Saint Venant–Kirchhoff.
 
+use super::cofactor_tangent::{PAIRS, clamped_from_modes, is_positive_definite, twist_flip};
+use super::corotated::signed_svd;
 use super::stable_neo_hookean::mirror_upper;
 use super::{Lame, Mat9, Material};
 use crate::Mat3;
@@ -15,6 +17,20 @@ use crate::Mat3;
 /// ψ is a polynomial in F, so everything is finite for every F (`INVERSION_SAFE`), but the
 /// model is notoriously weak under compression: ψ → 0 as F → 0 and inverted elements
 /// (F = −I, ψ = 0) are not pushed back. It is rotation invariant.
+///
+/// # Projection
+///
+/// [`Material::dpdf_projected`] uses the tangent's eigensystem in the frame of the SVD
+/// F = UΣVᵀ. In principal stretches ψ = μ/4 Σ_i (σ_i² − 1)² + λ/8 (I − 3)², I = Σ_i σ_i², so
+/// with ψ_i = ∂ψ/∂σ_i and c = λ/2 (I − 3), for each pair (i, j):
+///
+/// * twist (u_i v_jᵀ − u_j v_iᵀ)/√2: (ψ_i + ψ_j)/(σ_i + σ_j) = μ(σ_i² − σ_iσ_j + σ_j² − 1) + c,
+/// * flip (u_i v_jᵀ + u_j v_iᵀ)/√2: (ψ_i − ψ_j)/(σ_i − σ_j) = μ(σ_i² + σ_iσ_j + σ_j² − 1) + c,
+///
+/// and the scaling modes Σ_i e_i u_i v_iᵀ come from the 3×3 Hessian ∂²ψ/∂σ_i∂σ_j =
+/// δ_ij (μ(3σ_i² − 1) + c) + λσ_iσ_j. A positive definite tangent is returned as it is (no SVD);
+/// otherwise it is rebuilt from its non-negative eigenpairs, which equals the clamped
+/// eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD.
 ///
 /// # Derivation
 ///
@@ -117,6 +133,35 @@ impl Material for StVenantKirchhoff {
         }
         mirror_upper(&mut m);
         m
+    }
+
+    /// Analytic projection (see the type's documentation). Non-finite F yields the
+    /// (non-finite) tangent unchanged.
+    fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
+        let m = self.dpdf(F);
+        if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
+            return m;
+        }
+        let (mu, lambda) = (self.mu, self.lambda);
+        let svd = signed_svd(F);
+        let s = &svd.sigma;
+        let c = 0.5 * lambda * (s.norm_squared() - 3.0);
+        // The modes' shapes, with eigenvalues set below.
+        let mut pairs = twist_flip(&svd, 0.0, 0.0);
+        for (k, (i, j)) in PAIRS.into_iter().enumerate() {
+            let (a, b) = (s[i], s[j]);
+            pairs[k].0 = mu * (a * a - a * b + b * b - 1.0) + c;
+            pairs[k + 3].0 = mu * (a * a + a * b + b * b - 1.0) + c;
+        }
+        let block = Mat3::from_fn(|i, j| {
+            let diagonal = if i == j {
+                mu * (3.0 * s[i] * s[i] - 1.0) + c
+            } else {
+                0.0
+            };
+            diagonal + lambda * s[i] * s[j]
+        });
+        clamped_from_modes(&m, &svd, pairs, &block)
     }
 }
 
