@@ -113,7 +113,8 @@ struct SimulateArgs {
 
 #[derive(clap::Args)]
 struct SuiteArgs {
-    /// Folder of MEDIT meshes (default: the shared/ folder's meshes beside the repository).
+    /// Folder of meshes in any format `[mesh] path` takes (default: the shared/ folder's
+    /// meshes beside the repository).
     #[arg(long)]
     meshes: Option<PathBuf>,
     /// Leave out meshes with more vertices than this.
