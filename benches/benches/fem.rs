@@ -335,8 +335,9 @@ fn material_name<M: Material>(_: &M) -> &'static str {
     M::NAME
 }
 
-/// Each material's ψ with P (what an energy-and-gradient pass evaluates per element) and its
-/// projected tangent (Newton's and the preconditioners' per-element Hessian), per F.
+/// Each material's ψ with P (what an energy-and-gradient pass evaluates per element), its
+/// tangent (the reduced preconditioners' per-element Hessian) and the projected tangent
+/// (Newton's), per F.
 fn bench_materials(c: &mut Criterion) {
     const COUNT: usize = 4096;
     let fs = deformation_gradients(COUNT);
@@ -361,6 +362,9 @@ fn bench_materials(c: &mut Criterion) {
             let name = material_name(m);
             group.bench_function(format!("psi_pk1/{name}"), |b| {
                 b.iter(|| fs.iter().map(|f| m.psi_pk1(black_box(f)).0).sum::<f64>())
+            });
+            group.bench_function(format!("dpdf/{name}"), |b| {
+                b.iter(|| fs.iter().map(|f| m.dpdf(black_box(f))[0]).sum::<f64>())
             });
             group.bench_function(format!("dpdf_projected/{name}"), |b| {
                 b.iter(|| {

@@ -95,20 +95,29 @@ impl Material for Corotated {
     }
 
     fn dpdf(&self, F: &Mat3) -> Mat9 {
-        self.tangent(F, &signed_svd(F))
+        match polar_rotation(F) {
+            Some(r) => self.tangent_from_rotation(F, &r),
+            None => self.tangent_from_svd(F, &signed_svd(F)),
+        }
     }
 
     /// Analytic projection: the tangent's eigensystem in the SVD frame (see the type's
     /// documentation) with its negative eigenvalues clamped to zero, which equals the clamped
-    /// eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD (and a 3×3
-    /// eigenproblem only when the scaling block is indefinite). Non-finite F yields the
-    /// (non-finite) tangent unchanged.
+    /// eigen-decomposition of [`super::project_psd`]. A positive definite tangent is returned
+    /// as it is, without the SVD where the polar rotation gave it; otherwise it costs one 3×3
+    /// SVD (and a 3×3 eigenproblem when the scaling block is indefinite). Non-finite F yields
+    /// the (non-finite) tangent unchanged.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
-        let svd = signed_svd(F);
-        let m = self.tangent(F, &svd);
+        let polar = polar_rotation(F);
+        let mut svd = None;
+        let m = match &polar {
+            Some(r) => self.tangent_from_rotation(F, r),
+            None => self.tangent_from_svd(F, svd.insert(signed_svd(F))),
+        };
         if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
             return m;
         }
+        let svd = svd.unwrap_or_else(|| signed_svd(F));
         // 2μ I₉ and the λ terms have the eigensystem of the Neo-Hookean tangents with
         // (μ, a, c) = (2μ, λ, λ(J − 1)); −2μ ∂R/∂F adds −4μ/(σ_i + σ_j) to each twist
         // (w wᵀ with ‖w‖² = 2).
@@ -128,21 +137,62 @@ fn rotation_denominator(s: &Vec3, i: usize, j: usize) -> f64 {
     (s[i] + s[j]).max(ROTATION_DENOMINATOR_FLOOR * s[0].max(1.0))
 }
 
+#[allow(non_snake_case)]
 impl Corotated {
-    /// ∂P/∂F at F, whose rotation-variant SVD is `svd`.
-    #[allow(non_snake_case)]
-    fn tangent(&self, F: &Mat3, svd: &SignedSvd) -> Mat9 {
-        let (mu, lambda) = (self.mu, self.lambda);
+    /// ∂P/∂F at F with −2μ ∂R/∂F from the rotation-variant SVD `svd` of F: Σ over the pairs
+    /// (i, j) of −2μ/(σ_i + σ_j) w wᵀ, w = u_i v_jᵀ − u_j v_iᵀ.
+    fn tangent_from_svd(&self, F: &Mat3, svd: &SignedSvd) -> Mat9 {
         let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
+        self.tangent(F, |m| {
+            for (i, j) in PAIRS {
+                let w =
+                    u.column(i) * v.column(j).transpose() - u.column(j) * v.column(i).transpose();
+                // w is NaN when the denominator is.
+                add_outer_upper(m, &w, &w, -2.0 * self.mu / rotation_denominator(s, i, j));
+            }
+        })
+    }
+
+    /// ∂P/∂F at F with −2μ ∂R/∂F from the polar rotation R of F, no SVD: ω of δR = Rω̂ is
+    /// G a(δF) with G = (tr(S) I − S)⁻¹, S = RᵀF, and a(δF) = axial(RᵀδF − δFᵀR) (see the
+    /// type's derivation), and ⟨δF', Rω̂⟩ = a(δF')·ω, so ∂R/∂F = Σ_ij G_ij vec(A_i) vec(A_j)ᵀ
+    /// with A_i the matrix of a(δF)_i = A_i : δF.
+    fn tangent_from_rotation(&self, F: &Mat3, R: &Mat3) -> Mat9 {
+        let S = R.tr_mul(F);
+        let mut T = -(S + S.transpose()) * 0.5;
+        let trace = S.trace();
+        for i in 0..3 {
+            T[(i, i)] += trace;
+        }
+        // T is symmetric, so its inverse is cof(T)/det T.
+        let cof_t = cofactor(&T);
+        let G = cof_t / det_from_cofactor(&T, &cof_t);
+        let (r0, r1, r2) = (R.column(0), R.column(1), R.column(2));
+        let zero = Vec3::zeros();
+        // a₀ = r₂·δf₁ − r₁·δf₂, a₁ = r₀·δf₂ − r₂·δf₀, a₂ = r₁·δf₀ − r₀·δf₁ (δf_j column j).
+        let a = [
+            Mat3::from_columns(&[zero, r2.into(), -r1]),
+            Mat3::from_columns(&[-r2, zero, r0.into()]),
+            Mat3::from_columns(&[r1.into(), -r0, zero]),
+        ];
+        self.tangent(F, |m| {
+            for (i, ai) in a.iter().enumerate() {
+                for (j, aj) in a.iter().enumerate() {
+                    add_outer_upper(m, ai, aj, -2.0 * self.mu * G[(i, j)]);
+                }
+            }
+        })
+    }
+
+    /// ∂P/∂F = 2μ I₉ + λ vec(cof) vec(cof)ᵀ + λ(J − 1) ∂cof/∂F plus the rotational term, which
+    /// `add_rotation` adds to the upper triangle.
+    fn tangent(&self, F: &Mat3, add_rotation: impl FnOnce(&mut Mat9)) -> Mat9 {
+        let (mu, lambda) = (self.mu, self.lambda);
         let cof = cofactor(F);
         let J = det_from_cofactor(F, &cof);
         let mut m = Mat9::zeros();
         add_outer_upper(&mut m, &cof, &cof, lambda);
-        for (i, j) in PAIRS {
-            let w = u.column(i) * v.column(j).transpose() - u.column(j) * v.column(i).transpose();
-            // w is NaN when the denominator is.
-            add_outer_upper(&mut m, &w, &w, -2.0 * mu / rotation_denominator(s, i, j));
-        }
+        add_rotation(&mut m);
         mirror_upper(&mut m);
         for a in 0..9 {
             m[(a, a)] += 2.0 * mu;
@@ -410,6 +460,29 @@ mod tests {
             Mat3::from_diagonal(&Vec3::new(f64::INFINITY, 1.0, 1.0)),
         ] {
             assert_eq!(polar_rotation(&f), None, "F = {f}");
+        }
+    }
+
+    #[test]
+    fn tangent_from_the_polar_rotation_is_the_svd_one() {
+        let m = Corotated::new(Lame {
+            mu: 1.0,
+            lambda: 9.0,
+        });
+        for f in [
+            Mat3::identity(),
+            Mat3::from_diagonal(&Vec3::new(0.1, 3.0, 2.0)),
+            Mat3::new(1.2, 0.3, -0.1, 0.05, 0.9, 0.2, -0.3, 0.1, 1.1),
+            Mat3::new(0.7, 0.6, 0.0, -0.6, 0.7, 0.1, 0.0, 0.05, 1.3),
+            nalgebra::Rotation3::from_euler_angles(0.3, -2.0, 1.0).into_inner()
+                * Mat3::new(1.0, 0.02, 0.0, 0.01, 0.97, 0.03, 0.0, -0.02, 1.04),
+        ] {
+            let r = polar_rotation(&f).expect("well-shaped F");
+            let (a, b) = (
+                m.tangent_from_rotation(&f, &r),
+                m.tangent_from_svd(&f, &signed_svd(&f)),
+            );
+            assert!((a - b).norm() <= 1e-12 * b.norm(), "F = {f}: {a} vs {b}");
         }
     }
 
