@@ -27,18 +27,32 @@ use crate::Mat3;
 /// third index k.
 pub(super) const PAIRS: [(usize, usize); 3] = [(1, 2), (0, 2), (0, 1)];
 
-/// The twist and flip eigenpairs: `(eigenvalue, w)` with unit eigenvector vec(w)/√2.
+/// The shapes w of the twist and flip modes, twists first: u_i v_jᵀ − u_j v_iᵀ and
+/// u_i v_jᵀ + u_j v_iᵀ over [`PAIRS`] (unit eigenvectors vec(w)/√2).
+pub(super) fn mode_shapes(svd: &SignedSvd) -> [Mat3; 6] {
+    let (u, v) = (&svd.u, &svd.v);
+    let [(a0, b0), (a1, b1), (a2, b2)] = PAIRS.map(|(i, j)| {
+        (
+            u.column(i) * v.column(j).transpose(),
+            u.column(j) * v.column(i).transpose(),
+        )
+    });
+    [a0 - b0, a1 - b1, a2 - b2, a0 + b0, a1 + b1, a2 + b2]
+}
+
+/// The twist and flip eigenpairs of μ I₉ + c ∂cof/∂F: `(eigenvalue, w)` with unit eigenvector
+/// vec(w)/√2, the twist of pair k with μ + c σ_k, its flip with μ − c σ_k.
 pub(super) fn twist_flip(svd: &SignedSvd, mu: f64, c: f64) -> [(f64, Mat3); 6] {
-    let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
-    let pair = |i: usize, j: usize, k: usize| {
-        let a = u.column(i) * v.column(j).transpose();
-        let b = u.column(j) * v.column(i).transpose();
-        [(mu + c * s[k], a - b), (mu - c * s[k], a + b)]
-    };
-    let [t0, f0] = pair(PAIRS[0].0, PAIRS[0].1, 0);
-    let [t1, f1] = pair(PAIRS[1].0, PAIRS[1].1, 1);
-    let [t2, f2] = pair(PAIRS[2].0, PAIRS[2].1, 2);
-    [t0, t1, t2, f0, f1, f2]
+    let s = &svd.sigma;
+    let [t0, t1, t2, f0, f1, f2] = mode_shapes(svd);
+    [
+        (mu + c * s[0], t0),
+        (mu + c * s[1], t1),
+        (mu + c * s[2], t2),
+        (mu - c * s[0], f0),
+        (mu - c * s[1], f1),
+        (mu - c * s[2], f2),
+    ]
 }
 
 /// The 3×3 matrix whose eigenpairs (λ, e) give the scaling eigenpairs (λ, Σ_i e_i u_i v_iᵀ).
@@ -56,14 +70,8 @@ pub(super) fn scaling_block(s: &crate::Vec3, mu: f64, a: f64, c: f64) -> Mat3 {
     m
 }
 
-/// The projection onto the PSD cone of the exact tangent `m` = μ I₉ + a ggᵀ + c ∂cof/∂F of F:
-/// its eigensystem with the negative eigenvalues clamped to zero ([`clamped_from_modes`]).
-/// `coefficients(J)` gives (a, c) at J = σ₀σ₁σ₂.
-///
-/// A positive definite `m` (the common case: most elements are not near a buckling mode) is
-/// recognised by a Cholesky-type factorisation and returned unchanged, without the SVD.
-/// Non-finite F yields `m` unchanged; if the 3×3 eigenproblem fails, the generic
-/// [`project_psd`] is used.
+/// The projection onto the PSD cone of the exact tangent `m` = μ I₉ + a ggᵀ + c ∂cof/∂F of F
+/// ([`project_with`]); `coefficients(J)` gives (a, c) at J = σ₀σ₁σ₂.
 #[allow(non_snake_case)]
 pub(super) fn project(
     m: Mat9,
@@ -71,18 +79,34 @@ pub(super) fn project(
     mu: f64,
     coefficients: impl Fn(f64) -> (f64, f64),
 ) -> Mat9 {
+    project_with(m, F, None, |svd| {
+        let s = &svd.sigma;
+        let (a, c) = coefficients(s[0] * s[1] * s[2]);
+        (twist_flip(svd, mu, c), scaling_block(s, mu, a, c))
+    })
+}
+
+/// The projection onto the PSD cone of the exact tangent `m` of F, whose eigensystem in the
+/// SVD frame `eigensystem` gives: the twist and flip pairs in [`twist_flip`]'s shape and the
+/// scaling block ([`clamped_from_modes`]).
+///
+/// A positive definite `m` is recognised by a Cholesky-type factorisation and returned
+/// unchanged, without the SVD (most elements of a Neo-Hookean body; about half of a moving
+/// corotated or StVK body's, whose twists are zero at rest). `svd`, when the caller has it
+/// already, saves computing it again. Non-finite F yields `m` unchanged.
+#[allow(non_snake_case)]
+pub(super) fn project_with(
+    m: Mat9,
+    F: &Mat3,
+    svd: Option<SignedSvd>,
+    eigensystem: impl FnOnce(&SignedSvd) -> ([(f64, Mat3); 6], Mat3),
+) -> Mat9 {
     if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
         return m;
     }
-    let svd = signed_svd(F);
-    let s = &svd.sigma;
-    let (a, c) = coefficients(s[0] * s[1] * s[2]);
-    clamped_from_modes(
-        &m,
-        &svd,
-        twist_flip(&svd, mu, c),
-        &scaling_block(s, mu, a, c),
-    )
+    let svd = svd.unwrap_or_else(|| signed_svd(F));
+    let (pairs, block) = eigensystem(&svd);
+    clamped_from_modes(m, &svd, pairs, &block)
 }
 
 /// The projection of the tangent `m` onto the PSD cone from its eigensystem in the SVD frame
@@ -90,20 +114,19 @@ pub(super) fn project(
 /// scaling block of [`scaling_block`]'s, with the negative eigenvalues clamped to zero.
 ///
 /// Either `m` minus its negative modes or the sum of its positive ones, whichever has the
-/// smaller eigenvalues in total: that is both the cheaper (fewer rank-one terms, as a rule)
-/// and the more accurate, since each way errs by rounding in the scale of what it adds or
-/// removes. A crushed StVK element has nine negative modes, and near the corotated singular
-/// set one twist is ~μ·10⁸; either would leave the result to cancellation if subtracted. If
-/// the 3×3 eigenproblem fails, the generic [`project_psd`] is used.
+/// smaller eigenvalues in total: each way errs by rounding in the scale of what it removes or
+/// adds. Subtraction is the usual case (a few negative modes); a crushed StVK element has nine,
+/// and near the corotated singular set one twist is ~μ·10⁸, which subtracted would leave the
+/// result to cancellation. If the 3×3 eigenproblem fails, the generic [`project_psd`] is used.
 pub(super) fn clamped_from_modes(
-    m: &Mat9,
+    m: Mat9,
     svd: &SignedSvd,
     pairs: [(f64, Mat3); 6],
     block: &Mat3,
 ) -> Mat9 {
     // The scaling modes live in the span of d_i = u_i v_iᵀ, where the tangent is
     // Σ_ij B_ij vec(d_i) vec(d_j)ᵀ.
-    let d = [0, 1, 2].map(|i| svd.u.column(i) * svd.v.column(i).transpose());
+    let d = || [0, 1, 2].map(|i| svd.u.column(i) * svd.v.column(i).transpose());
     // Sylvester's criterion; on failure (indefinite or borderline) decompose.
     let block_pd = block[(0, 0)] > 0.0
         && block[(0, 0)] * block[(1, 1)] - block[(0, 1)] * block[(0, 1)] > 0.0
@@ -113,8 +136,9 @@ pub(super) fn clamped_from_modes(
     let mut scaling: [(f64, Mat3); 3] = [(0.0, Mat3::zeros()); 3];
     if !block_pd {
         let Some(eig) = block.try_symmetric_eigen(f64::EPSILON, 1000) else {
-            return project_psd(m);
+            return project_psd(&m);
         };
+        let d = d();
         for (mode, (val, e)) in scaling
             .iter_mut()
             .zip(eig.eigenvalues.iter().zip(eig.eigenvectors.column_iter()))
@@ -137,7 +161,10 @@ pub(super) fn clamped_from_modes(
     let modes = pairs.iter().map(half).chain(scaling);
     let mut out;
     if negative <= positive {
-        out = *m;
+        if negative == 0.0 {
+            return m;
+        }
+        out = m;
         for (val, q) in modes.filter(|(v, _)| *v < 0.0) {
             add_outer_upper(&mut out, &q, &q, -val);
         }
@@ -147,6 +174,7 @@ pub(super) fn clamped_from_modes(
             add_outer_upper(&mut out, &q, &q, val);
         }
         if block_pd {
+            let d = d();
             for (i, di) in d.iter().enumerate() {
                 for (j, dj) in d.iter().enumerate() {
                     add_outer_upper(&mut out, di, dj, block[(i, j)]);

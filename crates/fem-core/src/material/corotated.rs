@@ -1,9 +1,7 @@
 //! Fixed corotated elasticity (Stomakhin et al. 2012), and the rotation-variant SVD shared by
 //! the materials of this module.
 
-use super::cofactor_tangent::{
-    PAIRS, clamped_from_modes, is_positive_definite, scaling_block, twist_flip,
-};
+use super::cofactor_tangent::{PAIRS, project_with, scaling_block, twist_flip};
 use super::stable_neo_hookean::{
     add_cofactor_hessian, add_outer_upper, cofactor, det, det_from_cofactor, mirror_upper,
 };
@@ -25,10 +23,11 @@ use crate::{Mat3, Vec3};
 ///
 /// At F = I the tangent is 2μ𝒮 + λ vec(I)vec(I)ᵀ, the linear-elasticity tangent.
 ///
-/// ψ and P need R only, not the SVD: where det F is well positive (every element of a body
+/// ψ, P and ∂P/∂F need R, not the SVD: where det F is well positive (every element of a body
 /// that is not being crushed) R is the polar factor, which a few Newton steps find about four
-/// times faster than the Jacobi SVD (`cargo bench -p benches --bench fem -- material`); the
-/// tangent and its projection take the SVD.
+/// times faster than the Jacobi SVD (`cargo bench -p benches --bench fem -- material`), and
+/// ∂R/∂F follows from it (`Corotated::tangent_from_rotation`). Elsewhere, and to project a
+/// tangent that is not positive definite, the SVD is taken.
 ///
 /// # Inversion and the singular set
 ///
@@ -95,7 +94,7 @@ impl Material for Corotated {
     }
 
     fn dpdf(&self, F: &Mat3) -> Mat9 {
-        match polar_rotation(F) {
+        match tangent_rotation(F) {
             Some(r) => self.tangent_from_rotation(F, &r),
             None => self.tangent_from_svd(F, &signed_svd(F)),
         }
@@ -108,27 +107,26 @@ impl Material for Corotated {
     /// SVD (and a 3×3 eigenproblem when the scaling block is indefinite). Non-finite F yields
     /// the (non-finite) tangent unchanged.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
-        let polar = polar_rotation(F);
-        let mut svd = None;
-        let m = match &polar {
-            Some(r) => self.tangent_from_rotation(F, r),
-            None => self.tangent_from_svd(F, svd.insert(signed_svd(F))),
+        let (m, svd) = match tangent_rotation(F) {
+            Some(r) => (self.tangent_from_rotation(F, &r), None),
+            None => {
+                let svd = signed_svd(F);
+                (self.tangent_from_svd(F, &svd), Some(svd))
+            }
         };
-        if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
-            return m;
-        }
-        let svd = svd.unwrap_or_else(|| signed_svd(F));
-        // 2μ I₉ and the λ terms have the eigensystem of the Neo-Hookean tangents with
-        // (μ, a, c) = (2μ, λ, λ(J − 1)); −2μ ∂R/∂F adds −4μ/(σ_i + σ_j) to each twist
-        // (w wᵀ with ‖w‖² = 2).
-        let s = &svd.sigma;
-        let c = self.lambda * (s[0] * s[1] * s[2] - 1.0);
-        let mut pairs = twist_flip(&svd, 2.0 * self.mu, c);
-        for (twist, (i, j)) in pairs.iter_mut().zip(PAIRS) {
-            twist.0 -= 4.0 * self.mu / rotation_denominator(s, i, j);
-        }
-        let block = scaling_block(s, 2.0 * self.mu, self.lambda, c);
-        clamped_from_modes(&m, &svd, pairs, &block)
+        let (mu, lambda) = (self.mu, self.lambda);
+        project_with(m, F, svd, |svd| {
+            // 2μ I₉ and the λ terms have the eigensystem of the Neo-Hookean tangents with
+            // (μ, a, c) = (2μ, λ, λ(J − 1)); −2μ ∂R/∂F adds −4μ/(σ_i + σ_j) to each twist
+            // (w wᵀ with ‖w‖² = 2).
+            let s = &svd.sigma;
+            let c = lambda * (s[0] * s[1] * s[2] - 1.0);
+            let mut pairs = twist_flip(svd, 2.0 * mu, c);
+            for (twist, (i, j)) in pairs[..3].iter_mut().zip(PAIRS) {
+                twist.0 -= 4.0 * mu / rotation_denominator(s, i, j);
+            }
+            (pairs, scaling_block(s, 2.0 * mu, lambda, c))
+        })
     }
 }
 
@@ -147,7 +145,7 @@ impl Corotated {
             for (i, j) in PAIRS {
                 let w =
                     u.column(i) * v.column(j).transpose() - u.column(j) * v.column(i).transpose();
-                // w is NaN when the denominator is.
+                // `max` also maps a NaN denominator to the floor; w is then NaN anyway.
                 add_outer_upper(m, &w, &w, -2.0 * self.mu / rotation_denominator(s, i, j));
             }
         })
@@ -212,7 +210,7 @@ const ROTATION_DENOMINATOR_FLOOR: f64 = 1e-8;
 /// F is well away from inversion, from [`signed_svd`] otherwise.
 #[allow(non_snake_case)]
 #[inline]
-pub(super) fn rotation(F: &Mat3) -> Mat3 {
+fn rotation(F: &Mat3) -> Mat3 {
     polar_rotation(F).unwrap_or_else(|| {
         let svd = signed_svd(F);
         svd.u * svd.v.transpose()
@@ -222,18 +220,33 @@ pub(super) fn rotation(F: &Mat3) -> Mat3 {
 /// Below this det F / (‖F‖²/3)^{3/2} (1 for a scaled rotation, 0 for a singular F) the polar
 /// iteration is not used.
 const POLAR_MIN_SHAPE: f64 = 1e-3;
-/// Newton steps at most; from a well-shaped F the iteration settles in 3–6.
+/// Newton steps at most; from a well-shaped F the iteration settles in 3–7.
 const POLAR_MAX_STEPS: usize = 12;
 /// A step smaller than this (Frobenius) leaves an error of about its square: the last one.
 const POLAR_LAST_STEP: f64 = 1e-8;
+/// The steps are scaled while |det X − 1| is above this: far from a scaled rotation scaling
+/// saves steps, near one it changes nothing and costs a cube root.
+const POLAR_SCALED_STEPS_DET: f64 = 1e-2;
+/// Below this ‖F‖² the tangent takes the SVD even where the polar rotation exists: with the
+/// shape above 10⁻³, σ₂ ≥ 1.9·10⁻⁴ ‖F‖, so from here on σ_i + σ_j stays above the floor the
+/// SVD's tangent clamps it to (see [`Corotated`]), and the two tangents agree.
+const POLAR_TANGENT_MIN_NORM_SQUARED: f64 = 1e-9;
+
+/// The polar rotation of F for its tangent: [`polar_rotation`] but for F so small that the
+/// tangent's denominators would fall below their floor.
+#[allow(non_snake_case)]
+fn tangent_rotation(F: &Mat3) -> Option<Mat3> {
+    polar_rotation(F).filter(|_| F.norm_squared() >= POLAR_TANGENT_MIN_NORM_SQUARED)
+}
 
 /// The rotation of the polar decomposition F = RS (S symmetric positive definite), which
 /// for det F > 0 is the UVᵀ of the rotation-variant SVD, by Newton's iteration
 /// X ← (γX + γ⁻¹X⁻ᵀ)/2 from X = F with X⁻ᵀ = cof(X)/det X (Higham 1986). γ = (det X)^{-1/3}
 /// scales the steps while det X is far from 1; scaled or not, the iteration converges
-/// quadratically to the same R, so R is the polar factor to rounding. `None` when det F is not positive, F is too near
-/// singular (see [`POLAR_MIN_SHAPE`]), non-finite, or the iteration has not settled in
-/// [`POLAR_MAX_STEPS`]: the caller then takes the SVD, which handles every F.
+/// quadratically to the same R, so R is the polar factor to rounding. `None` when det F is
+/// not positive, F is too near singular (see [`POLAR_MIN_SHAPE`]), non-finite, or the
+/// iteration has not settled in [`POLAR_MAX_STEPS`]: the caller then takes the SVD, which
+/// handles every F.
 #[allow(non_snake_case)]
 fn polar_rotation(F: &Mat3) -> Option<Mat3> {
     let mean_square = F.norm_squared() / 3.0;
@@ -248,7 +261,7 @@ fn polar_rotation(F: &Mat3) -> Option<Mat3> {
         if !(d > 0.0 && d.is_finite()) {
             return None;
         }
-        let next = if (d - 1.0).abs() > 1e-2 {
+        let next = if (d - 1.0).abs() > POLAR_SCALED_STEPS_DET {
             let gamma = d.cbrt().recip();
             (x * gamma + cof * (1.0 / (gamma * d))) * 0.5
         } else {
@@ -422,39 +435,22 @@ mod tests {
 
     #[test]
     fn polar_rotation_is_the_svd_rotation() {
-        // F = R₁ diag(σ) R₂ over stretches from 10⁻² to 10², shears and near-rotations.
-        let mut seed = 7_u64;
-        let mut uniform = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1_u64 << 53) as f64
-        };
-        let mut checked = 0;
+        let mut rng = crate::rng::SplitMix64::new(7);
         for n in 0..2000 {
-            let mut angle = || (uniform() - 0.5) * 6.0;
-            let r1 = nalgebra::Rotation3::from_euler_angles(angle(), angle(), angle());
-            let r2 = nalgebra::Rotation3::from_euler_angles(angle(), angle(), angle());
-            let spread = [1e-3, 0.1, 1.0, 4.0][n % 4];
-            let s = Vec3::from_fn(|_, _| (spread * (uniform() - 0.5)).exp());
-            let f = r1.matrix() * Mat3::from_diagonal(&s) * r2.matrix();
+            let f = random_f(&mut rng, [1e-3, 0.1, 1.0, 4.0][n % 4]);
             let svd = signed_svd(&f);
             let expected = svd.u * svd.v.transpose();
-            match polar_rotation(&f) {
-                Some(r) => {
-                    assert!((r - expected).norm() < 1e-12, "F = {f}: {r} vs {expected}");
-                    assert!((r.transpose() * r - Mat3::identity()).norm() < 1e-14);
-                    checked += 1;
-                }
-                // Only far from a scaled rotation is the SVD left to do it.
-                None => assert!(spread == 4.0, "F = {f}"),
-            }
+            let r = polar_rotation(&f).unwrap_or_else(|| panic!("F = {f}: no polar rotation"));
+            assert!((r - expected).norm() < 1e-12, "F = {f}: {r} vs {expected}");
+            assert!((r.transpose() * r - Mat3::identity()).norm() < 1e-14);
         }
-        assert!(checked > 1800, "{checked} of 2000 by the polar iteration");
         assert_eq!(polar_rotation(&Mat3::identity()), Some(Mat3::identity()));
+        // Shape det F / (‖F‖²/3)^{3/2} 1.8·10⁻³, just above the threshold.
+        assert!(polar_rotation(&Mat3::from_diagonal(&Vec3::new(1.0, 1.0, 1e-3))).is_some());
         for f in [
+            // Shape 3.7·10⁻⁴, just below it.
+            Mat3::from_diagonal(&Vec3::new(1.0, 1.0, 2e-4)),
             Mat3::from_diagonal(&Vec3::new(1.0, 1.0, -1.0)),
-            Mat3::from_diagonal(&Vec3::new(1.0, 1.0, 1e-5)),
             Mat3::zeros(),
             Mat3::from_element(f64::NAN),
             Mat3::from_diagonal(&Vec3::new(f64::INFINITY, 1.0, 1.0)),
@@ -463,27 +459,68 @@ mod tests {
         }
     }
 
+    /// F = R₁ diag(σ) R₂ with random rotations and ln σ_i uniform in ±spread/2 (spread 4: σ
+    /// from 0.14 to 7.4).
+    fn random_f(rng: &mut crate::rng::SplitMix64, spread: f64) -> Mat3 {
+        let mut angle = || rng.range(-3.0, 3.0);
+        let r1 = nalgebra::Rotation3::from_euler_angles(angle(), angle(), angle());
+        let r2 = nalgebra::Rotation3::from_euler_angles(angle(), angle(), angle());
+        let s = Vec3::from_fn(|_, _| (spread * rng.range(-0.5, 0.5)).exp());
+        r1.matrix() * Mat3::from_diagonal(&s) * r2.matrix()
+    }
+
     #[test]
     fn tangent_from_the_polar_rotation_is_the_svd_one() {
         let m = Corotated::new(Lame {
             mu: 1.0,
             lambda: 9.0,
         });
-        for f in [
+        let mut rng = crate::rng::SplitMix64::new(11);
+        let mut fs = vec![
             Mat3::identity(),
             Mat3::from_diagonal(&Vec3::new(0.1, 3.0, 2.0)),
             Mat3::new(1.2, 0.3, -0.1, 0.05, 0.9, 0.2, -0.3, 0.1, 1.1),
             Mat3::new(0.7, 0.6, 0.0, -0.6, 0.7, 0.1, 0.0, 0.05, 1.3),
-            nalgebra::Rotation3::from_euler_angles(0.3, -2.0, 1.0).into_inner()
-                * Mat3::new(1.0, 0.02, 0.0, 0.01, 0.97, 0.03, 0.0, -0.02, 1.04),
-        ] {
-            let r = polar_rotation(&f).expect("well-shaped F");
+        ];
+        fs.extend((0..200).map(|n| random_f(&mut rng, [0.1, 1.0, 4.0][n % 3])));
+        for f in &fs {
+            let r = polar_rotation(f).expect("well-shaped F");
             let (a, b) = (
-                m.tangent_from_rotation(&f, &r),
-                m.tangent_from_svd(&f, &signed_svd(&f)),
+                m.tangent_from_rotation(f, &r),
+                m.tangent_from_svd(f, &signed_svd(f)),
             );
-            assert!((a - b).norm() <= 1e-12 * b.norm(), "F = {f}: {a} vs {b}");
+            assert!((a - b).norm() <= 1e-11 * b.norm(), "F = {f}: {a} vs {b}");
         }
+        // A crushed element keeps the SVD tangent's floor on σ_i + σ_j: the polar rotation
+        // exists, but the tangent does not take it.
+        for scale in [1e-5, 1e-10, 1e-100] {
+            let f = fs[3] * scale;
+            assert!(polar_rotation(&f).is_some());
+            assert_eq!(
+                m.dpdf(&f),
+                m.tangent_from_svd(&f, &signed_svd(&f)),
+                "scale {scale}"
+            );
+        }
+    }
+
+    #[test]
+    fn projection_at_the_zero_matrix_is_the_shear_part() {
+        // At F = 0 the tangent is 2μ I₉ − (2μ/floor) Σ w wᵀ: twists hugely negative, flips and
+        // scalings 2μ, so the projection is 2μ times the projection onto symmetric matrices.
+        let m = Corotated::new(Lame {
+            mu: 1.5,
+            lambda: 40.0,
+        });
+        let symmetric = Mat9::from_fn(|a, b| {
+            let (r, c) = (a % 3, a / 3);
+            let (k, l) = (b % 3, b / 3);
+            let same = if (r, c) == (k, l) { 0.5 } else { 0.0 };
+            let transposed = if (r, c) == (l, k) { 0.5 } else { 0.0 };
+            same + transposed
+        });
+        let p = m.dpdf_projected(&Mat3::zeros());
+        assert!((p - symmetric * 3.0).norm() < 1e-12, "{p}");
     }
 
     #[test]

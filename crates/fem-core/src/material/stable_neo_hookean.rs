@@ -34,8 +34,8 @@ use crate::Mat3;
 ///
 /// [`Material::dpdf_projected`] uses the analytic eigensystem of tangents of the form
 /// μ I₉ + a vec(cof)vec(cof)ᵀ + c ∂cof/∂F (here a = λ', c = λ'(J − 1) − μ'; see
-/// `super::cofactor_tangent`): a positive definite tangent is returned as it is, otherwise it
-/// is rebuilt from its non-negative eigenpairs, which equals the clamped eigen-decomposition of
+/// `super::cofactor_tangent`): a positive definite tangent is returned as it is, otherwise its
+/// negative eigenvalues are clamped to zero, which equals the clamped eigen-decomposition of
 /// [`super::project_psd`] at the cost of one 3×3 SVD (and a 3×3 eigenproblem only when the
 /// scaling block is indefinite).
 ///

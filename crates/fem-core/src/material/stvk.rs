@@ -1,7 +1,6 @@
 //! Saint Venant–Kirchhoff.
 
-use super::cofactor_tangent::{PAIRS, clamped_from_modes, is_positive_definite, twist_flip};
-use super::corotated::signed_svd;
+use super::cofactor_tangent::{PAIRS, mode_shapes, project_with};
 use super::stable_neo_hookean::mirror_upper;
 use super::{Lame, Mat9, Material};
 use crate::Mat3;
@@ -29,8 +28,9 @@ use crate::Mat3;
 ///
 /// and the scaling modes Σ_i e_i u_i v_iᵀ come from the 3×3 Hessian ∂²ψ/∂σ_i∂σ_j =
 /// δ_ij (μ(3σ_i² − 1) + c) + λσ_iσ_j. A positive definite tangent is returned as it is (no SVD);
-/// otherwise it is rebuilt from its non-negative eigenpairs, which equals the clamped
-/// eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD.
+/// otherwise its negative eigenvalues are clamped to zero, which equals the clamped
+/// eigen-decomposition of [`super::project_psd`] at the cost of one 3×3 SVD (and a 3×3
+/// eigenproblem when the scaling block is indefinite).
 ///
 /// # Derivation
 ///
@@ -138,30 +138,28 @@ impl Material for StVenantKirchhoff {
     /// Analytic projection (see the type's documentation). Non-finite F yields the
     /// (non-finite) tangent unchanged.
     fn dpdf_projected(&self, F: &Mat3) -> Mat9 {
-        let m = self.dpdf(F);
-        if is_positive_definite(&m) || !F.iter().all(|x| x.is_finite()) {
-            return m;
-        }
         let (mu, lambda) = (self.mu, self.lambda);
-        let svd = signed_svd(F);
-        let s = &svd.sigma;
-        let c = 0.5 * lambda * (s.norm_squared() - 3.0);
-        // The modes' shapes, with eigenvalues set below.
-        let mut pairs = twist_flip(&svd, 0.0, 0.0);
-        for (k, (i, j)) in PAIRS.into_iter().enumerate() {
-            let (a, b) = (s[i], s[j]);
-            pairs[k].0 = mu * (a * a - a * b + b * b - 1.0) + c;
-            pairs[k + 3].0 = mu * (a * a + a * b + b * b - 1.0) + c;
-        }
-        let block = Mat3::from_fn(|i, j| {
-            let diagonal = if i == j {
-                mu * (3.0 * s[i] * s[i] - 1.0) + c
-            } else {
-                0.0
-            };
-            diagonal + lambda * s[i] * s[j]
-        });
-        clamped_from_modes(&m, &svd, pairs, &block)
+        project_with(self.dpdf(F), F, None, |svd| {
+            let s = &svd.sigma;
+            let c = 0.5 * lambda * (s.norm_squared() - 3.0);
+            let shapes = mode_shapes(svd);
+            let pairs = std::array::from_fn(|m| {
+                let (i, j) = PAIRS[m % 3];
+                let (a, b) = (s[i], s[j]);
+                // Twists (a² − ab + b²), then flips (a² + ab + b²).
+                let ab = if m < 3 { -a * b } else { a * b };
+                (mu * (a * a + ab + b * b - 1.0) + c, shapes[m])
+            });
+            let block = Mat3::from_fn(|i, j| {
+                let diagonal = if i == j {
+                    mu * (3.0 * s[i] * s[i] - 1.0) + c
+                } else {
+                    0.0
+                };
+                diagonal + lambda * s[i] * s[j]
+            });
+            (pairs, block)
+        })
     }
 }
 
