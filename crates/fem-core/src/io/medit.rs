@@ -202,12 +202,24 @@ impl<'a> Parser<'a> {
     }
 
     fn read_count(&mut self, section: &str) -> Result<usize, MeshError> {
-        let (n, line) = self.read_usize(&|| format!("the number of entries of {section}"))?;
-        if n > MAX_ENTITIES {
-            return Err(self.error(
-                line,
-                format!("{section} declares {n} entries, more than the limit of {MAX_ENTITIES}"),
-            ));
+        self.read_at_most(
+            &|| format!("the number of entries of {section}"),
+            MAX_ENTITIES,
+            &|n| format!("{section} declares {n} entries, more than the limit of {MAX_ENTITIES}"),
+        )
+    }
+
+    /// A non-negative integer no larger than `limit`; `too_large(n)` says why a larger one is
+    /// refused, at its line.
+    pub(super) fn read_at_most(
+        &mut self,
+        what: &dyn Fn() -> String,
+        limit: usize,
+        too_large: &dyn Fn(usize) -> String,
+    ) -> Result<usize, MeshError> {
+        let (n, line) = self.read_usize(what)?;
+        if n > limit {
+            return Err(self.error(line, too_large(n)));
         }
         Ok(n)
     }

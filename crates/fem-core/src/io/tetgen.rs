@@ -70,26 +70,16 @@ pub(crate) fn tet_line(ele: &str, t: usize) -> Option<usize> {
 
 /// A header's count, checked against [`MAX_ENTITIES`].
 fn count(file: &mut Parser<'_>, what: &str) -> Result<usize, MeshError> {
-    let (n, line) = file.read_usize(&|| format!("the number of {what}"))?;
-    if n > MAX_ENTITIES {
-        return Err(file.error(
-            line,
-            format!("{n} {what} is more than this reader accepts ({MAX_ENTITIES})"),
-        ));
-    }
-    Ok(n)
+    file.read_at_most(&|| format!("the number of {what}"), MAX_ENTITIES, &|n| {
+        format!("{n} {what} is more than this reader accepts ({MAX_ENTITIES})")
+    })
 }
 
 /// A header flag that is 0 or 1.
 fn flag(file: &mut Parser<'_>, what: &str) -> Result<usize, MeshError> {
-    let (v, line) = file.read_usize(&|| format!("the number of {what} (0 or 1)"))?;
-    if v > 1 {
-        return Err(file.error(
-            line,
-            format!("the number of {what} must be 0 or 1, found {v}"),
-        ));
-    }
-    Ok(v)
+    file.read_at_most(&|| format!("the number of {what} (0 or 1)"), 1, &|v| {
+        format!("the number of {what} must be 0 or 1, found {v}")
+    })
 }
 
 /// Skips `n` tokens (attributes, markers, extra nodes), each named by `what` if missing.
@@ -111,13 +101,10 @@ fn read_nodes(text: &str, path: &Path) -> Result<(Vec<Vec3>, usize), MeshError> 
             format!("the dimension is {dimension}; a tetrahedral mesh needs 3"),
         ));
     }
-    let (attributes, line) = file.read_usize(&|| "the number of attributes".into())?;
-    if attributes > MAX_ENTITIES {
-        return Err(file.error(
-            line,
-            format!("{attributes} attributes per point is too many"),
-        ));
-    }
+    let attributes =
+        file.read_at_most(&|| "the number of attributes".into(), MAX_ENTITIES, &|n| {
+            format!("{n} attributes per point is too many")
+        })?;
     let markers = flag(&mut file, "boundary markers")?;
     // A header may lie about its count: never reserve more than the text could hold.
     let mut vertices = Vec::with_capacity(n.min(text.len() / 8));
