@@ -331,10 +331,6 @@ fn deformation_gradients(count: usize) -> Vec<Mat3> {
         .collect()
 }
 
-fn material_name<M: Material>(_: &M) -> &'static str {
-    M::NAME
-}
-
 /// Each material's ψ with P (what an energy-and-gradient pass evaluates per element), its
 /// tangent (the reduced preconditioners' per-element Hessian) and the projected tangent
 /// (Newton's), per F.
@@ -347,19 +343,14 @@ fn bench_materials(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(2))
         .throughput(Throughput::Elements(COUNT as u64));
-    for model in [
-        MaterialModel::Linear,
-        MaterialModel::Corotated,
-        MaterialModel::Stvk,
-        MaterialModel::NeoHookean,
-        MaterialModel::StableNeoHookean,
-    ] {
-        let config = MaterialConfig {
+    for model in MaterialModel::ALL {
+        let material = MaterialConfig {
             model,
             ..MaterialConfig::default()
-        };
-        with_material!(&config.build(), |m| {
-            let name = material_name(m);
+        }
+        .build();
+        let name = material.name();
+        with_material!(&material, |m| {
             // Each whole result goes through black_box, so no part of it can be skipped.
             group.bench_function(format!("psi_pk1/{name}"), |b| {
                 b.iter(|| {

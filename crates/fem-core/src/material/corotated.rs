@@ -1,7 +1,7 @@
 //! Fixed corotated elasticity (Stomakhin et al. 2012), and the rotation-variant SVD shared by
 //! the materials of this module.
 
-use super::cofactor_tangent::{PAIRS, project_with, scaling_block, twist_flip};
+use super::cofactor_tangent::{PAIRS, mode_shapes, project_with, scaling_block, twist_flip};
 use super::stable_neo_hookean::{
     add_cofactor_hessian, add_outer_upper, cofactor, det, det_from_cofactor, mirror_upper,
 };
@@ -140,13 +140,18 @@ impl Corotated {
     /// ∂P/∂F at F with −2μ ∂R/∂F from the rotation-variant SVD `svd` of F: Σ over the pairs
     /// (i, j) of −2μ/(σ_i + σ_j) w wᵀ, w = u_i v_jᵀ − u_j v_iᵀ.
     fn tangent_from_svd(&self, F: &Mat3, svd: &SignedSvd) -> Mat9 {
-        let (u, s, v) = (&svd.u, &svd.sigma, &svd.v);
+        let s = &svd.sigma;
+        // The twists' shapes come first.
+        let w = mode_shapes(svd);
         self.tangent(F, |m| {
-            for (i, j) in PAIRS {
-                let w =
-                    u.column(i) * v.column(j).transpose() - u.column(j) * v.column(i).transpose();
+            for (k, (i, j)) in PAIRS.into_iter().enumerate() {
                 // `max` also maps a NaN denominator to the floor; w is then NaN anyway.
-                add_outer_upper(m, &w, &w, -2.0 * self.mu / rotation_denominator(s, i, j));
+                add_outer_upper(
+                    m,
+                    &w[k],
+                    &w[k],
+                    -2.0 * self.mu / rotation_denominator(s, i, j),
+                );
             }
         })
     }

@@ -86,6 +86,17 @@ pub enum MaterialModel {
     StableNeoHookean,
 }
 
+impl MaterialModel {
+    /// Every model, in declaration order.
+    pub const ALL: [MaterialModel; 5] = [
+        MaterialModel::Linear,
+        MaterialModel::Corotated,
+        MaterialModel::Stvk,
+        MaterialModel::NeoHookean,
+        MaterialModel::StableNeoHookean,
+    ];
+}
+
 /// The `[material]` section of a scene.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]

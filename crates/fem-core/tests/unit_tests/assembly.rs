@@ -47,16 +47,6 @@ fn small_box() -> TetMesh {
     .unwrap()
 }
 
-fn models() -> [MaterialModel; 5] {
-    [
-        MaterialModel::Linear,
-        MaterialModel::Corotated,
-        MaterialModel::Stvk,
-        MaterialModel::NeoHookean,
-        MaterialModel::StableNeoHookean,
-    ]
-}
-
 fn config(model: MaterialModel) -> MaterialConfig {
     MaterialConfig {
         model,
@@ -75,7 +65,7 @@ fn gradient_and_hessian_match_finite_differences_for_every_material() {
     let u: Vec<f64> = (0..n).map(|_| 0.05 * rng.next()).collect();
     let dofs = DofMap::new(&mesh, &[]);
     let pattern = HessianPattern::new(&elements.tets, &dofs);
-    for model in models() {
+    for model in MaterialModel::ALL {
         let mat = config(model).build();
         let mut buf = AssemblyBuffers::default();
         let mut grad = vec![0.0; n];
@@ -286,7 +276,7 @@ fn patch_test_affine_displacement_gives_constant_f_and_no_interior_force() {
     }
     // Uniform stress is in equilibrium: interior vertices feel no net force.
     let surface = mesh.surface_vertices();
-    for model in models() {
+    for model in MaterialModel::ALL {
         let mat = config(model).build();
         let mut grad = vec![0.0; u.len()];
         let mut buf = AssemblyBuffers::default();
