@@ -1,7 +1,8 @@
 //! How much the full-space test trajectory itself amplifies a small error
-//! ([`pipeline::run::sensitivity`], which `cargo xtask run` measures on its own when a reduced
-//! method drifts): reruns it with the state (displacement and velocity) scaled by 1 − ε after
-//! one frame and prints how far it ends from the cached reference.
+//! ([`pipeline::run::sensitivity`]): reruns it with the state (displacement and velocity)
+//! scaled by 1 − ε after one frame and prints how far it ends from the cached reference.
+//! (`cargo xtask run` measures, for a reduced method that drifts, the full simulation started
+//! from the method's own state instead: [`pipeline::run::restart`].)
 //!
 //! ```sh
 //! cargo xtask run --scene S.toml                  # caches the reference

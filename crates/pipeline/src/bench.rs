@@ -435,7 +435,7 @@ mod tests {
                 step_restarts: 0,
                 failure: None,
                 machine_gfma: None,
-                sensitivity: None,
+                restart: None,
             },
             offline_seconds: 0.0,
             pareto: false,

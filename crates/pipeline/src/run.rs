@@ -116,10 +116,12 @@ pub struct MethodReport {
     /// earlier (`run`'s full space, timed when the cached reference was computed).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub machine_gfma: Option<f64>,
-    /// On the `full` row, when a reduced method drifts from the full trajectory: how much the
-    /// full trajectory itself amplifies a small error ([`sensitivity`]).
+    /// On a reduced method's row, when it drifts from the full trajectory
+    /// ([`crate::trust::drifting`]): the full simulation started from the method's own state
+    /// part way through the test ([`restart`]), which says how much of the drift the full
+    /// dynamics make of a small early error.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub sensitivity: Option<Sensitivity>,
+    pub restart: Option<Restart>,
 }
 
 /// How much the full-space test trajectory amplifies a small error: the state (displacement
@@ -137,11 +139,9 @@ pub struct Sensitivity {
     pub last_error: f64,
 }
 
-/// The relative change [`sensitivity`] makes: about a reduced method's one-step error.
-pub const SENSITIVITY_CHANGE: f64 = 0.01;
-
-/// Where in the test trajectory [`sensitivity`] changes the state (fraction of its frames):
-/// late enough that the test's forces have acted, early enough to leave time to grow.
+/// Where in the test trajectory [`sensitivity`] and [`restart`] change the state (fraction of
+/// its frames): late enough that the test's forces have acted, early enough to leave time to
+/// grow.
 pub const SENSITIVITY_AT: f64 = 0.3;
 
 /// Simulates test trajectory `trajectory` in full space with its state scaled by 1 − `change`
@@ -154,6 +154,152 @@ pub fn sensitivity(
     change: f64,
     stage_progress: Progress<'_>,
 ) -> Result<Sensitivity> {
+    let errors = rerun(pipeline, trajectory, frame, stage_progress, |state| {
+        state.u.iter_mut().for_each(|x| *x *= 1.0 - change);
+        state.v.iter_mut().for_each(|x| *x *= 1.0 - change);
+        Ok(())
+    })?;
+    Ok(Sensitivity {
+        time: frame as f64 * pipeline.scene.time.step,
+        change,
+        mean_error: mean(&errors.rel),
+        last_error: errors.rel.last().copied().unwrap_or(0.0),
+    })
+}
+
+/// The full simulation started from a reduced method's own state part way through the test,
+/// against the reference. A method's drift is partly the full dynamics' own: started from a
+/// state a little off, the full simulation goes on to end somewhere else too. Where the
+/// restarted full trajectory ends about as far off as the method, most of the drift is the
+/// test amplifying the method's early error, and the trajectory errors rank the methods by how
+/// they are perturbed more than by how good they are.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Restart {
+    /// When the full simulation took over the method's state (s).
+    pub time: f64,
+    /// The method's own relative error then.
+    pub start_error: f64,
+    /// Mean over the frames after the restart of the restarted full trajectory's relative error.
+    pub mean_error: f64,
+    /// The same at the last frame.
+    pub last_error: f64,
+    /// The method's own mean error over the same frames.
+    pub method_mean_error: f64,
+    /// The method's own error at the last frame.
+    pub method_last_error: f64,
+}
+
+impl Restart {
+    /// The share of the method's drift after the restart that the full dynamics make on their
+    /// own from its state (near 1: nearly all; near 0: the reduced steps drift by themselves).
+    pub fn share(&self) -> f64 {
+        if self.method_mean_error > 0.0 {
+            self.mean_error / self.method_mean_error
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Runs reduced `row.method` again to frame `frame` of test trajectory `trajectory` (runs
+/// reproduce bit for bit), then simulates the full space on from its state there: the
+/// displacement it reports and the velocity implicit Euler gives it, (u_frame − u_frame−1)/h.
+pub fn restart(
+    pipeline: &mut Pipeline<'_>,
+    row: &MethodReport,
+    trajectory: usize,
+    frame: usize,
+    stage_progress: Progress<'_>,
+) -> Result<Restart> {
+    let method = row.method;
+    anyhow::ensure!(
+        !method.is_full(),
+        "{method} is full space: there is no reduced state to restart from"
+    );
+    anyhow::ensure!(
+        frame >= 1 && frame < row.frame_errors.len(),
+        "frame {frame} is not within the {} frames {method} completed",
+        row.frame_errors.len()
+    );
+    let sim_opts = SimulateOptions {
+        method,
+        trajectory: Trajectory::Test(trajectory),
+        out: PathBuf::new(),
+        frames: Some(frame),
+        every: 0,
+        solver: None,
+    };
+    let (model, time, solver) = setup(pipeline, &sim_opts)?;
+    let material = pipeline.scene.material.clone();
+    let mut runner = Runner::new(
+        pipeline,
+        method,
+        model,
+        &material,
+        time,
+        solver,
+        stage_progress,
+    )?;
+    let mut before = runner.displacement();
+    for _ in 1..frame {
+        runner.step()?;
+        before = runner.displacement();
+    }
+    runner.step()?;
+    let now = runner.displacement();
+    let (mean_error, last_error) =
+        full_from(pipeline, trajectory, frame, &before, &now, stage_progress)?;
+    let after = &row.frame_errors[frame..];
+    Ok(Restart {
+        time: frame as f64 * pipeline.scene.time.step,
+        start_error: row.frame_errors[frame - 1],
+        mean_error,
+        last_error,
+        method_mean_error: mean(after),
+        method_last_error: after.last().copied().unwrap_or(0.0),
+    })
+}
+
+/// Simulates test trajectory `trajectory` in full space from frame `frame` on, started from
+/// displacement `now` (every vertex) and the velocity implicit Euler gives it after `before`,
+/// (now − before)/h; returns the mean relative error of the frames after `frame` against the
+/// cached reference, and the last frame's. Started from the reference's own frames it
+/// reproduces the reference.
+pub fn full_from(
+    pipeline: &mut Pipeline<'_>,
+    trajectory: usize,
+    frame: usize,
+    before: &[f64],
+    now: &[f64],
+    stage_progress: Progress<'_>,
+) -> Result<(f64, f64)> {
+    let h = pipeline.scene.time.step;
+    let errors = rerun(pipeline, trajectory, frame, stage_progress, |state| {
+        anyhow::ensure!(
+            state.u.len() == now.len() && now.len() == before.len(),
+            "the full model has {} displacements, the states given {} and {}",
+            state.u.len(),
+            before.len(),
+            now.len()
+        );
+        state.u.copy_from_slice(now);
+        for ((v, a), b) in state.v.iter_mut().zip(now).zip(before) {
+            *v = (a - b) / h;
+        }
+        Ok(())
+    })?;
+    Ok((mean(&errors.rel), errors.rel.last().copied().unwrap_or(0.0)))
+}
+
+/// Simulates test trajectory `trajectory` in full space, with its state after frame `frame`
+/// replaced by `change`, and measures the frames from there on against the cached reference.
+fn rerun(
+    pipeline: &mut Pipeline<'_>,
+    trajectory: usize,
+    frame: usize,
+    stage_progress: Progress<'_>,
+    change: impl FnOnce(&mut fem_core::integrator::State) -> Result<()>,
+) -> Result<ErrorAccumulator> {
     let reference = pipeline.reference(trajectory, stage_progress)?;
     let frames = reference.frames.len();
     anyhow::ensure!(
@@ -171,22 +317,19 @@ pub fn sensitivity(
         scene.solver.clone(),
     )?;
     let mut errors = ErrorAccumulator::default();
+    let mut change = Some(change);
     for (k, r) in reference.frames.iter().enumerate() {
-        if k == frame {
-            sim.state.u.iter_mut().for_each(|x| *x *= 1.0 - change);
-            sim.state.v.iter_mut().for_each(|x| *x *= 1.0 - change);
+        if k == frame
+            && let Some(change) = change.take()
+        {
+            change(&mut sim.state)?;
         }
         sim.step()?;
         if k >= frame {
             errors.add(&sim.model, &sim.state.u, r);
         }
     }
-    Ok(Sensitivity {
-        time: frame as f64 * scene.time.step,
-        change,
-        mean_error: mean(&errors.rel),
-        last_error: errors.rel.last().copied().unwrap_or(0.0),
-    })
+    Ok(errors)
 }
 
 /// Errors of a trajectory against the reference, frame by frame.
@@ -264,24 +407,20 @@ pub fn run(
         rows.push(measure(pipeline, &m, stage_progress, progress)?);
     }
     set_speedups(&mut rows);
-    if crate::trust::drifts(&rows)
-        && let Some(full) = rows.iter().position(|r| r.method.is_full())
-    {
-        let frames = pipeline
-            .reference(opts.trajectory, stage_progress)?
-            .frames
-            .len();
-        let frame = (SENSITIVITY_AT * frames as f64) as usize;
-        match sensitivity(
-            pipeline,
-            opts.trajectory,
-            frame,
-            SENSITIVITY_CHANGE,
-            stage_progress,
-        ) {
-            Ok(s) => rows[full].sensitivity = Some(s),
-            Err(e) => tracing::warn!("the test trajectory's sensitivity was not measured: {e:#}"),
+    for i in 0..rows.len() {
+        if !crate::trust::drifting(&rows[i]) {
+            continue;
         }
+        let frame = (SENSITIVITY_AT * rows[i].frame_errors.len() as f64) as usize;
+        progress(&format!("full from {}", rows[i].method), 0, 1);
+        match restart(pipeline, &rows[i], opts.trajectory, frame, stage_progress) {
+            Ok(r) => rows[i].restart = Some(r),
+            Err(e) => tracing::warn!(
+                "the full simulation from {}'s state was not measured: {e:#}",
+                rows[i].method
+            ),
+        }
+        progress(&format!("full from {}", rows[i].method), 1, 1);
     }
     write_json(&opts.out.join("report.json"), &rows)?;
     if let Some(method) = crate::export::run_method(&opts.methods) {
@@ -476,7 +615,7 @@ pub fn measure(
             step_restarts: 0,
             failure: None,
             machine_gfma: None,
-            sensitivity: None,
+            restart: None,
         });
     }
     let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
@@ -638,7 +777,7 @@ pub fn measure(
         step_restarts,
         failure,
         machine_gfma,
-        sensitivity: None,
+        restart: None,
     })
 }
 

@@ -17,54 +17,51 @@ pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 
 /// Whether a reduced method drifts from the full trajectory: more than
 /// [`UNCOVERED_SUBSPACE_ERROR`] off while its subspace holds the test four times better. Then
-/// `run` measures how much the full trajectory itself amplifies a small error
-/// ([`crate::run::sensitivity`]), which [`assess`] reports.
-pub fn drifts(rows: &[MethodReport]) -> bool {
-    rows.iter().any(|r| {
-        !r.method.is_full()
-            && r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR
-            && r.subspace_error <= r.mean_rel_error / 4.0
-    })
+/// `run` starts the full simulation from the method's own state part way through
+/// ([`crate::run::restart`]), and [`assess`] says how much of the drift that explains.
+pub fn drifting(r: &MethodReport) -> bool {
+    !r.method.is_full()
+        && r.failure.is_none()
+        && r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR
+        && r.subspace_error <= r.mean_rel_error / 4.0
 }
 
-/// A full trajectory that turns an error into twice as much or more by its end amplifies
-/// errors.
-pub const AMPLIFYING: f64 = 2.0;
+/// A full simulation started from a drifting method's state that goes on to make at least
+/// this share of the method's later error on its own: the test amplifies the method's early
+/// error, and most of its drift is the full dynamics'.
+pub const AMPLIFIED_SHARE: f64 = 0.5;
 
-/// What the full row's sensitivity says of the drifting methods.
-fn sensitivity_warning(rows: &[MethodReport]) -> Option<String> {
-    let s = rows.iter().find_map(|r| r.sensitivity)?;
+/// What the full simulation started from a drifting method's state says of its drift.
+fn restart_warning(r: &MethodReport) -> Option<String> {
+    let s = r.restart?;
     let pct = |x: f64| 100.0 * x;
-    let changed = format!(
-        "the full trajectory with its state changed by {:.0} % at t = {:.2} s ends {:.1} % from \
-         the unchanged one ({:.1} % on average from then on)",
-        pct(s.change),
+    let restarted = format!(
+        "the full simulation started from its state at t = {:.2} s, where it is {:.1} % off, \
+         ends {:.1} % from the full trajectory ({:.1} % on average from then on, the method \
+         {:.1} %)",
         s.time,
+        pct(s.start_error),
         pct(s.last_error),
-        pct(s.mean_error)
+        pct(s.mean_error),
+        pct(s.method_mean_error)
     );
-    let steps: Vec<f64> = (rows.iter())
-        .filter(|r| !r.method.is_full() && r.failure.is_none() && r.step_error > 0.0)
-        .map(|r| r.step_error)
-        .collect();
-    let steps = match (
-        steps.iter().copied().reduce(f64::min),
-        steps.iter().copied().reduce(f64::max),
-    ) {
-        (Some(lo), Some(hi)) => format!("{:.1}–{:.1} %", pct(lo), pct(hi)),
-        _ => "some".to_string(),
-    };
-    Some(if s.last_error >= AMPLIFYING * s.change {
+    Some(if s.share() >= AMPLIFIED_SHARE {
         format!(
-            "the test amplifies errors: {changed}. The reduced steps are each {steps} off (one-step \
-             error), so every method drifts further than its subspace error says, and the \
-             trajectory errors compare how each is perturbed more than how good it is: compare \
-             the one-step errors, or test a gentler pull (`[test] stiffness`, `offset`)"
+            "{}: the test amplifies its error: {restarted}. Most of its drift is what the full \
+             dynamics make of its early error: its one-step error ({:.2} %) ranks it \
+             better than its trajectory error does, and a gentler pull (`[test] stiffness`, \
+             `offset`) tests it where errors grow less",
+            r.method,
+            pct(r.step_error)
         )
     } else {
         format!(
-            "the test does not amplify errors ({changed}): the drift comes from the reduced \
-             steps themselves, each {steps} off (one-step error)"
+            "{}: the drift is the reduced steps' own: {restarted}, so the full dynamics do not \
+             make it from the method's early error; each step is {:.2} % off (one-step \
+             error): keep more PCA coefficients (`[pca]`) or, for the neural methods, a larger \
+             `[autoencoder] latent_dim`",
+            r.method,
+            pct(r.step_error)
         )
     })
 }
@@ -74,7 +71,8 @@ fn sensitivity_warning(rows: &[MethodReport]) -> Option<String> {
 pub struct Assessment {
     /// Figures not to be trusted: a method that stopped, a subspace that misses the test, a
     /// trajectory over [`UNTRUSTED_ERROR`] off, one that left the training poses and ended over
-    /// [`UNCOVERED_SUBSPACE_ERROR`] off, and what the test's own sensitivity says of them.
+    /// [`UNCOVERED_SUBSPACE_ERROR`] off, and what the full simulation started from a drifting
+    /// method's state says of its drift.
     pub untrusted: Vec<String>,
     /// Figures that held but may not hold elsewhere: a trajectory that left the training poses
     /// and still ended within [`UNCOVERED_SUBSPACE_ERROR`] of the full one.
@@ -168,7 +166,13 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             }
         }
         if r.mean_rel_error > UNTRUSTED_ERROR {
-            let why = if r.subspace_error <= r.mean_rel_error / 4.0 {
+            let why = if r.subspace_error <= r.mean_rel_error / 4.0 && r.restart.is_some() {
+                format!(
+                    "its subspace holds the test trajectory to {:.1} %, so the trajectory drifts \
+                     away (below)",
+                    pct(r.subspace_error)
+                )
+            } else if r.subspace_error <= r.mean_rel_error / 4.0 {
                 format!(
                     "its subspace holds the test trajectory to {:.1} % and a single step from \
                      it is {:.1} % off, so the reduced dynamics drift away from the full ones \
@@ -187,8 +191,8 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                 pct(r.mean_rel_error)
             ));
         }
+        out.extend(restart_warning(r));
     }
-    out.extend(sensitivity_warning(rows));
     Assessment {
         untrusted: out,
         caveats,
@@ -210,59 +214,94 @@ mod tests {
         }
     }
 
-    /// The full row's sensitivity becomes one warning, which says whether the test amplifies
-    /// errors and quotes the reduced methods' one-step errors.
+    /// A drifting method's restart becomes its warning: whether the full dynamics make most of
+    /// its drift from its early error, with its one-step error.
     #[test]
-    fn a_measured_sensitivity_says_whether_the_test_amplifies() {
-        let drifting = MethodReport {
+    fn a_restart_says_whether_the_test_amplifies_the_methods_error() {
+        let drifting_row = MethodReport {
             step_error: 0.004,
             ..row(Method::Pca, 0.12, 0.002)
         };
-        let other = MethodReport {
-            step_error: 0.02,
-            ..row(Method::NeuralCubature, 0.3, 0.003)
-        };
-        assert!(drifts(std::slice::from_ref(&drifting)));
-        assert!(!drifts(&[row(Method::Pca, 0.04, 0.002)]), "within 5 %");
+        assert!(drifting(&drifting_row));
+        assert!(!drifting(&row(Method::Pca, 0.04, 0.002)), "within 5 %");
         assert!(
-            !drifts(&[row(Method::Pca, 0.12, 0.06)]),
+            !drifting(&row(Method::Pca, 0.12, 0.06)),
             "the subspace misses it"
         );
-        assert!(!drifts(&[row(Method::Full, 0.12, 0.0)]));
-        let full = |last: f64| MethodReport {
-            sensitivity: Some(crate::run::Sensitivity {
-                time: 0.3,
-                change: 0.01,
-                mean_error: last / 2.0,
-                last_error: last,
+        assert!(!drifting(&row(Method::Full, 0.12, 0.0)));
+        assert!(
+            !drifting(&MethodReport {
+                failure: Some("frame 3: no".into()),
+                ..drifting_row.clone()
             }),
-            ..row(Method::Full, 0.0, 0.0)
+            "a method that stopped is warned of as such"
+        );
+        let restarted = |mean: f64| MethodReport {
+            restart: Some(crate::run::Restart {
+                time: 0.3,
+                start_error: 0.007,
+                mean_error: mean,
+                last_error: 2.0 * mean,
+                method_mean_error: 0.2,
+                method_last_error: 0.5,
+            }),
+            ..drifting_row.clone()
         };
-        let rows = [full(0.051), drifting.clone(), other.clone()];
-        let w = assess(&rows).untrusted;
-        let last = w.last().unwrap();
-        assert!(last.starts_with("the test amplifies errors"), "{last}");
+        let w = assess(&[restarted(0.15)]).untrusted;
+        assert_eq!(w.len(), 1, "{w:#?}");
         assert!(
-            last.contains("ends 5.1 %") && last.contains("t = 0.30 s"),
-            "{last}"
+            w[0].starts_with("pca: the test amplifies its error"),
+            "{}",
+            w[0]
         );
         assert!(
-            last.contains("0.4–2.0 %"),
-            "the one-step errors' range: {last}"
+            w[0].contains("t = 0.30 s, where it is 0.7 % off, ends 30.0 %")
+                && w[0].contains("the method 20.0 %")
+                && w[0].contains("(0.40 %)"),
+            "{}",
+            w[0]
         );
-        let rows = [full(0.003), drifting, other];
-        let w = assess(&rows).untrusted;
-        let last = w.last().unwrap();
+        let w = assess(&[restarted(0.02)]).untrusted;
         assert!(
-            last.starts_with("the test does not amplify errors"),
-            "{last}"
+            w[0].starts_with("pca: the drift is the reduced steps' own"),
+            "{}",
+            w[0]
         );
         assert!(
-            !assess(&[row(Method::Full, 0.0, 0.0), row(Method::Pca, 0.01, 0.004)])
+            assess(&[row(Method::Full, 0.0, 0.0), drifting_row])
                 .untrusted
                 .iter()
-                .any(|w| w.contains("amplif")),
-            "no sensitivity measured, nothing said"
+                .all(|w| !w.contains("started from its state")),
+            "no restart measured, nothing said"
+        );
+    }
+
+    /// Over 20 % off with a restart measured: the drift's advice is the restart's, not the
+    /// generic one.
+    #[test]
+    fn an_untrusted_drift_with_a_restart_defers_to_it() {
+        let r = MethodReport {
+            restart: Some(crate::run::Restart {
+                time: 0.3,
+                start_error: 0.007,
+                mean_error: 0.3,
+                last_error: 0.5,
+                method_mean_error: 0.35,
+                method_last_error: 0.55,
+            }),
+            ..row(Method::NeuralCubature, 0.3, 0.003)
+        };
+        let w = assess(&[r]).untrusted;
+        assert_eq!(w.len(), 2, "{w:#?}");
+        assert!(
+            w[0].ends_with("so the trajectory drifts away (below)"),
+            "{}",
+            w[0]
+        );
+        assert!(
+            w[1].starts_with("neural-cubature: the test amplifies"),
+            "{}",
+            w[1]
         );
     }
 
