@@ -144,9 +144,9 @@ pub struct Sensitivity {
 /// grow.
 pub const SENSITIVITY_AT: f64 = 0.3;
 
-/// Simulates test trajectory `trajectory` in full space with its state scaled by 1 − `change`
-/// after frame `frame`, and measures it against the cached reference. With `change` = 0 the
-/// reference is reproduced exactly.
+/// Simulates test trajectory `trajectory` in full space from the reference's state after frame
+/// `frame`, scaled by 1 − `change`, and measures it against the cached reference. With `change`
+/// = 0 the reference is reproduced to the solver's tolerance.
 pub fn sensitivity(
     pipeline: &mut Pipeline<'_>,
     trajectory: usize,
@@ -216,10 +216,15 @@ pub fn restart(
         !method.is_full(),
         "{method} is full space: there is no reduced state to restart from"
     );
+    let frames = pipeline.reference(trajectory, stage_progress)?.frames.len();
     anyhow::ensure!(
-        frame >= 1 && frame < row.frame_errors.len(),
-        "frame {frame} is not within the {} frames {method} completed",
+        row.frame_errors.len() == frames,
+        "{method} has errors for {} of the reference's {frames} frames",
         row.frame_errors.len()
+    );
+    anyhow::ensure!(
+        frame >= 1 && frame < frames,
+        "frame {frame} is not within the reference's {frames} frames"
     );
     let sim_opts = SimulateOptions {
         method,
@@ -247,12 +252,18 @@ pub fn restart(
     }
     runner.step()?;
     let now = runner.displacement();
+    let mut start = ErrorAccumulator::default();
+    start.add(
+        runner.model(),
+        &now,
+        &pipeline.reference(trajectory, stage_progress)?.frames[frame - 1],
+    );
     let (mean_error, last_error) =
         full_from(pipeline, trajectory, frame, &before, &now, stage_progress)?;
     let after = &row.frame_errors[frame..];
     Ok(Restart {
         time: frame as f64 * pipeline.scene.time.step,
-        start_error: row.frame_errors[frame - 1],
+        start_error: mean(&start.rel),
         mean_error,
         last_error,
         method_mean_error: mean(after),
@@ -291,8 +302,9 @@ pub fn full_from(
     Ok((mean(&errors.rel), errors.rel.last().copied().unwrap_or(0.0)))
 }
 
-/// Simulates test trajectory `trajectory` in full space, with its state after frame `frame`
-/// replaced by `change`, and measures the frames from there on against the cached reference.
+/// Simulates test trajectory `trajectory` in full space from the reference's state after frame
+/// `frame` (step and time too) changed by `change`, and measures the frames from there on
+/// against the cached reference.
 fn rerun(
     pipeline: &mut Pipeline<'_>,
     trajectory: usize,
@@ -307,6 +319,7 @@ fn rerun(
         "frame {frame} is past the reference's {frames} frames"
     );
     let scene = pipeline.scene;
+    let h = scene.time.step;
     let time = fem_core::integrator::TimeConfig {
         frames,
         ..scene.time.clone()
@@ -316,18 +329,30 @@ fn rerun(
         time,
         scene.solver.clone(),
     )?;
+    // The reference's state after `frame` steps, without simulating them again: its
+    // displacement, and the velocity implicit Euler gave it, (u_frame − u_frame−1)/h.
+    if frame > 0 {
+        let mut before = vec![0.0; sim.model.num_full()];
+        if frame > 1 {
+            sim.model
+                .dofs
+                .scatter(&reference.frames[frame - 2], &mut before);
+        }
+        let state = &mut sim.state;
+        sim.model
+            .dofs
+            .scatter(&reference.frames[frame - 1], &mut state.u);
+        for ((v, a), b) in state.v.iter_mut().zip(&state.u).zip(&before) {
+            *v = (a - b) / h;
+        }
+        state.step = frame;
+        state.time = frame as f64 * h;
+    }
+    change(&mut sim.state)?;
     let mut errors = ErrorAccumulator::default();
-    let mut change = Some(change);
-    for (k, r) in reference.frames.iter().enumerate() {
-        if k == frame
-            && let Some(change) = change.take()
-        {
-            change(&mut sim.state)?;
-        }
+    for r in &reference.frames[frame..] {
         sim.step()?;
-        if k >= frame {
-            errors.add(&sim.model, &sim.state.u, r);
-        }
+        errors.add(&sim.model, &sim.state.u, r);
     }
     Ok(errors)
 }

@@ -48,18 +48,18 @@ fn restart_warning(r: &MethodReport) -> Option<String> {
     Some(if s.share() >= AMPLIFIED_SHARE {
         format!(
             "{}: the test amplifies its error: {restarted}. Most of its drift is what the full \
-             dynamics make of its early error: its one-step error ({:.2} %) ranks it \
-             better than its trajectory error does, and a gentler pull (`[test] stiffness`, \
-             `offset`) tests it where errors grow less",
+             dynamics make of its early error: its one-step error ({:.2} %) says more of \
+             its accuracy than its trajectory error does, and a gentler pull (`[test] \
+             stiffness`, `offset`) tests it where errors grow less",
             r.method,
             pct(r.step_error)
         )
     } else {
         format!(
-            "{}: the drift is the reduced steps' own: {restarted}, so the full dynamics do not \
-             make it from the method's early error; each step is {:.2} % off (one-step \
-             error): keep more PCA coefficients (`[pca]`) or, for the neural methods, a larger \
-             `[autoencoder] latent_dim`",
+            "{}: the drift is mostly the reduced steps' own: {restarted}, so most of it is \
+             not the full dynamics' response to the method's early error; each step is \
+             {:.2} % off (one-step error), which a larger subspace lowers (`[pca]`, and for the \
+             neural methods `[autoencoder] latent_dim`)",
             r.method,
             pct(r.step_error)
         )
@@ -263,10 +263,15 @@ mod tests {
         );
         let w = assess(&[restarted(0.02)]).untrusted;
         assert!(
-            w[0].starts_with("pca: the drift is the reduced steps' own"),
+            w[0].starts_with("pca: the drift is mostly the reduced steps' own"),
             "{}",
             w[0]
         );
+        // The boundary: the full simulation making half the method's later error amplifies.
+        let w = assess(&[restarted(AMPLIFIED_SHARE * 0.2)]).untrusted;
+        assert!(w[0].contains("the test amplifies"), "{}", w[0]);
+        let w = assess(&[restarted(0.99 * AMPLIFIED_SHARE * 0.2)]).untrusted;
+        assert!(w[0].contains("mostly the reduced steps' own"), "{}", w[0]);
         assert!(
             assess(&[row(Method::Full, 0.0, 0.0), drifting_row])
                 .untrusted

@@ -34,8 +34,10 @@ fn an_unchanged_state_reproduces_the_reference_and_a_changed_one_does_not() {
     let cache = scratch("sensitivity");
     let mut p = Pipeline::new(&scene, &cache).unwrap();
     let none = |_: usize, _: usize| {};
+    // Started from the reference's state at frame 12, not simulated again to it: the same
+    // frames to the solver's tolerance (its starting guesses differ).
     let same = sensitivity(&mut p, 0, 12, 0.0, &none).unwrap();
-    assert_eq!((same.mean_error, same.last_error), (0.0, 0.0));
+    assert!(same.mean_error < 1e-6 && same.last_error < 1e-6, "{same:?}");
     assert!((same.time - 0.12).abs() < 1e-12, "{}", same.time);
     let changed = sensitivity(&mut p, 0, 12, 0.01, &none).unwrap();
     assert!(
@@ -91,17 +93,17 @@ fn a_restart_from_the_references_frames_reproduces_it_and_one_from_a_method_meas
     };
     let row = measure(&mut p, Method::Pca);
     let r = pipeline::run::restart(&mut p, &row, 0, 12, &none).unwrap();
+    // The method run again to frame 12 is where the measured run was: its error there, taken
+    // from the state the full simulation starts from, is the measured one to the bit.
     assert_eq!(r.start_error, row.frame_errors[11]);
-    let after = &row.frame_errors[12..];
-    assert_eq!(r.method_last_error, *after.last().unwrap());
-    assert!((r.method_mean_error - after.iter().sum::<f64>() / after.len() as f64).abs() < 1e-15);
+    assert!(r.start_error > 0.0);
     assert!(r.mean_error > 0.0 && r.mean_error.is_finite(), "{r:?}");
     assert!((r.time - 0.12).abs() < 1e-12);
     let full_row = measure(&mut p, Method::Full);
     assert!(pipeline::run::restart(&mut p, &full_row, 0, 12, &none).is_err());
     assert!(
         pipeline::run::restart(&mut p, &row, 0, 40, &none).is_err(),
-        "past the frames the method completed"
+        "past the reference's frames"
     );
     let _ = std::fs::remove_dir_all(&cache);
 }
