@@ -13,9 +13,7 @@ use crate::output::FrameWriter;
 use crate::pipeline::{Pipeline, Progress};
 use crate::plot::{Plot, Scale, Series};
 use crate::scene::Scene;
-use crate::simulate::{
-    Method, Runner, SimulateOptions, StepParts, Trajectory, median, setup, write_json,
-};
+use crate::simulate::{Method, Runner, SimulateOptions, StepParts, Trajectory, median, write_json};
 
 /// How long the machine's multiply–add rate is probed before a method is timed.
 const PROBE_TIME: std::time::Duration = std::time::Duration::from_millis(100);
@@ -216,7 +214,8 @@ pub fn restart(
         !method.is_full(),
         "{method} is full space: there is no reduced state to restart from"
     );
-    let frames = pipeline.reference(trajectory, stage_progress)?.frames.len();
+    let reference = pipeline.reference(trajectory, stage_progress)?;
+    let frames = reference.frames.len();
     anyhow::ensure!(
         row.frame_errors.len() == frames,
         "{method} has errors for {} of the reference's {frames} frames",
@@ -234,17 +233,7 @@ pub fn restart(
         every: 0,
         solver: None,
     };
-    let (model, time, solver) = setup(pipeline, &sim_opts)?;
-    let material = pipeline.scene.material.clone();
-    let mut runner = Runner::new(
-        pipeline,
-        method,
-        model,
-        &material,
-        time,
-        solver,
-        stage_progress,
-    )?;
+    let mut runner = Runner::from_options(pipeline, &sim_opts, stage_progress)?;
     let mut before = runner.displacement();
     for _ in 1..frame {
         runner.step()?;
@@ -253,11 +242,7 @@ pub fn restart(
     runner.step()?;
     let now = runner.displacement();
     let mut start = ErrorAccumulator::default();
-    start.add(
-        runner.model(),
-        &now,
-        &pipeline.reference(trajectory, stage_progress)?.frames[frame - 1],
-    );
+    start.add(runner.model(), &now, &reference.frames[frame - 1]);
     let (mean_error, last_error) =
         full_from(pipeline, trajectory, frame, &before, &now, stage_progress)?;
     let after = &row.frame_errors[frame..];
@@ -293,10 +278,7 @@ pub fn full_from(
             before.len(),
             now.len()
         );
-        state.u.copy_from_slice(now);
-        for ((v, a), b) in state.v.iter_mut().zip(now).zip(before) {
-            *v = (a - b) / h;
-        }
+        implicit_euler_state(state, before, now, h);
         Ok(())
     })?;
     Ok((mean(&errors.rel), errors.rel.last().copied().unwrap_or(0.0)))
@@ -329,24 +311,21 @@ fn rerun(
         time,
         scene.solver.clone(),
     )?;
-    // The reference's state after `frame` steps, without simulating them again: its
-    // displacement, and the velocity implicit Euler gave it, (u_frame − u_frame−1)/h.
+    // The reference's state after `frame` steps, without simulating them again.
     if frame > 0 {
         let mut before = vec![0.0; sim.model.num_full()];
+        let mut now = before.clone();
         if frame > 1 {
             sim.model
                 .dofs
                 .scatter(&reference.frames[frame - 2], &mut before);
         }
-        let state = &mut sim.state;
         sim.model
             .dofs
-            .scatter(&reference.frames[frame - 1], &mut state.u);
-        for ((v, a), b) in state.v.iter_mut().zip(&state.u).zip(&before) {
-            *v = (a - b) / h;
-        }
-        state.step = frame;
-        state.time = frame as f64 * h;
+            .scatter(&reference.frames[frame - 1], &mut now);
+        implicit_euler_state(&mut sim.state, &before, &now, h);
+        sim.state.step = frame;
+        sim.state.time = frame as f64 * h;
     }
     change(&mut sim.state)?;
     let mut errors = ErrorAccumulator::default();
@@ -355,6 +334,20 @@ fn rerun(
         errors.add(&sim.model, &sim.state.u, r);
     }
     Ok(errors)
+}
+
+/// Puts `state` at displacement `now` with the velocity implicit Euler gives it after
+/// displacement `before`, (now − before)/h (full vectors of the same length).
+fn implicit_euler_state(
+    state: &mut fem_core::integrator::State,
+    before: &[f64],
+    now: &[f64],
+    h: f64,
+) {
+    state.u.copy_from_slice(now);
+    for ((v, a), b) in state.v.iter_mut().zip(now).zip(before) {
+        *v = (a - b) / h;
+    }
 }
 
 /// Errors of a trajectory against the reference, frame by frame.
@@ -437,7 +430,8 @@ pub fn run(
             continue;
         }
         let frame = (SENSITIVITY_AT * rows[i].frame_errors.len() as f64) as usize;
-        progress(&format!("full from {}", rows[i].method), 0, 1);
+        let label = format!("full from {}", rows[i].method);
+        progress(&label, 0, 1);
         match restart(pipeline, &rows[i], opts.trajectory, frame, stage_progress) {
             Ok(r) => rows[i].restart = Some(r),
             Err(e) => tracing::warn!(
@@ -445,7 +439,7 @@ pub fn run(
                 rows[i].method
             ),
         }
-        progress(&format!("full from {}", rows[i].method), 1, 1);
+        progress(&label, 1, 1);
     }
     write_json(&opts.out.join("report.json"), &rows)?;
     if let Some(method) = crate::export::run_method(&opts.methods) {
@@ -658,17 +652,7 @@ pub fn measure(
     // The reduced pose of each frame of the first run, for its distance to the training data.
     let mut poses: Vec<Vec<f64>> = Vec::new();
     for repeat in 0..m.repeats.max(1) {
-        let (model, time, solver) = setup(pipeline, &sim_opts)?;
-        let material = pipeline.scene.material.clone();
-        let mut runner = Runner::new(
-            pipeline,
-            method,
-            model,
-            &material,
-            time,
-            solver,
-            stage_progress,
-        )?;
+        let mut runner = Runner::from_options(pipeline, &sim_opts, stage_progress)?;
         let first = repeat == 0;
         if first && let Some(w) = writer.as_mut() {
             w.write(&runner.model().mesh, 0, 0.0, &runner.displacement())?;

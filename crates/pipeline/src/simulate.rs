@@ -248,6 +248,25 @@ impl Runner {
         Ok(Runner::Reduced(runtime))
     }
 
+    /// [`Runner::new`] on the model, time and solver [`setup`] gives for `opts`.
+    pub fn from_options(
+        pipeline: &mut Pipeline<'_>,
+        opts: &SimulateOptions,
+        progress: Progress<'_>,
+    ) -> Result<Self> {
+        let scene = pipeline.scene;
+        let (model, time, solver) = setup(pipeline, opts)?;
+        Self::new(
+            pipeline,
+            opts.method,
+            model,
+            &scene.material,
+            time,
+            solver,
+            progress,
+        )
+    }
+
     pub fn step(&mut self) -> Result<StepInfo> {
         Ok(match self {
             Runner::Full(s) => {

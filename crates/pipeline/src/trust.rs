@@ -81,19 +81,18 @@ fn held_outside_caveat(rows: &[&MethodReport], what: &str) -> String {
         if lo == hi { lo } else { format!("{lo}–{hi}") }
     };
     let names: Vec<String> = rows.iter().map(|r| r.method.to_string()).collect();
-    let (its, it) = if rows.len() == 1 {
-        ("its pose goes", "it stays")
+    let (goes, its, stays) = if rows.len() == 1 {
+        ("its pose goes", "its", "it stays")
     } else {
-        ("their poses go", "they stay")
+        ("their poses go", "their", "they stay")
     };
     format!(
-        "{}: at t = {} s {its} {} % of {} size beyond the training poses, so the decoder and \
-         the cubature rule extrapolate there (on this test {it} {} % from the full trajectory: \
-         the extrapolation held here, a harder pull may not), {what}",
+        "{}: at t = {} s {goes} {} % of {its} size beyond the training poses, so the decoder and \
+         the cubature rule extrapolate there (on this test {stays} {} % from the full \
+         trajectory: the extrapolation held here, a harder pull may not), {what}",
         names.join(", "),
         range(&|r| r.training_distance_time, 3, 1.0),
         range(&|r| r.training_distance, 0, 100.0),
-        if rows.len() == 1 { "its" } else { "their" },
         range(&|r| r.mean_rel_error, 1, 100.0),
     )
 }
@@ -191,13 +190,14 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             }
         }
         if r.mean_rel_error > UNTRUSTED_ERROR {
-            let why = if r.subspace_error <= r.mean_rel_error / 4.0 && r.restart.is_some() {
+            let dynamics_drift = r.subspace_error <= r.mean_rel_error / 4.0;
+            let why = if dynamics_drift && r.restart.is_some() {
                 format!(
                     "its subspace holds the test trajectory to {:.1} %, so the trajectory drifts \
                      away (below)",
                     pct(r.subspace_error)
                 )
-            } else if r.subspace_error <= r.mean_rel_error / 4.0 {
+            } else if dynamics_drift {
                 format!(
                     "its subspace holds the test trajectory to {:.1} % and a single step from \
                      it is {:.1} % off, so the reduced dynamics drift away from the full ones \
@@ -250,6 +250,22 @@ mod tests {
         }
     }
 
+    /// `r` with a restart at 0.3 s from a state 0.7 % off, whose full simulation makes `mean`
+    /// on average (twice that at the end) against the method's `method_mean` (0.5 at the end).
+    fn with_restart(r: MethodReport, mean: f64, method_mean: f64) -> MethodReport {
+        MethodReport {
+            restart: Some(crate::run::Restart {
+                time: 0.3,
+                start_error: 0.007,
+                mean_error: mean,
+                last_error: 2.0 * mean,
+                method_mean_error: method_mean,
+                method_last_error: 0.5,
+            }),
+            ..r
+        }
+    }
+
     /// A drifting method's restart becomes its warning: whether the full dynamics make most of
     /// its drift from its early error, with its one-step error.
     #[test]
@@ -272,17 +288,7 @@ mod tests {
             }),
             "a method that stopped is warned of as such"
         );
-        let restarted = |mean: f64| MethodReport {
-            restart: Some(crate::run::Restart {
-                time: 0.3,
-                start_error: 0.007,
-                mean_error: mean,
-                last_error: 2.0 * mean,
-                method_mean_error: 0.2,
-                method_last_error: 0.5,
-            }),
-            ..drifting_row.clone()
-        };
+        let restarted = |mean: f64| with_restart(drifting_row.clone(), mean, 0.2);
         let w = assess(&[restarted(0.15)]).untrusted;
         assert_eq!(w.len(), 1, "{w:#?}");
         assert!(
@@ -321,17 +327,7 @@ mod tests {
     /// generic one.
     #[test]
     fn an_untrusted_drift_with_a_restart_defers_to_it() {
-        let r = MethodReport {
-            restart: Some(crate::run::Restart {
-                time: 0.3,
-                start_error: 0.007,
-                mean_error: 0.3,
-                last_error: 0.5,
-                method_mean_error: 0.35,
-                method_last_error: 0.55,
-            }),
-            ..row(Method::NeuralCubature, 0.3, 0.003)
-        };
+        let r = with_restart(row(Method::NeuralCubature, 0.3, 0.003), 0.3, 0.35);
         let w = assess(&[r]).untrusted;
         assert_eq!(w.len(), 2, "{w:#?}");
         assert!(
