@@ -154,10 +154,13 @@ fn a_tiny_scene_runs_end_to_end() {
     let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
     assert_eq!(rows.len(), 5);
     let (full, pca, cub) = (&rows[0], &rows[1], &rows[2]);
+    // TINY's 6 PCA columns and the positions of the fall under gravity they miss.
+    let k = p.pca(&no_progress).unwrap().basis.k();
+    assert!(k > 6, "{k}");
     for neural in &rows[3..] {
         // d = 2 latent coordinates (TINY's) and the linear directions chosen by default
-        // (gravity's onset, the complement the data asks for), within the 6 PCA coefficients.
-        assert!(neural.dim > 2 && neural.dim <= 6, "{neural:?}");
+        // (gravity's onset, the complement the data asks for), within the k PCA coefficients.
+        assert!(neural.dim > 2 && neural.dim <= k, "{neural:?}");
         assert!(neural.mean_rel_error.is_finite(), "{neural:?}");
     }
     assert!(rows[4].cubature_elements < full.cubature_elements);
@@ -169,7 +172,7 @@ fn a_tiny_scene_runs_end_to_end() {
     );
     assert_eq!(full.method, Method::Full);
     assert_eq!(full.mean_rel_error, 0.0);
-    assert_eq!(pca.dim, 6);
+    assert_eq!(pca.dim, k);
     assert!(pca.mean_rel_error.is_finite() && pca.mean_rel_error > 0.0);
     assert!(pca.max_rel_error < 1.0, "{pca:?}");
     assert!(pca.ms_per_step > 0.0 && full.ms_per_step > 0.0);
@@ -335,7 +338,9 @@ fn linear_directions_default_to_the_counts_chosen() {
 /// naming the scene and the field.
 #[test]
 fn complement_directions_complete_the_autoencoder() {
-    let text = format!("{TINY}[reduced]\ncomplement_directions = 2\nonset_directions = 0\n");
+    // Six PCA columns and nothing appended.
+    let tiny = TINY.replace("dimension = 6", "dimension = 6\ngravity_directions = 0");
+    let text = format!("{tiny}[reduced]\ncomplement_directions = 2\nonset_directions = 0\n");
     let s = scene(&text);
     let out = scratch_dir("pipeline-complement");
     let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
@@ -393,7 +398,7 @@ fn complement_directions_complete_the_autoencoder() {
         without.subspace_error
     );
 
-    let too_many = scene(&format!("{TINY}[reduced]\ncomplement_directions = 7\n"));
+    let too_many = scene(&format!("{tiny}[reduced]\ncomplement_directions = 7\n"));
     let mut p = Pipeline::new(&too_many, &out.join("cache")).unwrap();
     let err = p.complement_columns(&no_progress).unwrap_err().to_string();
     assert!(
@@ -409,7 +414,7 @@ fn complement_directions_complete_the_autoencoder() {
 #[test]
 fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
     let defaulted = TINY
-        .replace("dimension = 6", "dimension = 5")
+        .replace("dimension = 6", "dimension = 5\ngravity_directions = 0")
         .replace("latent_dim = 2\n", "epochs = 20\n")
         .replace("epochs = 150\n", "")
         .replace("hidden = [16, 16]\n", "");
@@ -428,7 +433,9 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
         "{line}"
     );
 
-    let too_wide = TINY.replace("latent_dim = 2", "latent_dim = 8");
+    let too_wide = TINY
+        .replace("latent_dim = 2", "latent_dim = 8")
+        .replace("dimension = 6", "dimension = 6\ngravity_directions = 0");
     let s = scene(&too_wide);
     let mut p = Pipeline::new(&s, &scratch_dir("pipeline-latent-too-wide")).unwrap();
     let e = p.train(&no_progress).unwrap_err().to_string();

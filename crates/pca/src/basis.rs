@@ -214,6 +214,62 @@ impl PcaBasis {
         })
     }
 
+    /// The basis with `directions` (each of length n) appended: each made M-orthogonal to the
+    /// columns before it (two passes of Gram–Schmidt) and of unit M-norm, and left out when
+    /// less than `min_new` of its M-norm lies outside their span. Returns the basis and, per
+    /// direction, the fraction of its M-norm that was new (0 for a zero direction). The
+    /// spectrum stays the fit's (padded with zeros where the columns outnumber it).
+    ///
+    /// # Errors
+    /// [`PcaError::InvalidBasis`] when a direction's length is not n or it is not finite.
+    pub fn extended(
+        &self,
+        directions: &[Vec<f64>],
+        min_new: f64,
+    ) -> Result<(Self, Vec<f64>), PcaError> {
+        let n = self.n;
+        let dot = |a: &[f64], b: &[f64]| -> f64 {
+            match &self.mass {
+                Some(m) => a.iter().zip(b).zip(m).map(|((a, b), m)| a * m * b).sum(),
+                None => a.iter().zip(b).map(|(a, b)| a * b).sum(),
+            }
+        };
+        let mut basis = self.basis.clone();
+        let mut new_fractions = Vec::with_capacity(directions.len());
+        for (i, d) in directions.iter().enumerate() {
+            if d.len() != n || d.iter().any(|x| !x.is_finite()) {
+                return Err(PcaError::InvalidBasis(format!(
+                    "direction {i} to append has {} entries (n = {n}) or a non-finite one",
+                    d.len()
+                )));
+            }
+            let norm = dot(d, d).sqrt();
+            let mut r = d.clone();
+            for _ in 0..2 {
+                for col in basis.chunks_exact(n) {
+                    let c = dot(col, &r);
+                    r.iter_mut().zip(col).for_each(|(r, u)| *r -= c * u);
+                }
+            }
+            let left = dot(&r, &r).sqrt();
+            let fraction = if norm > 0.0 { left / norm } else { 0.0 };
+            new_fractions.push(fraction);
+            if norm > 0.0 && fraction >= min_new {
+                basis.extend(r.iter().map(|x| x / left));
+            }
+        }
+        let k = basis.len() / n;
+        // The spectrum covers every column (a basis of all min(n, N) modes plus more).
+        let mut singular_values = self.singular_values.clone();
+        if singular_values.len() < k {
+            singular_values.resize(k, 0.0);
+        }
+        Ok((
+            Self::from_parts(n, k, basis, self.mass.clone(), singular_values),
+            new_fractions,
+        ))
+    }
+
     /// q = UᵀMu, the M-orthogonal projection coefficients of `u`.
     ///
     /// # Panics

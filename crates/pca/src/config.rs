@@ -58,7 +58,18 @@ pub struct PcaConfig {
     /// the default. Left out of the serialised section at its default.
     #[serde(skip_serializing_if = "is_default")]
     pub norm: BasisNorm,
+    /// Columns appended after the fit: the first positions of the body's linear implicit-Euler
+    /// fall from rest under gravity, each M-orthogonalised against the basis before it and
+    /// left out when less than 0.1 % of it is new (the pipeline computes them; they need the
+    /// FEM model). `None` lets the pipeline choose: three, where the basis misses at least 1 %
+    /// of the first position, else none; `Some(0)` appends none. At most
+    /// [`MAX_GRAVITY_DIRECTIONS`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gravity_directions: Option<usize>,
 }
+
+/// The most `[pca] gravity_directions` a scene may ask for.
+pub const MAX_GRAVITY_DIRECTIONS: usize = 8;
 
 /// The norm a basis is chosen in (`[pca] norm`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -83,6 +94,7 @@ impl Default for PcaConfig {
             max_vertex_error: None,
             max_dimension: DEFAULT_MAX_DIMENSION,
             norm: BasisNorm::default(),
+            gravity_directions: None,
         }
     }
 }
@@ -179,6 +191,14 @@ impl PcaConfig {
                 format!("must be positive and finite, got {t}"),
             ),
             _ => {}
+        }
+        if let Some(m) = self.gravity_directions
+            && m > MAX_GRAVITY_DIRECTIONS
+        {
+            bad(
+                "gravity_directions",
+                format!("must be at most {MAX_GRAVITY_DIRECTIONS}, got {m}"),
+            );
         }
     }
 

@@ -42,12 +42,16 @@ pub struct PcaFit {
     /// For the max-vertex-error rule: the maximum vertex error for k = 1, 2, …, chosen k (or up
     /// to the cap when the tolerance was not met). Empty for the other rules.
     pub max_vertex_error_per_k: Vec<f64>,
+    /// Columns appended after the rule chose k ([`PcaBasis::extended`]): the basis has
+    /// k + `appended` columns.
+    #[serde(default)]
+    pub appended: usize,
 }
 
 impl PcaFit {
-    /// The chosen basis dimension k.
+    /// The dimension the rule chose (the basis has [`Self::appended`] more columns).
     pub fn chosen_k(&self) -> usize {
-        self.basis.k()
+        self.basis.k().saturating_sub(self.appended)
     }
 }
 
@@ -168,6 +172,7 @@ impl PcaBasis {
             numerical_rank: rank,
             tolerance_met,
             max_vertex_error_per_k: per_k,
+            appended: 0,
         })
     }
 }

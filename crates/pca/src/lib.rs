@@ -50,7 +50,8 @@ mod vertex_error;
 
 pub use basis::PcaBasis;
 pub use config::{
-    BasisNorm, DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DimensionRule, PcaConfig,
+    BasisNorm, DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DimensionRule,
+    MAX_GRAVITY_DIRECTIONS, PcaConfig,
 };
 pub use error::PcaError;
 pub use fit::PcaFit;

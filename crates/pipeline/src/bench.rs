@@ -234,7 +234,9 @@ pub fn bench(
         let mut p = Pipeline::new(scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
         p.reference(opts.trajectory, stage_progress)?;
-        p.pca(stage_progress)?.basis.k()
+        // The rule's k: a variant `dimension = k` then has the scene's own basis, with the same
+        // gravity directions appended.
+        p.pca(stage_progress)?.chosen_k()
     };
     let mut rows = Vec::new();
     for v in variants(scene, chosen_k, opts) {

@@ -113,7 +113,15 @@ impl StageSummary for PcaFit {
         } else {
             " (not reached within `[pca] max_dimension`)"
         };
-        format!("k = {}: {why}{met}", self.basis.k())
+        match self.appended {
+            0 => format!("k = {}: {why}{met}", self.basis.k()),
+            m => format!(
+                "k = {} + {m}: {why}{met}, plus {m} position{} of the body's first fall from \
+                 rest under gravity, which those columns miss (`[pca] gravity_directions`)",
+                self.chosen_k(),
+                if m == 1 { "" } else { "s" }
+            ),
+        }
     }
 }
 
@@ -381,6 +389,20 @@ pub fn default_latent_dim(k: usize) -> usize {
     k.div_ceil(2).max(nn::DEFAULT_LATENT_DIM).min(k)
 }
 
+/// How many positions of the body's fall under gravity (its gravity directions) the `pca` stage
+/// appends when `[pca] gravity_directions` is not given, where the basis holds less than
+/// 1 − [`GRAVITY_ONSET_MISSED`] of the first.
+pub const DEFAULT_GRAVITY_DIRECTIONS: usize = 3;
+
+/// By default the gravity directions are appended when the PCA basis misses at least this
+/// fraction of the body's first step from rest under gravity (in the lumped mass norm the basis
+/// is orthonormal in). A scene that names `gravity_directions` gets them without this test.
+pub const GRAVITY_ONSET_MISSED: f64 = 0.01;
+
+/// A position of the fall is appended when at least this fraction of its M-norm lies outside
+/// the basis so far: less would add a direction of the basis's own round-off.
+const GRAVITY_DIRECTION_NEW: f64 = 1e-3;
+
 /// A scene's pipeline with its cache folder and the model every stage shares.
 pub struct Pipeline<'a> {
     pub scene: &'a Scene,
@@ -490,6 +512,11 @@ impl<'a> Pipeline<'a> {
         KeyBuilder::new(Stage::Pca)
             .mix_key(self.snapshots_key())
             .mix(&self.scene.pca)
+            .mix(&(
+                self.gravity_directions(),
+                GRAVITY_ONSET_MISSED,
+                GRAVITY_DIRECTION_NEW,
+            ))
             .finish()
     }
 
@@ -780,8 +807,36 @@ impl<'a> Pipeline<'a> {
                     })
                     .map_err(err)?;
             }
+            let count = p.gravity_directions();
+            if count > 0 {
+                let onset = fem_core::step_norm::gravity_onset(&p.model, &p.scene.time, count)
+                    .map_err(|e| {
+                        anyhow::anyhow!("{}: stage pca, gravity directions: {e}", p.scene.source)
+                    })?;
+                let (basis, new) = fit
+                    .basis
+                    .extended(&onset, GRAVITY_DIRECTION_NEW)
+                    .map_err(err)?;
+                // By default only where the basis misses how the body starts to fall.
+                let missed = new.first().is_some_and(|&f| f >= GRAVITY_ONSET_MISSED);
+                if missed || p.scene.pca.gravity_directions.is_some() {
+                    fit.appended = basis.k() - fit.basis.k();
+                    fit.basis = basis;
+                }
+            }
             Ok(fit)
         })
+    }
+
+    /// The scene's `[pca] gravity_directions`, or [`DEFAULT_GRAVITY_DIRECTIONS`] under gravity.
+    pub fn gravity_directions(&self) -> usize {
+        if self.model.gravity.norm() == 0.0 {
+            return 0;
+        }
+        self.scene
+            .pca
+            .gravity_directions
+            .unwrap_or(DEFAULT_GRAVITY_DIRECTIONS)
     }
 
     /// Stage `cubature`: a weighted element set reproducing the PCA subspace's reduced elastic

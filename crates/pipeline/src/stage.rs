@@ -97,7 +97,9 @@ impl Stage {
             // 5: poses completed by the complement directions (other rules).
             Stage::CubatureNeural => 5,
             // 2: the default explained energy 1 − 10⁻⁷ instead of 1 − 10⁻⁶ (scenes naming no rule).
-            Stage::Pca => 2,
+            // 3: the positions of the fall under gravity appended (`PcaFit::appended`, a new
+            //    field the old artifacts lack).
+            Stage::Pca => 3,
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
             // 3: with the snapshots' energy and the latent dimension.
             Stage::Complement => 3,
@@ -165,7 +167,7 @@ mod tests {
             [
                 ("snapshots", 11),
                 ("snapshots-shard", 11),
-                ("pca", 2),
+                ("pca", 3),
                 ("cubature", 3),
                 ("cubature-neural", 5),
                 ("train", 6),

@@ -15,9 +15,13 @@ pub fn describe_pca(fit: &PcaFit) -> String {
     let s = fit.basis.singular_values();
     let shown: Vec<String> = s.iter().take(12).map(|v| format!("{v:.3e}")).collect();
     format!(
-        "singular values: {} …\nk = {} ({:?}; tolerance met: {}), explained energy {:.6}\n",
+        "singular values: {} …\nk = {}{} ({:?}; tolerance met: {}), explained energy {:.6}\n",
         shown.join(" "),
         fit.chosen_k(),
+        match fit.appended {
+            0 => String::new(),
+            m => format!(" + {m} positions of the fall under gravity"),
+        },
         fit.rule,
         fit.tolerance_met,
         fit.basis.explained_energy(fit.chosen_k())

@@ -354,6 +354,12 @@ fn variants() -> Vec<Variant> {
             "",
             BASIS,
         ),
+        v(
+            "pca.gravity_directions",
+            add!("pca", "gravity_directions = 1"),
+            "",
+            BASIS,
+        ),
         // [autoencoder]
         v(
             "autoencoder.latent_dim",

@@ -682,3 +682,89 @@ fn a_step_lbfgs_cannot_finish_is_finished_by_newton_from_where_it_stopped() {
         assert!((a - b).abs() <= 1e-6 * scale, "{a} against {b}");
     }
 }
+
+/// `gravity_onset` is linear implicit Euler from rest: for the linear material the full
+/// simulation's first steps are exactly those positions, and an unpinned body falls as
+/// u_n = h² g n(n+1)/2 whatever the material.
+#[test]
+fn gravity_onset_is_the_first_steps_of_a_fall_from_rest() {
+    use fem_core::step_norm::gravity_onset;
+    let g = [0.0, -9.81, 0.0];
+    let m = model(beam([8, 2, 2]), MaterialModel::Linear, 1e5, g, vec![]);
+    let onset = gravity_onset(&m, &dynamic(3), 3).unwrap();
+    assert_eq!(onset.len(), 3);
+    let free = m.dofs.free.clone();
+    let mut sim = Simulator::new(m, dynamic(3), solver(SolverMethod::Newton, 1e-12)).unwrap();
+    for (n, x) in onset.iter().enumerate() {
+        sim.step().unwrap();
+        let size = x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let diff = free
+            .iter()
+            .zip(x)
+            .map(|(&d, v)| (sim.state.u[d] - v).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(diff <= 1e-9 * size, "step {}: {diff:e} of {size:e}", n + 1);
+    }
+    // Held at the pins, the fall is not uniform: near them the body drops less than the free
+    // fall h²g·n(n+1)/2 (a third less here), at the far end about that far.
+    let free_fall = -(0.01f64.powi(2)) * g[1] * 6.0;
+    let drops: Vec<f64> = onset[2].iter().skip(1).step_by(3).map(|v| -v).collect();
+    let least = drops.iter().fold(f64::INFINITY, |a, &v| a.min(v));
+    let most = drops.iter().fold(0.0f64, |a, &v| a.max(v));
+    assert!(
+        most - least > 0.2 * free_fall && (most / free_fall - 1.0).abs() < 0.1,
+        "{least:e} {most:e} against {free_fall:e}"
+    );
+
+    let mesh = beam([6, 2, 2]);
+    let material = MaterialConfig {
+        model: MaterialModel::StableNeoHookean,
+        youngs_modulus: 1e5,
+        poisson_ratio: 0.4,
+        ..Default::default()
+    };
+    let free_body = FullSpaceModel::new(mesh, &material, vec![], Vec3::from(g), vec![]).unwrap();
+    let time = dynamic(4);
+    let onset = gravity_onset(&free_body, &time, 4).unwrap();
+    for (n, x) in onset.iter().enumerate() {
+        let n = n + 1;
+        let expect = time.step * time.step * g[1] * (n * (n + 1)) as f64 / 2.0;
+        for (i, &u) in x.iter().enumerate() {
+            let want = if i % 3 == 1 { expect } else { 0.0 };
+            assert!(
+                (u - want).abs() <= 1e-9 * expect.abs(),
+                "step {n}, dof {i}: {u}"
+            );
+        }
+    }
+    // Quasi-static: one position, the static response (the linear material's static solve);
+    // without gravity: none.
+    let m = model(beam([8, 2, 2]), MaterialModel::Linear, 1e5, g, vec![]);
+    let statics = gravity_onset(&m, &static_frame(), 3).unwrap();
+    assert_eq!(statics.len(), 1);
+    let free = m.dofs.free.clone();
+    let mut sim = Simulator::new(m, static_frame(), solver(SolverMethod::Newton, 1e-12)).unwrap();
+    sim.step().unwrap();
+    let size = statics[0].iter().map(|v| v * v).sum::<f64>().sqrt();
+    let diff = free
+        .iter()
+        .zip(&statics[0])
+        .map(|(&d, v)| (sim.state.u[d] - v).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(size > 0.0 && diff <= 1e-9 * size, "{diff:e} of {size:e}");
+    assert!(
+        gravity_onset(&free_body, &static_frame(), 3)
+            .unwrap()
+            .is_empty()
+    );
+    let m = model(
+        beam([8, 2, 2]),
+        MaterialModel::Linear,
+        1e5,
+        [0.0; 3],
+        vec![],
+    );
+    assert!(gravity_onset(&m, &dynamic(3), 3).unwrap().is_empty());
+}

@@ -94,6 +94,13 @@ fn invalid_values_name_their_field() {
             },
             "pca.max_dimension",
         ),
+        (
+            PcaConfig {
+                gravity_directions: Some(pca::MAX_GRAVITY_DIRECTIONS + 1),
+                ..PcaConfig::default()
+            },
+            "pca.gravity_directions",
+        ),
     ];
     for (config, field) in cases {
         assert_eq!(error_fields(&config), vec![field.to_string()], "{config:?}");

@@ -200,3 +200,77 @@ fn identity_mass_is_the_default() {
     let u = none.basis_ref();
     assert!((u.transpose() * u - Mat::<f64>::identity(4, 4)).norm_max() < 1e-12);
 }
+
+#[test]
+fn extended_basis_stays_mass_orthonormal_and_spans_what_it_kept() {
+    let (n, k) = (60, 6);
+    let mut rng = Rng::new(40);
+    let s = decaying_snapshots(&mut rng, n, 20, 0.7);
+    let mass = rng.mass(n, 3);
+    let basis = fit(s.as_ref(), Some(&mass), k);
+    let new = rng.normal_vec(n);
+    // A combination of the basis's own columns adds nothing; a zero direction neither.
+    let inside: Vec<f64> = (0..n)
+        .map(|i| 2.0 * basis.column(0)[i] - basis.column(3)[i])
+        .collect();
+    let (extended, fractions) = basis
+        .extended(&[new.clone(), inside, vec![0.0; n]], 0.01)
+        .unwrap();
+    assert_eq!(extended.k(), k + 1);
+    assert!(
+        fractions[0] > 0.1,
+        "a random direction is mostly new: {fractions:?}"
+    );
+    assert!(fractions[1] < 1e-12 && fractions[2] == 0.0, "{fractions:?}");
+    let u = extended.basis_ref();
+    let gram = u.transpose() * diag(&mass) * u;
+    let err = (&gram - Mat::<f64>::identity(k + 1, k + 1)).norm_max();
+    assert!(err < 1e-12, "‖UᵀMU − I‖_max = {err:e}");
+    // The first k columns are the fit's, and the new direction is reproduced by the basis.
+    assert_eq!(
+        &extended
+            .basis_ref()
+            .as_ref()
+            .col(0)
+            .iter()
+            .copied()
+            .collect::<Vec<_>>()[..],
+        basis.column(0)
+    );
+    let mut q = vec![0.0; k + 1];
+    let mut back = vec![0.0; n];
+    extended.project(&new, &mut q);
+    extended.reconstruct(&q, &mut back);
+    let miss = m_norm_sq(
+        &back
+            .iter()
+            .zip(&new)
+            .map(|(a, b)| a - b)
+            .collect::<Vec<_>>(),
+        &mass,
+    );
+    assert!(
+        miss.sqrt() < 1e-12 * m_norm_sq(&new, &mass).sqrt(),
+        "{miss:e}"
+    );
+    // The same direction asked for twice is kept once.
+    let (twice, f) = basis.extended(&[new.clone(), new], 0.01).unwrap();
+    assert_eq!((twice.k(), f[1] < 1e-12), (k + 1, true), "{f:?}");
+    // A basis of every mode the snapshots have, extended past its spectrum, is still a valid
+    // basis (the spectrum is padded, so it reads back).
+    let all = fit(s.as_ref(), Some(&mass), 20);
+    let (more, _) = all.extended(&[rng.normal_vec(n)], 0.01).unwrap();
+    assert_eq!(more.k(), 21);
+    let parts = (0..21).flat_map(|j| more.column(j).to_vec()).collect();
+    let again = PcaBasis::new(
+        n,
+        21,
+        parts,
+        Some(mass.clone()),
+        more.singular_values().to_vec(),
+    );
+    assert_eq!(again.unwrap(), more);
+    // A direction of the wrong length is an error naming it.
+    let e = basis.extended(&[vec![1.0; n - 1]], 0.01).unwrap_err();
+    assert!(e.to_string().contains("direction 0"), "{e}");
+}

@@ -1,0 +1,107 @@
+//! The `pca` stage's gravity-onset directions: appended where the basis misses how the body
+//! starts to fall, not otherwise, and `[pca] gravity_directions` honoured; with them a reduced
+//! method follows the first frames of the fall that its basis alone cannot.
+
+use std::path::Path;
+
+mod common;
+use common::scratch;
+
+use pipeline::pipeline::{Pipeline, StageSummary};
+use pipeline::run::{Measure, measure};
+use pipeline::scene::Scene;
+use pipeline::simulate::Method;
+
+/// A beam with a basis too small to hold its own fall (`dimension = 3`).
+const SCENE: &str = r#"name = "onset"
+[mesh]
+generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
+[material]
+youngs_modulus = 1.0e5
+poisson_ratio = 0.4
+[[pin]]
+plane = { axis = "x", side = "min", tolerance = 1.0e-6 }
+[gravity]
+acceleration = [0.0, -9.81, 0.0]
+[time]
+step = 0.01
+[training]
+schedules = 4
+frames_per_schedule = 20
+[test]
+frames_per_schedule = 12
+[pca]
+dimension = 3
+"#;
+
+/// The `pca` method's mean error over the first `n` frames of the test, and the basis size.
+fn first_frames(text: &str, name: &str, n: usize) -> (f64, usize, usize, String) {
+    let scene = Scene::from_str(text, Path::new("."), name).unwrap();
+    let cache = scratch(name);
+    let mut p = Pipeline::new(&scene, &cache).unwrap();
+    let none = |_: usize, _: usize| {};
+    let fit = p.pca(&none).unwrap();
+    let m = Measure {
+        method: Method::Pca,
+        trajectory: 0,
+        out: cache.join("out"),
+        every: 0,
+        repeats: 1,
+        time_full: false,
+        solver: None,
+    };
+    let row = measure(&mut p, &m, &none, &mut |_, _, _| {}).unwrap();
+    let _ = std::fs::remove_dir_all(&cache);
+    let early = row.frame_errors[..n].iter().sum::<f64>() / n as f64;
+    (early, fit.basis.k(), fit.appended, fit.summary())
+}
+
+#[test]
+fn a_basis_that_misses_the_fall_gets_its_directions_and_follows_it() {
+    let (with, k, appended, summary) = first_frames(SCENE, "onset-default", 3);
+    assert!(appended >= 1, "{summary}");
+    assert_eq!(k, 3 + appended);
+    assert!(summary.contains("gravity_directions"), "{summary}");
+    let off = SCENE.replace("dimension = 3", "dimension = 3\ngravity_directions = 0");
+    let (without, k, appended, summary) = first_frames(&off, "onset-off", 3);
+    assert_eq!((k, appended), (3, 0), "{summary}");
+    assert!(!summary.contains("gravity_directions"), "{summary}");
+    // The fall is a shape the three columns miss: with its directions the first frames are
+    // followed more than twice as closely (13 against 32 % off when written).
+    assert!(
+        with < 0.5 * without,
+        "first frames {with:.3e} with the directions, {without:.3e} without"
+    );
+}
+
+#[test]
+fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
+    // Without gravity there is nothing to add, whatever the scene asks for.
+    let weightless = SCENE.replace(
+        "acceleration = [0.0, -9.81, 0.0]",
+        "acceleration = [0.0, 0.0, 0.0]",
+    );
+    let scene = Scene::from_str(&weightless, Path::new("."), "weightless").unwrap();
+    let cache = scratch("onset-weightless");
+    let mut p = Pipeline::new(&scene, &cache).unwrap();
+    assert_eq!(p.gravity_directions(), 0);
+    let fit = p.pca(&|_, _| {}).unwrap();
+    assert_eq!((fit.appended, fit.basis.k()), (0, 3));
+    let _ = std::fs::remove_dir_all(&cache);
+    // A basis of 60 columns (of 72 free coordinates) holds this small beam's fall: by default nothing is appended, and
+    // a scene that names a count gets its directions all the same.
+    let large = SCENE.replace("dimension = 3", "dimension = 60");
+    let scene = Scene::from_str(&large, Path::new("."), "large").unwrap();
+    let cache = scratch("onset-large");
+    let mut p = Pipeline::new(&scene, &cache).unwrap();
+    let fit = p.pca(&|_, _| {}).unwrap();
+    assert_eq!((fit.appended, fit.basis.k()), (0, 60), "{}", fit.summary());
+    let _ = std::fs::remove_dir_all(&cache);
+    let asked = large.replace("dimension = 60", "dimension = 60\ngravity_directions = 2");
+    let scene = Scene::from_str(&asked, Path::new("."), "asked").unwrap();
+    let cache = scratch("onset-asked");
+    let mut p = Pipeline::new(&scene, &cache).unwrap();
+    let fit = p.pca(&|_, _| {}).unwrap();
+    assert!(fit.appended >= 1, "{}", fit.summary());
+    let _ = std::fs::remove_dir_all(&cache);
+}
