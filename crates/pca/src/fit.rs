@@ -46,6 +46,10 @@ pub struct PcaFit {
     /// k + `appended` columns.
     #[serde(default)]
     pub appended: usize,
+    /// The fraction of the body's first step of its fall under gravity (M-norm) that the k
+    /// columns miss, when the pipeline measured it.
+    #[serde(default)]
+    pub fall_missed: Option<f64>,
 }
 
 impl PcaFit {
@@ -173,6 +177,7 @@ impl PcaBasis {
             tolerance_met,
             max_vertex_error_per_k: per_k,
             appended: 0,
+            fall_missed: None,
         })
     }
 }

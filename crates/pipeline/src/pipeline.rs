@@ -113,11 +113,22 @@ impl StageSummary for PcaFit {
         } else {
             " (not reached within `[pca] max_dimension`)"
         };
-        match self.appended {
-            0 => format!("k = {}: {why}{met}", self.basis.k()),
-            m => format!(
-                "k = {} + {m}: {why}{met}, plus {m} position{} of the body's first fall from \
-                 rest under gravity, which those columns miss (`[pca] gravity_directions`)",
+        let missed = self
+            .fall_missed
+            .map(|f| format!(" {:.2} % of", 100.0 * f))
+            .unwrap_or_default();
+        match (self.appended, self.fall_missed) {
+            (0, Some(f)) => format!(
+                "k = {}: {why}{met}; they hold the body's first step of its fall from rest under \
+                 gravity to {:.2} %, no gravity directions added (`[pca] gravity_directions`)",
+                self.basis.k(),
+                100.0 * f
+            ),
+            (0, None) => format!("k = {}: {why}{met}", self.basis.k()),
+            (m, _) => format!(
+                "k = {} + {m}: {why}{met}, plus {m} position{} of the body's fall from rest \
+                 under gravity (those columns miss{missed} its first step; \
+                 `[pca] gravity_directions`)",
                 self.chosen_k(),
                 if m == 1 { "" } else { "s" }
             ),
@@ -818,6 +829,7 @@ impl<'a> Pipeline<'a> {
                     .extended(&onset, GRAVITY_DIRECTION_NEW)
                     .map_err(err)?;
                 // By default only where the basis misses how the body starts to fall.
+                fit.fall_missed = new.first().copied();
                 let missed = new.first().is_some_and(|&f| f >= GRAVITY_ONSET_MISSED);
                 if missed || p.scene.pca.gravity_directions.is_some() {
                     fit.appended = basis.k() - fit.basis.k();

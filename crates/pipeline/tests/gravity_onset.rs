@@ -62,6 +62,10 @@ fn a_basis_that_misses_the_fall_gets_its_directions_and_follows_it() {
     assert!(appended >= 1, "{summary}");
     assert_eq!(k, 3 + appended);
     assert!(summary.contains("gravity_directions"), "{summary}");
+    assert!(
+        summary.contains("those columns miss") && summary.contains("% of its first step"),
+        "{summary}"
+    );
     let off = SCENE.replace("dimension = 3", "dimension = 3\ngravity_directions = 0");
     let (without, k, appended, summary) = first_frames(&off, "onset-off", 3);
     assert_eq!((k, appended), (3, 0), "{summary}");
@@ -96,6 +100,17 @@ fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
     let mut p = Pipeline::new(&scene, &cache).unwrap();
     let fit = p.pca(&|_, _| {}).unwrap();
     assert_eq!((fit.appended, fit.basis.k()), (0, 60), "{}", fit.summary());
+    // The stage's line says how closely the basis holds the fall, below the 1 % that adds it.
+    let missed = fit.fall_missed.unwrap();
+    assert!(missed < 0.01, "{missed}");
+    let line = fit.summary();
+    assert!(
+        line.contains(&format!(
+            "to {:.2} %, no gravity directions added",
+            100.0 * missed
+        )),
+        "{line}"
+    );
     let _ = std::fs::remove_dir_all(&cache);
     let asked = large.replace("dimension = 60", "dimension = 60\ngravity_directions = 2");
     let scene = Scene::from_str(&asked, Path::new("."), "asked").unwrap();
