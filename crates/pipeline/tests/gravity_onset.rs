@@ -120,3 +120,18 @@ fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
     assert!(fit.appended >= 1, "{}", fit.summary());
     let _ = std::fs::remove_dir_all(&cache);
 }
+
+/// A quasi-static scene has one position of its "fall", the static sag K₀⁻¹f_g: however many
+/// are asked for, at most one is appended.
+#[test]
+fn a_quasi_static_scene_gets_its_static_sag_at_most() {
+    let text = SCENE
+        .replace("step = 0.01", "step = 0.01\nquasi_static = true")
+        .replace("dimension = 3", "dimension = 3\ngravity_directions = 3");
+    let scene = Scene::from_str(&text, Path::new("."), "static").unwrap();
+    let cache = scratch("onset-static");
+    let mut p = Pipeline::new(&scene, &cache).unwrap();
+    let fit = p.pca(&|_, _| {}).unwrap();
+    let _ = std::fs::remove_dir_all(&cache);
+    assert_eq!((fit.appended, fit.basis.k()), (1, 4), "{}", fit.summary());
+}
