@@ -16,7 +16,7 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 use crate::forces::{ExternalForce, ForceKind};
-use crate::integrator::{FullSpaceModel, NewtonParts, Simulator, TimeConfig};
+use crate::integrator::{FullSpaceModel, Simulator, TimeConfig};
 use crate::optim::SolverConfig;
 use crate::rng::SplitMix64;
 use crate::{FemError, Mat3, Vec3};
@@ -309,19 +309,7 @@ impl std::fmt::Debug for StiffnessProbe {
 impl StiffnessProbe {
     /// Factorises K₀ + M/T² for `model`, T the time scale of a schedule.
     pub fn new(model: &FullSpaceModel, time_scale: f64) -> Result<Self, FemError> {
-        let mut parts = NewtonParts::new(model)?;
-        let rest = vec![0.0; model.num_full()];
-        let mut buf = crate::assembly::AssemblyBuffers::default();
-        crate::with_material!(&model.material, |m| crate::assembly::hessian(
-            m,
-            &model.elements,
-            crate::assembly::ElementSet::All,
-            &rest,
-            true,
-            &parts.pattern,
-            &mut parts.values,
-            &mut buf
-        ));
+        let mut parts = crate::step_norm::rest_stiffness(model)?;
         parts.add_mass(model, 1.0 / (time_scale * time_scale));
         parts.factor()?;
         Ok(Self { chol: parts.chol })

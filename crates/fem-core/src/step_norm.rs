@@ -26,9 +26,9 @@ impl std::fmt::Debug for StepOperator {
 impl StepOperator {
     /// Assembles K₀ (the stiffness at rest) plus M/h² for `model` with time step `h`.
     pub fn new(model: &FullSpaceModel, h: f64) -> Result<Self, FemError> {
-        Ok(Self {
-            parts: rest_operator(model, 1.0 / (h * h))?.0,
-        })
+        let mut parts = rest_stiffness(model)?;
+        parts.add_mass(model, 1.0 / (h * h));
+        Ok(Self { parts })
     }
 
     /// Number of free DOFs.
@@ -42,8 +42,9 @@ impl StepOperator {
     }
 }
 
-/// K₀ + s·M on the free DOFs, and s·M alone in the same pattern's value layout.
-fn rest_operator(model: &FullSpaceModel, s: f64) -> Result<(NewtonParts, Vec<f64>), FemError> {
+/// K₀, the stiffness at rest, on the free DOFs (add the mass term with
+/// [`NewtonParts::add_mass`]).
+pub(crate) fn rest_stiffness(model: &FullSpaceModel) -> Result<NewtonParts, FemError> {
     let mut parts = NewtonParts::new(model)?;
     let rest = vec![0.0; model.num_full()];
     let mut buf = crate::assembly::AssemblyBuffers::default();
@@ -57,15 +58,7 @@ fn rest_operator(model: &FullSpaceModel, s: f64) -> Result<(NewtonParts, Vec<f64
         &mut parts.values,
         &mut buf
     ));
-    let stiffness = parts.values.clone();
-    parts.add_mass(model, s);
-    let mass = parts
-        .values
-        .iter()
-        .zip(&stiffness)
-        .map(|(a, k)| a - k)
-        .collect();
-    Ok((parts, mass))
+    Ok(parts)
 }
 
 /// How a body at rest starts to fall under gravity: the first `count` positions of linear
@@ -94,7 +87,16 @@ pub fn gravity_onset(
     } else {
         (count, 1.0 / (time.step * time.step))
     };
-    let (mut parts, mass) = rest_operator(model, inv_h2)?;
+    let mut parts = rest_stiffness(model)?;
+    let stiffness = parts.values.clone();
+    parts.add_mass(model, inv_h2);
+    // M/h² alone, in the same value layout.
+    let mass: Vec<f64> = parts
+        .values
+        .iter()
+        .zip(&stiffness)
+        .map(|(a, k)| a - k)
+        .collect();
     parts.factor()?;
     let n = model.dofs.free.len();
     let load: Vec<f64> = model

@@ -228,12 +228,7 @@ impl PcaBasis {
         min_new: f64,
     ) -> Result<(Self, Vec<f64>), PcaError> {
         let n = self.n;
-        let dot = |a: &[f64], b: &[f64]| -> f64 {
-            match &self.mass {
-                Some(m) => a.iter().zip(b).zip(m).map(|((a, b), m)| a * m * b).sum(),
-                None => a.iter().zip(b).map(|(a, b)| a * b).sum(),
-            }
-        };
+        let mass = self.mass.as_deref();
         let mut basis = self.basis.clone();
         let mut new_fractions = Vec::with_capacity(directions.len());
         for (i, d) in directions.iter().enumerate() {
@@ -243,15 +238,9 @@ impl PcaBasis {
                     d.len()
                 )));
             }
-            let norm = dot(d, d).sqrt();
+            let norm = m_dot(mass, d, d).sqrt();
             let mut r = d.clone();
-            for _ in 0..2 {
-                for col in basis.chunks_exact(n) {
-                    let c = dot(col, &r);
-                    r.iter_mut().zip(col).for_each(|(r, u)| *r -= c * u);
-                }
-            }
-            let left = dot(&r, &r).sqrt();
+            let left = orthogonalise(&mut r, &basis, mass);
             let fraction = if norm > 0.0 { left / norm } else { 0.0 };
             new_fractions.push(fraction);
             if norm > 0.0 && fraction >= min_new {
@@ -278,10 +267,7 @@ impl PcaBasis {
         assert_eq!(u.len(), self.n, "project: u must have n entries");
         assert_eq!(q.len(), self.k, "project: q must have k entries");
         for (qi, col) in q.iter_mut().zip(self.basis.chunks_exact(self.n)) {
-            *qi = match &self.mass {
-                Some(m) => col.iter().zip(m).zip(u).map(|((c, m), u)| c * m * u).sum(),
-                None => col.iter().zip(u).map(|(c, u)| c * u).sum(),
-            };
+            *qi = m_dot(self.mass.as_deref(), col, u);
         }
     }
 
@@ -361,4 +347,24 @@ impl PcaBasis {
             .reduce(|| 0.0, f64::max);
         Ok(max_sq.sqrt())
     }
+}
+
+/// aᵀMb (M = I without a mass), summed in order so that it reproduces bit for bit.
+pub(crate) fn m_dot(mass: Option<&[f64]>, a: &[f64], b: &[f64]) -> f64 {
+    match mass {
+        Some(m) => a.iter().zip(b).zip(m).map(|((a, b), m)| a * m * b).sum(),
+        None => a.iter().zip(b).map(|(a, b)| a * b).sum(),
+    }
+}
+
+/// Makes `v` M-orthogonal to the M-orthonormal columns `basis` (column-major, `v.len()` rows
+/// each) by two passes of modified Gram–Schmidt, and returns the M-norm left.
+pub(crate) fn orthogonalise(v: &mut [f64], basis: &[f64], mass: Option<&[f64]>) -> f64 {
+    for _ in 0..2 {
+        for col in basis.chunks_exact(v.len()) {
+            let c = m_dot(mass, col, v);
+            v.iter_mut().zip(col).for_each(|(r, u)| *r -= c * u);
+        }
+    }
+    m_dot(mass, v, v).sqrt()
 }

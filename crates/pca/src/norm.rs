@@ -11,6 +11,7 @@
 
 use faer::{Mat, MatRef};
 
+use crate::basis::orthogonalise;
 use crate::{PcaBasis, PcaError};
 
 impl PcaBasis {
@@ -66,47 +67,24 @@ impl PcaBasis {
             }
         }
         let modes = snapshots * &coefficients;
-        let mass: Vec<f64> = match self.mass() {
-            Some(m) => m.to_vec(),
-            None => vec![1.0; n],
-        };
-        let mut columns: Vec<Vec<f64>> = (0..k)
-            .map(|c| modes.col(c).iter().copied().collect())
-            .collect();
         // In order, not a parallel sum: rayon's split points vary from run to run, and with
         // them the round-off, so the basis (and every stage after it) would not reproduce.
-        let m_dot = |a: &[f64], b: &[f64]| -> f64 {
-            a.iter()
-                .zip(b)
-                .zip(&mass)
-                .map(|((x, y), m)| x * y * m)
-                .sum()
-        };
+        let mut columns: Vec<f64> = Vec::with_capacity(n * k);
         for c in 0..k {
-            for _pass in 0..2 {
-                for p in 0..c {
-                    let (done, rest) = columns.split_at_mut(c);
-                    let proj = m_dot(&rest[0], &done[p]);
-                    for (x, y) in rest[0].iter_mut().zip(&done[p]) {
-                        *x -= proj * y;
-                    }
-                }
-            }
-            let norm = m_dot(&columns[c], &columns[c]).sqrt();
+            let mut v: Vec<f64> = modes.col(c).iter().copied().collect();
+            let norm = orthogonalise(&mut v, &columns, self.mass());
             if !(norm.is_finite() && norm > 0.0) {
                 return Err(PcaError::DimensionOutOfRange {
                     requested: k,
                     available: c,
                 });
             }
-            for x in &mut columns[c] {
-                *x /= norm;
-            }
+            columns.extend(v.iter().map(|x| x / norm));
         }
         Ok(PcaBasis::from_parts(
             n,
             k,
-            columns.concat(),
+            columns,
             self.mass().map(<[f64]>::to_vec),
             self.singular_values().to_vec(),
         ))

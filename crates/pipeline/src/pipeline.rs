@@ -113,10 +113,6 @@ impl StageSummary for PcaFit {
         } else {
             " (not reached within `[pca] max_dimension`)"
         };
-        let missed = self
-            .fall_missed
-            .map(|f| format!(" {:.2} % of", 100.0 * f))
-            .unwrap_or_default();
         match (self.appended, self.fall_missed) {
             (0, Some(f)) => format!(
                 "k = {}: {why}{met}; they hold the body's first step of its fall from rest under \
@@ -127,10 +123,13 @@ impl StageSummary for PcaFit {
             (0, None) => format!("k = {}: {why}{met}", self.basis.k()),
             (m, _) => format!(
                 "k = {} + {m}: {why}{met}, plus {m} position{} of the body's fall from rest \
-                 under gravity (those columns miss{missed} its first step; \
+                 under gravity (those columns miss{} its first step; \
                  `[pca] gravity_directions`)",
                 self.chosen_k(),
-                if m == 1 { "" } else { "s" }
+                if m == 1 { "" } else { "s" },
+                self.fall_missed
+                    .map(|f| format!(" {:.2} % of", 100.0 * f))
+                    .unwrap_or_default()
             ),
         }
     }
@@ -830,7 +829,7 @@ impl<'a> Pipeline<'a> {
                     .map_err(err)?;
                 // By default only where the basis misses how the body starts to fall.
                 fit.fall_missed = new.first().copied();
-                let missed = new.first().is_some_and(|&f| f >= GRAVITY_ONSET_MISSED);
+                let missed = fit.fall_missed.is_some_and(|f| f >= GRAVITY_ONSET_MISSED);
                 if missed || p.scene.pca.gravity_directions.is_some() {
                     fit.appended = basis.k() - fit.basis.k();
                     fit.basis = basis;

@@ -3,12 +3,13 @@
 //! method follows the first frames of the fall that its basis alone cannot.
 
 use std::path::Path;
+use std::sync::Arc;
 
 mod common;
-use common::scratch;
+use common::{measure, scratch};
 
+use pca::PcaFit;
 use pipeline::pipeline::{Pipeline, StageSummary};
-use pipeline::run::{Measure, measure};
 use pipeline::scene::Scene;
 use pipeline::simulate::Method;
 
@@ -34,23 +35,24 @@ frames_per_schedule = 12
 dimension = 3
 "#;
 
+/// The `pca` stage's fit of scene `text` in a scratch cache `name`, and the count of gravity
+/// directions the pipeline resolves for it.
+fn fit_of(text: &str, name: &str) -> (Arc<PcaFit>, usize) {
+    let scene = Scene::from_str(text, Path::new("."), name).unwrap();
+    let cache = scratch(name);
+    let mut p = Pipeline::new(&scene, &cache).unwrap();
+    let fit = p.pca(&|_, _| {}).unwrap();
+    let _ = std::fs::remove_dir_all(&cache);
+    (fit, p.gravity_directions())
+}
+
 /// The `pca` method's mean error over the first `n` frames of the test, and the basis size.
 fn first_frames(text: &str, name: &str, n: usize) -> (f64, usize, usize, String) {
     let scene = Scene::from_str(text, Path::new("."), name).unwrap();
     let cache = scratch(name);
     let mut p = Pipeline::new(&scene, &cache).unwrap();
-    let none = |_: usize, _: usize| {};
-    let fit = p.pca(&none).unwrap();
-    let m = Measure {
-        method: Method::Pca,
-        trajectory: 0,
-        out: cache.join("out"),
-        every: 0,
-        repeats: 1,
-        time_full: false,
-        solver: None,
-    };
-    let row = measure(&mut p, &m, &none, &mut |_, _, _| {}).unwrap();
+    let fit = p.pca(&|_, _| {}).unwrap();
+    let row = measure(&mut p, Method::Pca, &cache.join("out"));
     let _ = std::fs::remove_dir_all(&cache);
     let early = row.frame_errors[..n].iter().sum::<f64>() / n as f64;
     (early, fit.basis.k(), fit.appended, fit.summary())
@@ -85,20 +87,13 @@ fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
         "acceleration = [0.0, -9.81, 0.0]",
         "acceleration = [0.0, 0.0, 0.0]",
     );
-    let scene = Scene::from_str(&weightless, Path::new("."), "weightless").unwrap();
-    let cache = scratch("onset-weightless");
-    let mut p = Pipeline::new(&scene, &cache).unwrap();
-    assert_eq!(p.gravity_directions(), 0);
-    let fit = p.pca(&|_, _| {}).unwrap();
+    let (fit, count) = fit_of(&weightless, "onset-weightless");
+    assert_eq!(count, 0);
     assert_eq!((fit.appended, fit.basis.k()), (0, 3));
-    let _ = std::fs::remove_dir_all(&cache);
     // A basis of 60 columns (of 72 free coordinates) holds this small beam's fall: by default nothing is appended, and
     // a scene that names a count gets its directions all the same.
     let large = SCENE.replace("dimension = 3", "dimension = 60");
-    let scene = Scene::from_str(&large, Path::new("."), "large").unwrap();
-    let cache = scratch("onset-large");
-    let mut p = Pipeline::new(&scene, &cache).unwrap();
-    let fit = p.pca(&|_, _| {}).unwrap();
+    let (fit, _) = fit_of(&large, "onset-large");
     assert_eq!((fit.appended, fit.basis.k()), (0, 60), "{}", fit.summary());
     // The stage's line says how closely the basis holds the fall, below the 1 % that adds it.
     let missed = fit.fall_missed.unwrap();
@@ -111,14 +106,9 @@ fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
         )),
         "{line}"
     );
-    let _ = std::fs::remove_dir_all(&cache);
     let asked = large.replace("dimension = 60", "dimension = 60\ngravity_directions = 2");
-    let scene = Scene::from_str(&asked, Path::new("."), "asked").unwrap();
-    let cache = scratch("onset-asked");
-    let mut p = Pipeline::new(&scene, &cache).unwrap();
-    let fit = p.pca(&|_, _| {}).unwrap();
+    let (fit, _) = fit_of(&asked, "onset-asked");
     assert!(fit.appended >= 1, "{}", fit.summary());
-    let _ = std::fs::remove_dir_all(&cache);
 }
 
 /// A quasi-static scene has one position of its "fall", the static sag K₀⁻¹f_g: however many
@@ -128,10 +118,6 @@ fn a_quasi_static_scene_gets_its_static_sag_at_most() {
     let text = SCENE
         .replace("step = 0.01", "step = 0.01\nquasi_static = true")
         .replace("dimension = 3", "dimension = 3\ngravity_directions = 3");
-    let scene = Scene::from_str(&text, Path::new("."), "static").unwrap();
-    let cache = scratch("onset-static");
-    let mut p = Pipeline::new(&scene, &cache).unwrap();
-    let fit = p.pca(&|_, _| {}).unwrap();
-    let _ = std::fs::remove_dir_all(&cache);
+    let (fit, _) = fit_of(&text, "onset-static");
     assert_eq!((fit.appended, fit.basis.k()), (1, 4), "{}", fit.summary());
 }

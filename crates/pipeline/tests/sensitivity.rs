@@ -5,7 +5,7 @@
 use std::path::Path;
 
 mod common;
-use common::scratch;
+use common::{measure, scratch};
 
 use pipeline::pipeline::Pipeline;
 use pipeline::run::sensitivity;
@@ -79,19 +79,7 @@ fn a_restart_from_the_references_frames_reproduces_it_and_one_from_a_method_meas
         "a state of the wrong size"
     );
 
-    let measure = |p: &mut Pipeline<'_>, method| {
-        let m = pipeline::run::Measure {
-            method,
-            trajectory: 0,
-            out: cache.join("out"),
-            every: 0,
-            repeats: 1,
-            time_full: false,
-            solver: None,
-        };
-        pipeline::run::measure(p, &m, &none, &mut |_, _, _| {}).unwrap()
-    };
-    let row = measure(&mut p, Method::Pca);
+    let row = measure(&mut p, Method::Pca, &cache.join("out"));
     let r = pipeline::run::restart(&mut p, &row, 0, 12, &none).unwrap();
     // The method run again to frame 12 is where the measured run was: its error there, taken
     // from the state the full simulation starts from, is the measured one to the bit.
@@ -99,7 +87,7 @@ fn a_restart_from_the_references_frames_reproduces_it_and_one_from_a_method_meas
     assert!(r.start_error > 0.0);
     assert!(r.mean_error > 0.0 && r.mean_error.is_finite(), "{r:?}");
     assert!((r.time - 0.12).abs() < 1e-12);
-    let full_row = measure(&mut p, Method::Full);
+    let full_row = measure(&mut p, Method::Full, &cache.join("out"));
     assert!(pipeline::run::restart(&mut p, &full_row, 0, 12, &none).is_err());
     assert!(
         pipeline::run::restart(&mut p, &row, 0, 40, &none).is_err(),

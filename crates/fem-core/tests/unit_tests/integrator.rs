@@ -64,6 +64,17 @@ fn static_frame() -> TimeConfig {
     }
 }
 
+/// The unpinned 6×2×2 beam (stable Neo-Hookean, E = 10⁵ Pa) under gravity `g`.
+fn free_body(g: [f64; 3]) -> FullSpaceModel {
+    let material = MaterialConfig {
+        model: MaterialModel::StableNeoHookean,
+        youngs_modulus: 1e5,
+        poisson_ratio: 0.4,
+        ..Default::default()
+    };
+    FullSpaceModel::new(beam([6, 2, 2]), &material, vec![], Vec3::from(g), vec![]).unwrap()
+}
+
 fn tip(mesh: &TetMesh) -> usize {
     (0..mesh.num_vertices())
         .min_by(|&a, &b| {
@@ -100,15 +111,7 @@ fn a_body_at_rest_without_loads_stays_exactly_at_rest() {
 fn free_fall_follows_implicit_euler_and_the_extrapolated_start_is_already_the_solution() {
     let g = [0.0, -9.81, 0.0];
     for method in [SolverMethod::Newton, SolverMethod::Lbfgs] {
-        let mesh = beam([6, 2, 2]);
-        let material = MaterialConfig {
-            model: MaterialModel::StableNeoHookean,
-            youngs_modulus: 1e5,
-            poisson_ratio: 0.4,
-            ..Default::default()
-        };
-        let m = FullSpaceModel::new(mesh, &material, vec![], Vec3::from(g), vec![]).unwrap();
-        let mut sim = Simulator::new(m, dynamic(6), solver(method, 1e-8)).unwrap();
+        let mut sim = Simulator::new(free_body(g), dynamic(6), solver(method, 1e-8)).unwrap();
         let h = sim.time.step;
         for n in 1..=6 {
             let r = sim.step().unwrap();
@@ -683,6 +686,16 @@ fn a_step_lbfgs_cannot_finish_is_finished_by_newton_from_where_it_stopped() {
     }
 }
 
+/// ‖u − x‖ and ‖x‖ over the free DOFs (`free` their full indices, `x` on them).
+fn off_free(u: &[f64], free: &[usize], x: &[f64]) -> (f64, f64) {
+    let diff = free
+        .iter()
+        .zip(x)
+        .map(|(&d, v)| (u[d] - v).powi(2))
+        .sum::<f64>();
+    (diff.sqrt(), x.iter().map(|v| v * v).sum::<f64>().sqrt())
+}
+
 /// `gravity_onset` is linear implicit Euler from rest: for the linear material the full
 /// simulation's first steps are exactly those positions, and an unpinned body falls as
 /// u_n = h² g n(n+1)/2 whatever the material.
@@ -697,13 +710,7 @@ fn gravity_onset_is_the_first_steps_of_a_fall_from_rest() {
     let mut sim = Simulator::new(m, dynamic(3), solver(SolverMethod::Newton, 1e-12)).unwrap();
     for (n, x) in onset.iter().enumerate() {
         sim.step().unwrap();
-        let size = x.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let diff = free
-            .iter()
-            .zip(x)
-            .map(|(&d, v)| (sim.state.u[d] - v).powi(2))
-            .sum::<f64>()
-            .sqrt();
+        let (diff, size) = off_free(&sim.state.u, &free, x);
         assert!(diff <= 1e-9 * size, "step {}: {diff:e} of {size:e}", n + 1);
     }
     // Held at the pins, the fall is not uniform: near them the body drops less than the free
@@ -717,14 +724,7 @@ fn gravity_onset_is_the_first_steps_of_a_fall_from_rest() {
         "{least:e} {most:e} against {free_fall:e}"
     );
 
-    let mesh = beam([6, 2, 2]);
-    let material = MaterialConfig {
-        model: MaterialModel::StableNeoHookean,
-        youngs_modulus: 1e5,
-        poisson_ratio: 0.4,
-        ..Default::default()
-    };
-    let free_body = FullSpaceModel::new(mesh, &material, vec![], Vec3::from(g), vec![]).unwrap();
+    let free_body = free_body(g);
     let time = dynamic(4);
     let onset = gravity_onset(&free_body, &time, 4).unwrap();
     for (n, x) in onset.iter().enumerate() {
@@ -746,13 +746,7 @@ fn gravity_onset_is_the_first_steps_of_a_fall_from_rest() {
     let free = m.dofs.free.clone();
     let mut sim = Simulator::new(m, static_frame(), solver(SolverMethod::Newton, 1e-12)).unwrap();
     sim.step().unwrap();
-    let size = statics[0].iter().map(|v| v * v).sum::<f64>().sqrt();
-    let diff = free
-        .iter()
-        .zip(&statics[0])
-        .map(|(&d, v)| (sim.state.u[d] - v).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let (diff, size) = off_free(&sim.state.u, &free, &statics[0]);
     assert!(size > 0.0 && diff <= 1e-9 * size, "{diff:e} of {size:e}");
     assert!(
         gravity_onset(&free_body, &static_frame(), 3)

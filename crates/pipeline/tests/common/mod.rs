@@ -1,6 +1,10 @@
 //! What the pipeline's test binaries share.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+use pipeline::pipeline::Pipeline;
+use pipeline::run::{Measure, MethodReport};
+use pipeline::simulate::Method;
 
 /// An empty folder `name` under this test process's own folder in the system's temporary
 /// directory (each test binary is its own process, so binaries never share one).
@@ -11,4 +15,20 @@ pub fn scratch(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
+}
+
+/// `method` run once on test trajectory 0 and compared with the reference, writing no frames
+/// (`out` is where they would go).
+#[allow(dead_code)] // Not every test binary measures a method.
+pub fn measure(p: &mut Pipeline<'_>, method: Method, out: &Path) -> MethodReport {
+    let m = Measure {
+        method,
+        trajectory: 0,
+        out: out.to_path_buf(),
+        every: 0,
+        repeats: 1,
+        time_full: false,
+        solver: None,
+    };
+    pipeline::run::measure(p, &m, &|_, _| {}, &mut |_, _, _| {}).unwrap()
 }
