@@ -72,18 +72,45 @@
     const nx = dot(d, right) / (z * t * aspect()), ny = dot(d, up) / (z * t);
     return { x: ((nx + 1) / 2) * canvas.clientWidth, y: ((1 - ny) / 2) * canvas.clientHeight, z };
   }
+  // The view frames the box of every position the body has taken (the rest shape at first), so
+  // that a body that falls or swings away from where it started stays in view; it stops
+  // following as soon as the person moves the camera or grabs the body.
+  let framed = null;   // { lo, hi }, or null once the person took the camera over
+  function frameBox(box) {
+    camera.target = scale(add(box.lo, box.hi), 0.5);
+    camera.radius = norm(sub(box.hi, box.lo)) / 2 || 1;
+    camera.distance = (camera.radius / Math.sin(camera.fov / 2)) * 1.05;
+  }
   function fitCamera() {
-    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
     for (let i = 0; i < mesh.n; i++) {
       for (let c = 0; c < 3; c++) {
         lo[c] = Math.min(lo[c], mesh.rest[3 * i + c]);
         hi[c] = Math.max(hi[c], mesh.rest[3 * i + c]);
       }
     }
-    camera.target = scale(add(lo, hi), 0.5);
-    camera.radius = norm(sub(hi, lo)) / 2 || 1;
-    camera.distance = (camera.radius / Math.sin(camera.fov / 2)) * 1.05;
+    framed = { lo, hi };
+    frameBox(framed);
   }
+  // Grows the framed box by the latest positions; the camera moves only when the box grew by
+  // more than 1 % of its size, so a body at rest or swinging inside it leaves the view alone.
+  function followBody() {
+    if (!framed) return;
+    const lo = [...framed.lo], hi = [...framed.hi];
+    for (let i = 0; i < mesh.n; i++) {
+      for (let c = 0; c < 3; c++) {
+        const x = positions[3 * i + c];
+        if (x < lo[c]) lo[c] = x;
+        if (x > hi[c]) hi[c] = x;
+      }
+    }
+    const size = norm(sub(framed.hi, framed.lo));
+    if (norm(sub(lo, framed.lo)) + norm(sub(hi, framed.hi)) > 0.01 * size) {
+      framed = { lo, hi };
+      frameBox(framed);
+    }
+  }
+  const takeCamera = () => { framed = null; };
   const vertex = (i) => [positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]];
 
   // Nearest hit of a ray on the surface (Möller–Trumbore), or null.
@@ -272,6 +299,7 @@
       if (n !== mesh.n) return;
       frameStep = data.getFloat64(8, true);
       positions.set(new Float32Array(event.data, 24, 3 * n));
+      followBody();
       meshDirty = true;
       framesShown += 1;
       frameTimes.push(performance.now());
@@ -360,6 +388,7 @@
     orbit = null;
   }
   canvas.addEventListener('pointerdown', (e) => {
+    takeCamera();
     if (e.pointerType === 'touch') {
       touches.set(e.pointerId, { x: e.clientX, y: e.clientY });
       if (touches.size >= 2) {
@@ -425,6 +454,7 @@
   canvas.addEventListener('pointercancel', pointerEnd);
   canvas.addEventListener('wheel', (e) => {
     e.preventDefault();
+    takeCamera();
     camera.distance *= Math.exp(e.deltaY * 0.001);
   }, { passive: false });
 
@@ -460,6 +490,17 @@
     handle: () => (drag ? drag.handle : null),
     target: () => (drag ? drag.target : null),
     cameraDistance: () => camera.distance,
+    following: () => framed !== null,
+    vertexCount: () => (mesh ? mesh.n : 0),
+    // How many vertices are drawn outside the canvas.
+    outsideView: () => {
+      let n = 0;
+      for (let i = 0; mesh && i < mesh.n; i++) {
+        const s = project(vertex(i));
+        if (!(s.z > 0 && s.x >= 0 && s.x <= canvas.clientWidth && s.y >= 0 && s.y <= canvas.clientHeight)) n += 1;
+      }
+      return n;
+    },
     // A surface vertex far from the pins that the mouse can pick where it is drawn, inside the
     // silhouette (the body around it for 10 pixels), so that a little motion does not matter.
     grabCandidate: () => {

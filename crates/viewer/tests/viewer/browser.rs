@@ -1,5 +1,6 @@
 //! The page in headless Chromium, driven through the DevTools protocol: it loads from the
-//! server, a real mouse drag on the canvas pulls the body, and the HUD shows a steps/s figure.
+//! server, a real mouse drag on the canvas pulls the body, the HUD shows a steps/s figure, and a
+//! body that falls away from where it started stays in view.
 //! Without Chromium it says `skipping …` and passes (`.ci/run` installs Debian's `chromium`).
 //!
 //! `VIEWER_BROWSER_URL=http://127.0.0.1:PORT/` drives a server started elsewhere (e.g. `cargo
@@ -17,7 +18,7 @@ use serde_json::{Value, json};
 use tungstenite::{Message, WebSocket};
 use viewer::{Method, Server, Session, Settings};
 
-use crate::common::model;
+use crate::common::{falling_model, model};
 
 type Result<T> = std::result::Result<T, String>;
 
@@ -363,8 +364,9 @@ fn a_finger_drag_on_the_page_pulls_the_body() {
     drag_on_the_page(Input::Finger);
 }
 
-fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
-    let mut browser = Browser::start(binary, &dir.join("profile"))?;
+/// Opens `url` in a 1280 × 800 page of `browser` (touch emulated for `Input::Finger`) and waits
+/// until it shows the mesh and steps.
+fn open_page<'a>(browser: &'a mut Browser, url: &str, input: Input) -> Result<Page<'a>> {
     let target = browser
         .cdp
         .call(None, "Target.createTarget", json!({ "url": "about:blank" }))?;
@@ -397,6 +399,85 @@ fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
         "the page showing the mesh",
     )?;
     page.wait_for("viewerDebug.state().steps_per_second > 0", "stepping")?;
+    Ok(page)
+}
+
+/// A body that falls away from where it started stays in view: the camera frames every position
+/// it has taken until the person moves the camera, and a turn of the wheel hands it over.
+#[test]
+fn a_falling_body_stays_in_view() {
+    let Some(binary) = chromium() else {
+        tests::skip(
+            "the viewer's framing test: no chromium on the PATH (apt-get install chromium)",
+        );
+        return;
+    };
+    let m = falling_model();
+    let methods = vec![Method::new(
+        "full",
+        latent_sim::FullRuntime::from_model(m).expect("full"),
+    )];
+    let session = Session::new(Settings::for_model(m), methods).expect("a session");
+    let server = Server::bind("127.0.0.1:0", session).expect("a port");
+    let dir = tests::scratch_dir("viewer-browser-falling");
+    let result = watch_the_fall(&binary, &dir, &server.url());
+    server.shutdown();
+    if let Err(e) = result {
+        panic!("{e}");
+    }
+}
+
+fn watch_the_fall(binary: &Path, dir: &Path, url: &str) -> Result<()> {
+    let mut browser = Browser::start(binary, &dir.join("profile"))?;
+    let mut page = open_page(&mut browser, url, Input::Mouse)?;
+    let camera = |page: &mut Page<'_>| -> Result<f64> {
+        page.eval("viewerDebug.cameraDistance()")?
+            .as_f64()
+            .ok_or_else(|| "no camera distance".to_string())
+    };
+    // Rest at y ∈ [0, 0.2]: framed as at rest, the view shows down to about y = −0.5; the body
+    // falls until it hangs about a metre below.
+    page.wait_for(
+        "(() => { let low = Infinity; for (let i = 0; i < viewerDebug.vertexCount(); i++) \
+         low = Math.min(low, viewerDebug.position(i)[1]); return low; })() < -0.7",
+        "the body falling 0.7 m below where it rested",
+    )?;
+    // The body keeps falling and swinging; every vertex stays on the page.
+    for _ in 0..10 {
+        std::thread::sleep(Duration::from_millis(100));
+        let outside = page.eval("viewerDebug.outsideView()")?;
+        if outside != json!(0) {
+            let n = page.eval("viewerDebug.vertexCount()")?;
+            return Err(format!(
+                "{outside} of {n} vertices are drawn outside the page"
+            ));
+        }
+    }
+    page.call(
+        "Input.dispatchMouseEvent",
+        json!({ "type": "mouseWheel", "x": 640, "y": 400, "deltaX": 0, "deltaY": 100 }),
+    )?;
+    page.wait_for(
+        "viewerDebug.following() === false",
+        "the camera handed over by the wheel",
+    )?;
+    let handed = camera(&mut page)?;
+    std::thread::sleep(Duration::from_millis(500));
+    let later = camera(&mut page)?;
+    if later != handed {
+        return Err(format!(
+            "the camera moved from {handed} to {later} after the wheel handed it over"
+        ));
+    }
+    Ok(())
+}
+
+fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
+    let mut browser = Browser::start(binary, &dir.join("profile"))?;
+    let mut page = open_page(&mut browser, url, input)?;
+    if page.eval("viewerDebug.following()")? != json!(true) {
+        return Err("the camera does not frame the body before anyone touched it".into());
+    }
     let candidate = page.eval("viewerDebug.grabCandidate()")?;
     let vertex = candidate["vertex"]
         .as_u64()
@@ -410,6 +491,9 @@ fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
     if let Err(e) = page.wait_for("viewerDebug.handle() !== null", "a handle from the grab") {
         let said = page.eval("document.getElementById('message').textContent")?;
         return Err(format!("{e} ({input:?} at {x}, {y}; the page says {said})"));
+    }
+    if page.eval("viewerDebug.following()")? != json!(false) {
+        return Err("the camera still follows the body after a grab".into());
     }
     let pixels: f64 = std::env::var("VIEWER_BROWSER_DRAG")
         .ok()

@@ -33,6 +33,24 @@ pub fn model() -> &'static ReducedModel {
     })
 }
 
+/// The tiny beam of the workspace's tests under gravity: pinned at one end, it falls until it
+/// hangs (for the view's framing).
+pub fn falling_model() -> &'static ReducedModel {
+    static MODEL: OnceLock<ReducedModel> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let scene = tests::scene(tests::TINY);
+        let cache = tests::scratch_dir("viewer-falling-model");
+        let mut p = Pipeline::new(&scene, &cache).expect("a pipeline");
+        pipeline::export::scene_model(
+            &mut p,
+            PipelineMethod::Pca,
+            latent_sim::model::Rows::Used,
+            &tests::no_progress,
+        )
+        .expect("the tiny model under gravity")
+    })
+}
+
 /// A session over the tiny model: `pca` and `full`.
 pub fn session() -> Session {
     let m = model();
