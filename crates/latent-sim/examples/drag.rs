@@ -9,7 +9,8 @@
 //! ```
 //!
 //! The vertex is the surface vertex farthest from the pins, pulled against gravity by 20 % of
-//! the mesh's size with a spring of 10⁻³ E·L (2 kN/m on the cantilever). Each frame reads the
+//! the mesh's size L with a spring that carries the body's weight at that stretch, M|g|/(0.2 L),
+//! and at least 10⁻³ E·L (1.9 kN/m on the cantilever). Each frame reads the
 //! surface back into an `f32` buffer, as a renderer would. `--full` does the same in full space
 //! on the model's mesh ([`FullRuntime`]), for comparison.
 
@@ -95,7 +96,13 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
     } else {
         fem_core::Vec3::y()
     };
-    let stiffness = 1e-3 * model.material.youngs_modulus * size;
+    // A spring that holds the body's weight when stretched by the drag's 0.2 L (a soft, heavy
+    // body hangs from it instead of falling away), and at least 10⁻³ E·L.
+    let volume: f64 = (0..model.mesh.num_tets())
+        .map(|t| model.mesh.signed_volume(t))
+        .sum();
+    let weight = model.material.density * volume * g.norm();
+    let stiffness = (1e-3 * model.material.youngs_modulus * size).max(weight / (0.2 * size));
     let steps = (1.0 / model.time_step).round().max(1.0) as usize;
     let grabbed_at = rest[vertex];
     let handle = sim.grab(&[vertex], stiffness)?;

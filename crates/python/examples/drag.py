@@ -6,8 +6,8 @@ stepped and plots the grabbed vertex's height over time (with matplotlib, if ins
     python crates/python/examples/drag.py out/cantilever/neural-cubature.ldm [--full] [--plot FILE]
 
 The Python twin of `cargo run --release -p latent-sim --example drag`: the vertex is the surface
-vertex farthest from the pins, pulled against gravity by 20 % of the mesh's size with a spring
-of 1e-3 E L. Each frame reads the surface back as float32, as a renderer would. --full steps the
+vertex farthest from the pins, pulled against gravity by 20 % of the mesh's size L with a spring
+that carries the body's weight at that stretch, M|g|/(0.2 L), and at least 1e-3 E L. Each frame reads the surface back as float32, as a renderer would. --full steps the
 model's mesh in full space instead. The plot goes to FILE (default drag.png beside the model).
 """
 
@@ -42,7 +42,9 @@ def main() -> None:
     g = np.array(model.gravity)
     up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 1.0, 0.0])
     size = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
-    stiffness = 1e-3 * model.youngs_modulus * size
+    # A spring that holds the body's weight when stretched by the drag's 0.2 L (a soft, heavy
+    # body hangs from it instead of falling away), and at least 1e-3 E L.
+    stiffness = max(1e-3 * model.youngs_modulus * size, model.mass * np.linalg.norm(g) / (0.2 * size))
     steps = max(1, round(1.0 / model.time_step))
 
     handle = sim.grab(vertex, stiffness)

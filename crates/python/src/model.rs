@@ -156,6 +156,14 @@ impl Model {
         self.inner.material.youngs_modulus
     }
 
+    /// The body's mass (kg): the density times the rest volume of the mesh's tets.
+    #[getter]
+    fn mass(&self) -> f64 {
+        let mesh = &self.inner.mesh;
+        let volume: f64 = (0..mesh.num_tets()).map(|t| mesh.signed_volume(t)).sum();
+        self.inner.material.density * volume
+    }
+
     /// The errors the pipeline measured while making the model: a list of
     /// ``(name, held_out, value)``, ``held_out`` telling a held-out test trajectory's from the
     /// training data's.

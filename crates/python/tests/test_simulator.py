@@ -20,6 +20,8 @@ def test_model_describes_itself(model: ld.Model, neural_path) -> None:
     assert model.latent_dim >= 2
     assert model.has_all_rows and model.rows_vertex_count == model.vertex_count
     assert model.time_step == pytest.approx(0.02)
+    # 1.0 × 0.2 × 0.2 m of density 1000 kg/m³.
+    assert model.mass == pytest.approx(40.0, rel=1e-12)
     assert model.pinned == [v for v in model.pinned if v < model.vertex_count]
     assert len(model.pinned) == 4
     assert model.path == neural_path

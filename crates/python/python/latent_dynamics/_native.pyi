@@ -111,6 +111,9 @@ class Model:
     @property
     def youngs_modulus(self) -> float: ...
     @property
+    def mass(self) -> float:
+        """The body's mass (kg): density times the mesh's rest volume."""
+    @property
     def errors(self) -> list[Tuple[str, bool, float]]:
         """(name, held_out, value) of each error the pipeline measured."""
 
