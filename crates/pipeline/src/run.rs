@@ -488,6 +488,7 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
     );
     s.push_str(&markdown(rows));
     s.push_str(&time_split_markdown(rows));
+    s.push_str(&standing_line(rows));
     for r in rows.iter().filter(|r| r.step_restarts > 0) {
         s.push_str(&format!(
             "\n{}: {} of its steps started again from the last state (not solvable from their \
@@ -508,6 +509,29 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
         ));
     }
     s
+}
+
+/// Where `neural-cubature` stands against `pca-cubature` on the error–cost plane
+/// ([`crate::suite::standing`]), with both figures, as a line of `run`'s summary (empty unless
+/// both ran).
+pub fn standing_line(rows: &[MethodReport]) -> String {
+    let find = |m: Method| rows.iter().find(|r| r.method == m);
+    let (Some(n), Some(p)) = (find(Method::NeuralCubature), find(Method::PcaCubature)) else {
+        return String::new();
+    };
+    let standing = crate::suite::standing(n, p);
+    if standing == "—" {
+        return String::new();
+    }
+    format!(
+        "\nneural-cubature against pca-cubature: {standing} ({:.3} against {:.3} ms a step, \
+         {:.2} against {:.2} % off; step times move by 10–30 % between runs on a shared machine, \
+         `cargo xtask bench` repeats them and sweeps both methods' sizes)\n",
+        n.ms_per_step,
+        p.ms_per_step,
+        100.0 * n.mean_rel_error,
+        100.0 * p.mean_rel_error
+    )
 }
 
 /// Where a reduced step's time goes, mean ms per step, as a markdown table under a heading
@@ -1035,7 +1059,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{ErrorAccumulator, Method, MethodReport, mean};
+    use super::{ErrorAccumulator, Method, MethodReport, mean, standing_line};
     use fem_core::element::Elements;
     use fem_core::mass::{MassKind, MassMatrix};
     use fem_core::mesh::generate::{BoxSpec, box_mesh};
@@ -1099,6 +1123,35 @@ mod tests {
             assert_eq!(json["method"], method.name());
             assert_eq!(method.to_string(), method.name());
         }
+    }
+
+    /// `run` says where neural-cubature stands against pca-cubature when both ran.
+    #[test]
+    fn the_summary_says_where_neural_cubature_stands() {
+        let row = |method, ms_per_step, mean_rel_error| MethodReport {
+            method,
+            ms_per_step,
+            mean_rel_error,
+            ..Default::default()
+        };
+        let line = standing_line(&[
+            row(Method::Full, 50.0, 0.0),
+            row(Method::PcaCubature, 0.296, 0.00298),
+            row(Method::NeuralCubature, 0.205, 0.00532),
+        ]);
+        assert!(
+            line.contains(
+                "neural-cubature against pca-cubature: frontier: faster, less accurate \
+                 (0.205 against 0.296 ms a step, 0.53 against 0.30 % off"
+            ),
+            "{line}"
+        );
+        let behind = standing_line(&[
+            row(Method::PcaCubature, 0.2, 0.01),
+            row(Method::NeuralCubature, 0.3, 0.02),
+        ]);
+        assert!(behind.contains(": behind ("), "{behind}");
+        assert_eq!(standing_line(&[row(Method::NeuralCubature, 0.2, 0.01)]), "");
     }
 
     /// Full space has no subspace error: its mean must print as 0, not −0.
