@@ -79,7 +79,9 @@
   function frameBox(box) {
     camera.target = scale(add(box.lo, box.hi), 0.5);
     camera.radius = norm(sub(box.hi, box.lo)) / 2 || 1;
-    camera.distance = (camera.radius / Math.sin(camera.fov / 2)) * 1.05;
+    // The narrower of the two half-angles: on a portrait page the sides bound the view.
+    const half = Math.atan(Math.tan(camera.fov / 2) * Math.min(1, aspect()));
+    camera.distance = (camera.radius / Math.sin(half)) * 1.05;
   }
   function fitCamera() {
     const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
@@ -100,6 +102,7 @@
     for (let i = 0; i < mesh.n; i++) {
       for (let c = 0; c < 3; c++) {
         const x = positions[3 * i + c];
+        if (!Number.isFinite(x)) continue;   // a diverged method's frame moves nothing
         if (x < lo[c]) lo[c] = x;
         if (x > hi[c]) hi[c] = x;
       }
@@ -358,7 +361,11 @@
   $('method').onchange = () => send({ type: 'method', name: $('method').value });
   $('pause').onclick = () => send({ type: 'pause', paused: !(state && state.paused) });
   $('single').onclick = () => send({ type: 'step' });
-  $('reset').onclick = () => send({ type: 'reset' });
+  $('reset').onclick = () => {
+    send({ type: 'reset' });
+    // Still following: frame the rest shape again (a method that flew off widened the box).
+    if (framed && mesh) fitCamera();
+  };
   $('gravity').onchange = () => send({ type: 'gravity', enabled: $('gravity').checked });
 
   // ---- pointer: drag the body, or orbit, pan and zoom ----

@@ -48,15 +48,22 @@ pub struct Settings {
 }
 
 impl Settings {
-    /// The settings for `model`'s scene. With L the diagonal of the mesh's bounding box and E
-    /// Young's modulus: radius L/20; stiffness 10⁻² E L (several times a 5:1 cantilever's own
-    /// tip stiffness, so that the grabbed patch follows the cursor most of the way), both
-    /// adjustable up to L and 100×; targets within 10 L of the centre; 120 frames per second
-    /// at most.
+    /// The settings for `model`'s scene. With L the diagonal of the mesh's bounding box, E
+    /// Young's modulus and M|g| the body's weight: radius L/20; stiffness 10⁻² E L (several
+    /// times a 5:1 cantilever's own tip stiffness, so that the grabbed patch follows the cursor
+    /// most of the way), and at least M|g|/(0.2 L), which holds a soft, heavy body's weight
+    /// when the spring is stretched by a fifth of its size; both adjustable up to L and 100×;
+    /// targets within 10 L of the centre; 120 frames per second at most.
     pub fn for_model(model: &ReducedModel) -> Self {
         let (lo, hi) = model.mesh.bounding_box();
         let size = (hi - lo).norm().max(f64::MIN_POSITIVE);
-        let stiffness = 1e-2 * model.material.youngs_modulus * size;
+        let volume: f64 = (0..model.mesh.num_tets())
+            .map(|t| model.mesh.signed_volume(t))
+            .sum();
+        let g = model.gravity;
+        let weight =
+            model.material.density * volume * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let stiffness = (1e-2 * model.material.youngs_modulus * size).max(weight / (0.2 * size));
         Self {
             scene: model.provenance.scene.clone(),
             time_step: model.time_step,
