@@ -2,9 +2,9 @@
 //! `latent-sim` with the AutoDef "X"-shaped decoder (6 → 200 → 200 → k, ELU), on one thread, at
 //! 48, 100 and 300 cubature elements.
 //!
-//! The scene is the default cantilever's geometry and material (1 × 0.2 × 0.2 m, 20 × 4 × 4 cells,
-//! stable Neo-Hookean E = 2 MPa, ν = 0.45, clamped at x = 0, gravity) with a spring dragging the
-//! tip for the first half second. The subspace is synthetic, so that the benchmark needs no
+//! The scene is an earlier default cantilever's geometry and material (1 × 0.2 × 0.2 m, 20 × 4 × 4
+//! cells, stable Neo-Hookean E = 2 MPa, ν = 0.45, clamped at x = 0, gravity) with a spring dragging
+//! the tip for the first half second. The subspace is synthetic, so that the benchmark needs no
 //! pipeline run: k = 32 smooth mass-orthonormal columns, and a decoder whose linear skip carries
 //! the leading 6 coefficients and whose random nonlinear part is scaled to bend them gently, its
 //! rest state anchored. Cubature elements are spread evenly over the mesh with equal weights. The

@@ -1,13 +1,13 @@
 //! The offline stages between snapshots and training: the PCA fit (`pca_fit`) and the cubature
 //! fit (`cubature`), on synthetic inputs of the shipped scenes' sizes, so no pipeline run is needed.
 //!
-//! * `pca_fit/<n>x<N>`: mass-weighted thin SVD and the max-vertex-error dimension rule (the
-//!   scenes' rule, at 1 % of the largest vertex displacement) on a rank-400 snapshot matrix with a
-//!   spectrum decaying like 1/m²: n = 1,500 free DOFs (the default cantilever) and 9,759 (the
+//! * `pca_fit/<n>x<N>`: mass-weighted thin SVD and the max-vertex-error dimension rule (the scenes'
+//!   rule, at 1 % of the largest vertex displacement) on a rank-400 snapshot matrix with a spectrum
+//!   decaying like 1/m²: n = 1,500 free DOFs (an earlier default cantilever) and 9,759 (the
 //!   catapult), N = 1,440 snapshots (24 schedules of 60 frames, the scenes' training default).
 //! * `cubature/build` and `cubature/fit`: the training matrix of 150 poses and the greedy + NNLS
-//!   fit to the default 2 % on a 20 × 4 × 4-cell beam (the default scene's mesh, 1,920 tets) with
-//!   a 10-mode smooth basis: the cubature tests' fixture.
+//!   fit to the default 2 % on a 20 × 4 × 4-cell beam (an earlier default scene's mesh, 1,920 tets)
+//!   with a 10-mode smooth basis: the cubature tests' fixture.
 //! * `cubature/build-nonlinear`: the neural rule's training matrix on the same beam and poses,
 //!   at the sizes of a 27k-tet minimal scene's neural methods: k = 60 reduced coordinates (the 10
 //!   modes and 50 more columns the poses leave at zero) and Jacobians of 60 × 50, so each

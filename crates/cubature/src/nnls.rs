@@ -19,10 +19,10 @@
 //! (ties go to the lowest index).
 //!
 //! The factor and the passive set survive between solves, so the greedy fit, which grows the
-//! problem by one column a step, goes on from the last step's solution instead of starting over.
-//! On the default cantilever's cubature stage (training matrix and greedy fit, 169 of 15,360
-//! elements) that took 2.6–2.8 s, against 3.3–3.5 s with every step solved from an empty passive
-//! set (two runs each, alternating).
+//! problem by one column a step, goes on from the last step's solution instead of starting over. On
+//! the cubature stage of the stiff cantilever that was the default scene until 2026-11-27 (training
+//! matrix and greedy fit, 169 of 15,360 elements) that took 2.6–2.8 s, against 3.3–3.5 s with every
+//! step solved from an empty passive set (two runs each, alternating).
 //!
 //! ```
 //! use faer::mat;

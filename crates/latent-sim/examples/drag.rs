@@ -9,8 +9,9 @@
 //! ```
 //!
 //! The vertex is the surface vertex farthest from the pins, pulled against gravity by 20 % of
-//! the mesh's size L with a spring that carries the body's weight at that stretch, M|g|/(0.2 L),
-//! and at least 10⁻³ E·L (1.9 kN/m on the cantilever). Each frame reads the
+//! the mesh's size L with a spring of 10⁻³ E·L, or, when that is weaker, one that carries the
+//! body's weight at that stretch, M|g|/(0.2 L) (on the soft default cantilever the weight sets
+//! it: 1.9 kN/m, where 10⁻³ E·L is 104 N/m). Each frame reads the
 //! surface back into an `f32` buffer, as a renderer would. `--full` does the same in full space
 //! on the model's mesh ([`FullRuntime`]), for comparison.
 

@@ -525,8 +525,8 @@ pub fn standing_line(rows: &[MethodReport]) -> String {
     }
     format!(
         "\nneural-cubature against pca-cubature: {standing} ({:.3} against {:.3} ms a step, \
-         {:.2} against {:.2} % off; step times move by 10–30 % between runs on a shared machine, \
-         `cargo xtask bench` repeats them and sweeps both methods' sizes)\n",
+         {:.2} against {:.2} % off; step times move by up to 50 % between runs on a shared \
+         machine, `cargo xtask bench` repeats them and sweeps both methods' sizes)\n",
         n.ms_per_step,
         p.ms_per_step,
         100.0 * n.mean_rel_error,

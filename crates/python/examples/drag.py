@@ -7,7 +7,8 @@ stepped and plots the grabbed vertex's height over time (with matplotlib, if ins
 
 The Python twin of `cargo run --release -p latent-sim --example drag`: the vertex is the surface
 vertex farthest from the pins, pulled against gravity by 20 % of the mesh's size L with a spring
-that carries the body's weight at that stretch, M|g|/(0.2 L), and at least 1e-3 E L. Each frame reads the surface back as float32, as a renderer would. --full steps the
+of 1e-3 E L, or, when that is weaker, one that carries the body's weight at that stretch,
+M|g|/(0.2 L). Each frame reads the surface back as float32, as a renderer would. --full steps the
 model's mesh in full space instead. The plot goes to FILE (default drag.png beside the model).
 """
 
@@ -44,7 +45,8 @@ def main() -> None:
     size = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
     # A spring that holds the body's weight when stretched by the drag's 0.2 L (a soft, heavy
     # body hangs from it instead of falling away), and at least 1e-3 E L.
-    stiffness = max(1e-3 * model.youngs_modulus * size, model.mass * np.linalg.norm(g) / (0.2 * size))
+    weight = model.mass * np.linalg.norm(g)
+    stiffness = max(1e-3 * model.youngs_modulus * size, weight / (0.2 * size))
     steps = max(1, round(1.0 / model.time_step))
 
     handle = sim.grab(vertex, stiffness)

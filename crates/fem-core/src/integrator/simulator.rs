@@ -66,9 +66,9 @@ pub const PRECOND_MAX_AGE: usize = 16;
 
 /// What assembling and factorising the preconditioner costs, in L-BFGS iterations (an energy and
 /// gradient evaluation plus two triangular solves). Measured on 2 cores: 25 ms against 2.5 ms per
-/// iteration on the catapult (9.8k DOFs), 1.3 ms against 0.15 ms on the default cantilever
-/// (1.5k DOFs). A fixed figure rather than a timing, so that when a factor is refreshed (and so
-/// the trajectory, at the solver's tolerance) never depends on the machine's load.
+/// iteration on the catapult (9.8k DOFs), 1.3 ms against 0.15 ms on an earlier default cantilever
+/// (1.5k DOFs). A fixed figure rather than a timing, so that when a factor is refreshed (and so the
+/// trajectory, at the solver's tolerance) never depends on the machine's load.
 const REFACTOR_COST_ITERATIONS: usize = 10;
 
 /// L-BFGS with the factor that preconditions it, and how well that factor still serves.

@@ -6,9 +6,10 @@
 //! All work vectors are owned by [`Lbfgs`] and reused, so a solve allocates nothing.
 //!
 //! Hand-written: the optimisation crates lag the faer and nalgebra versions used here, and the
-//! preconditioner is what makes it pay. On the default cantilever (9,720 DOFs) full space with
-//! this solver took 27.9 ms/step (6.3 iterations) against Newton's 124.9 ms/step (2.1 iterations)
-//! in one `cargo xtask run` (its report's `full` and `full-newton` rows).
+//! preconditioner is what makes it pay. On the stiff cantilever that was the default scene until
+//! 2026-11-27 (9,720 DOFs) full space with this solver took 27.9 ms/step (6.3 iterations) against
+//! Newton's 124.9 ms/step (2.1 iterations) in one `cargo xtask run` (its report's `full` and
+//! `full-newton` rows).
 
 use super::{
     Objective, SolveParams, SolveStats, armijo_backtracking, at_roundoff_floor, dot, norm, relative,
