@@ -11,7 +11,7 @@ use tungstenite::Message;
 use viewer::protocol::{Event, MAX_MESSAGE_BYTES};
 use viewer::{Method, Session, Settings};
 
-use crate::common::{Client, distance, model, serve, session, tip};
+use crate::common::{Client, distance, falling_model, model, serve, session, tip};
 
 #[test]
 fn a_drag_pulls_the_vertex_to_the_target_and_the_body_relaxes_after_release() {
@@ -456,6 +456,26 @@ fn a_solver_failure_is_shown_and_a_reset_goes_on() {
         "stepping again after the second reset",
     );
     server.shutdown();
+}
+
+/// The grab spring starts at 10⁻² E·L, or stiffer where that could not hold the body's weight
+/// when stretched by a fifth of its size: the tiny beam (1 × 0.2 × 0.2 m, 40 kg, E = 100 kPa)
+/// without gravity gets 10⁻² E·L, under gravity M|g|/(0.2 L).
+#[test]
+fn the_grab_spring_holds_the_body_weight() {
+    let size = (1.0f64 + 0.04 + 0.04).sqrt();
+    let floating = Settings::for_model(model()).stiffness;
+    assert!(
+        (floating - 1e-2 * 1.0e5 * size).abs() < 1e-9 * floating,
+        "{floating}"
+    );
+    let heavy = Settings::for_model(falling_model()).stiffness;
+    let weight = 40.0 * 9.81;
+    assert!(
+        (heavy - weight / (0.2 * size)).abs() < 1e-9 * heavy,
+        "{heavy} against {}",
+        weight / (0.2 * size)
+    );
 }
 
 #[test]
