@@ -26,6 +26,9 @@ use crate::{ReducedError, ReducedSpace, Subspace};
 /// An iterate is kept when at least this fraction of its A-norm is new.
 const NEW_FRACTION: f64 = 1e-3;
 
+/// Gauss–Newton steps [`Augmented::refine`] takes at most.
+const REFINE_STEPS: usize = 8;
+
 /// The subspace `S` with linear directions V (k × m) beside it: latent coordinates (z, w),
 /// q = f(z) + V w, J = [J_f | V].
 #[derive(Debug, Clone)]
@@ -294,8 +297,22 @@ impl<S: Subspace> Subspace for Augmented<S> {
         out[k * d..].copy_from_slice(&self.directions);
     }
 
-    /// z = encode_f(q), then w the A-orthogonal projection of q − f(z) on V.
+    /// z = encode_f(q), then w the A-orthogonal projection of q − f(z) on V; from there,
+    /// Gauss–Newton on ½‖q − f(z) − V w‖² finds the nearest point of the subspace (the
+    /// encoder's guess is close on the training data, not exact).
     fn encode(&mut self, q: &[f64], z: &mut [f64]) {
+        self.first_guess(q, z);
+        self.refine(q, z);
+    }
+
+    fn is_linear(&self) -> bool {
+        self.inner.is_linear()
+    }
+}
+
+impl<S: Subspace> Augmented<S> {
+    /// z = encode_f(q), then w the A-orthogonal projection of q − f(z) on V.
+    fn first_guess(&mut self, q: &[f64], z: &mut [f64]) {
         let (d, k) = (self.inner.latent_dim(), self.inner.coeff_dim());
         self.inner.encode(q, &mut z[..d]);
         if self.directions() == 0 {
@@ -314,7 +331,66 @@ impl<S: Subspace> Subspace for Augmented<S> {
         self.residual = r;
     }
 
-    fn is_linear(&self) -> bool {
-        self.inner.is_linear()
+    /// The best fit of q in the subspace, min ½‖q − f(z) − V w‖² over (z, w) (the Euclidean norm
+    /// of the PCA coefficients: the displacement's mass norm), by Gauss–Newton from `z`, the
+    /// encoder's answer. An encoder is trained to be close on the training data, not exact: at
+    /// the first millimetres of a fall the autoencoder's encoder missed 3.6 % of the
+    /// displacement along the decoder's own tangent, which no linear direction beside it (each
+    /// A-orthogonal to that tangent) can take up. Each step is kept only when it lowers the
+    /// misfit; at most [`REFINE_STEPS`] steps.
+    fn refine(&mut self, q: &[f64], z: &mut [f64]) {
+        let (k, n) = (self.inner.coeff_dim(), self.latent_dim());
+        let mut fit = vec![0.0; k];
+        let misfit = |s: &mut Self, z: &[f64], fit: &mut [f64]| -> f64 {
+            s.decode(z, fit);
+            fit.iter_mut().zip(q).for_each(|(f, q)| *f = q - *f);
+            dot(fit, fit)
+        };
+        let mut cost = misfit(self, z, &mut fit);
+        let scale = dot(q, q);
+        let (mut jac, mut normal, mut step) = (vec![0.0; k * n], vec![0.0; n * n], vec![0.0; n]);
+        let mut trial = vec![0.0; n];
+        let mut factor = DenseFactor::default();
+        for _ in 0..REFINE_STEPS {
+            // Also stops on a NaN cost.
+            if cost.is_nan() || cost <= 1e-24 * scale {
+                break;
+            }
+            self.jacobian(z, &mut jac);
+            for (i, ci) in jac.chunks_exact(k).enumerate() {
+                step[i] = dot(ci, &fit);
+                for (j, cj) in jac.chunks_exact(k).enumerate().take(i + 1) {
+                    let g = dot(ci, cj);
+                    normal[j * n + i] = g;
+                    normal[i * n + j] = g;
+                }
+            }
+            let trace: f64 = (0..n).map(|i| normal[i * n + i]).sum();
+            if !factor.try_factor(&normal, n, 1e-12 * trace / n as f64) {
+                break;
+            }
+            factor.solve_in_place(&mut step);
+            let (mut t, before) = (1.0, cost);
+            let mut better = false;
+            for _ in 0..4 {
+                trial
+                    .iter_mut()
+                    .zip(z.iter())
+                    .zip(&step)
+                    .for_each(|((x, z), s)| *x = z + t * s);
+                let c = misfit(self, &trial, &mut fit);
+                if c < cost {
+                    cost = c;
+                    z.copy_from_slice(&trial);
+                    better = true;
+                    break;
+                }
+                t *= 0.5;
+            }
+            // Converged: a step that gains nothing measurable ends it.
+            if !better || before - cost <= 1e-10 * before {
+                break;
+            }
+        }
     }
 }

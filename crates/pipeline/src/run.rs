@@ -63,9 +63,9 @@ pub struct MethodReport {
     /// Mean solver iterations per step.
     pub iterations: f64,
     /// Mean over frames of the relative error of the reference's best representation in this
-    /// method's subspace (u_full projected and, for neural methods, encoded and decoded and
-    /// completed by the complement directions, the onset directions left out): the part of the
-    /// error the subspace itself causes, whatever the dynamics do.
+    /// method's subspace (u_full projected and, for neural methods, the nearest point of the
+    /// subspace, linear directions included, that the runtime's `encode` finds): the part of
+    /// the error the subspace itself causes, whatever the dynamics do.
     pub subspace_error: f64,
     /// Mean over frames of the relative error of one step started from the reference: the
     /// method put in its subspace's representation of the reference at the two steps before
@@ -756,6 +756,14 @@ pub fn measure(
             &reference.frames,
             stage_progress,
         )?;
+        // The neural subspaces' best fit, through the runtime's own encode (the gravity-onset
+        // directions included), where the runner is at hand.
+        let subspace = match (method, last_runner.as_mut()) {
+            (Method::Neural | Method::NeuralCubature, Some(runner)) => {
+                fitted_errors(runner, &states, &reference.frames)?
+            }
+            _ => subspace,
+        };
         let step = match last_runner.as_mut() {
             Some(runner) => step_errors(method, runner, &states, &reference.frames)?,
             None => Vec::new(),
@@ -830,9 +838,9 @@ fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>>
 
 /// Relative error, frame by frame, of the reference frames' best representation in reduced
 /// `method`'s subspace: u ↦ U UᵀM u for PCA, u ↦ U(f + VVᵀ(q − f)) with f = decode(encode(q))
-/// for the autoencoder (q = UᵀM u, V its complement directions; the few gravity-onset
-/// directions are left out, so a neural subspace stepped with them holds the frames a little
-/// better than this says), from the frames' coefficients `states` ([`reference_states`]).
+/// for the autoencoder (q = UᵀM u, V its complement directions), from the frames'
+/// coefficients `states` ([`reference_states`]). For a neural method whose runner ran,
+/// [`fitted_errors`] replaces this with the nearest point of its whole subspace.
 fn subspace_errors(
     pipeline: &mut Pipeline<'_>,
     method: Method,
@@ -866,6 +874,23 @@ fn subspace_errors(
         model.dofs.scatter(&free, &mut u);
         model.dofs.scatter(f, &mut r);
         errors.add_full(&model.mass, &u, &r);
+    }
+    Ok(errors.rel)
+}
+
+/// The relative error, frame by frame, of each reference frame's best fit in reduced
+/// `runner`'s subspace: its state set to the frame's coefficients (`states`,
+/// [`reference_states`]), which the runtime encodes and refines to the nearest point of the
+/// subspace, linear directions included.
+fn fitted_errors(
+    runner: &mut Runner,
+    states: &[Vec<f64>],
+    frames: &[Vec<f64>],
+) -> Result<Vec<f64>> {
+    let mut errors = ErrorAccumulator::default();
+    for (j, f) in frames.iter().enumerate() {
+        runner.set_state(j + 1, &states[j + 1], &states[j])?;
+        errors.add(runner.model(), &runner.displacement(), f);
     }
     Ok(errors.rel)
 }

@@ -256,7 +256,8 @@ impl<S: Subspace> ReducedSimulator<S> {
 
     /// Puts the simulator at step `step` (time `step · h`) in the states its subspace gives to
     /// the PCA coefficients `q_now` (at that step) and `q_before` (one step earlier): z =
-    /// encode(q), q = decode(z), the velocities their differences over h (zero when
+    /// encode(q) (with linear directions beside a network, the nearest point of the subspace:
+    /// [`Augmented`](crate::Augmented)), q = decode(z), the velocities their differences over h (zero when
     /// quasi-static). Nothing of the previous solves is kept (warm-start history, L-BFGS pairs,
     /// preconditioner), so the next [`step`](Self::step) depends on these two states only: what
     /// a one-step error measures, started from a reference trajectory.

@@ -903,6 +903,58 @@ fn onset_directions_are_new_and_linear() {
     assert_eq!(none.directions(), 0);
 }
 
+/// encode finds the point of the subspace nearest q, not the encoder's guess: an untrained
+/// autoencoder's encoder is far off, yet a pose the subspace holds (any decoded (z, w)) comes
+/// back to within round-off, and a pose it does not hold comes back no farther than the
+/// encoder's guess put it.
+#[test]
+fn encode_finds_the_nearest_point_of_the_subspace() {
+    let m = model();
+    let k = 6;
+    let space = reduced_space(&m, &small_basis(&m, k), k, None).unwrap();
+    let ae =
+        nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    let mut sub =
+        Augmented::with_gravity_onset(NeuralSubspace::new(ae.clone()), &space, &time(1), 2)
+            .unwrap();
+    let d = sub.latent_dim();
+    assert_eq!(d, 4);
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let mut ws = ae.workspace();
+    for (a, b) in [(0.3, 0.02), (-0.5, 0.05), (0.8, -0.01)] {
+        // A pose in the subspace.
+        let target: Vec<f64> = (0..d).map(|i| a * (i as f64 + 1.0).sin() + b).collect();
+        let mut q = vec![0.0; k];
+        sub.decode(&target, &mut q);
+        // The encoder alone is far from it ...
+        let (mut ze, mut qe) = (vec![0.0; 2], vec![0.0; k]);
+        ae.encode(&q, &mut ze, &mut ws);
+        ae.decode(&ze, &mut qe, &mut ws);
+        let off = |p: &[f64]| norm(&p.iter().zip(&q).map(|(x, y)| x - y).collect::<Vec<_>>());
+        assert!(off(&qe) > 1e-2 * norm(&q), "the encoder is already exact");
+        // ... encode is not.
+        let (mut z, mut back) = (vec![0.0; d], vec![0.0; k]);
+        sub.encode(&q, &mut z);
+        sub.decode(&z, &mut back);
+        assert!(
+            off(&back) <= 1e-8 * norm(&q),
+            "{} of {}",
+            off(&back),
+            norm(&q)
+        );
+        // A pose off the subspace: q plus a little of every coefficient.
+        let q2: Vec<f64> = q
+            .iter()
+            .enumerate()
+            .map(|(i, x)| x + 0.01 * (i as f64).cos())
+            .collect();
+        sub.encode(&q2, &mut z);
+        sub.decode(&z, &mut back);
+        let miss = norm(&back.iter().zip(&q2).map(|(x, y)| x - y).collect::<Vec<_>>());
+        assert!(miss <= norm(&q2.iter().zip(&q).map(|(x, y)| x - y).collect::<Vec<_>>()) + 1e-12);
+    }
+}
+
 /// Complement directions join the subspace where they are new: one already in the tangent at
 /// rest, or a repeat, is dropped; the kept ones are A-orthogonal to the tangent and to the onset
 /// directions before them; they are added without gravity too; a column of the wrong length is a
