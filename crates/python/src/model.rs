@@ -159,9 +159,7 @@ impl Model {
     /// The body's mass (kg): the density times the rest volume of the mesh's tets.
     #[getter]
     fn mass(&self) -> f64 {
-        let mesh = &self.inner.mesh;
-        let volume: f64 = (0..mesh.num_tets()).map(|t| mesh.signed_volume(t)).sum();
-        self.inner.material.density * volume
+        self.inner.material.density * self.inner.mesh.volume()
     }
 
     /// The errors the pipeline measured while making the model: a list of

@@ -157,7 +157,7 @@ mod tests {
         .unwrap();
         assert_eq!(m.num_vertices(), 5 * 4 * 3);
         assert_eq!(m.num_tets(), 6 * 24);
-        let vol: f64 = (0..m.num_tets()).map(|t| m.signed_volume(t)).sum();
+        let vol = m.volume();
         assert!((vol - 0.25).abs() < 1e-12, "{vol}");
         assert!((0..m.num_tets()).all(|t| m.signed_volume(t) > 0.0));
         // A closed box surface: 2 triangles per boundary quad.

@@ -33,6 +33,12 @@ impl TetMesh {
         self.tets.len()
     }
 
+    /// The rest volume: the sum of the tets' signed volumes (positive once the mesh is validated,
+    /// which orients every tet).
+    pub fn volume(&self) -> f64 {
+        (0..self.num_tets()).map(|t| self.signed_volume(t)).sum()
+    }
+
     /// Signed volume det[X1−X0, X2−X0, X3−X0] / 6 of tet `t`.
     pub fn signed_volume(&self, t: usize) -> f64 {
         let [a, b, c, d] = self.tets[t];
