@@ -20,16 +20,7 @@ pub fn model() -> &'static ReducedModel {
             "{}\n[gravity]\nacceleration = [0.0, 0.0, 0.0]\n",
             tests::TINY
         );
-        let scene = tests::scene(&text);
-        let cache = tests::scratch_dir("viewer-model");
-        let mut p = Pipeline::new(&scene, &cache).expect("a pipeline");
-        pipeline::export::scene_model(
-            &mut p,
-            PipelineMethod::Pca,
-            latent_sim::model::Rows::Used,
-            &tests::no_progress,
-        )
-        .expect("the tiny model")
+        pca_model(&text, "viewer-model")
     })
 }
 
@@ -37,18 +28,21 @@ pub fn model() -> &'static ReducedModel {
 /// hangs (for the view's framing).
 pub fn falling_model() -> &'static ReducedModel {
     static MODEL: OnceLock<ReducedModel> = OnceLock::new();
-    MODEL.get_or_init(|| {
-        let scene = tests::scene(tests::TINY);
-        let cache = tests::scratch_dir("viewer-falling-model");
-        let mut p = Pipeline::new(&scene, &cache).expect("a pipeline");
-        pipeline::export::scene_model(
-            &mut p,
-            PipelineMethod::Pca,
-            latent_sim::model::Rows::Used,
-            &tests::no_progress,
-        )
-        .expect("the tiny model under gravity")
-    })
+    MODEL.get_or_init(|| pca_model(tests::TINY, "viewer-falling-model"))
+}
+
+/// The `pca` model of scene `text`, its stages cached in the scratch folder `cache`.
+fn pca_model(text: &str, cache: &str) -> ReducedModel {
+    let scene = tests::scene(text);
+    let cache = tests::scratch_dir(cache);
+    let mut p = Pipeline::new(&scene, &cache).expect("a pipeline");
+    pipeline::export::scene_model(
+        &mut p,
+        PipelineMethod::Pca,
+        latent_sim::model::Rows::Used,
+        &tests::no_progress,
+    )
+    .expect("the tiny model")
 }
 
 /// A session over the tiny model: `pca` and `full`.
