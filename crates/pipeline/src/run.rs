@@ -747,28 +747,13 @@ pub fn measure(
     } else {
         let fit = pipeline.pca(stage_progress)?;
         let states = reference_states(&fit.basis, &reference.frames);
-        let subspace = subspace_errors(
-            pipeline,
-            method,
-            &model,
-            &fit.basis,
-            &states,
-            &reference.frames,
-            stage_progress,
-        )?;
-        // The neural subspaces' best fit, through the runtime's own encode (the gravity-onset
-        // directions included), where the runner is at hand.
-        let subspace = match (method, last_runner.as_mut()) {
-            (Method::Neural | Method::NeuralCubature, Some(runner)) => {
-                fitted_errors(runner, &model, &fit.basis, &states, &reference.frames)?
-            }
-            _ => subspace,
-        };
-        let step = match last_runner.as_mut() {
-            Some(runner) => step_errors(method, runner, &states, &reference.frames)?,
-            None => Vec::new(),
-        };
-        (subspace, step)
+        match last_runner.as_mut() {
+            Some(runner) => (
+                subspace_errors(runner, &model, &fit.basis, &states, &reference.frames)?,
+                step_errors(method, runner, &states, &reference.frames)?,
+            ),
+            None => (Vec::new(), Vec::new()),
+        }
     };
     let (mut training_distance, mut training_distance_time, mut training_seconds) = (0.0, 0.0, 0.0);
     if !poses.is_empty() {
@@ -837,54 +822,11 @@ fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>>
 }
 
 /// Relative error, frame by frame, of the reference frames' best representation in reduced
-/// `method`'s subspace: u ↦ U UᵀM u for PCA, u ↦ U(f + VVᵀ(q − f)) with f = decode(encode(q))
-/// for the autoencoder (q = UᵀM u, V its complement directions), from the frames'
-/// coefficients `states` ([`reference_states`]). For a neural method whose runner ran,
-/// [`fitted_errors`] replaces this with the nearest point of its whole subspace.
+/// `runner`'s subspace: its state set to each frame's coefficients (`states`,
+/// [`reference_states`]), which the runtime encodes (for PCA, q itself; for the autoencoder with
+/// its linear directions, the nearest point of the subspace), and the error of U q. A spring's
+/// dent, which the runtime's displacement adds outside the subspace, is left out.
 fn subspace_errors(
-    pipeline: &mut Pipeline<'_>,
-    method: Method,
-    model: &FullSpaceModel,
-    basis: &pca::PcaBasis,
-    states: &[Vec<f64>],
-    frames: &[Vec<f64>],
-    progress: Progress<'_>,
-) -> Result<Vec<f64>> {
-    let (trained, complement) = match method {
-        Method::Neural | Method::NeuralCubature => (
-            Some(pipeline.train(progress)?),
-            pipeline.complement_columns(progress)?,
-        ),
-        _ => (None, Vec::new()),
-    };
-    let mut ws = trained.as_ref().map(|t| t.model.workspace());
-    let mut qh = vec![0.0; basis.k()];
-    let mut free = vec![0.0; basis.n()];
-    let (mut u, mut r) = (vec![0.0; model.num_full()], vec![0.0; model.num_full()]);
-    let mut errors = ErrorAccumulator::default();
-    for (q, f) in states[1..].iter().zip(frames) {
-        match (&trained, ws.as_mut()) {
-            (Some(t), Some(ws)) => {
-                t.model.reconstruct(q, &mut qh, ws);
-                crate::pipeline::complete(&complement, q, &mut qh);
-            }
-            _ => qh.copy_from_slice(q),
-        }
-        basis.reconstruct(&qh, &mut free);
-        model.dofs.scatter(&free, &mut u);
-        model.dofs.scatter(f, &mut r);
-        errors.add_full(&model.mass, &u, &r);
-    }
-    Ok(errors.rel)
-}
-
-/// The relative error, frame by frame, of each reference frame's best fit in reduced
-/// `runner`'s subspace: its state set to the frame's coefficients (`states`,
-/// [`reference_states`]), which the runtime encodes and refines to the nearest point of the
-/// subspace, linear directions included. The fit's own coefficients, U q: a spring's dent, which
-/// the runtime's displacement adds outside the subspace, is left out, as in
-/// [`subspace_errors`].
-fn fitted_errors(
     runner: &mut Runner,
     model: &FullSpaceModel,
     basis: &pca::PcaBasis,
