@@ -83,30 +83,30 @@
     const half = Math.atan(Math.tan(camera.fov / 2) * Math.min(1, aspect()));
     camera.distance = (camera.radius / Math.sin(half)) * 1.05;
   }
-  function fitCamera() {
-    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-    for (let i = 0; i < mesh.n; i++) {
+  // The box { lo, hi } grown by the finite coordinates of `coords` (x, y, z per vertex): a
+  // diverged method's frame moves nothing.
+  function grownBox(box, coords) {
+    const lo = [...box.lo], hi = [...box.hi];
+    for (let i = 0; i < coords.length; i += 3) {
       for (let c = 0; c < 3; c++) {
-        lo[c] = Math.min(lo[c], mesh.rest[3 * i + c]);
-        hi[c] = Math.max(hi[c], mesh.rest[3 * i + c]);
+        const x = coords[i + c];
+        if (!Number.isFinite(x)) continue;
+        if (x < lo[c]) lo[c] = x;
+        if (x > hi[c]) hi[c] = x;
       }
     }
-    framed = { lo, hi };
+    return { lo, hi };
+  }
+  function fitCamera() {
+    const empty = { lo: [Infinity, Infinity, Infinity], hi: [-Infinity, -Infinity, -Infinity] };
+    framed = grownBox(empty, mesh.rest);
     frameBox(framed);
   }
   // Grows the framed box by the latest positions; the camera moves only when the box grew by
   // more than 1 % of its size, so a body at rest or swinging inside it leaves the view alone.
   function followBody() {
     if (!framed) return;
-    const lo = [...framed.lo], hi = [...framed.hi];
-    for (let i = 0; i < mesh.n; i++) {
-      for (let c = 0; c < 3; c++) {
-        const x = positions[3 * i + c];
-        if (!Number.isFinite(x)) continue;   // a diverged method's frame moves nothing
-        if (x < lo[c]) lo[c] = x;
-        if (x > hi[c]) hi[c] = x;
-      }
-    }
+    const { lo, hi } = grownBox(framed, positions);
     const size = norm(sub(framed.hi, framed.lo));
     if (norm(sub(lo, framed.lo)) + norm(sub(hi, framed.hi)) > 0.01 * size) {
       framed = { lo, hi };
