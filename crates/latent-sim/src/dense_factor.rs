@@ -70,6 +70,9 @@ impl DenseFactor {
         d: usize,
         what: &'static str,
     ) -> Result<(), ReducedError> {
+        if !a[..d * d].iter().all(|x| x.is_finite()) {
+            return Err(ReducedError::NotFinite { what });
+        }
         let mean = (0..d).map(|i| a[i * d + i].abs()).sum::<f64>() / d.max(1) as f64;
         let mut shift = 0.0;
         for _ in 0..12 {
@@ -91,5 +94,29 @@ impl DenseFactor {
         let l = MatRef::from_column_major_slice(&self.l, n, n);
         let x = MatMut::from_column_major_slice_mut(&mut x[..n], n, 1);
         llt::solve::solve_in_place(l, x, Par::Seq, MemStack::new(&mut []));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_matrix_with_a_nan_says_so_rather_than_not_positive_definite() {
+        let mut f = DenseFactor::default();
+        f.factor(&[2.0, 1.0, 1.0, 2.0], 2, "test").unwrap();
+        let mut x = [3.0, 3.0];
+        f.solve_in_place(&mut x);
+        assert!((x[0] - 1.0).abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12);
+        let e = f.factor(&[2.0, f64::NAN, f64::NAN, 2.0], 2, "test");
+        assert!(
+            matches!(e, Err(ReducedError::NotFinite { what: "test" })),
+            "{e:?}"
+        );
+        let e = f.factor(&[1.0, 2.0, 2.0, 1.0], 2, "test");
+        assert!(
+            matches!(e, Err(ReducedError::NotPositiveDefinite { .. })),
+            "{e:?}"
+        );
     }
 }

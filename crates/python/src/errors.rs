@@ -158,7 +158,9 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         | RuntimeError::Reduced(ReducedError::NoBasisRows { .. })
         | RuntimeError::Reduced(ReducedError::Keyframes)
         | RuntimeError::Reduced(ReducedError::NoSuchForce { .. }) => Class::InvalidArgument,
-        RuntimeError::Reduced(ReducedError::NotPositiveDefinite { .. }) => Class::Solver,
+        RuntimeError::Reduced(
+            ReducedError::NotPositiveDefinite { .. } | ReducedError::NotFinite { .. },
+        ) => Class::Solver,
         RuntimeError::Reduced(_) | RuntimeError::Fem(_) => Class::Base,
     }
 }
