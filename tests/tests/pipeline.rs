@@ -566,7 +566,8 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
         frames: 20,
         ..s.time.clone()
     };
-    let mut sim = Simulator::new(model.clone(), time, s.solver.clone()).unwrap();
+    let cfg = s.training();
+    let mut sim = Simulator::new(model.clone(), time, cfg.solver(&s.solver)).unwrap();
     for _ in 0..20 {
         sim.step().unwrap();
     }
@@ -574,7 +575,6 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
         u: sim.state.u.clone(),
         v: sim.state.v.clone(),
     };
-    let cfg = s.training();
     let by_hand = generate_from(
         &model,
         &cfg,

@@ -665,7 +665,7 @@ impl<'a> Pipeline<'a> {
             frames: last,
             ..self.scene.time.clone()
         };
-        let mut sim = Simulator::new(model, time, self.scene.solver.clone())?;
+        let mut sim = Simulator::new(model, time, cfg.solver(&self.scene.solver))?;
         let (mut start, mut peak_kinetic) = (None, 0.0f64);
         for frame in 1..=last {
             let Ok(report) = sim.step() else {
@@ -1266,7 +1266,7 @@ impl<'a> Pipeline<'a> {
                 frames: cfg.frames_per_schedule,
                 ..p.scene.time.clone()
             };
-            let mut sim = Simulator::new(model, time, p.scene.solver.clone())?;
+            let mut sim = Simulator::new(model, time, cfg.solver(&p.scene.solver))?;
             let mut r = Reference {
                 frames: Vec::new(),
                 step_seconds: Vec::new(),

@@ -249,9 +249,15 @@ impl Scene {
         }
     }
 
-    /// The training schedule family, defaults filled in.
+    /// The training schedule family, defaults filled in. Its solves stop at `[training]
+    /// tolerance`, by default the looser of [`fem_core::snapshots::TRAINING_TOLERANCE`] and
+    /// `[solver] tolerance`.
     pub fn training(&self) -> ScheduleConfig {
-        self.training.resolve(ScheduleConfig::training())
+        let mut cfg = self.training.resolve(ScheduleConfig::training());
+        if self.training.tolerance.is_none() {
+            cfg.tolerance = cfg.tolerance.map(|t| t.max(self.solver.tolerance));
+        }
+        cfg
     }
 
     /// The test schedule family, defaults filled in.
@@ -506,6 +512,35 @@ mod tests {
         assert!(err.contains("bad.toml"), "{err}");
         assert!(err.contains("material.poisson_ratio"), "{err}");
         assert!(err.contains("time.step"), "{err}");
+    }
+
+    /// The training data's solves stop at 10⁻⁴ unless the solver's own tolerance is looser or
+    /// `[training] tolerance` says otherwise; the test trajectory keeps the solver's.
+    #[test]
+    fn training_solves_take_their_own_tolerance() {
+        let with = |extra: &str| {
+            Scene::from_str(
+                &format!("{DEFAULT_SCENE}\n{extra}"),
+                Path::new("."),
+                "t.toml",
+            )
+        };
+        let s = with("").unwrap();
+        assert_eq!(s.training().tolerance, Some(1e-4));
+        assert_eq!(s.test().tolerance, None);
+        assert_eq!(s.training().solver(&s.solver).tolerance, 1e-4);
+        assert_eq!(s.test().solver(&s.solver).tolerance, s.solver.tolerance);
+        let s = with("[solver]\ntolerance = 1.0e-3\n").unwrap();
+        assert_eq!(s.training().tolerance, Some(1e-3));
+        let s = with("[training]\ntolerance = 1.0e-7\n").unwrap();
+        assert_eq!(s.training().tolerance, Some(1e-7));
+        let err = with("[training]\ntolerance = 0.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("training.tolerance") && err.contains("t.toml"),
+            "{err}"
+        );
     }
 
     #[test]

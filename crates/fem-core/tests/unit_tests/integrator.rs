@@ -520,6 +520,7 @@ fn a_schedule_whose_solve_fails_keeps_its_earlier_frames() {
         kinds: vec![ScheduleKind::Pull],
         offset: [2.0, 3.0],
         stiffness: [5.0, 10.0],
+        tolerance: None,
         ..ScheduleConfig::training()
     };
     let time = dynamic(family.frames_per_schedule);
@@ -593,9 +594,11 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
         [0.0, -9.81, 0.0],
         vec![],
     );
+    // The solver's own tolerance (the family's default would loosen it to 10⁻⁴).
     let family = ScheduleConfig {
         schedules: 4,
         frames_per_schedule: 10,
+        tolerance: None,
         ..ScheduleConfig::training()
     };
     let time = dynamic(family.frames_per_schedule);
