@@ -100,8 +100,9 @@ impl StageSummary for PcaFit {
         let why = match self.rule {
             pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
             pca::DimensionRule::ExplainedEnergy(f) => format!(
-                "the smallest basis holding {:.4} % of the snapshots' energy (`[pca] explained_energy`)",
-                100.0 * f
+                "the smallest basis holding all but {:.1e} of the snapshots' energy (`[pca] \
+                 explained_energy` = {f})",
+                1.0 - f
             ),
             pca::DimensionRule::MaxVertexError(t) => format!(
                 "the smallest basis whose worst vertex error over the snapshots is at most {t} \
