@@ -142,13 +142,12 @@ pub enum ReducedError {
     /// A reduced matrix that must be positive definite is not.
     #[error("the reduced {what} matrix is not positive definite")]
     NotPositiveDefinite { what: &'static str },
-    /// A reduced matrix with entries that are not finite: an element it evaluates is inverted
-    /// at this state, where the material (classic Neo-Hookean) has no energy.
+    /// A reduced matrix with entries that are not finite: e.g. an element it evaluates is
+    /// inverted at this state, where the material (classic Neo-Hookean) has no energy.
     #[error(
-        "the reduced {what} matrix is not finite at this state: an element it evaluates is \
-         inverted, where the material has no energy (classic Neo-Hookean); a state the reduced \
-         simulation reached itself never is, one given from outside (a projected full-space \
-         state) can be"
+        "the reduced {what} matrix has entries that are not finite at this state (e.g. an \
+         element it evaluates is inverted, where classic Neo-Hookean has no energy: a state \
+         given from outside, such as a full-space state projected on the basis, can be)"
     )]
     NotFinite { what: &'static str },
     /// The parts of a reduced space do not fit together or the mesh.

@@ -4,7 +4,7 @@
 //! per core).
 //!
 //! ```sh
-//! RAYON_NUM_THREADS=1 cargo run --release -p xtask --example snapshot_timing -- \
+//! RAYON_NUM_THREADS=1 cargo run --release -p pipeline --example snapshot_timing -- \
 //!     data/catapult.toml 0 40 lbfgs current-state
 //! ```
 
@@ -27,7 +27,8 @@ fn main() -> Result<()> {
     let scene = Scene::from_file(&PathBuf::from(&args[0]))?;
     let index: usize = args[1].parse().context("SCHEDULE")?;
     let frames: usize = args[2].parse().context("FRAMES")?;
-    let mut solver = scene.solver.clone();
+    // The snapshot stage's solver: the scene's, at the training data's tolerance.
+    let mut solver = scene.training().solver(&scene.solver);
     solver.method = match args[3].as_str() {
         "newton" => SolverMethod::Newton,
         "lbfgs" => SolverMethod::Lbfgs,
@@ -58,6 +59,7 @@ fn main() -> Result<()> {
     )?;
     let mut m = model.clone();
     m.forces = training.schedule(&model, &probe, index, scene.time.step);
+    m.scale_gravity(training.gravity_scale);
     let time = TimeConfig {
         frames,
         ..scene.time.clone()

@@ -99,6 +99,11 @@ impl StageSummary for PcaFit {
     fn summary(&self) -> String {
         let why = match self.rule {
             pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
+            pca::DimensionRule::ExplainedEnergy(f) if f >= 1.0 => {
+                "the smallest basis holding all of the snapshots' energy (`[pca] \
+                 explained_energy` = 1)"
+                    .to_string()
+            }
             pca::DimensionRule::ExplainedEnergy(f) => format!(
                 "the smallest basis holding all but {:.1e} of the snapshots' energy (`[pca] \
                  explained_energy` = {f})",

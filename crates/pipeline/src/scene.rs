@@ -116,6 +116,15 @@ impl Scene {
         self.reduced.check(&mut errors);
         self.training().check("training", &mut errors);
         self.test().check("test", &mut errors);
+        if let Some(t) = self.test.tolerance {
+            errors.push(FemError::InvalidConfig {
+                field: "test.tolerance".into(),
+                reason: format!(
+                    "got {t}, but the held-out test is solved to `[solver] tolerance` (as is every \
+                     full-space run it is compared with); set that instead"
+                ),
+            });
+        }
         let mut cub_errors = Vec::new();
         self.cubature.check(&mut cub_errors);
         for e in cub_errors {
@@ -254,8 +263,10 @@ impl Scene {
     /// `[solver] tolerance`.
     pub fn training(&self) -> ScheduleConfig {
         let mut cfg = self.training.resolve(ScheduleConfig::training());
-        if self.training.tolerance.is_none() {
-            cfg.tolerance = cfg.tolerance.map(|t| t.max(self.solver.tolerance));
+        let solver = self.solver.tolerance;
+        // An invalid `[solver] tolerance` is reported under its own name, not again here.
+        if self.training.tolerance.is_none() && solver > 0.0 && solver < 1.0 {
+            cfg.tolerance = cfg.tolerance.map(|t| t.max(solver));
         }
         cfg
     }
@@ -534,6 +545,13 @@ mod tests {
         assert_eq!(s.training().tolerance, Some(1e-3));
         let s = with("[training]\ntolerance = 1.0e-7\n").unwrap();
         assert_eq!(s.training().tolerance, Some(1e-7));
+        let err = with("[test]\ntolerance = 1.0e-4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("test.tolerance") && err.contains("[solver] tolerance"),
+            "{err}"
+        );
         let err = with("[training]\ntolerance = 0.0\n")
             .unwrap_err()
             .to_string();

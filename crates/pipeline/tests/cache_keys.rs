@@ -281,6 +281,19 @@ fn variants() -> Vec<Variant> {
         ),
         v("training.seed", add!("training", "seed = 7"), "", TRAINING),
         v(
+            "training.tolerance",
+            add!("training", "tolerance = 1.0e-5"),
+            "",
+            TRAINING,
+        ),
+        // The default, written out: the looser of 10⁻⁴ and `[solver] tolerance` (10⁻⁸ here).
+        v(
+            "training.tolerance (default)",
+            add!("training", "tolerance = 1.0e-4"),
+            "",
+            NONE,
+        ),
+        v(
             "training.kinds",
             add!("training", "kinds = [\"drag\"]"),
             "",

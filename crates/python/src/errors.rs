@@ -70,7 +70,7 @@ impl Class {
             Class::Solver => {
                 "A step whose solve failed: it diverged, did not converge or met an inverted \
                  element (the simulator keeps the state before the step); or a reduced matrix \
-                 that is not positive definite."
+                 that is not positive definite or not finite."
             }
             Class::Pipeline => {
                 "A pipeline run or export that failed: a stage whose solve failed (with the \
