@@ -450,10 +450,15 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
 /// fem-core's `a_schedule_whose_solve_fails_keeps_its_earlier_frames`).
 #[test]
 fn snapshots_that_never_start_are_an_error_that_says_what_to_change() {
-    let s = scene(&TINY.replace(
-        "tolerance = 1.0e-8",
-        "tolerance = 1.0e-15\nmax_iterations = 1",
-    ));
+    // The training family's own tolerance too: by default it is the looser 10⁻⁴.
+    let s = scene(
+        &TINY
+            .replace(
+                "tolerance = 1.0e-8",
+                "tolerance = 1.0e-15\nmax_iterations = 1",
+            )
+            .replace("[training]\n", "[training]\ntolerance = 1.0e-15\n"),
+    );
     let cache = scratch_dir("pipeline-no-frames");
     let mut p = Pipeline::new(&s, &cache).unwrap();
     let err = format!("{:#}", p.snapshots(&no_progress).unwrap_err());
