@@ -95,9 +95,11 @@ def test_a_failed_step_raises_solver_error_and_keeps_the_state(sim: ld.Simulator
 def test_a_failed_stage_raises_pipeline_error_with_the_solver_message(tmp_path: pathlib.Path) -> None:
     scene = tmp_path / "stiff.toml"
     # Every schedule fails at its first step (one that fails later keeps its earlier frames and
-    # the stage goes on).
+    # the stage goes on); the training family's tolerance is its own, by default the looser 1e-4.
     scene.write_text(
-        TINY.read_text().replace("tolerance = 1.0e-8", 'method = "newton"\ntolerance = 1.0e-15\nmax_iterations = 1')
+        TINY.read_text()
+        .replace("tolerance = 1.0e-8", 'method = "newton"\ntolerance = 1.0e-15\nmax_iterations = 1')
+        .replace("[training]\n", "[training]\ntolerance = 1.0e-15\n")
     )
     with pytest.raises(ld.PipelineError, match="stage snapshots: every training schedule.* did not converge"):
         ld.export_model(scene, "pca", cache_dir=tmp_path / "cache", path=tmp_path / "m.ldm")
