@@ -310,10 +310,6 @@ pub struct Complement {
     pub pca_lost_energy: f64,
 }
 
-/// The autoencoder's validation split holds out whole training schedules (keyed, so that networks
-/// trained on a split of frames are not reused).
-const VALIDATION_BY_SCHEDULE: &str = "validation by schedule";
-
 /// Residual energy below this fraction of the snapshots' is round-off, not worth a direction.
 const COMPLEMENT_ROUND_OFF: f64 = 1e-14;
 
@@ -552,7 +548,6 @@ impl<'a> Pipeline<'a> {
         KeyBuilder::new(Stage::Train)
             .mix_key(self.pca_key())
             .mix(&self.scene.autoencoder)
-            .mix(&VALIDATION_BY_SCHEDULE)
             .finish()
     }
 
@@ -1064,10 +1059,6 @@ impl<'a> Pipeline<'a> {
             let k = basis.k();
             let source = &p.scene.source;
             let mut cfg = p.scene.autoencoder.clone();
-            // Validation on whole schedules the network never trained on: early stopping and
-            // the kept weights then judge it on loads it has not seen, as the test's drag is
-            // (on a 29k-tet torus its subspace error on the test went from 0.45 to 0.28 %).
-            cfg.validation_groups = snaps.frames.clone();
             let mut latent_choice = None;
             match (cfg.latent_dim, cfg.latent_dims) {
                 (None, None) => {
