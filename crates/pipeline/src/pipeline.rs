@@ -501,8 +501,9 @@ impl<'a> Pipeline<'a> {
         })
     }
 
-    /// What every full-space simulation reads: mesh, material, pins, gravity, time step, solver.
-    fn physics_key(&self, stage: Stage) -> KeyBuilder {
+    /// What every full-space simulation reads: mesh, material, pins, gravity, time step, and
+    /// the solver as that simulation runs it.
+    fn physics_key(&self, stage: Stage, solver: &fem_core::optim::SolverConfig) -> KeyBuilder {
         let s = self.scene;
         KeyBuilder::new(stage)
             .mix_key(self.mesh_hash)
@@ -510,13 +511,16 @@ impl<'a> Pipeline<'a> {
             .mix(&self.model.pinned)
             .mix(&s.gravity)
             .mix(&(s.time.step, s.time.quasi_static))
-            .mix(&s.solver)
+            .mix(solver)
     }
 
     pub fn snapshots_key(&self) -> u64 {
+        // The solver at the training data's tolerance: a `[solver] tolerance` that only the test
+        // uses does not recompute the snapshots.
+        let training = self.scene.training();
         let key = self
-            .physics_key(Stage::Snapshots)
-            .mix(&self.scene.training());
+            .physics_key(Stage::Snapshots, &training.solver(&self.scene.solver))
+            .mix(&training);
         // Schedules left at the default length may start later to reach the test's last frame.
         match self.scene.training.frames_per_schedule {
             None => key.mix(&self.scene.test().frames_per_schedule).finish(),
@@ -552,7 +556,7 @@ impl<'a> Pipeline<'a> {
     }
 
     fn reference_key(&self, trajectory: usize) -> u64 {
-        self.physics_key(Stage::Reference)
+        self.physics_key(Stage::Reference, &self.scene.solver)
             .mix(&self.scene.test())
             .mix(&trajectory)
             .finish()

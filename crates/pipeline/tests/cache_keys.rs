@@ -196,10 +196,17 @@ fn variants() -> Vec<Variant> {
             "",
             ALL,
         ),
+        // The training data is solved to 10⁻⁴ whatever a tighter solver tolerance says.
         v(
             "solver.tolerance",
             "tolerance = 1.0e-8",
             "tolerance = 1.0e-9",
+            TEST,
+        ),
+        v(
+            "solver.tolerance (looser than the training data's)",
+            "tolerance = 1.0e-8",
+            "tolerance = 1.0e-3",
             ALL,
         ),
         v(
