@@ -99,7 +99,7 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
     };
     // A spring that holds the body's weight when stretched by the drag's 0.2 L (a soft, heavy
     // body hangs from it instead of falling away), and at least 10⁻³ E·L.
-    let weight = model.material.density * model.mesh.volume() * g.norm();
+    let weight = model.mass() * g.norm();
     let stiffness = (1e-3 * model.material.youngs_modulus * size).max(weight / (0.2 * size));
     let steps = (1.0 / model.time_step).round().max(1.0) as usize;
     let grabbed_at = rest[vertex];

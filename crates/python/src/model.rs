@@ -159,7 +159,7 @@ impl Model {
     /// The body's mass (kg): the density times the rest volume of the mesh's tets.
     #[getter]
     fn mass(&self) -> f64 {
-        self.inner.material.density * self.inner.mesh.volume()
+        self.inner.mass()
     }
 
     /// The errors the pipeline measured while making the model: a list of

@@ -57,10 +57,7 @@ impl Settings {
     pub fn for_model(model: &ReducedModel) -> Self {
         let (lo, hi) = model.mesh.bounding_box();
         let size = (hi - lo).norm().max(f64::MIN_POSITIVE);
-        let g = model.gravity;
-        let weight = model.material.density
-            * model.mesh.volume()
-            * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let weight = model.mass() * fem_core::Vec3::from(model.gravity).norm();
         let stiffness = (1e-2 * model.material.youngs_modulus * size).max(weight / (0.2 * size));
         Self {
             scene: model.provenance.scene.clone(),

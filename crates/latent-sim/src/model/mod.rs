@@ -190,6 +190,11 @@ pub struct ModelSource<'a> {
 }
 
 impl ReducedModel {
+    /// The body's mass (kg): the density times the rest volume of the mesh's tets.
+    pub fn mass(&self) -> f64 {
+        self.material.density * self.mesh.volume()
+    }
+
     /// Builds the model: the reduced space of the basis and rule, and the linear directions of
     /// a neural subspace, as the runtime will step them.
     ///
