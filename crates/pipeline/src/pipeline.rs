@@ -1276,7 +1276,7 @@ impl<'a> Pipeline<'a> {
                 frames: cfg.frames_per_schedule,
                 ..p.scene.time.clone()
             };
-            let mut sim = Simulator::new(model, time, cfg.solver(&p.scene.solver))?;
+            let mut sim = Simulator::new(model, time, p.scene.solver.clone())?;
             let mut r = Reference {
                 frames: Vec::new(),
                 step_seconds: Vec::new(),

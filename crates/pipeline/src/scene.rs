@@ -545,20 +545,19 @@ mod tests {
         assert_eq!(s.training().tolerance, Some(1e-3));
         let s = with("[training]\ntolerance = 1.0e-7\n").unwrap();
         assert_eq!(s.training().tolerance, Some(1e-7));
-        let err = with("[test]\ntolerance = 1.0e-4\n")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("test.tolerance") && err.contains("[solver] tolerance"),
-            "{err}"
-        );
-        let err = with("[training]\ntolerance = 0.0\n")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("training.tolerance") && err.contains("t.toml"),
-            "{err}"
-        );
+        for (extra, says) in [
+            (
+                "[test]\ntolerance = 1.0e-4\n",
+                ["test.tolerance", "[solver] tolerance"],
+            ),
+            (
+                "[training]\ntolerance = 0.0\n",
+                ["training.tolerance", "t.toml"],
+            ),
+        ] {
+            let err = with(extra).unwrap_err().to_string();
+            assert!(says.iter().all(|s| err.contains(s)), "{err}");
+        }
     }
 
     #[test]
