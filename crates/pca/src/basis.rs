@@ -326,6 +326,43 @@ impl PcaBasis {
         snapshots: MatRef<'_, f64>,
         group: usize,
     ) -> Result<f64, PcaError> {
+        self.check_groups(snapshots, group)?;
+        let mut residual = self.reconstruct_matrix(self.project_matrix(snapshots).as_ref());
+        residual -= snapshots;
+        let max_sq = (0..residual.ncols())
+            .into_par_iter()
+            .map(|j| max_group_norm_sq(residual.col_as_slice(j), group))
+            .reduce(|| 0.0, f64::max);
+        Ok(max_sq.sqrt())
+    }
+
+    /// [`Self::max_group_error`] of the first k columns for k = 1, 2, …, up to the first k for
+    /// which `stop(k, error)` holds or all of them: one incremental pass (rank-one updates of
+    /// the residual, `K_BLOCK` columns per sweep over it) instead of a reconstruction per k.
+    /// Valid for any M-orthonormal columns, appended ones included, since their coefficients are
+    /// the projections UᵀMS.
+    pub fn max_group_errors(
+        &self,
+        snapshots: MatRef<'_, f64>,
+        group: usize,
+        stop: impl Fn(usize, f64) -> bool,
+    ) -> Result<Vec<f64>, PcaError> {
+        self.check_groups(snapshots, group)?;
+        let q = self.project_matrix(snapshots);
+        let n = self.n;
+        let scan = crate::vertex_error::scan_max_vertex_error(
+            snapshots,
+            self.k,
+            |start, count| self.basis[start * n..(start + count) * n].to_vec(),
+            |j, i| q[(i, j)],
+            group,
+            stop,
+        );
+        Ok(scan.per_k)
+    }
+
+    /// Snapshots of n rows, and vertices of `group` rows that tile them.
+    fn check_groups(&self, snapshots: MatRef<'_, f64>, group: usize) -> Result<(), PcaError> {
         if snapshots.nrows() != self.n {
             return Err(PcaError::ShapeMismatch {
                 what: "snapshot matrix",
@@ -339,13 +376,7 @@ impl PcaBasis {
                 nrows: self.n,
             });
         }
-        let mut residual = self.reconstruct_matrix(self.project_matrix(snapshots).as_ref());
-        residual -= snapshots;
-        let max_sq = (0..residual.ncols())
-            .into_par_iter()
-            .map(|j| max_group_norm_sq(residual.col_as_slice(j), group))
-            .reduce(|| 0.0, f64::max);
-        Ok(max_sq.sqrt())
+        Ok(())
     }
 }
 

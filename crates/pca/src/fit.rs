@@ -147,7 +147,7 @@ impl PcaBasis {
                     basis_columns,
                     |j, i| sigma[i] * v[(j, i)],
                     group,
-                    tolerance,
+                    |_, error| error <= tolerance,
                 );
                 let (k, met) = match scan.chosen {
                     Some(k) => (k, true),

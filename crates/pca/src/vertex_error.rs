@@ -82,13 +82,14 @@ pub(crate) struct Scan {
     /// max over vertices and snapshots of the reconstruction distance for k = 1, 2, … (as far as
     /// the scan went).
     pub per_k: Vec<f64>,
-    /// The smallest k meeting the tolerance, if any k ≤ the number of modes given did.
+    /// The smallest k at which `stop` held, if any k ≤ the number of modes given did.
     pub chosen: Option<usize>,
     /// The basis columns formed so far (at least `per_k.len()` of them), column-major.
     pub basis: Vec<f64>,
 }
 
-/// Scans k = 1..=`modes` and stops at the first k whose maximum vertex error is ≤ `tolerance`.
+/// Scans k = 1..=`modes` and stops at the first k for which `stop(k, error)` holds (e.g. the
+/// maximum vertex error is within a tolerance).
 ///
 /// * `snapshots`: S, n × N.
 /// * `columns(start, count)`: columns `start..start + count` of U, column-major. They are asked
@@ -100,7 +101,7 @@ pub(crate) fn scan_max_vertex_error(
     columns: impl Fn(usize, usize) -> Vec<f64>,
     coefficient: impl Fn(usize, usize) -> f64 + Sync,
     group: usize,
-    tolerance: f64,
+    stop: impl Fn(usize, f64) -> bool,
 ) -> Scan {
     let n = snapshots.nrows();
     let mut residual: Vec<f64> = Vec::with_capacity(n * snapshots.ncols());
@@ -160,7 +161,7 @@ pub(crate) fn scan_max_vertex_error(
         for (t, &worst_sq) in block_max.iter().take(kc).enumerate() {
             let worst = worst_sq.sqrt();
             per_k.push(worst);
-            if worst <= tolerance {
+            if stop(k0 + t + 1, worst) {
                 return Scan {
                     per_k,
                     chosen: Some(k0 + t + 1),
