@@ -586,7 +586,7 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
         &s.time,
         &s.solver,
         (0, 1),
-        Some(&start),
+        Some(&|| Ok(Some(start.clone()))),
         &|_| {},
     )
     .unwrap();

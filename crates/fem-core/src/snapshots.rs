@@ -13,8 +13,6 @@
 
 use std::sync::Mutex;
 
-use rayon::prelude::*;
-
 use crate::forces::{ExternalForce, ForceKind};
 use crate::integrator::{FullSpaceModel, Simulator, TimeConfig};
 use crate::optim::SolverConfig;
@@ -586,15 +584,21 @@ pub struct MovingStart {
     pub v: Vec<f64>,
 }
 
-/// [`generate`], with every fourth schedule (3, 7, 11, …) starting from `later` instead of rest
-/// (its grab timed from there), so that the family covers times after its own length.
+/// Computes the state every fourth schedule starts from (None: they start from rest).
+pub type LaterStart<'a> = &'a (dyn Fn() -> Result<Option<MovingStart>, FemError> + Sync);
+
+/// [`generate`], with every fourth schedule (3, 7, 11, …) starting from the state `later`
+/// computes instead of rest (its grab timed from there), so that the family covers times after
+/// its own length. `later` runs as one task beside the schedules from rest (a full-space run of
+/// the body falling, which on one core left the other idle), and the schedules that wait for it
+/// start when it ends.
 pub fn generate_from(
     model: &FullSpaceModel,
     config: &ScheduleConfig,
     time: &TimeConfig,
     solver: &SolverConfig,
     shard: (usize, usize),
-    later: Option<&MovingStart>,
+    later: Option<LaterStart<'_>>,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<SnapshotSet, FemError> {
     let (index, count) = shard;
@@ -605,38 +609,67 @@ pub fn generate_from(
     let done = Mutex::new(0);
     let probe = StiffnessProbe::new(model, config.frames_per_schedule as f64 * time.step)?;
     let solver = &config.solver(solver);
-    let results: Vec<Result<Recorded, FemError>> = schedules
-        .par_iter()
-        .with_max_len(1)
-        .map(|&s| {
-            let forces = config.schedule(model, &probe, s, time.step);
-            let mut frames = Vec::with_capacity(config.frames_per_schedule);
-            let r = record_schedule(
-                model,
-                forces,
-                config.gravity_scale,
-                time,
-                solver,
-                config.frames_per_schedule,
-                later.filter(|_| s % LATER_EVERY == LATER_EVERY - 1),
-                &mut frames,
-            );
-            let mut count = done.lock().unwrap_or_else(|e| e.into_inner());
-            *count += 1;
-            progress(*count);
-            match r {
-                Ok(()) => Ok((frames, None)),
-                // A solve that fails partway (a grab that turns the body inside out, a
-                // stagnating Newton solve far from rest) ends the schedule, not the family: the
-                // frames before it are poses the full simulation reached.
-                Err(e) if e.is_solve_failure() => Ok((frames, Some(e))),
-                Err(e) => Err(FemError::Schedule {
-                    index: s,
-                    source: Box::new(e),
-                }),
-            }
-        })
-        .collect();
+    let run = |s: usize, start: Option<&MovingStart>| -> Result<Recorded, FemError> {
+        let forces = config.schedule(model, &probe, s, time.step);
+        let mut frames = Vec::with_capacity(config.frames_per_schedule);
+        let r = record_schedule(
+            model,
+            forces,
+            config.gravity_scale,
+            time,
+            solver,
+            config.frames_per_schedule,
+            start,
+            &mut frames,
+        );
+        let mut count = done.lock().unwrap_or_else(|e| e.into_inner());
+        *count += 1;
+        progress(*count);
+        match r {
+            Ok(()) => Ok((frames, None)),
+            // A solve that fails partway (a grab that turns the body inside out, a
+            // stagnating Newton solve far from rest) ends the schedule, not the family: the
+            // frames before it are poses the full simulation reached.
+            Err(e) if e.is_solve_failure() => Ok((frames, Some(e))),
+            Err(e) => Err(FemError::Schedule {
+                index: s,
+                source: Box::new(e),
+            }),
+        }
+    };
+    let waits = |s: usize| later.is_some() && s % LATER_EVERY == LATER_EVERY - 1;
+    let slots: Vec<Mutex<Option<Result<Recorded, FemError>>>> =
+        schedules.iter().map(|_| Mutex::new(None)).collect();
+    let start: Mutex<Result<Option<MovingStart>, FemError>> = Mutex::new(Ok(None));
+    let store = |i: usize, r| *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+    rayon::scope(|scope| {
+        if let Some(compute) = later {
+            // Spawned first, so the other thread takes it at once.
+            scope.spawn(|scope| {
+                let computed = compute();
+                let mut slot = start.lock().unwrap_or_else(|e| e.into_inner());
+                *slot = computed;
+                if let Ok(from) = &*slot {
+                    let from = from.clone();
+                    for (i, &s) in schedules.iter().enumerate().filter(|(_, s)| waits(**s)) {
+                        let from = from.clone();
+                        let (run, store) = (&run, &store);
+                        scope.spawn(move |_| store(i, run(s, from.as_ref())));
+                    }
+                }
+            });
+        }
+        for (i, &s) in schedules.iter().enumerate().filter(|(_, s)| !waits(**s)) {
+            let (run, store) = (&run, &store);
+            scope.spawn(move |_| store(i, run(s, None)));
+        }
+    });
+    start.into_inner().unwrap_or_else(|e| e.into_inner())?;
+    let results = slots.into_iter().map(|slot| {
+        slot.into_inner()
+            .unwrap_or_else(|e| e.into_inner())
+            .expect("every schedule ran")
+    });
     let dim = model.dofs.num_free();
     let mut data = Vec::with_capacity(dim * schedules.len() * config.frames_per_schedule);
     let mut recorded = Vec::with_capacity(schedules.len());

@@ -656,26 +656,29 @@ impl<'a> Pipeline<'a> {
     /// `test − training` and end at the test's last frame. Costs one full-space run, cut short
     /// once the body is at rest when the schedules end. The state, with the reason the
     /// `snapshots` line prints.
-    fn later_start(&self) -> Result<Option<(snapshots::MovingStart, String)>> {
-        let cfg = self.scene.training();
-        let until = self.scene.test().frames_per_schedule;
+    fn later_start(
+        scene: &Scene,
+        model: &FullSpaceModel,
+    ) -> Result<Option<(snapshots::MovingStart, String)>, fem_core::FemError> {
+        let cfg = scene.training();
+        let until = scene.test().frames_per_schedule;
         let from = cfg.frames_per_schedule;
-        if self.scene.training.frames_per_schedule.is_some()
+        if scene.training.frames_per_schedule.is_some()
             || until <= from
-            || (self.model.gravity * cfg.gravity_scale).norm() == 0.0
-            || self.scene.time.quasi_static
+            || (model.gravity * cfg.gravity_scale).norm() == 0.0
+            || scene.time.quasi_static
         {
             return Ok(None);
         }
-        let mut model = self.model.clone();
+        let mut model = model.clone();
         model.forces.clear();
         model.scale_gravity(cfg.gravity_scale);
         let (at, last) = (until - from, from.max(until - from));
         let time = TimeConfig {
             frames: last,
-            ..self.scene.time.clone()
+            ..scene.time.clone()
         };
-        let mut sim = Simulator::new(model, time, cfg.solver(&self.scene.solver))?;
+        let mut sim = Simulator::new(model, time, cfg.solver(&scene.solver))?;
         let (mut start, mut peak_kinetic) = (None, 0.0f64);
         for frame in 1..=last {
             let Ok(report) = sim.step() else {
@@ -700,7 +703,7 @@ impl<'a> Pipeline<'a> {
              still moves when they end, and runs to the test's last frame ({until}); `[training] \
              frames_per_schedule` set starts them all at rest",
             snapshots::LATER_EVERY,
-            at as f64 * self.scene.time.step
+            at as f64 * scene.time.step
         );
         Ok(start.map(|s| (s, why)))
     }
@@ -728,18 +731,28 @@ impl<'a> Pipeline<'a> {
         progress: Progress<'_>,
     ) -> Result<SnapshotSet> {
         let total = shard_len(cfg.schedules, shard);
-        let later = self.later_start()?;
+        // Computed beside the schedules from rest; its reason is kept for the stage's line.
+        let why = std::sync::Mutex::new(None);
+        let (scene, model) = (self.scene, &self.model);
+        let later = || {
+            Self::later_start(scene, model).map(|l| {
+                l.map(|(start, reason)| {
+                    *why.lock().unwrap_or_else(|e| e.into_inner()) = Some(reason);
+                    start
+                })
+            })
+        };
         let mut set = snapshots::generate_from(
-            &self.model,
+            model,
             cfg,
-            &self.scene.time,
-            &self.scene.solver,
+            &scene.time,
+            &scene.solver,
             shard,
-            later.as_ref().map(|l| &l.0),
+            Some(&later),
             &|done| progress(done, total),
         )
-        .map_err(|e| anyhow::anyhow!("{}: stage snapshots: {e}", self.scene.source))?;
-        set.later_start = later.map(|l| l.1);
+        .map_err(|e| anyhow::anyhow!("{}: stage snapshots: {e}", scene.source))?;
+        set.later_start = why.into_inner().unwrap_or_else(|e| e.into_inner());
         Ok(set)
     }
 

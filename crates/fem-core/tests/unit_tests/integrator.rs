@@ -611,7 +611,16 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
         u: fall.state.u.clone(),
         v: fall.state.v.clone(),
     };
-    let set = generate_from(&m, &family, &time, &newton, (0, 1), Some(&start), &|_| {}).unwrap();
+    let set = generate_from(
+        &m,
+        &family,
+        &time,
+        &newton,
+        (0, 1),
+        Some(&|| Ok(Some(start.clone()))),
+        &|_| {},
+    )
+    .unwrap();
     let rest = generate(&m, &family, &time, &newton, (0, 1), &|_| {}).unwrap();
     let probe =
         fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)

@@ -136,7 +136,9 @@ fn max_group_errors_match_brute_force_per_k() {
     for (k, (a, b)) in all.iter().zip(&brute).enumerate() {
         assert!((a - b).abs() <= 1e-9 * b, "k = {}: {a:e} vs {b:e}", k + 1);
     }
-    let some = basis.max_group_errors(s.as_ref(), 3, |k, _| k == 3).unwrap();
+    let some = basis
+        .max_group_errors(s.as_ref(), 3, |k, _| k == 3)
+        .unwrap();
     assert_eq!(some, all[..3]);
     assert!(basis.max_group_errors(s.as_ref(), 2, |_, _| false).is_err());
 }
