@@ -118,14 +118,15 @@ pub struct ScheduleConfig {
     pub tolerance: Option<f64>,
 }
 
-/// The training family's default solve tolerance: training poses need to be accurate to well
-/// below what a subspace of them holds (PCA keeps 1 − 10⁻⁷ of their energy, a relative error
-/// of about 3·10⁻⁴ of their size), not to the held-out test's 10⁻⁶ (a relative gradient, not a
-/// relative displacement: the two are compared by what the pipeline measured, not derived). On a
-/// 29k-tet torus a full-space step at 10⁻⁴ took 6.2 L-BFGS iterations instead of 9.4 (1.5×
-/// less time a step), the snapshot stage 105 s instead of 133, and the PCA basis and the linear
-/// methods' errors were the same to three digits.
-pub const TRAINING_TOLERANCE: f64 = 1e-4;
+/// The training family's default solve tolerance: training poses need to be accurate to below
+/// what a subspace of them holds (PCA keeps 1 − 10⁻⁷ of their energy, a relative error of about
+/// 3·10⁻⁴ of their size), not to the held-out test's 10⁻⁶ (a relative gradient, not a relative
+/// displacement: the two are compared by what the pipeline measured, not derived). Measured:
+/// on a 29k-tet torus a full-space step took 9.4 L-BFGS iterations at 10⁻⁶, 6.2 at 10⁻⁴ and
+/// 4.5 at 10⁻³. From 10⁻⁴ to 10⁻³ the mesh suite's `pca` errors stayed the same to 0.01
+/// point on five meshes of six (the dinosaur 20.1 → 19.6 %), the cubature rules and networks
+/// moved within a redraw's spread, and the suite took 4.4 min instead of 5.3.
+pub const TRAINING_TOLERANCE: f64 = 1e-3;
 
 fn is_random(p: &PatchPlacement) -> bool {
     *p == PatchPlacement::Random
@@ -202,7 +203,7 @@ impl ScheduleConfig {
         {
             bad(
                 "tolerance",
-                format!("must be in (0, 1) (a relative gradient, e.g. 1e-4), got {t}"),
+                format!("must be in (0, 1) (a relative gradient, e.g. 1e-3), got {t}"),
             );
         }
     }
