@@ -1,0 +1,108 @@
+//! Whether the test trajectory's subspace error is the grabbed patch's local deformation: the
+//! mean relative M-norm error of the reference frames projected on the scene's PCA basis, on
+//! that basis extended by the static responses A⁻¹Gᵀ to a unit load on P surface patches
+//! spread over the body (A = K₀ + M/T², as the schedules' stiffness probe), and on a PCA basis
+//! of the snapshots with as many more columns (the control).
+//!
+//! ```sh
+//! cargo run --release -p pipeline --example patch_coverage -- SCENE CACHE [P]
+//! ```
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use fem_core::snapshots::StiffnessProbe;
+use pca::{PcaBasis, PcaConfig};
+use pipeline::pipeline::Pipeline;
+use pipeline::scene::Scene;
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.len() < 2 {
+        bail!("usage: patch_coverage SCENE CACHE [P]");
+    }
+    let scene = Scene::from_file(&PathBuf::from(&args[0]))?;
+    let patches: usize = match args.get(2) {
+        Some(a) => a.parse().context("P")?,
+        None => 48,
+    };
+    let mut p = Pipeline::new(&scene, &PathBuf::from(&args[1]))?;
+    let none = |_: usize, _: usize| {};
+    let snaps = p.snapshots(&none)?;
+    let fit = p.pca(&none)?;
+    let reference = p.reference(0, &none)?;
+    let model = &p.model;
+    let basis = &fit.basis;
+    let mass = basis.mass().context("mass")?.to_vec();
+    let error = |b: &PcaBasis| -> f64 {
+        let (mut q, mut uh) = (vec![0.0; b.k()], vec![0.0; b.n()]);
+        let mut sum = 0.0;
+        let mut count = 0;
+        for u in &reference.frames {
+            b.project(u, &mut q);
+            b.reconstruct(&q, &mut uh);
+            let (mut e, mut t) = (0.0, 0.0);
+            for ((a, h), m) in u.iter().zip(&uh).zip(&mass) {
+                e += m * (a - h) * (a - h);
+                t += m * a * a;
+            }
+            if t > 0.0 {
+                sum += (e / t).sqrt();
+                count += 1;
+            }
+        }
+        sum / count.max(1) as f64
+    };
+    println!(
+        "PCA basis k = {}: mean subspace error {:.4e}",
+        basis.k(),
+        error(basis)
+    );
+
+    let training = scene.training();
+    let probe = StiffnessProbe::new(model, training.frames_per_schedule as f64 * scene.time.step)?;
+    let mesh = &model.mesh;
+    let (lo, hi) = mesh.bounding_box();
+    let radius = training.patch_radius * (hi - lo).norm();
+    let candidates: Vec<usize> = mesh
+        .surface_vertices()
+        .into_iter()
+        .filter(|v| model.pinned.binary_search(v).is_err())
+        .collect();
+    // Farthest-point order from the first candidate.
+    let mut nearest = vec![f64::INFINITY; candidates.len()];
+    let mut current = 0;
+    let mut directions = Vec::new();
+    for _ in 0..patches {
+        let c = mesh.vertices[candidates[current]];
+        let vertices: Vec<usize> = candidates
+            .iter()
+            .copied()
+            .filter(|&v| (mesh.vertices[v] - c).norm() <= radius)
+            .collect();
+        let (_, columns) = probe.patch_response(model, &vertices);
+        directions.extend(columns.chunks_exact(basis.n()).map(<[f64]>::to_vec));
+        let mut far = (0, -1.0);
+        for (i, d) in nearest.iter_mut().enumerate() {
+            *d = d.min((mesh.vertices[candidates[i]] - c).norm_squared());
+            if *d > far.1 {
+                far = (i, *d);
+            }
+        }
+        current = far.0;
+    }
+    for min_new in [1e-1, 3e-2, 1e-2] {
+        let (extended, _) = basis.extended(&directions, min_new)?;
+        let added = extended.k() - basis.k();
+        let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+        let more = PcaBasis::fit(s, Some(&mass), &PcaConfig::by_dimension(extended.k()), 3)?.basis;
+        println!(
+            "{patches} patches, new fraction ≥ {min_new}: + {added} response columns → {:.4e}; \
+             PCA with k = {} instead → {:.4e}",
+            error(&extended),
+            more.k(),
+            error(&more)
+        );
+    }
+    Ok(())
+}
