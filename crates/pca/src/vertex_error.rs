@@ -94,7 +94,8 @@ pub(crate) struct Scan {
 /// * `snapshots`: S, n × N.
 /// * `columns(start, count)`: columns `start..start + count` of U, column-major. They are asked
 ///   for block by block, so memory grows with the k reached, not with `modes`.
-/// * `coefficient(j, i)`: σ_i V_{ji}, the coefficient of mode i in snapshot j.
+/// * `coefficient(j, i)`: the coefficient of column i in snapshot j: σ_i V_{ji} for the SVD's
+///   modes, (UᵀM s_j)_i for any M-orthonormal columns.
 pub(crate) fn scan_max_vertex_error(
     snapshots: faer::MatRef<'_, f64>,
     modes: usize,

@@ -33,7 +33,7 @@ fn main() -> Result<()> {
     let reference = p.reference(0, &none)?;
     let model = &p.model;
     let basis = &fit.basis;
-    let mass = basis.mass().context("mass")?.to_vec();
+    let mass = basis.mass().context("the basis has no mass")?;
     let error = |b: &PcaBasis| -> f64 {
         let (mut q, mut uh) = (vec![0.0; b.k()], vec![0.0; b.n()]);
         let mut sum = 0.0;
@@ -42,7 +42,7 @@ fn main() -> Result<()> {
             b.project(u, &mut q);
             b.reconstruct(&q, &mut uh);
             let (mut e, mut t) = (0.0, 0.0);
-            for ((a, h), m) in u.iter().zip(&uh).zip(&mass) {
+            for ((a, h), m) in u.iter().zip(&uh).zip(mass) {
                 e += m * (a - h) * (a - h);
                 t += m * a * a;
             }
@@ -69,6 +69,12 @@ fn main() -> Result<()> {
         .into_iter()
         .filter(|v| model.pinned.binary_search(v).is_err())
         .collect();
+    if candidates.is_empty() {
+        bail!(
+            "{}: every surface vertex is pinned, no patch to load",
+            args[0]
+        );
+    }
     // Farthest-point order from the first candidate.
     let mut nearest = vec![f64::INFINITY; candidates.len()];
     let mut current = 0;
@@ -95,7 +101,7 @@ fn main() -> Result<()> {
         let (extended, _) = basis.extended(&directions, min_new)?;
         let added = extended.k() - basis.k();
         let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
-        let more = PcaBasis::fit(s, Some(&mass), &PcaConfig::by_dimension(extended.k()), 3)?.basis;
+        let more = PcaBasis::fit(s, Some(mass), &PcaConfig::by_dimension(extended.k()), 3)?.basis;
         println!(
             "{patches} patches, new fraction ≥ {min_new}: + {added} response columns → {:.4e}; \
              PCA with k = {} instead → {:.4e}",

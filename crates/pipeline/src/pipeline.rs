@@ -1120,7 +1120,12 @@ impl<'a> Pipeline<'a> {
             // PCA's error with k columns as far as both comparisons need: to d, and to the
             // first k that matches the autoencoder (one incremental pass; a reconstruction per k
             // took 26 s of a 29k-tet torus's 34 s stage).
-            let met = |k: usize, e: f64| k >= d && e <= chosen.error;
+            // (The error need not fall with k: a match below d is remembered, not waited for.)
+            let matched = std::cell::Cell::new(false);
+            let met = |k: usize, e: f64| {
+                matched.set(matched.get() || e <= chosen.error);
+                k >= d && matched.get()
+            };
             let per_k = basis.max_group_errors(s, 3, met)?;
             let pca_error_at_latent_dim = d
                 .checked_sub(1)

@@ -196,7 +196,7 @@ fn variants() -> Vec<Variant> {
             "",
             ALL,
         ),
-        // The training data is solved to 10⁻⁴ whatever a tighter solver tolerance says.
+        // The training data is solved to 10⁻³ whatever a tighter solver tolerance says.
         v(
             "solver.tolerance",
             "tolerance = 1.0e-8",

@@ -118,29 +118,38 @@ fn max_group_error_matches_brute_force() {
 }
 
 /// The per-k curve of any M-orthonormal basis, appended columns included, is the brute-force
-/// one, and the scan stops where `stop` first holds.
+/// one, and the scan stops where `stop` first holds: within one block of columns and one tile of
+/// rows, and across several.
 #[test]
 fn max_group_errors_match_brute_force_per_k() {
-    let mut rng = Rng::new(121);
-    let s = decaying_snapshots(&mut rng, 45, 25, 0.6);
-    let mass = rng.mass(45, 3);
-    let fit = PcaBasis::fit(s.as_ref(), Some(&mass), &PcaConfig::by_dimension(6), 3).unwrap();
-    let extra: Vec<Vec<f64>> = (0..2).map(|_| rng.normal_vec(45)).collect();
-    let (basis, _) = fit.basis.extended(&extra, 1e-3).unwrap();
-    assert_eq!(basis.k(), 8);
-    let brute: Vec<f64> = (1..=8)
-        .map(|k| brute_force_max_vertex_error(&basis.truncate(k).unwrap(), s.as_ref(), 3))
-        .collect();
-    let all = basis.max_group_errors(s.as_ref(), 3, |_, _| false).unwrap();
-    assert_eq!(all.len(), 8);
-    for (k, (a, b)) in all.iter().zip(&brute).enumerate() {
-        assert!((a - b).abs() <= 1e-9 * b, "k = {}: {a:e} vs {b:e}", k + 1);
+    for (seed, n, fitted) in [(121, 45, 6), (122, 600, 18)] {
+        let mut rng = Rng::new(seed);
+        let s = decaying_snapshots(&mut rng, n, 40, 0.8);
+        let mass = rng.mass(n, 3);
+        let config = PcaConfig::by_dimension(fitted);
+        let fit = PcaBasis::fit(s.as_ref(), Some(&mass), &config, 3).unwrap();
+        let extra: Vec<Vec<f64>> = (0..2).map(|_| rng.normal_vec(n)).collect();
+        let (basis, _) = fit.basis.extended(&extra, 1e-3).unwrap();
+        let k = fitted + 2;
+        assert_eq!(basis.k(), k);
+        let brute: Vec<f64> = (1..=k)
+            .map(|k| brute_force_max_vertex_error(&basis.truncate(k).unwrap(), s.as_ref(), 3))
+            .collect();
+        let all = basis.max_group_errors(s.as_ref(), 3, |_, _| false).unwrap();
+        assert_eq!(all.len(), k);
+        for (i, (a, b)) in all.iter().zip(&brute).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-9 * b,
+                "n = {n}, k = {}: {a:e} vs {b:e}",
+                i + 1
+            );
+        }
+        let some = basis
+            .max_group_errors(s.as_ref(), 3, |k, _| k == 3)
+            .unwrap();
+        assert_eq!(some, all[..3]);
+        assert!(basis.max_group_errors(s.as_ref(), 7, |_, _| false).is_err());
     }
-    let some = basis
-        .max_group_errors(s.as_ref(), 3, |k, _| k == 3)
-        .unwrap();
-    assert_eq!(some, all[..3]);
-    assert!(basis.max_group_errors(s.as_ref(), 2, |_, _| false).is_err());
 }
 
 #[test]
