@@ -71,6 +71,13 @@ pub struct AutoencoderConfig {
     /// Fraction of the samples held out (seeded) for validation and early stopping, in [0, 1).
     /// With 0 the training loss is monitored instead.
     pub validation_fraction: f64,
+    /// The samples' groups, as the sizes of consecutive runs of columns (e.g. the frames of each
+    /// training schedule, in order). When given (at least two groups, summing to the number of
+    /// samples), the validation split holds out whole groups, about `validation_fraction` of
+    /// them, so that early stopping and the kept weights judge the network on loads it never
+    /// saw rather than on frames between ones it did. Set by the caller, not a scene key.
+    #[serde(skip)]
+    pub validation_groups: Vec<usize>,
     /// Stop after this many epochs without a new best monitored loss; 0 disables early stopping.
     /// The best weights are returned either way.
     pub patience: usize,
@@ -120,6 +127,7 @@ impl Default for AutoencoderConfig {
             beta2: adam.beta2,
             epsilon: adam.epsilon,
             validation_fraction: 0.1,
+            validation_groups: Vec::new(),
             patience: 100,
             seed: 0,
             restarts: 1,

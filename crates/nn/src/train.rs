@@ -220,8 +220,12 @@ impl Trainer {
             );
         }
 
-        let (train_indices, validation_indices) =
-            split(n, config.validation_fraction, config.seed)?;
+        let (train_indices, validation_indices) = split(
+            n,
+            config.validation_fraction,
+            &config.validation_groups,
+            config.seed,
+        )?;
         let columns = |idx: &[usize]| Mat::from_fn(k, idx.len(), |i, j| data[(i, idx[j])]);
         let train_data = columns(&train_indices);
         let val_data = columns(&validation_indices);
@@ -370,7 +374,17 @@ impl Trainer {
 }
 
 /// Seeded split of 0..n into (training, validation) index lists, both ascending.
-fn split(n: usize, fraction: f64, seed: u64) -> Result<(Vec<usize>, Vec<usize>), NnError> {
+fn split(
+    n: usize,
+    fraction: f64,
+    groups: &[usize],
+    seed: u64,
+) -> Result<(Vec<usize>, Vec<usize>), NnError> {
+    // Empty groups (a schedule whose first step failed) hold no sample to validate on.
+    let groups: Vec<usize> = groups.iter().copied().filter(|&g| g > 0).collect();
+    if fraction > 0.0 && groups.len() >= 2 && groups.iter().sum::<usize>() == n {
+        return Ok(split_groups(fraction, &groups, seed));
+    }
     let n_val = if fraction > 0.0 {
         if n < 2 {
             return Err(NnError::TooFewSamples {
@@ -389,6 +403,27 @@ fn split(n: usize, fraction: f64, seed: u64) -> Result<(Vec<usize>, Vec<usize>),
     val.sort_unstable();
     train.sort_unstable();
     Ok((train, val))
+}
+
+/// The validation split by whole groups of consecutive samples (`groups`: their sizes): about
+/// `fraction` of the groups, at least one and never all, drawn by `seed`.
+fn split_groups(fraction: f64, groups: &[usize], seed: u64) -> (Vec<usize>, Vec<usize>) {
+    let count = groups.len();
+    let held = ((fraction * count as f64).round() as usize).clamp(1, count - 1);
+    let mut order: Vec<usize> = (0..count).collect();
+    SplitMix64::for_item(seed, 2).shuffle(&mut order);
+    let mut is_held = vec![false; count];
+    for &g in &order[..held] {
+        is_held[g] = true;
+    }
+    let (mut train, mut val) = (Vec::new(), Vec::new());
+    let mut start = 0;
+    for (&size, &h) in groups.iter().zip(&is_held) {
+        let side = if h { &mut val } else { &mut train };
+        side.extend(start..start + size);
+        start += size;
+    }
+    (train, val)
 }
 
 /// One latent dimension tried by [`train_search`].

@@ -447,3 +447,35 @@ fn the_skip_starts_at_pca_and_the_origin_is_anchored() {
     outcome.model.reconstruct(&[0.0; 10], &mut origin, &mut ws);
     assert!(origin.iter().all(|o| o.abs() <= 1e-13), "{origin:?}");
 }
+
+/// With the samples' groups given, the validation split holds out whole groups (about the
+/// validation fraction of them, at least one, never all; empty groups skipped); groups that do
+/// not add up to the samples fall back to the split of single samples.
+#[test]
+fn the_validation_split_holds_out_whole_groups() {
+    use nn::Trainer;
+    let data = manifold_data(40, 3);
+    let with = |groups: Vec<usize>, fraction: f64| {
+        let config = AutoencoderConfig {
+            hidden: Some(vec![8]),
+            validation_fraction: fraction,
+            validation_groups: groups,
+            seed: 5,
+            ..AutoencoderConfig::default()
+        };
+        let t = Trainer::new(data.as_ref(), 2, &config).unwrap();
+        (t.train_indices().to_vec(), t.validation_indices().to_vec())
+    };
+    let (train, val) = with(vec![10, 0, 10, 10, 10], 0.25);
+    assert_eq!(val.len(), 10, "{val:?}");
+    assert_eq!(val[9] - val[0], 9, "one whole group: {val:?}");
+    assert!([0, 10, 20, 30].contains(&val[0]), "{val:?}");
+    assert_eq!(train.len() + val.len(), 40);
+    assert!(train.iter().all(|i| !val.contains(i)));
+    // A fraction that rounds to no group still holds one out; one that rounds to all keeps one.
+    assert_eq!(with(vec![20, 20], 0.01).1.len(), 20);
+    assert_eq!(with(vec![20, 20], 0.9).1.len(), 20);
+    // Groups that do not cover the samples: single samples, as without groups.
+    assert_eq!(with(vec![10, 10], 0.25), with(Vec::new(), 0.25));
+    assert_eq!(with(Vec::new(), 0.25).1.len(), 10);
+}
