@@ -153,6 +153,21 @@ pub enum LatentRule {
 }
 
 impl AutoencoderConfig {
+    /// The sizes of the groups the validation split holds out whole, for `n` samples: the
+    /// non-empty `validation_groups` (an empty one, a schedule whose first step failed, holds no
+    /// sample to validate on), when the fraction is positive and at least two of them cover the
+    /// samples. None: the split draws single samples.
+    pub fn held_out_groups(&self, n: usize) -> Option<Vec<usize>> {
+        let groups: Vec<usize> = self
+            .validation_groups
+            .iter()
+            .copied()
+            .filter(|&g| g > 0)
+            .collect();
+        (self.validation_fraction > 0.0 && groups.len() >= 2 && groups.iter().sum::<usize>() == n)
+            .then_some(groups)
+    }
+
     /// The hidden layer widths for `input_dim` inputs (the PCA dimension k): `hidden` when
     /// given, else two layers of k clamped to [`DEFAULT_HIDDEN_RANGE`]. The decoder's last hidden
     /// layer then spans the k coefficients it maps to, and no more: the decode and its VJP,

@@ -220,12 +220,10 @@ impl Trainer {
             );
         }
 
-        let (train_indices, validation_indices) = split(
-            n,
-            config.validation_fraction,
-            &config.validation_groups,
-            config.seed,
-        )?;
+        let (train_indices, validation_indices) = match config.held_out_groups(n) {
+            Some(groups) => split_groups(config.validation_fraction, &groups, config.seed),
+            None => split(n, config.validation_fraction, config.seed)?,
+        };
         let columns = |idx: &[usize]| Mat::from_fn(k, idx.len(), |i, j| data[(i, idx[j])]);
         let train_data = columns(&train_indices);
         let val_data = columns(&validation_indices);
@@ -374,17 +372,7 @@ impl Trainer {
 }
 
 /// Seeded split of 0..n into (training, validation) index lists, both ascending.
-fn split(
-    n: usize,
-    fraction: f64,
-    groups: &[usize],
-    seed: u64,
-) -> Result<(Vec<usize>, Vec<usize>), NnError> {
-    // Empty groups (a schedule whose first step failed) hold no sample to validate on.
-    let groups: Vec<usize> = groups.iter().copied().filter(|&g| g > 0).collect();
-    if fraction > 0.0 && groups.len() >= 2 && groups.iter().sum::<usize>() == n {
-        return Ok(split_groups(fraction, &groups, seed));
-    }
+fn split(n: usize, fraction: f64, seed: u64) -> Result<(Vec<usize>, Vec<usize>), NnError> {
     let n_val = if fraction > 0.0 {
         if n < 2 {
             return Err(NnError::TooFewSamples {

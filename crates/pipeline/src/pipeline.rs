@@ -1141,8 +1141,7 @@ impl<'a> Pipeline<'a> {
             let d = chosen.latent_dim;
             // Then every schedule, the held-out ones too, for as many epochs as the held-out
             // ones judged best: a schedule held out may be the only one that grabs a limb.
-            let by_schedule = cfg.validation_fraction > 0.0
-                && snaps.frames.iter().filter(|&&f| f > 0).count() >= 2;
+            let by_schedule = cfg.held_out_groups(q.ncols()).is_some();
             let (model, error, retrained_epochs) = if by_schedule {
                 let epochs = chosen.outcome.best_epoch.max(1);
                 let all = nn::AutoencoderConfig {
