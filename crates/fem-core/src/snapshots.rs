@@ -642,31 +642,31 @@ pub fn generate_from(
     let waits = |s: usize| later.is_some() && s % LATER_EVERY == LATER_EVERY - 1;
     let slots: Vec<Mutex<Option<Result<Recorded, FemError>>>> =
         schedules.iter().map(|_| Mutex::new(None)).collect();
-    let start: Mutex<Result<Option<MovingStart>, FemError>> = Mutex::new(Ok(None));
     let store = |i: usize, r| *slots[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+    let (run, store, indices) = (&run, &store, &schedules);
+    let mut failed = None;
     rayon::scope(|scope| {
         if let Some(compute) = later {
+            let failed = &mut failed;
             // Spawned first: with two threads or more another one takes it at once (rayon's
             // thieves take the oldest job); on one it runs after the schedules from rest.
-            scope.spawn(|scope| {
-                let computed = compute();
-                let from = computed.as_ref().ok().cloned();
-                *start.lock().unwrap_or_else(|e| e.into_inner()) = computed;
-                if let Some(from) = from {
-                    for (i, &s) in schedules.iter().enumerate().filter(|(_, s)| waits(**s)) {
+            scope.spawn(move |scope| match compute() {
+                Ok(from) => {
+                    for (i, &s) in indices.iter().enumerate().filter(|(_, s)| waits(**s)) {
                         let from = from.clone();
-                        let (run, store) = (&run, &store);
                         scope.spawn(move |_| store(i, run(s, from.as_ref())));
                     }
                 }
+                Err(e) => *failed = Some(e),
             });
         }
-        for (i, &s) in schedules.iter().enumerate().filter(|(_, s)| !waits(**s)) {
-            let (run, store) = (&run, &store);
+        for (i, &s) in indices.iter().enumerate().filter(|(_, s)| !waits(**s)) {
             scope.spawn(move |_| store(i, run(s, None)));
         }
     });
-    start.into_inner().unwrap_or_else(|e| e.into_inner())?;
+    if let Some(e) = failed {
+        return Err(e);
+    }
     let results = slots.into_iter().map(|slot| {
         slot.into_inner()
             .unwrap_or_else(|e| e.into_inner())
