@@ -1,8 +1,9 @@
 //! Whether the test trajectory's subspace error is the grabbed patch's local deformation: the
 //! mean relative M-norm error of the reference frames projected on the scene's PCA basis, on
 //! that basis extended by the static responses A⁻¹Gᵀ to a unit load on P surface patches
-//! spread over the body (A = K₀ + M/T², as the schedules' stiffness probe), and on a PCA basis
-//! of the snapshots with as many more columns (the control).
+//! spread over the body (the first P patches of the training family's spread placement; A =
+//! K₀ + M/T², as the schedules' stiffness probe), and on a PCA basis of the snapshots with as
+//! many more columns (the control).
 //!
 //! ```sh
 //! cargo run --release -p pipeline --example patch_coverage -- SCENE CACHE [P]
@@ -11,7 +12,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use fem_core::snapshots::StiffnessProbe;
+use fem_core::snapshots::{PatchPlacement, ScheduleConfig, ScheduleKind, StiffnessProbe};
 use pca::{PcaBasis, PcaConfig};
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
@@ -59,43 +60,25 @@ fn main() -> Result<()> {
         error(basis)
     );
 
-    let training = scene.training();
-    let probe = StiffnessProbe::new(model, training.frames_per_schedule as f64 * scene.time.step)?;
-    let mesh = &model.mesh;
-    let (lo, hi) = mesh.bounding_box();
-    let radius = training.patch_radius * (hi - lo).norm();
-    let candidates: Vec<usize> = mesh
-        .surface_vertices()
-        .into_iter()
-        .filter(|v| model.pinned.binary_search(v).is_err())
-        .collect();
-    if candidates.is_empty() {
-        bail!(
-            "{}: every surface vertex is pinned, no patch to load",
-            args[0]
-        );
-    }
-    // Farthest-point order from the first candidate.
-    let mut nearest = vec![f64::INFINITY; candidates.len()];
-    let mut current = 0;
+    // The patches the training family's pulls would grab, spread over the surface in
+    // farthest-point order (`[training] patches = "spread"`), one per schedule index.
+    let family = ScheduleConfig {
+        kinds: vec![ScheduleKind::Pull],
+        patches: PatchPlacement::Spread,
+        ..scene.training()
+    };
+    let probe = StiffnessProbe::new(model, family.frames_per_schedule as f64 * scene.time.step)?;
     let mut directions = Vec::new();
-    for _ in 0..patches {
-        let c = mesh.vertices[candidates[current]];
-        let vertices: Vec<usize> = candidates
-            .iter()
-            .copied()
-            .filter(|&v| (mesh.vertices[v] - c).norm() <= radius)
-            .collect();
-        let (_, columns) = probe.patch_response(model, &vertices);
+    for i in 0..patches {
+        let forces = family.schedule(model, &probe, i, scene.time.step);
+        let Some(grab) = forces.first() else {
+            bail!(
+                "{}: every surface vertex is pinned, no patch to load",
+                args[0]
+            );
+        };
+        let (_, columns) = probe.patch_response(model, &grab.vertices);
         directions.extend(columns.chunks_exact(basis.n()).map(<[f64]>::to_vec));
-        let mut far = (0, -1.0);
-        for (i, d) in nearest.iter_mut().enumerate() {
-            *d = d.min((mesh.vertices[candidates[i]] - c).norm_squared());
-            if *d > far.1 {
-                far = (i, *d);
-            }
-        }
-        current = far.0;
     }
     for min_new in [1e-1, 3e-2, 1e-2] {
         let (extended, _) = basis.extended(&directions, min_new)?;
