@@ -18,7 +18,9 @@
 //! - [`TrainingMatrix::build`] evaluates A in parallel over elements (module [`training`]).
 //! - [`fit`] runs the greedy selection with Lawson–Hanson NNLS (modules [`greedy`] and
 //!   [`nnls`](mod@nnls)), recording the relative error against |S|.
-//! - [`CubatureRule::evaluate`] measures a rule on held-out poses built the same way.
+//! - [`CubatureRule::evaluate`] measures a rule on held-out poses built the same way, and
+//!   [`HeldOutForces`] gives the same figure from the rule's columns alone (the pipeline's
+//!   error on the held-out test, without a matrix of every element for it).
 //!
 //! ```
 //! use cubature::{CubatureConfig, Poses, TrainingMatrix, fit};
@@ -64,4 +66,4 @@ pub use error::CubatureError;
 pub use greedy::{FitProgress, fit, fit_with_progress};
 pub use nnls::{NnlsParams, NnlsSolution, nnls, nnls_with};
 pub use rule::CubatureRule;
-pub use training::{Poses, TrainingMatrix};
+pub use training::{HeldOutForces, Poses, TrainingMatrix};

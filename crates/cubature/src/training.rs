@@ -19,6 +19,8 @@
 //! failure. Poses where an element's force is not finite (inverted under a material undefined
 //! there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
 
+use std::collections::HashMap;
+
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use fem_core::constraints::FIXED;
@@ -92,64 +94,9 @@ impl TrainingMatrix {
         config: &CubatureConfig,
     ) -> Result<Self, CubatureError> {
         config.validate()?;
+        let dim = check_inputs(model, basis, k, &poses)?;
         let m = model.elements.len();
-        if m == 0 {
-            return Err(CubatureError::NoElements);
-        }
-        let nf = model.dofs.num_free();
-        if k == 0 || basis.len() != nf * k {
-            return Err(CubatureError::ShapeMismatch {
-                what: "basis U (free DOFs × k)",
-                expected: (nf, k),
-                found: (basis.len() / k.max(1), k),
-            });
-        }
         let num_poses = poses.q.ncols();
-        if num_poses == 0 {
-            return Err(CubatureError::NoPoses);
-        }
-        if poses.q.nrows() != k {
-            return Err(CubatureError::ShapeMismatch {
-                what: "pose coefficients q (k × poses)",
-                expected: (k, num_poses),
-                found: (poses.q.nrows(), num_poses),
-            });
-        }
-        let dim = match poses.jacobians {
-            None => k,
-            Some(js) => {
-                if js.len() != num_poses {
-                    return Err(CubatureError::ShapeMismatch {
-                        what: "Jacobian list (one per pose)",
-                        expected: (num_poses, 1),
-                        found: (js.len(), 1),
-                    });
-                }
-                let d = js[0].ncols();
-                for j in js {
-                    if j.nrows() != k || j.ncols() != d || d == 0 {
-                        return Err(CubatureError::ShapeMismatch {
-                            what: "pose Jacobian J (k × d)",
-                            expected: (k, d.max(1)),
-                            found: (j.nrows(), j.ncols()),
-                        });
-                    }
-                }
-                d
-            }
-        };
-        check_finite("basis U", basis.iter().copied())?;
-        check_finite(
-            "pose coefficients q",
-            (0..num_poses).flat_map(|i| poses.q.col(i).iter().copied()),
-        )?;
-        if let Some(js) = poses.jacobians {
-            check_finite(
-                "pose Jacobians",
-                js.iter()
-                    .flat_map(|j| (0..j.ncols()).flat_map(move |c| j.col(c).iter().copied())),
-            )?;
-        }
 
         // Poses beyond what the memory budget holds are left out of the subsample (with a
         // warning), down to MIN_POSES: a large mesh then fits the default budget instead of
@@ -191,72 +138,24 @@ impl TrainingMatrix {
             "building the cubature training matrix"
         );
 
-        // Full displacements u_i = U q_i of the chosen poses.
-        let dofs = &model.dofs;
-        let displacements: Vec<Vec<f64>> = chosen
-            .par_iter()
-            .map(|&i| {
-                let q = poses.q.col(i);
-                let mut u = vec![0.0; n_full];
-                for (j, &qj) in q.iter().enumerate() {
-                    if qj != 0.0 {
-                        for (r, &full) in dofs.free.iter().enumerate() {
-                            u[full] += basis[j * nf + r] * qj;
-                        }
-                    }
-                }
-                u
-            })
-            .collect();
+        let displacements = displacements(model, basis, poses.q, &chosen);
         let jacobians: Option<Vec<MatRef<'_, f64>>> = poses
             .jacobians
             .map(|js| chosen.iter().map(|&i| js[i]).collect());
 
         let mut a = vec![0.0; rows * m];
-        let elements = &model.elements;
         with_material!(&model.material, |material| {
             a.par_chunks_mut(rows).enumerate().for_each_init(
                 || (vec![0.0; 12 * k], vec![0.0; k]),
                 |(ue, g), (e, column)| {
-                    // U_e, 12 × k row-major, zero rows for fixed DOFs.
-                    for (a_local, &v) in elements.tets[e].iter().enumerate() {
-                        for c in 0..3 {
-                            let row = &mut ue[(3 * a_local + c) * k..(3 * a_local + c + 1) * k];
-                            match dofs.index[3 * v + c] {
-                                FIXED => row.fill(0.0),
-                                r => {
-                                    for (j, x) in row.iter_mut().enumerate() {
-                                        *x = basis[j * nf + r];
-                                    }
-                                }
-                            }
-                        }
-                    }
-                    for (p, u) in displacements.iter().enumerate() {
-                        let (_, f, _) = elements.energy_gradient(material, e, u, 1.0);
-                        g.fill(0.0);
-                        for (l, &fl) in f.iter().enumerate() {
-                            if fl != 0.0 {
-                                for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
-                                    *gj += uj * fl;
-                                }
-                            }
-                        }
-                        let out = &mut column[p * dim..(p + 1) * dim];
-                        match &jacobians {
-                            None => out.copy_from_slice(g),
-                            // Jᵀg through faer's SIMD kernels: this product was two thirds
-                            // of the neural rule's stage as a scalar dot per coordinate.
-                            Some(js) => matmul(
-                                MatMut::from_column_major_slice_mut(out, dim, 1),
-                                Accum::Replace,
-                                js[p].transpose(),
-                                MatRef::from_column_major_slice(g, k, 1),
-                                1.0,
-                                Par::Seq,
-                            ),
-                        }
-                    }
+                    let forces = ElementForces {
+                        model,
+                        basis,
+                        k,
+                        displacements: &displacements,
+                        jacobians: jacobians.as_deref(),
+                    };
+                    forces.column(material, e, column, ue, g);
                 },
             );
         });
@@ -438,6 +337,371 @@ impl TrainingMatrix {
     pub fn invalid_poses(&self) -> &[usize] {
         &self.invalid_poses
     }
+}
+
+/// The reduced forces of poses a rule was not fitted to, for the rule's error there (the
+/// held-out test's frames), normalised per pose as in [`TrainingMatrix`] and giving the same
+/// error as [`CubatureRule::evaluate`](crate::CubatureRule::evaluate) on a matrix of every
+/// element built from all of them.
+///
+/// The target b_i comes from one assembly of the whole mesh's force per pose, b_i = J_iᵀ Uᵀ f(u_i),
+/// and A's columns are computed only for the elements asked about, when first asked, and kept.
+/// A [`TrainingMatrix`] of the same poses holds every element's column: 8·P·d·m bytes, about
+/// 2 GB for 100 poses of 85 coordinates on 29k elements, built at the cost of the training
+/// matrix itself, where a greedy path visits a few hundred elements. The memory limit does not
+/// apply (this holds P full displacements); `max_poses` and the seed choose the poses as there.
+pub struct HeldOutForces<'a> {
+    model: &'a FullSpaceModel,
+    basis: &'a [f64],
+    k: usize,
+    dim: usize,
+    displacements: Vec<Vec<f64>>,
+    jacobians: Option<Vec<MatRef<'a, f64>>>,
+    /// 1 / ‖b_i‖ of each pose kept.
+    inv_scales: Vec<f64>,
+    b: Vec<f64>,
+    columns: HashMap<usize, Vec<f64>>,
+}
+
+impl std::fmt::Debug for HeldOutForces<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HeldOutForces")
+            .field("k", &self.k)
+            .field("dim", &self.dim)
+            .field("poses", &self.inv_scales.len())
+            .field("columns", &self.columns.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a> HeldOutForces<'a> {
+    /// The poses' targets (see the type's docs); poses where the force is not finite (an element
+    /// the pose inverts, under a material undefined there) or zero (at rest) are left out, as
+    /// [`TrainingMatrix::build`] leaves them out.
+    pub fn new(
+        model: &'a FullSpaceModel,
+        basis: &'a [f64],
+        k: usize,
+        poses: Poses<'a>,
+        config: &CubatureConfig,
+    ) -> Result<Self, CubatureError> {
+        config.validate()?;
+        let dim = check_inputs(model, basis, k, &poses)?;
+        let chosen = subsample(poses.q.ncols(), config.max_poses, config.seed);
+        let displacements = displacements(model, basis, poses.q, &chosen);
+        let jacobians: Option<Vec<MatRef<'a, f64>>> = poses
+            .jacobians
+            .map(|js| chosen.iter().map(|&i| js[i]).collect());
+        let dofs = &model.dofs;
+        let nf = dofs.num_free();
+        let targets: Vec<Vec<f64>> = with_material!(&model.material, |material| {
+            displacements
+                .par_iter()
+                .enumerate()
+                .map(|(p, u)| {
+                    let elements = &model.elements;
+                    let mut f = vec![0.0; u.len()];
+                    for (e, tet) in elements.tets.iter().enumerate() {
+                        let (_, fe, _) = elements.energy_gradient(material, e, u, 1.0);
+                        for (a, &v) in tet.iter().enumerate() {
+                            for c in 0..3 {
+                                f[3 * v + c] += fe[3 * a + c];
+                            }
+                        }
+                    }
+                    let g: Vec<f64> = (0..k)
+                        .map(|j| {
+                            let col = &basis[j * nf..(j + 1) * nf];
+                            col.iter().zip(&dofs.free).map(|(x, &r)| x * f[r]).sum()
+                        })
+                        .collect();
+                    match &jacobians {
+                        None => g,
+                        Some(js) => {
+                            let mut out = vec![0.0; dim];
+                            matmul(
+                                MatMut::from_column_major_slice_mut(&mut out, dim, 1),
+                                Accum::Replace,
+                                js[p].transpose(),
+                                MatRef::from_column_major_slice(&g, k, 1),
+                                1.0,
+                                Par::Seq,
+                            );
+                            out
+                        }
+                    }
+                })
+                .collect()
+        });
+        let scales: Vec<f64> = targets
+            .iter()
+            .map(|t| {
+                if t.iter().all(|x| x.is_finite()) {
+                    norm(t)
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        let largest = scales
+            .iter()
+            .copied()
+            .filter(|s| s.is_finite())
+            .fold(0.0, f64::max);
+        if largest == 0.0 {
+            return Err(CubatureError::ZeroTarget {
+                poses: chosen.len(),
+            });
+        }
+        let keep: Vec<usize> = (0..chosen.len())
+            .filter(|&p| scales[p].is_finite() && scales[p] > ZERO_POSE_TOLERANCE * largest)
+            .collect();
+        let inv_scales: Vec<f64> = keep.iter().map(|&p| 1.0 / scales[p]).collect();
+        let b = keep
+            .iter()
+            .zip(&inv_scales)
+            .flat_map(|(&p, &s)| targets[p].iter().map(move |x| x * s))
+            .collect();
+        let mut displacements = displacements;
+        let mut kept = keep.iter().peekable();
+        let mut p = 0;
+        displacements.retain(|_| {
+            let kept_here = kept.next_if_eq(&&p).is_some();
+            p += 1;
+            kept_here
+        });
+        let jacobians = jacobians.map(|js| keep.iter().map(|&p| js[p]).collect());
+        Ok(Self {
+            model,
+            basis,
+            k,
+            dim,
+            displacements,
+            jacobians,
+            inv_scales,
+            b,
+            columns: HashMap::new(),
+        })
+    }
+
+    /// The number of poses kept.
+    pub fn num_poses(&self) -> usize {
+        self.inv_scales.len()
+    }
+
+    /// The target b: each kept pose's reduced force over the whole mesh, divided by its norm.
+    pub fn b(&self) -> &[f64] {
+        &self.b
+    }
+
+    /// ‖A_S w − b‖ / ‖b‖ for elements S with weights w (the columns of S not yet computed are,
+    /// in parallel, and kept for the next call).
+    pub fn relative_error(&mut self, elements: &[usize], weights: &[f64]) -> f64 {
+        let mut missing: Vec<usize> = elements
+            .iter()
+            .copied()
+            .filter(|e| !self.columns.contains_key(e))
+            .collect();
+        missing.sort_unstable();
+        missing.dedup();
+        let rows = self.b.len();
+        let (k, p) = (self.k, self.inv_scales.len());
+        let forces = ElementForces {
+            model: self.model,
+            basis: self.basis,
+            k,
+            displacements: &self.displacements,
+            jacobians: self.jacobians.as_deref(),
+        };
+        let inv_scales = &self.inv_scales;
+        let dim = self.dim;
+        let computed: Vec<(usize, Vec<f64>)> = with_material!(&self.model.material, |material| {
+            missing
+                .par_iter()
+                .map_init(
+                    || (vec![0.0; 12 * k], vec![0.0; k]),
+                    |(ue, g), &e| {
+                        let mut column = vec![0.0; p * dim];
+                        forces.column(material, e, &mut column, ue, g);
+                        for (block, s) in column.chunks_mut(dim).zip(inv_scales) {
+                            block.iter_mut().for_each(|x| *x *= s);
+                        }
+                        (e, column)
+                    },
+                )
+                .collect()
+        });
+        self.columns.extend(computed);
+        let mut r: Vec<f64> = self.b.iter().map(|x| -x).collect();
+        for (e, &w) in elements.iter().zip(weights) {
+            for (ri, a) in r.iter_mut().zip(&self.columns[e]) {
+                *ri += w * a;
+            }
+        }
+        debug_assert_eq!(r.len(), rows);
+        norm(&r) / norm(&self.b).max(f64::MIN_POSITIVE)
+    }
+}
+
+/// The full displacements u_i = U q_i of poses `chosen` (columns of q).
+fn displacements(
+    model: &FullSpaceModel,
+    basis: &[f64],
+    q: MatRef<'_, f64>,
+    chosen: &[usize],
+) -> Vec<Vec<f64>> {
+    let dofs = &model.dofs;
+    let (nf, n_full) = (dofs.num_free(), model.num_full());
+    chosen
+        .par_iter()
+        .map(|&i| {
+            let mut u = vec![0.0; n_full];
+            for (j, &qj) in q.col(i).iter().enumerate() {
+                if qj != 0.0 {
+                    for (r, &full) in dofs.free.iter().enumerate() {
+                        u[full] += basis[j * nf + r] * qj;
+                    }
+                }
+            }
+            u
+        })
+        .collect()
+}
+
+/// What the reduced force of one element at each pose needs: the basis, the poses' full
+/// displacements and, for a nonlinear subspace, their tangents.
+struct ElementForces<'a, 'b> {
+    model: &'a FullSpaceModel,
+    basis: &'a [f64],
+    k: usize,
+    displacements: &'a [Vec<f64>],
+    jacobians: Option<&'a [MatRef<'b, f64>]>,
+}
+
+impl ElementForces<'_, '_> {
+    /// g_{e,i} = J_iᵀ U_eᵀ f_e(u_i) of element `e` for every pose i, stacked into `column`
+    /// (poses × d); `ue` (12·k) and `g` (k) are scratch.
+    fn column<M: fem_core::material::Material>(
+        &self,
+        material: &M,
+        e: usize,
+        column: &mut [f64],
+        ue: &mut [f64],
+        g: &mut [f64],
+    ) {
+        let (k, dofs) = (self.k, &self.model.dofs);
+        let nf = dofs.num_free();
+        let elements = &self.model.elements;
+        // U_e, 12 × k row-major, zero rows for fixed DOFs.
+        for (a_local, &v) in elements.tets[e].iter().enumerate() {
+            for c in 0..3 {
+                let row = &mut ue[(3 * a_local + c) * k..(3 * a_local + c + 1) * k];
+                match dofs.index[3 * v + c] {
+                    FIXED => row.fill(0.0),
+                    r => {
+                        for (j, x) in row.iter_mut().enumerate() {
+                            *x = self.basis[j * nf + r];
+                        }
+                    }
+                }
+            }
+        }
+        let dim = column.len() / self.displacements.len().max(1);
+        for (p, u) in self.displacements.iter().enumerate() {
+            let (_, f, _) = elements.energy_gradient(material, e, u, 1.0);
+            g.fill(0.0);
+            for (l, &fl) in f.iter().enumerate() {
+                if fl != 0.0 {
+                    for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
+                        *gj += uj * fl;
+                    }
+                }
+            }
+            let out = &mut column[p * dim..(p + 1) * dim];
+            match self.jacobians {
+                None => out.copy_from_slice(g),
+                // Jᵀg through faer's SIMD kernels: this product was two thirds of the neural
+                // rule's stage as a scalar dot per coordinate.
+                Some(js) => matmul(
+                    MatMut::from_column_major_slice_mut(out, dim, 1),
+                    Accum::Replace,
+                    js[p].transpose(),
+                    MatRef::from_column_major_slice(g, k, 1),
+                    1.0,
+                    Par::Seq,
+                ),
+            }
+        }
+    }
+}
+
+/// Checks a basis and poses against `model` (shapes, finite values) and returns the reduced
+/// dimension d of the poses' forces (k for a linear subspace, the Jacobians' columns otherwise).
+fn check_inputs(
+    model: &FullSpaceModel,
+    basis: &[f64],
+    k: usize,
+    poses: &Poses<'_>,
+) -> Result<usize, CubatureError> {
+    let m = model.elements.len();
+    if m == 0 {
+        return Err(CubatureError::NoElements);
+    }
+    let nf = model.dofs.num_free();
+    if k == 0 || basis.len() != nf * k {
+        return Err(CubatureError::ShapeMismatch {
+            what: "basis U (free DOFs × k)",
+            expected: (nf, k),
+            found: (basis.len() / k.max(1), k),
+        });
+    }
+    let num_poses = poses.q.ncols();
+    if num_poses == 0 {
+        return Err(CubatureError::NoPoses);
+    }
+    if poses.q.nrows() != k {
+        return Err(CubatureError::ShapeMismatch {
+            what: "pose coefficients q (k × poses)",
+            expected: (k, num_poses),
+            found: (poses.q.nrows(), num_poses),
+        });
+    }
+    let dim = match poses.jacobians {
+        None => k,
+        Some(js) => {
+            if js.len() != num_poses {
+                return Err(CubatureError::ShapeMismatch {
+                    what: "Jacobian list (one per pose)",
+                    expected: (num_poses, 1),
+                    found: (js.len(), 1),
+                });
+            }
+            let d = js[0].ncols();
+            for j in js {
+                if j.nrows() != k || j.ncols() != d || d == 0 {
+                    return Err(CubatureError::ShapeMismatch {
+                        what: "pose Jacobian J (k × d)",
+                        expected: (k, d.max(1)),
+                        found: (j.nrows(), j.ncols()),
+                    });
+                }
+            }
+            d
+        }
+    };
+    check_finite("basis U", basis.iter().copied())?;
+    check_finite(
+        "pose coefficients q",
+        (0..num_poses).flat_map(|i| poses.q.col(i).iter().copied()),
+    )?;
+    if let Some(js) = poses.jacobians {
+        check_finite(
+            "pose Jacobians",
+            js.iter()
+                .flat_map(|j| (0..j.ncols()).flat_map(move |c| j.col(c).iter().copied())),
+        )?;
+    }
+    Ok(dim)
 }
 
 /// Row sums of a column-major rows × m matrix, in element order (deterministic), in parallel over

@@ -285,18 +285,6 @@ fn whitened(w: faer::MatRef<'_, f64>, a: faer::MatRef<'_, f64>) -> faer::Mat<f64
     w * f
 }
 
-/// ‖A_S w − b‖ / ‖b‖ of elements `selected` with `weights` on `data`.
-fn relative_error(data: &cubature::TrainingMatrix, selected: &[usize], weights: &[f64]) -> f64 {
-    let mut r: Vec<f64> = data.b().iter().map(|b| -b).collect();
-    for (&e, &w) in selected.iter().zip(weights) {
-        for (ri, a) in r.iter_mut().zip(data.column(e)) {
-            *ri += w * a;
-        }
-    }
-    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
-    norm(&r) / norm(data.b()).max(f64::MIN_POSITIVE)
-}
-
 /// What the autoencoder misses in the training data (stage `complement`): the left singular
 /// vectors of the reconstruction residuals R = Q − decode(encode(Q)) over the snapshots' PCA
 /// coefficients Q, in order, for `[reduced] complement_directions`.
@@ -1014,36 +1002,52 @@ impl<'a> Pipeline<'a> {
                 })
                 .collect()
         };
-        let build = |frames: faer::MatRef<'_, f64>| -> Result<cubature::TrainingMatrix> {
-            let (q, jac) = poses(frames);
-            if let Some((basis, to)) = &whitened_basis {
-                let q = to * &q;
-                let p = cubature::Poses::linear(q.as_ref());
-                return cubature::TrainingMatrix::build(&self.model, basis, k, p, cfg).map_err(err);
-            }
-            let tangents = tangents(&jac);
-            let refs: Vec<faer::MatRef<'_, f64>> = tangents.iter().map(|m| m.as_ref()).collect();
-            let p = cubature::Poses::nonlinear(q.as_ref(), &refs);
-            cubature::TrainingMatrix::build(&self.model, &columns, k, p, cfg).map_err(err)
-        };
         let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
         let held: Vec<f64> = reference.frames.iter().flatten().copied().collect();
         let h = faer::MatRef::from_column_major_slice(&held, snaps.dim, reference.frames.len());
-        let held = build(h)?;
+        // The training poses and the held-out test's frames, each as linear poses in the
+        // whitened basis or as nonlinear ones with their tangents.
+        let (q_train, jac_train) = poses(s);
+        let (q_held, jac_held) = poses(h);
+        let (basis_used, q_train, q_held) = match &whitened_basis {
+            Some((basis, to)) => (&basis[..], to * &q_train, to * &q_held),
+            None => (&columns[..], q_train, q_held),
+        };
+        let (tan_train, tan_held) = match &whitened_basis {
+            Some(_) => (Vec::new(), Vec::new()),
+            None => (tangents(&jac_train), tangents(&jac_held)),
+        };
+        let refs_train: Vec<_> = tan_train.iter().map(|m| m.as_ref()).collect();
+        let refs_held: Vec<_> = tan_held.iter().map(|m| m.as_ref()).collect();
+        let linear = whitened_basis.is_some();
+        let (p_train, p_held) = if linear {
+            (
+                cubature::Poses::linear(q_train.as_ref()),
+                cubature::Poses::linear(q_held.as_ref()),
+            )
+        } else {
+            (
+                cubature::Poses::nonlinear(q_train.as_ref(), &refs_train),
+                cubature::Poses::nonlinear(q_held.as_ref(), &refs_held),
+            )
+        };
+        let mut held =
+            cubature::HeldOutForces::new(&self.model, basis_used, k, p_held, cfg).map_err(err)?;
         let start = Instant::now();
-        let train = build(s)?;
+        let train = cubature::TrainingMatrix::build(&self.model, basis_used, k, p_train, cfg)
+            .map_err(err)?;
         // The held-out error along the greedy path, at element counts about 20 % apart.
         let mut held_out_curve = Vec::new();
         let mut next = 1;
         let rule = cubature::fit_with_progress(&train, cfg, &mut |p| {
             if p.elements >= next {
-                held_out_curve.push((p.elements, relative_error(&held, p.selected, p.weights)));
+                held_out_curve.push((p.elements, held.relative_error(p.selected, p.weights)));
                 next = p.elements + 1 + p.elements / 5;
             }
         })
         .map_err(err)?;
         let fit_seconds = start.elapsed().as_secs_f64();
-        let held_out_error = rule.evaluate(&held).map_err(err)?;
+        let held_out_error = held.relative_error(&rule.elements, &rule.weights);
         if held_out_curve.last().is_none_or(|&(n, _)| n != rule.len()) {
             held_out_curve.push((rule.len(), held_out_error));
         }

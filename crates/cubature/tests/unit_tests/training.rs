@@ -1,6 +1,8 @@
 //! The training matrix against an independent whole-mesh assembly, pose handling and input errors.
 
-use cubature::{CubatureConfig, CubatureError, CubatureRule, Poses, TrainingMatrix};
+use cubature::{
+    CubatureConfig, CubatureError, CubatureRule, HeldOutForces, Poses, TrainingMatrix, fit,
+};
 use faer::{Mat, MatRef};
 use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::integrator::FullSpaceModel;
@@ -334,4 +336,87 @@ fn poses_that_invert_an_element_under_classic_neo_hookean_are_left_out() {
         TrainingMatrix::build(&model, &basis, k, Poses::linear(only_bad.as_ref()), &config),
         Err(CubatureError::NonFiniteForce { pose: 0, .. })
     ));
+}
+
+/// The held-out forces give a rule the error a matrix of every element gives it (targets from
+/// one assembly of the whole mesh, columns only for the elements asked about), for linear and
+/// nonlinear poses, with a pose at rest and one that inverts an element left out alike, and
+/// whatever columns earlier calls computed.
+#[test]
+fn held_out_forces_match_the_matrix_of_every_element() {
+    let fixture = beam([8, 2, 2]);
+    let material = fem_core::material::MaterialConfig {
+        model: fem_core::material::MaterialModel::NeoHookean,
+        ..Default::default()
+    };
+    let model = FullSpaceModel::new(
+        fixture.mesh.clone(),
+        &material,
+        fixture.pinned.clone(),
+        [0.0, 0.0, 0.0].into(),
+        vec![],
+    )
+    .unwrap();
+    let (modes, k0, lambda) = modal_basis(&model);
+    let good = random_poses(&model, &modes, &lambda, 9, 7);
+    // As in the test above: one more column that, at −1, pushes a tip corner through its
+    // elements; pose 3 at rest, pose 5 inverted.
+    let nf = model.dofs.num_free();
+    let k = k0 + 1;
+    let mut basis = modes.clone();
+    basis.extend((0..nf).map(|r| if r == nf - 3 { 1.0 } else { 0.0 }));
+    let q = Mat::from_fn(k, 9, |i, j| match (i, j) {
+        (_, 3) => 0.0,
+        (i, 5) if i == k0 => -1.0,
+        (i, _) if i == k0 => 0.0,
+        _ => good[(i, j)],
+    });
+    let config = CubatureConfig {
+        tolerance: 0.05,
+        ..Default::default()
+    };
+    let fitted = Mat::from_fn(k, 9, |i, j| if i < k0 { good[(i, j)] } else { 0.0 });
+    let train =
+        TrainingMatrix::build(&model, &basis, k, Poses::linear(fitted.as_ref()), &config).unwrap();
+    let rule = fit(&train, &config).unwrap();
+    let d = 3;
+    let mut rng = SplitMix64::new(5);
+    let js: Vec<Mat<f64>> = (0..9).map(|_| normal_mat(&mut rng, k, d)).collect();
+    let views: Vec<MatRef<'_, f64>> = js.iter().map(|j| j.as_ref()).collect();
+    for poses in [
+        Poses::linear(q.as_ref()),
+        Poses::nonlinear(q.as_ref(), &views),
+    ] {
+        let all = TrainingMatrix::build(&model, &basis, k, poses, &config).unwrap();
+        assert_eq!(all.invalid_poses(), &[5]);
+        assert_eq!(all.skipped_poses(), &[3]);
+        let mut held = HeldOutForces::new(&model, &basis, k, poses, &config).unwrap();
+        assert_eq!(held.num_poses(), all.num_poses());
+        assert!(rel_diff(held.b(), all.b()) <= 1e-12);
+        let weights = match poses.jacobians {
+            // The nonlinear poses' rule: the linear one's elements, other weights.
+            Some(_) => rule.weights.iter().map(|w| 0.5 * w).collect(),
+            None => rule.weights.clone(),
+        };
+        let check = CubatureRule {
+            elements: rule.elements.clone(),
+            weights: weights.clone(),
+            ..rule.clone()
+        };
+        let expected = check.evaluate(&all).unwrap();
+        // First a part of the rule (some columns computed), then all of it.
+        let half = rule.len() / 2;
+        let part = CubatureRule {
+            elements: rule.elements[..half].to_vec(),
+            weights: weights[..half].to_vec(),
+            ..rule.clone()
+        };
+        let part_error = held.relative_error(&part.elements, &part.weights);
+        assert!((part_error - part.evaluate(&all).unwrap()).abs() <= 1e-12);
+        let got = held.relative_error(&rule.elements, &weights);
+        assert!(
+            (got - expected).abs() <= 1e-12,
+            "held-out {got} against the whole matrix's {expected}"
+        );
+    }
 }
