@@ -475,7 +475,7 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
 /// fem-core's `a_schedule_whose_solve_fails_keeps_its_earlier_frames`).
 #[test]
 fn snapshots_that_never_start_are_an_error_that_says_what_to_change() {
-    // The training family's own tolerance too: by default it is the looser 10⁻³.
+    // The training family's own tolerance too: by default it is the looser 10⁻².
     let s = scene(
         &TINY
             .replace(

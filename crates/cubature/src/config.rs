@@ -46,7 +46,8 @@ pub struct CubatureConfig {
     pub max_elements: usize,
     /// Number of random unselected elements scored against the residual per greedy step.
     pub candidates: usize,
-    /// Keep at most this many training poses, chosen by a seeded subsample when more are given.
+    /// Keep at most this many training poses, chosen by a seeded subsample when more are given
+    /// (held-out poses too, [`crate::HeldOutForces`]).
     /// Each kept pose costs `d · elements` doubles of training matrix.
     pub max_poses: usize,
     /// Seed of the pose subsample and of the candidate draws.

@@ -18,6 +18,10 @@
 //! and only below [`MIN_POSES`] poses is it [`CubatureError::MemoryLimit`], never an allocation
 //! failure. Poses where an element's force is not finite (inverted under a material undefined
 //! there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
+//!
+//! [`HeldOutForces`] measures a rule on poses it was not fitted to without that matrix: the
+//! targets from one assembly of the whole mesh per pose, the columns of the elements asked
+//! about only. `max_poses` caps its poses too; the memory limit does not apply to it.
 
 use std::collections::HashMap;
 
@@ -349,7 +353,9 @@ impl TrainingMatrix {
 /// A [`TrainingMatrix`] of the same poses holds every element's column: 8·P·d·m bytes, about
 /// 2 GB for 100 poses of 85 coordinates on 29k elements, built at the cost of the training
 /// matrix itself, where a greedy path visits a few hundred elements. The memory limit does not
-/// apply (this holds P full displacements); `max_poses` and the seed choose the poses as there.
+/// apply (this holds P full displacements and the visited columns); `max_poses` and the seed
+/// choose the poses as there, and poses where an element's force is not finite are left out
+/// and listed ([`HeldOutForces::invalid_poses`]), with a warning.
 pub struct HeldOutForces<'a> {
     model: &'a FullSpaceModel,
     basis: &'a [f64],
@@ -360,6 +366,7 @@ pub struct HeldOutForces<'a> {
     /// 1 / ‖b_i‖ of each pose kept.
     inv_scales: Vec<f64>,
     b: Vec<f64>,
+    invalid_poses: Vec<usize>,
     columns: HashMap<usize, Vec<f64>>,
 }
 
@@ -394,7 +401,9 @@ impl<'a> HeldOutForces<'a> {
             .map(|js| chosen.iter().map(|&i| js[i]).collect());
         let dofs = &model.dofs;
         let nf = dofs.num_free();
-        let targets: Vec<Vec<f64>> = with_material!(&model.material, |material| {
+        // Each pose's target, or the first element whose force is not finite there (any entry,
+        // a pinned DOF's too, as a column of TrainingMatrix is then not finite either).
+        let targets: Vec<Result<Vec<f64>, usize>> = with_material!(&model.material, |material| {
             displacements
                 .par_iter()
                 .enumerate()
@@ -403,6 +412,9 @@ impl<'a> HeldOutForces<'a> {
                     let mut f = vec![0.0; u.len()];
                     for (e, tet) in elements.tets.iter().enumerate() {
                         let (_, fe, _) = elements.energy_gradient(material, e, u, 1.0);
+                        if !fe.iter().all(|x| x.is_finite()) {
+                            return Err(e);
+                        }
                         for (a, &v) in tet.iter().enumerate() {
                             for c in 0..3 {
                                 f[3 * v + c] += fe[3 * a + c];
@@ -415,7 +427,7 @@ impl<'a> HeldOutForces<'a> {
                             col.iter().zip(&dofs.free).map(|(x, &r)| x * f[r]).sum()
                         })
                         .collect();
-                    match &jacobians {
+                    Ok(match &jacobians {
                         None => g,
                         Some(js) => {
                             let mut out = vec![0.0; dim];
@@ -429,32 +441,38 @@ impl<'a> HeldOutForces<'a> {
                             );
                             out
                         }
-                    }
+                    })
                 })
                 .collect()
         });
-        let scales: Vec<f64> = targets
-            .iter()
-            .map(|t| {
-                if t.iter().all(|x| x.is_finite()) {
-                    norm(t)
-                } else {
-                    f64::NAN
-                }
-            })
+        let invalid_poses: Vec<usize> = (0..chosen.len())
+            .filter(|&p| targets[p].is_err())
+            .map(|p| chosen[p])
             .collect();
-        let largest = scales
-            .iter()
-            .copied()
-            .filter(|s| s.is_finite())
-            .fold(0.0, f64::max);
-        if largest == 0.0 {
+        if invalid_poses.len() == chosen.len() {
+            return Err(CubatureError::NonFiniteForce {
+                element: targets[0].clone().err().unwrap_or(0),
+                pose: chosen[0],
+            });
+        }
+        if !invalid_poses.is_empty() {
+            tracing::warn!(
+                "cubature: {} of {} held-out poses have an element whose force is not finite \
+                 there (inverted under the material) and are left out of the error",
+                invalid_poses.len(),
+                chosen.len()
+            );
+        }
+        let targets: Vec<Vec<f64>> = targets.into_iter().map(|t| t.unwrap_or_default()).collect();
+        let scales: Vec<f64> = targets.iter().map(|t| norm(t)).collect();
+        let largest = scales.iter().copied().fold(0.0, f64::max);
+        if largest == 0.0 || !largest.is_finite() {
             return Err(CubatureError::ZeroTarget {
                 poses: chosen.len(),
             });
         }
         let keep: Vec<usize> = (0..chosen.len())
-            .filter(|&p| scales[p].is_finite() && scales[p] > ZERO_POSE_TOLERANCE * largest)
+            .filter(|&p| !targets[p].is_empty() && scales[p] > ZERO_POSE_TOLERANCE * largest)
             .collect();
         let inv_scales: Vec<f64> = keep.iter().map(|&p| 1.0 / scales[p]).collect();
         let b = keep
@@ -480,6 +498,7 @@ impl<'a> HeldOutForces<'a> {
             jacobians,
             inv_scales,
             b,
+            invalid_poses,
             columns: HashMap::new(),
         })
     }
@@ -494,9 +513,35 @@ impl<'a> HeldOutForces<'a> {
         &self.b
     }
 
-    /// ‖A_S w − b‖ / ‖b‖ for elements S with weights w (the columns of S not yet computed are,
-    /// in parallel, and kept for the next call).
-    pub fn relative_error(&mut self, elements: &[usize], weights: &[f64]) -> f64 {
+    /// Poses (indices into the poses given) left out because an element's force is not finite
+    /// there, as [`TrainingMatrix::invalid_poses`].
+    pub fn invalid_poses(&self) -> &[usize] {
+        &self.invalid_poses
+    }
+
+    /// ‖A_S w − b‖ / ‖b‖ for elements S with weights w, in any order (the columns of S not yet
+    /// computed are, in parallel, and kept for the next call).
+    ///
+    /// # Errors
+    /// [`CubatureError::InvalidRule`] when the lengths differ or an element is out of range.
+    pub fn relative_error(
+        &mut self,
+        elements: &[usize],
+        weights: &[f64],
+    ) -> Result<f64, CubatureError> {
+        let m = self.model.elements.len();
+        if elements.len() != weights.len() {
+            return Err(CubatureError::InvalidRule(format!(
+                "{} elements and {} weights",
+                elements.len(),
+                weights.len()
+            )));
+        }
+        if let Some(&e) = elements.iter().find(|&&e| e >= m) {
+            return Err(CubatureError::InvalidRule(format!(
+                "element {e} is out of range for a mesh of {m} elements"
+            )));
+        }
         let mut missing: Vec<usize> = elements
             .iter()
             .copied()
@@ -539,7 +584,7 @@ impl<'a> HeldOutForces<'a> {
             }
         }
         debug_assert_eq!(r.len(), rows);
-        norm(&r) / norm(&self.b).max(f64::MIN_POSITIVE)
+        Ok(norm(&r) / norm(&self.b).max(f64::MIN_POSITIVE))
     }
 }
 

@@ -127,9 +127,9 @@ pub struct ScheduleConfig {
 /// 4.5 at 10⁻³ and about 3.9 at 10⁻². From 10⁻⁴ to 10⁻³ the mesh suite's `pca` errors stayed
 /// the same to 0.01 point on five meshes of six (the dinosaur 20.1 → 19.6 %); from 10⁻³ to
 /// 10⁻² they stayed within 0.4 point (the bar 1.5 → 1.4 %, the dinosaur 19.6 → 19.2 %, the
-/// torus and the toy 5.15 and 5.08 % both times; with 36 schedules the torus's `pca` was 2.72 %
-/// at 3·10⁻³ and at 10⁻²), the cubature rules and networks moved within a redraw's spread, the
-/// suite took 4.3 min instead of 4.7 and the torus's snapshots 64 s instead of 83.
+/// torus 5.15 → 5.16 %, the toy 5.08 % both times; with 36 schedules the torus's `pca` was
+/// 2.72 % at 3·10⁻³ and at 10⁻²), the cubature rules and networks moved within a redraw's
+/// spread, the suite took 4.3 min instead of 4.7 and the torus's snapshots 64 s instead of 83.
 pub const TRAINING_TOLERANCE: f64 = 1e-2;
 
 fn is_random(p: &PatchPlacement) -> bool {

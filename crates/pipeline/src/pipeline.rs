@@ -1036,18 +1036,31 @@ impl<'a> Pipeline<'a> {
         let start = Instant::now();
         let train = cubature::TrainingMatrix::build(&self.model, basis_used, k, p_train, cfg)
             .map_err(err)?;
-        // The held-out error along the greedy path, at element counts about 20 % apart.
+        // The held-out error along the greedy path, at element counts about 20 % apart (its
+        // time left out of the fit's).
         let mut held_out_curve = Vec::new();
         let mut next = 1;
+        let mut held_seconds = 0.0;
+        let mut held_failed = None;
         let rule = cubature::fit_with_progress(&train, cfg, &mut |p| {
             if p.elements >= next {
-                held_out_curve.push((p.elements, held.relative_error(p.selected, p.weights)));
+                let t = Instant::now();
+                match held.relative_error(p.selected, p.weights) {
+                    Ok(e) => held_out_curve.push((p.elements, e)),
+                    Err(e) => held_failed = held_failed.take().or(Some(e)),
+                }
+                held_seconds += t.elapsed().as_secs_f64();
                 next = p.elements + 1 + p.elements / 5;
             }
         })
         .map_err(err)?;
-        let fit_seconds = start.elapsed().as_secs_f64();
-        let held_out_error = held.relative_error(&rule.elements, &rule.weights);
+        if let Some(e) = held_failed {
+            return Err(err(e));
+        }
+        let fit_seconds = start.elapsed().as_secs_f64() - held_seconds;
+        let held_out_error = held
+            .relative_error(&rule.elements, &rule.weights)
+            .map_err(err)?;
         if held_out_curve.last().is_none_or(|&(n, _)| n != rule.len()) {
             held_out_curve.push((rule.len(), held_out_error));
         }

@@ -525,7 +525,7 @@ mod tests {
         assert!(err.contains("time.step"), "{err}");
     }
 
-    /// The training data's solves stop at 10⁻³ unless the solver's own tolerance is looser or
+    /// The training data's solves stop at 10⁻² unless the solver's own tolerance is looser or
     /// `[training] tolerance` says otherwise; the test trajectory keeps the solver's.
     #[test]
     fn training_solves_take_their_own_tolerance() {
@@ -537,12 +537,12 @@ mod tests {
             )
         };
         let s = with("").unwrap();
-        assert_eq!(s.training().tolerance, Some(1e-3));
-        assert_eq!(s.test().tolerance, None);
-        assert_eq!(s.training().solver(&s.solver).tolerance, 1e-3);
-        assert_eq!(s.test().solver(&s.solver).tolerance, s.solver.tolerance);
-        let s = with("[solver]\ntolerance = 1.0e-2\n").unwrap();
         assert_eq!(s.training().tolerance, Some(1e-2));
+        assert_eq!(s.test().tolerance, None);
+        assert_eq!(s.training().solver(&s.solver).tolerance, 1e-2);
+        assert_eq!(s.test().solver(&s.solver).tolerance, s.solver.tolerance);
+        let s = with("[solver]\ntolerance = 5.0e-2\n").unwrap();
+        assert_eq!(s.training().tolerance, Some(5e-2));
         let s = with("[training]\ntolerance = 1.0e-7\n").unwrap();
         assert_eq!(s.training().tolerance, Some(1e-7));
         for (extra, says) in [

@@ -383,15 +383,25 @@ fn held_out_forces_match_the_matrix_of_every_element() {
     let mut rng = SplitMix64::new(5);
     let js: Vec<Mat<f64>> = (0..9).map(|_| normal_mat(&mut rng, k, d)).collect();
     let views: Vec<MatRef<'_, f64>> = js.iter().map(|j| j.as_ref()).collect();
-    for poses in [
-        Poses::linear(q.as_ref()),
-        Poses::nonlinear(q.as_ref(), &views),
+    // Every pose, and a seeded subsample of 6 of the 9.
+    let subsample = CubatureConfig {
+        max_poses: 6,
+        ..config.clone()
+    };
+    for (poses, config) in [
+        (Poses::linear(q.as_ref()), &config),
+        (Poses::nonlinear(q.as_ref(), &views), &config),
+        (Poses::linear(q.as_ref()), &subsample),
+        (Poses::nonlinear(q.as_ref(), &views), &subsample),
     ] {
-        let all = TrainingMatrix::build(&model, &basis, k, poses, &config).unwrap();
-        assert_eq!(all.invalid_poses(), &[5]);
-        assert_eq!(all.skipped_poses(), &[3]);
-        let mut held = HeldOutForces::new(&model, &basis, k, poses, &config).unwrap();
+        let all = TrainingMatrix::build(&model, &basis, k, poses, config).unwrap();
+        if config.max_poses > 9 {
+            assert_eq!(all.invalid_poses(), &[5]);
+            assert_eq!(all.skipped_poses(), &[3]);
+        }
+        let mut held = HeldOutForces::new(&model, &basis, k, poses, config).unwrap();
         assert_eq!(held.num_poses(), all.num_poses());
+        assert_eq!(held.invalid_poses(), all.invalid_poses());
         assert!(rel_diff(held.b(), all.b()) <= 1e-12);
         let weights = match poses.jacobians {
             // The nonlinear poses' rule: the linear one's elements, other weights.
@@ -411,12 +421,34 @@ fn held_out_forces_match_the_matrix_of_every_element() {
             weights: weights[..half].to_vec(),
             ..rule.clone()
         };
-        let part_error = held.relative_error(&part.elements, &part.weights);
+        let part_error = held.relative_error(&part.elements, &part.weights).unwrap();
         assert!((part_error - part.evaluate(&all).unwrap()).abs() <= 1e-12);
-        let got = held.relative_error(&rule.elements, &weights);
+        let got = held.relative_error(&rule.elements, &weights).unwrap();
         assert!(
             (got - expected).abs() <= 1e-12,
             "held-out {got} against the whole matrix's {expected}"
         );
+        // The greedy path's order (not increasing) gives the same figure.
+        let (mut e_rev, mut w_rev) = (rule.elements.clone(), weights.clone());
+        e_rev.reverse();
+        w_rev.reverse();
+        let reversed = held.relative_error(&e_rev, &w_rev).unwrap();
+        assert!((reversed - expected).abs() <= 1e-12);
+        // A rule that does not fit the mesh is an error, not a panic.
+        let m = model.elements.len();
+        assert!(matches!(
+            held.relative_error(&[m], &[1.0]),
+            Err(CubatureError::InvalidRule(_))
+        ));
+        assert!(matches!(
+            held.relative_error(&[0, 1], &[1.0]),
+            Err(CubatureError::InvalidRule(_))
+        ));
     }
+    // Only the inverted pose: an error naming it, as for the training matrix.
+    let only_bad = Mat::from_fn(k, 1, |i, _| q[(i, 5)]);
+    assert!(matches!(
+        HeldOutForces::new(&model, &basis, k, Poses::linear(only_bad.as_ref()), &config),
+        Err(CubatureError::NonFiniteForce { pose: 0, .. })
+    ));
 }
