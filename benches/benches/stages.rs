@@ -4,7 +4,7 @@
 //! * `pca_fit/<n>x<N>`: mass-weighted thin SVD and the max-vertex-error dimension rule (the scenes'
 //!   rule, at 1 % of the largest vertex displacement) on a rank-400 snapshot matrix with a spectrum
 //!   decaying like 1/m²: n = 1,500 free DOFs (an earlier default cantilever) and 9,759 (the
-//!   catapult), N = 1,440 snapshots (24 schedules of 60 frames, the scenes' training default).
+//!   catapult), N = 1,920 snapshots (32 schedules of 60 frames, the scenes' training default).
 //! * `cubature/build` and `cubature/fit`: the training matrix of 150 poses and the greedy + NNLS
 //!   fit to the default 2 % on a 20 × 4 × 4-cell beam (an earlier default scene's mesh, 1,920 tets)
 //!   with a 10-mode smooth basis: the cubature tests' fixture.
@@ -28,8 +28,8 @@ use faer::Mat;
 use fem_core::rng::SplitMix64;
 use pca::{PcaBasis, PcaConfig};
 
-/// Snapshots of the scenes' training default: 24 schedules × 60 frames.
-const SNAPSHOTS: usize = 1_440;
+/// Snapshots of the scenes' training default: 32 schedules × 60 frames.
+const SNAPSHOTS: usize = 1_920;
 
 /// A rank-400 n × N snapshot matrix with singular values decaying like 1/m², and a lumped-mass
 /// diagonal varying by vertex.
