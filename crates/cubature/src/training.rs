@@ -142,10 +142,7 @@ impl TrainingMatrix {
             "building the cubature training matrix"
         );
 
-        let displacements = displacements(model, basis, poses.q, &chosen);
-        let jacobians: Option<Vec<MatRef<'_, f64>>> = poses
-            .jacobians
-            .map(|js| chosen.iter().map(|&i| js[i]).collect());
+        let (displacements, jacobians) = chosen_poses(model, basis, &poses, &chosen);
 
         let mut a = vec![0.0; rows * m];
         with_material!(&model.material, |material| {
@@ -395,10 +392,7 @@ impl<'a> HeldOutForces<'a> {
         config.validate()?;
         let dim = check_inputs(model, basis, k, &poses)?;
         let chosen = subsample(poses.q.ncols(), config.max_poses, config.seed);
-        let displacements = displacements(model, basis, poses.q, &chosen);
-        let jacobians: Option<Vec<MatRef<'a, f64>>> = poses
-            .jacobians
-            .map(|js| chosen.iter().map(|&i| js[i]).collect());
+        let (displacements, jacobians) = chosen_poses(model, basis, &poses, &chosen);
         let dofs = &model.dofs;
         let nf = dofs.num_free();
         // Each pose's target, or the first element whose force is not finite there (any entry,
@@ -427,21 +421,9 @@ impl<'a> HeldOutForces<'a> {
                             col.iter().zip(&dofs.free).map(|(x, &r)| x * f[r]).sum()
                         })
                         .collect();
-                    Ok(match &jacobians {
-                        None => g,
-                        Some(js) => {
-                            let mut out = vec![0.0; dim];
-                            matmul(
-                                MatMut::from_column_major_slice_mut(&mut out, dim, 1),
-                                Accum::Replace,
-                                js[p].transpose(),
-                                MatRef::from_column_major_slice(&g, k, 1),
-                                1.0,
-                                Par::Seq,
-                            );
-                            out
-                        }
-                    })
+                    let mut out = vec![0.0; dim];
+                    tangent_transpose_product(jacobians.as_ref().map(|js| js[p]), &g, &mut out);
+                    Ok(out)
                 })
                 .collect()
         });
@@ -451,7 +433,7 @@ impl<'a> HeldOutForces<'a> {
             .collect();
         if invalid_poses.len() == chosen.len() {
             return Err(CubatureError::NonFiniteForce {
-                element: targets[0].clone().err().unwrap_or(0),
+                element: targets[0].as_ref().err().copied().unwrap_or(0),
                 pose: chosen[0],
             });
         }
@@ -463,8 +445,10 @@ impl<'a> HeldOutForces<'a> {
                 chosen.len()
             );
         }
-        let targets: Vec<Vec<f64>> = targets.into_iter().map(|t| t.unwrap_or_default()).collect();
-        let scales: Vec<f64> = targets.iter().map(|t| norm(t)).collect();
+        let scales: Vec<f64> = targets
+            .iter()
+            .map(|t| t.as_ref().map_or(0.0, |t| norm(t)))
+            .collect();
         let largest = scales.iter().copied().fold(0.0, f64::max);
         if largest == 0.0 || !largest.is_finite() {
             return Err(CubatureError::ZeroTarget {
@@ -472,22 +456,20 @@ impl<'a> HeldOutForces<'a> {
             });
         }
         let keep: Vec<usize> = (0..chosen.len())
-            .filter(|&p| !targets[p].is_empty() && scales[p] > ZERO_POSE_TOLERANCE * largest)
+            .filter(|&p| targets[p].is_ok() && scales[p] > ZERO_POSE_TOLERANCE * largest)
             .collect();
         let inv_scales: Vec<f64> = keep.iter().map(|&p| 1.0 / scales[p]).collect();
         let b = keep
             .iter()
             .zip(&inv_scales)
-            .flat_map(|(&p, &s)| targets[p].iter().map(move |x| x * s))
+            .flat_map(|(&p, &s)| targets[p].iter().flatten().map(move |x| x * s))
             .collect();
-        let mut displacements = displacements;
-        let mut kept = keep.iter().peekable();
-        let mut p = 0;
-        displacements.retain(|_| {
-            let kept_here = kept.next_if_eq(&&p).is_some();
-            p += 1;
-            kept_here
-        });
+        let displacements = displacements
+            .into_iter()
+            .enumerate()
+            .filter(|(p, _)| keep.binary_search(p).is_ok())
+            .map(|(_, u)| u)
+            .collect();
         let jacobians = jacobians.map(|js| keep.iter().map(|&p| js[p]).collect());
         Ok(Self {
             model,
@@ -549,7 +531,6 @@ impl<'a> HeldOutForces<'a> {
             .collect();
         missing.sort_unstable();
         missing.dedup();
-        let rows = self.b.len();
         let (k, p) = (self.k, self.inv_scales.len());
         let forces = ElementForces {
             model: self.model,
@@ -583,21 +564,22 @@ impl<'a> HeldOutForces<'a> {
                 *ri += w * a;
             }
         }
-        debug_assert_eq!(r.len(), rows);
         Ok(norm(&r) / norm(&self.b).max(f64::MIN_POSITIVE))
     }
 }
 
-/// The full displacements u_i = U q_i of poses `chosen` (columns of q).
-fn displacements(
+/// The full displacements u_i = U q_i of poses `chosen`, and their tangents J_i for a nonlinear
+/// subspace.
+fn chosen_poses<'a>(
     model: &FullSpaceModel,
     basis: &[f64],
-    q: MatRef<'_, f64>,
+    poses: &Poses<'a>,
     chosen: &[usize],
-) -> Vec<Vec<f64>> {
+) -> (Vec<Vec<f64>>, Option<Vec<MatRef<'a, f64>>>) {
     let dofs = &model.dofs;
     let (nf, n_full) = (dofs.num_free(), model.num_full());
-    chosen
+    let q = poses.q;
+    let displacements = chosen
         .par_iter()
         .map(|&i| {
             let mut u = vec![0.0; n_full];
@@ -610,7 +592,28 @@ fn displacements(
             }
             u
         })
-        .collect()
+        .collect();
+    let jacobians = poses
+        .jacobians
+        .map(|js| chosen.iter().map(|&i| js[i]).collect());
+    (displacements, jacobians)
+}
+
+/// `out` = Jᵀg for a nonlinear subspace's tangent J (k × d), g itself for a linear one.
+fn tangent_transpose_product(jacobian: Option<MatRef<'_, f64>>, g: &[f64], out: &mut [f64]) {
+    match jacobian {
+        None => out.copy_from_slice(g),
+        // Through faer's SIMD kernels: this product was two thirds of the neural rule's
+        // stage as a scalar dot per coordinate.
+        Some(j) => matmul(
+            MatMut::from_column_major_slice_mut(out, j.ncols(), 1),
+            Accum::Replace,
+            j.transpose(),
+            MatRef::from_column_major_slice(g, j.nrows(), 1),
+            1.0,
+            Par::Seq,
+        ),
+    }
 }
 
 /// What the reduced force of one element at each pose needs: the basis, the poses' full
@@ -663,19 +666,7 @@ impl ElementForces<'_, '_> {
                 }
             }
             let out = &mut column[p * dim..(p + 1) * dim];
-            match self.jacobians {
-                None => out.copy_from_slice(g),
-                // Jᵀg through faer's SIMD kernels: this product was two thirds of the neural
-                // rule's stage as a scalar dot per coordinate.
-                Some(js) => matmul(
-                    MatMut::from_column_major_slice_mut(out, dim, 1),
-                    Accum::Replace,
-                    js[p].transpose(),
-                    MatRef::from_column_major_slice(g, k, 1),
-                    1.0,
-                    Par::Seq,
-                ),
-            }
+            tangent_transpose_product(self.jacobians.map(|js| js[p]), g, out);
         }
     }
 }

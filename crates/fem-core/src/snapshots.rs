@@ -122,14 +122,14 @@ pub struct ScheduleConfig {
 /// held-out test's 10⁻⁶, only so that what a subspace of them holds does not change (PCA keeps
 /// 1 − 10⁻⁷ of their energy, a relative error of about 3·10⁻⁴ of their size; the tolerance is a
 /// relative gradient, not a relative displacement, so the two are compared by what the pipeline
-/// measured, not derived). Measured:
-/// on a 29k-tet torus a full-space step took 9.4 L-BFGS iterations at 10⁻⁶, 6.2 at 10⁻⁴,
-/// 4.5 at 10⁻³ (its first three schedules alone: 6.0–7.4 at 10⁻³, 3.9–4.9 at 10⁻²). From
-/// 10⁻⁴ to 10⁻³ the mesh suite's `pca` errors stayed the same to 0.01 point on five meshes of six (the dinosaur 20.1 → 19.6 %); from 10⁻³ to
-/// 10⁻² they stayed within 0.4 point (the bar 1.5 → 1.4 %, the dinosaur 19.6 → 19.2 %, the
-/// torus 5.15 → 5.16 %, the toy 5.08 % both times; with 36 schedules the torus's `pca` was
-/// 2.72 % at 3·10⁻³ and at 10⁻²), the cubature rules and networks moved within a redraw's
-/// spread, the suite took 4.3 min instead of 4.7 and the torus's snapshots 64 s instead of 83.
+/// measured, not derived). Measured: on a 29k-tet torus a full-space step took 9.4 L-BFGS
+/// iterations at 10⁻⁶, 6.2 at 10⁻⁴, 4.5 at 10⁻³ (its first three schedules alone: 6.0–7.4 at
+/// 10⁻³, 3.9–4.9 at 10⁻²). From 10⁻⁴ to 10⁻³ the mesh suite's `pca` errors stayed the same to
+/// 0.01 point on five meshes of six (the dinosaur 20.1 → 19.6 %); from 10⁻³ to 10⁻² they
+/// stayed within 0.4 point (the bar 1.5 → 1.4 %, the dinosaur 19.6 → 19.2 %, the torus 5.15 →
+/// 5.16 %, the toy 5.08 % both times; with 36 schedules the torus's `pca` was 2.72 % at 3·10⁻³
+/// and at 10⁻²), the cubature rules and networks moved within a redraw's spread, the suite took
+/// 4.3 min instead of 4.7 and the torus's snapshots 64 s instead of 83.
 pub const TRAINING_TOLERANCE: f64 = 1e-2;
 
 fn is_random(p: &PatchPlacement) -> bool {

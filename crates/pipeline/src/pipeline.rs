@@ -285,6 +285,19 @@ fn whitened(w: faer::MatRef<'_, f64>, a: faer::MatRef<'_, f64>) -> faer::Mat<f64
     w * f
 }
 
+/// Poses for a cubature fit: linear ones when there are no tangents (PCA, whose basis is
+/// whitened instead), nonlinear ones with a tangent per pose otherwise.
+fn cubature_poses<'a>(
+    q: &'a faer::Mat<f64>,
+    tangents: &'a [faer::MatRef<'a, f64>],
+) -> cubature::Poses<'a> {
+    if tangents.is_empty() {
+        cubature::Poses::linear(q.as_ref())
+    } else {
+        cubature::Poses::nonlinear(q.as_ref(), tangents)
+    }
+}
+
 /// What the autoencoder misses in the training data (stage `complement`): the left singular
 /// vectors of the reconstruction residuals R = Q − decode(encode(Q)) over the snapshots' PCA
 /// coefficients Q, in order, for `[reduced] complement_directions`.
@@ -1005,35 +1018,27 @@ impl<'a> Pipeline<'a> {
         let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
         let held: Vec<f64> = reference.frames.iter().flatten().copied().collect();
         let h = faer::MatRef::from_column_major_slice(&held, snaps.dim, reference.frames.len());
-        // The training poses and the held-out test's frames, each as linear poses in the
-        // whitened basis or as nonlinear ones with their tangents.
-        let (q_train, jac_train) = poses(s);
-        let (q_held, jac_held) = poses(h);
-        let (basis_used, q_train, q_held) = match &whitened_basis {
-            Some((basis, to)) => (&basis[..], to * &q_train, to * &q_held),
-            None => (&columns[..], q_train, q_held),
+        // The training poses and the held-out test's frames, each as coefficients in the
+        // whitened basis (PCA) or as coefficients with their whitened tangents (neural).
+        let pose_set = |frames| -> (faer::Mat<f64>, Vec<faer::Mat<f64>>) {
+            let (q, jacobians) = poses(frames);
+            match &whitened_basis {
+                Some((_, to)) => (to * &q, Vec::new()),
+                None => (q, tangents(&jacobians)),
+            }
         };
-        let (tan_train, tan_held) = match &whitened_basis {
-            Some(_) => (Vec::new(), Vec::new()),
-            None => (tangents(&jac_train), tangents(&jac_held)),
-        };
+        let (q_train, tan_train) = pose_set(s);
+        let (q_held, tan_held) = pose_set(h);
+        let basis_used = whitened_basis
+            .as_ref()
+            .map_or(&columns[..], |(b, _)| &b[..]);
         let refs_train: Vec<_> = tan_train.iter().map(|m| m.as_ref()).collect();
         let refs_held: Vec<_> = tan_held.iter().map(|m| m.as_ref()).collect();
-        let linear = whitened_basis.is_some();
-        let (p_train, p_held) = if linear {
-            (
-                cubature::Poses::linear(q_train.as_ref()),
-                cubature::Poses::linear(q_held.as_ref()),
-            )
-        } else {
-            (
-                cubature::Poses::nonlinear(q_train.as_ref(), &refs_train),
-                cubature::Poses::nonlinear(q_held.as_ref(), &refs_held),
-            )
-        };
+        let p_held = cubature_poses(&q_held, &refs_held);
         let mut held =
             cubature::HeldOutForces::new(&self.model, basis_used, k, p_held, cfg).map_err(err)?;
         let start = Instant::now();
+        let p_train = cubature_poses(&q_train, &refs_train);
         let train = cubature::TrainingMatrix::build(&self.model, basis_used, k, p_train, cfg)
             .map_err(err)?;
         // The held-out error along the greedy path, at element counts about 20 % apart (its

@@ -289,12 +289,15 @@ fn from_matrix_checks_its_input() {
     ));
 }
 
-/// Classic Neo-Hookean is undefined where an element inverts. A pose that inverts elements (a
-/// PCA-reconstructed or decoded pose the full simulation never produced) is left out of the fit
-/// and listed, the others give exactly the matrix they give alone; only when every pose is
-/// invalid is the stage an error.
-#[test]
-fn poses_that_invert_an_element_under_classic_neo_hookean_are_left_out() {
+/// A classic Neo-Hookean beam (undefined where an element inverts), `n` poses of its modal
+/// basis drawn with `seed`, and that basis with one more column, k0 + 1 in all: the column moves
+/// the last free vertex (a tip corner) along x, and at a coefficient of −1 pushes it a whole
+/// beam length back, through the opposite faces of its elements. Returns the model, the
+/// extended basis, k0 and the poses (k0 + 1 rows, the last coefficient 0).
+fn beam_with_an_inverting_column(
+    n: usize,
+    seed: u64,
+) -> (FullSpaceModel, Vec<f64>, usize, Mat<f64>) {
     let fixture = beam([8, 2, 2]);
     let material = fem_core::material::MaterialConfig {
         model: fem_core::material::MaterialModel::NeoHookean,
@@ -309,14 +312,22 @@ fn poses_that_invert_an_element_under_classic_neo_hookean_are_left_out() {
     )
     .unwrap();
     let (modes, k0, lambda) = modal_basis(&model);
-    let good0 = random_poses(&model, &modes, &lambda, 6, 5);
-    // One more column moves the last free vertex (a tip corner) along x: a coefficient of −1
-    // pushes it a whole beam length back, through the opposite faces of its elements.
+    let modal = random_poses(&model, &modes, &lambda, n, seed);
     let nf = model.dofs.num_free();
-    let k = k0 + 1;
-    let mut basis = modes.clone();
+    let mut basis = modes;
     basis.extend((0..nf).map(|r| if r == nf - 3 { 1.0 } else { 0.0 }));
-    let good = Mat::from_fn(k, 6, |i, j| if i < k0 { good0[(i, j)] } else { 0.0 });
+    let poses = Mat::from_fn(k0 + 1, n, |i, j| if i < k0 { modal[(i, j)] } else { 0.0 });
+    (model, basis, k0, poses)
+}
+
+/// Classic Neo-Hookean is undefined where an element inverts. A pose that inverts elements (a
+/// PCA-reconstructed or decoded pose the full simulation never produced) is left out of the fit
+/// and listed, the others give exactly the matrix they give alone; only when every pose is
+/// invalid is the stage an error.
+#[test]
+fn poses_that_invert_an_element_under_classic_neo_hookean_are_left_out() {
+    let (model, basis, k0, good) = beam_with_an_inverting_column(6, 5);
+    let k = k0 + 1;
     let q = Mat::from_fn(k, 7, |i, j| match (i, j) {
         (i, 6) if i == k0 => -1.0,
         (i, 6) => good[(i, 0)],
@@ -344,38 +355,18 @@ fn poses_that_invert_an_element_under_classic_neo_hookean_are_left_out() {
 /// whatever columns earlier calls computed.
 #[test]
 fn held_out_forces_match_the_matrix_of_every_element() {
-    let fixture = beam([8, 2, 2]);
-    let material = fem_core::material::MaterialConfig {
-        model: fem_core::material::MaterialModel::NeoHookean,
-        ..Default::default()
-    };
-    let model = FullSpaceModel::new(
-        fixture.mesh.clone(),
-        &material,
-        fixture.pinned.clone(),
-        [0.0, 0.0, 0.0].into(),
-        vec![],
-    )
-    .unwrap();
-    let (modes, k0, lambda) = modal_basis(&model);
-    let good = random_poses(&model, &modes, &lambda, 9, 7);
-    // As in the test above: one more column that, at −1, pushes a tip corner through its
-    // elements; pose 3 at rest, pose 5 inverted.
-    let nf = model.dofs.num_free();
+    let (model, basis, k0, fitted) = beam_with_an_inverting_column(9, 7);
     let k = k0 + 1;
-    let mut basis = modes.clone();
-    basis.extend((0..nf).map(|r| if r == nf - 3 { 1.0 } else { 0.0 }));
+    // Pose 3 at rest, pose 5 inverted by the extra column at −1.
     let q = Mat::from_fn(k, 9, |i, j| match (i, j) {
         (_, 3) => 0.0,
         (i, 5) if i == k0 => -1.0,
-        (i, _) if i == k0 => 0.0,
-        _ => good[(i, j)],
+        _ => fitted[(i, j)],
     });
     let config = CubatureConfig {
         tolerance: 0.05,
         ..Default::default()
     };
-    let fitted = Mat::from_fn(k, 9, |i, j| if i < k0 { good[(i, j)] } else { 0.0 });
     let train =
         TrainingMatrix::build(&model, &basis, k, Poses::linear(fitted.as_ref()), &config).unwrap();
     let rule = fit(&train, &config).unwrap();

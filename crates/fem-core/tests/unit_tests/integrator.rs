@@ -594,7 +594,7 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
         [0.0, -9.81, 0.0],
         vec![],
     );
-    // The solver's own tolerance (the family's default would loosen it to 10⁻³).
+    // The solver's own tolerance (the family's default would loosen it to 10⁻²).
     let family = ScheduleConfig {
         schedules: 4,
         frames_per_schedule: 10,
