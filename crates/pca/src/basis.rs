@@ -227,11 +227,28 @@ impl PcaBasis {
         directions: &[Vec<f64>],
         min_new: f64,
     ) -> Result<(Self, Vec<f64>), PcaError> {
+        self.extended_at_most(directions, min_new, usize::MAX)
+    }
+
+    /// [`Self::extended`], stopping once `max_count` directions are appended (the fractions
+    /// then cover the directions looked at).
+    ///
+    /// # Errors
+    /// As [`Self::extended`].
+    pub fn extended_at_most(
+        &self,
+        directions: &[Vec<f64>],
+        min_new: f64,
+        max_count: usize,
+    ) -> Result<(Self, Vec<f64>), PcaError> {
         let n = self.n;
         let mass = self.mass.as_deref();
         let mut basis = self.basis.clone();
         let mut new_fractions = Vec::with_capacity(directions.len());
         for (i, d) in directions.iter().enumerate() {
+            if basis.len() / n - self.k >= max_count {
+                break;
+            }
             if d.len() != n || d.iter().any(|x| !x.is_finite()) {
                 return Err(PcaError::InvalidBasis(format!(
                     "direction {i} to append has {} entries (n = {n}) or a non-finite one",

@@ -66,10 +66,24 @@ pub struct PcaConfig {
     /// [`MAX_GRAVITY_DIRECTIONS`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gravity_directions: Option<usize>,
+    /// Surface patches whose static responses are offered to the basis after the fall's
+    /// positions: the displacement under a unit load along each axis spread over a patch
+    /// (the training family's patches, spread over the surface), appended in the patches'
+    /// order where at least 3 % of one lies outside the basis, up to a tenth of the basis's
+    /// columns, rounded up (the pipeline computes them; they need the FEM model). `None` lets the pipeline choose ([`DEFAULT_PATCH_RESPONSES`]); `Some(0)`
+    /// appends none. At most [`MAX_PATCH_RESPONSES`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub patch_responses: Option<usize>,
 }
 
 /// The most `[pca] gravity_directions` a scene may ask for.
 pub const MAX_GRAVITY_DIRECTIONS: usize = 8;
+
+/// The patches whose responses are offered when `[pca] patch_responses` is not given.
+pub const DEFAULT_PATCH_RESPONSES: usize = 48;
+
+/// The most `[pca] patch_responses` a scene may ask for.
+pub const MAX_PATCH_RESPONSES: usize = 256;
 
 /// The norm a basis is chosen in (`[pca] norm`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -95,6 +109,7 @@ impl Default for PcaConfig {
             max_dimension: DEFAULT_MAX_DIMENSION,
             norm: BasisNorm::default(),
             gravity_directions: None,
+            patch_responses: None,
         }
     }
 }
@@ -198,6 +213,14 @@ impl PcaConfig {
             bad(
                 "gravity_directions",
                 format!("must be at most {MAX_GRAVITY_DIRECTIONS}, got {m}"),
+            );
+        }
+        if let Some(m) = self.patch_responses
+            && m > MAX_PATCH_RESPONSES
+        {
+            bad(
+                "patch_responses",
+                format!("must be at most {MAX_PATCH_RESPONSES}, got {m}"),
             );
         }
     }

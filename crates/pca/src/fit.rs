@@ -42,10 +42,13 @@ pub struct PcaFit {
     /// For the max-vertex-error rule: the maximum vertex error for k = 1, 2, …, chosen k (or up
     /// to the cap when the tolerance was not met). Empty for the other rules.
     pub max_vertex_error_per_k: Vec<f64>,
-    /// Columns appended after the rule chose k ([`PcaBasis::extended`]): the basis has
-    /// k + `appended` columns.
+    /// Positions of the fall appended after the rule chose k ([`PcaBasis::extended`]).
     #[serde(default)]
     pub appended: usize,
+    /// Static responses to patch loads appended after those (`[pca] patch_responses`): the
+    /// basis has k + `appended` + `responses` columns, these the last.
+    #[serde(default)]
+    pub responses: usize,
     /// The fraction of the body's first step of its fall under gravity (M-norm) that the k
     /// columns miss, when the pipeline measured it.
     #[serde(default)]
@@ -53,9 +56,12 @@ pub struct PcaFit {
 }
 
 impl PcaFit {
-    /// The dimension the rule chose (the basis has [`Self::appended`] more columns).
+    /// The dimension the rule chose (the basis has [`Self::appended`] and [`Self::responses`]
+    /// more columns).
     pub fn chosen_k(&self) -> usize {
-        self.basis.k().saturating_sub(self.appended)
+        self.basis
+            .k()
+            .saturating_sub(self.appended + self.responses)
     }
 }
 
@@ -177,6 +183,7 @@ impl PcaBasis {
             tolerance_met,
             max_vertex_error_per_k: per_k,
             appended: 0,
+            responses: 0,
             fall_missed: None,
         })
     }

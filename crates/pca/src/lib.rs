@@ -50,8 +50,8 @@ mod vertex_error;
 
 pub use basis::PcaBasis;
 pub use config::{
-    BasisNorm, DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DimensionRule,
-    MAX_GRAVITY_DIRECTIONS, PcaConfig,
+    BasisNorm, DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DEFAULT_PATCH_RESPONSES,
+    DimensionRule, MAX_GRAVITY_DIRECTIONS, MAX_PATCH_RESPONSES, PcaConfig,
 };
 pub use error::PcaError;
 pub use fit::PcaFit;

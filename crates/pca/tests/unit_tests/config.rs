@@ -101,6 +101,13 @@ fn invalid_values_name_their_field() {
             },
             "pca.gravity_directions",
         ),
+        (
+            PcaConfig {
+                patch_responses: Some(pca::MAX_PATCH_RESPONSES + 1),
+                ..PcaConfig::default()
+            },
+            "pca.patch_responses",
+        ),
     ];
     for (config, field) in cases {
         assert_eq!(error_fields(&config), vec![field.to_string()], "{config:?}");

@@ -273,4 +273,19 @@ fn extended_basis_stays_mass_orthonormal_and_spans_what_it_kept() {
     // A direction of the wrong length is an error naming it.
     let e = basis.extended(&[vec![1.0; n - 1]], 0.01).unwrap_err();
     assert!(e.to_string().contains("direction 0"), "{e}");
+    // At most two of four new directions, the first two that are new (the second, a repeat of
+    // the first, is not), the same columns as `extended` appends first.
+    let others: Vec<Vec<f64>> = (0..3).map(|_| rng.normal_vec(n)).collect();
+    let four = [
+        others[0].clone(),
+        others[0].clone(),
+        others[1].clone(),
+        others[2].clone(),
+    ];
+    let (capped, f) = basis.extended_at_most(&four, 0.01, 2).unwrap();
+    assert_eq!((capped.k(), f.len()), (k + 2, 3), "{f:?}");
+    assert!(f[1] < 1e-12, "{f:?}");
+    let (all_four, _) = basis.extended(&four, 0.01).unwrap();
+    assert_eq!(all_four.k(), k + 3);
+    assert_eq!(capped.column(k + 1), all_four.column(k + 1));
 }
