@@ -58,7 +58,9 @@ pub fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
 
 /// A 6×1×1-cell beam whose every stage (snapshots, PCA, autoencoder, cubature, reference) runs
 /// in well under a second: the scene of the end-to-end tests, which vary it by text replacement.
-/// Its full space is Newton's, the reference the tests check full-space L-BFGS against.
+/// Its full space is Newton's, the reference the tests check full-space L-BFGS against. Its
+/// basis is the six PCA columns (and the fall's positions) without patch responses, whose own
+/// test is `crates/pipeline/tests/patch_responses.rs`.
 pub const TINY: &str = r#"
 name = "tiny"
 [mesh]
@@ -82,6 +84,7 @@ frames_per_schedule = 8
 frames_per_schedule = 12
 [pca]
 dimension = 6
+patch_responses = 0
 [autoencoder]
 latent_dim = 2
 hidden = [16, 16]

@@ -305,12 +305,16 @@ fn linear_directions_default_to_the_counts_chosen() {
         "{count} is not the fewest"
     );
     let line = p.linear_directions_summary(&no_progress).unwrap();
+    let responses = match fit.responses {
+        0 => String::new(),
+        r => format!(", the PCA basis's {r} patch responses"),
+    };
     assert_eq!(
         line,
         format!(
             "neural methods: d = 2 latent coordinates, 2 gravity-onset directions (the default \
              under gravity), {count} complement directions (what the data asks for, see stage \
-             complement)"
+             complement){responses}"
         )
     );
     let chosen = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);

@@ -1,9 +1,10 @@
 //! Whether the test trajectory's subspace error is the grabbed patch's local deformation: the
 //! mean relative M-norm error of the reference frames projected on the scene's PCA basis, on
 //! that basis extended by the static responses A⁻¹Gᵀ to a unit load on P surface patches
-//! spread over the body (the first P patches of the training family's spread placement; A =
-//! K₀ + M/T², as the schedules' stiffness probe), and on a PCA basis of the snapshots with as
-//! many more columns (the control).
+//! spread over the body ([`Pipeline::patch_response_columns`], which the `pca` stage appends
+//! at 3 % by default), and on a PCA basis of the snapshots with as many more columns (the
+//! control). Set `[pca] patch_responses = 0` in the scene to start from the snapshots' basis
+//! alone.
 //!
 //! ```sh
 //! cargo run --release -p pipeline --example patch_coverage -- SCENE CACHE [P]
@@ -12,7 +13,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use fem_core::snapshots::{PatchPlacement, ScheduleConfig, ScheduleKind, StiffnessProbe};
 use pca::{PcaBasis, PcaConfig};
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
@@ -32,7 +32,6 @@ fn main() -> Result<()> {
     let snaps = p.snapshots(&none)?;
     let fit = p.pca(&none)?;
     let reference = p.reference(0, &none)?;
-    let model = &p.model;
     let basis = &fit.basis;
     let mass = basis.mass().context("the basis has no mass")?;
     let error = |b: &PcaBasis| -> f64 {
@@ -62,23 +61,12 @@ fn main() -> Result<()> {
 
     // The patches the training family's pulls would grab, spread over the surface in
     // farthest-point order (`[training] patches = "spread"`), one per schedule index.
-    let family = ScheduleConfig {
-        kinds: vec![ScheduleKind::Pull],
-        patches: PatchPlacement::Spread,
-        ..scene.training()
-    };
-    let probe = StiffnessProbe::new(model, family.frames_per_schedule as f64 * scene.time.step)?;
-    let mut directions = Vec::new();
-    for i in 0..patches {
-        let forces = family.schedule(model, &probe, i, scene.time.step);
-        let Some(grab) = forces.first() else {
-            bail!(
-                "{}: every surface vertex is pinned, no patch to load",
-                args[0]
-            );
-        };
-        let (_, columns) = probe.patch_response(model, &grab.vertices);
-        directions.extend(columns.chunks_exact(basis.n()).map(<[f64]>::to_vec));
+    let directions = p.patch_response_columns(patches)?;
+    if directions.is_empty() {
+        bail!(
+            "{}: every surface vertex is pinned, no patch to load",
+            args[0]
+        );
     }
     for min_new in [1e-1, 3e-2, 1e-2] {
         let (extended, _) = basis.extended(&directions, min_new)?;

@@ -126,8 +126,9 @@ pub fn reduced_model(
     }
     let complement = if neural {
         let columns = pipeline.complement_columns(progress)?;
-        // A source when it gave directions, or chose how many (none, possibly).
-        if !columns.is_empty() || scene.reduced.complement_directions.is_none() {
+        // A source unless the scene asked for none (the columns may then still hold the PCA
+        // basis's patch responses, which are the `pca` stage's).
+        if scene.reduced.complement_directions != Some(0) {
             stage_keys.push(key(Stage::Complement, pipeline.complement_key()));
         }
         columns

@@ -102,7 +102,8 @@ impl Stage {
             // 2: the default explained energy 1 − 10⁻⁷ instead of 1 − 10⁻⁶ (scenes naming no rule).
             // 3: the positions of the fall under gravity appended (`PcaFit::appended`, a new
             //    field the old artifacts lack).
-            Stage::Pca => 3,
+            // 4: static responses to patch loads appended (`PcaFit::responses`).
+            Stage::Pca => 4,
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
             // 3: with the snapshots' energy and the latent dimension.
             Stage::Complement => 3,
@@ -170,7 +171,7 @@ mod tests {
             [
                 ("snapshots", 11),
                 ("snapshots-shard", 11),
-                ("pca", 3),
+                ("pca", 4),
                 ("cubature", 4),
                 ("cubature-neural", 6),
                 ("train", 6),

@@ -15,12 +15,16 @@ pub fn describe_pca(fit: &PcaFit) -> String {
     let s = fit.basis.singular_values();
     let shown: Vec<String> = s.iter().take(12).map(|v| format!("{v:.3e}")).collect();
     format!(
-        "singular values: {} …\nk = {}{} ({:?}; tolerance met: {}), explained energy {:.6}\n",
+        "singular values: {} …\nk = {}{}{} ({:?}; tolerance met: {}), explained energy {:.6}\n",
         shown.join(" "),
         fit.chosen_k(),
         match fit.appended {
             0 => String::new(),
             m => format!(" + {m} positions of the fall under gravity"),
+        },
+        match fit.responses {
+            0 => String::new(),
+            r => format!(" + {r} static responses to patch loads"),
         },
         fit.rule,
         fit.tolerance_met,

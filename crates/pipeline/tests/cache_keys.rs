@@ -380,6 +380,12 @@ fn variants() -> Vec<Variant> {
             "",
             BASIS,
         ),
+        v(
+            "pca.patch_responses",
+            add!("pca", "patch_responses = 4"),
+            "",
+            BASIS,
+        ),
         // [autoencoder]
         v(
             "autoencoder.latent_dim",

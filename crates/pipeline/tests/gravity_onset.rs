@@ -13,7 +13,8 @@ use pipeline::pipeline::{Pipeline, StageSummary};
 use pipeline::scene::Scene;
 use pipeline::simulate::Method;
 
-/// A beam with a basis too small to hold its own fall (`dimension = 3`).
+/// A beam with a basis too small to hold its own fall (`dimension = 3`), no patch responses
+/// beside the fall's positions (`tests/pipeline.rs` tests those).
 const SCENE: &str = r#"name = "onset"
 [mesh]
 generate = { kind = "box", size = [1.0, 0.2, 0.2], cells = [6, 1, 1] }
@@ -33,6 +34,7 @@ frames_per_schedule = 20
 frames_per_schedule = 12
 [pca]
 dimension = 3
+patch_responses = 0
 "#;
 
 /// The `pca` stage's fit of scene `text` in a scratch cache `name`, and the count of gravity
