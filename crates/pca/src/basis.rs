@@ -406,8 +406,9 @@ pub(crate) fn m_dot(mass: Option<&[f64]>, a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Makes `v` M-orthogonal to the M-orthonormal columns `basis` (column-major, `v.len()` rows
-/// each) by two passes of modified Gram–Schmidt, and returns the M-norm left.
-pub(crate) fn orthogonalise(v: &mut [f64], basis: &[f64], mass: Option<&[f64]>) -> f64 {
+/// each) by two passes of modified Gram–Schmidt, and returns the M-norm left (`mass` `None`:
+/// M = I).
+pub fn orthogonalise(v: &mut [f64], basis: &[f64], mass: Option<&[f64]>) -> f64 {
     for _ in 0..2 {
         for col in basis.chunks_exact(v.len()) {
             let c = m_dot(mass, col, v);

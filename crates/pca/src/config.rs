@@ -70,8 +70,9 @@ pub struct PcaConfig {
     /// positions: the displacement under a unit load along each axis spread over a patch
     /// (the training family's patches, spread over the surface), appended in the patches'
     /// order where at least 3 % of one lies outside the basis, up to a tenth of the basis's
-    /// columns, rounded up (the pipeline computes them; they need the FEM model). `None` lets the pipeline choose ([`DEFAULT_PATCH_RESPONSES`]); `Some(0)`
-    /// appends none. At most [`MAX_PATCH_RESPONSES`].
+    /// columns, rounded up (the pipeline computes them; they need the FEM model). `None` lets
+    /// the pipeline choose ([`DEFAULT_PATCH_RESPONSES`]); `Some(0)` appends none. At most
+    /// [`MAX_PATCH_RESPONSES`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub patch_responses: Option<usize>,
 }

@@ -48,7 +48,7 @@ pub mod norm;
 mod svd;
 mod vertex_error;
 
-pub use basis::PcaBasis;
+pub use basis::{PcaBasis, orthogonalise};
 pub use config::{
     BasisNorm, DEFAULT_EXPLAINED_ENERGY, DEFAULT_MAX_DIMENSION, DEFAULT_PATCH_RESPONSES,
     DimensionRule, MAX_GRAVITY_DIRECTIONS, MAX_PATCH_RESPONSES, PcaConfig,

@@ -1442,17 +1442,9 @@ impl<'a> Pipeline<'a> {
             return Ok(c.directions[..c.k * count].to_vec());
         }
         for direction in c.directions.chunks_exact(c.k).take(count) {
-            // Gram–Schmidt (two passes) against the responses, whose entries are zeroed, and
-            // the directions kept.
+            // Orthogonal to the responses (which zeroes their entries) and the directions kept.
             let mut v = direction.to_vec();
-            v[k - responses..].fill(0.0);
-            for _ in 0..2 {
-                for kept in columns.chunks_exact(k).skip(responses) {
-                    let d: f64 = kept.iter().zip(&v).map(|(a, b)| a * b).sum();
-                    v.iter_mut().zip(kept).for_each(|(x, a)| *x -= d * a);
-                }
-            }
-            let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let norm = pca::orthogonalise(&mut v, &columns, None);
             // A direction (of unit norm) almost inside the span before it adds nothing.
             if norm > 1e-3 {
                 columns.extend(v.iter().map(|x| x / norm));
