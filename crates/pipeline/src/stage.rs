@@ -85,9 +85,12 @@ impl Stage {
             //     still moving under gravity after them (`later_start`).
             // 11 (and the reference's 10): a step one full-space solver cannot finish goes on
             //     with the other from where the first stopped, not from the step's start.
-            Stage::Snapshots | Stage::SnapshotsShard => 11,
+            // 12 (and the reference's 11): L-BFGS's current-state factor turned with the body
+            //     between refactorisations, and an aged one cut short after its fresh count plus
+            //     a refactorisation's cost (iterates within tolerance).
+            Stage::Snapshots | Stage::SnapshotsShard => 12,
             // 9: a solve that fails partway keeps the frames before it (`stopped`).
-            Stage::Reference => 10,
+            Stage::Reference => 11,
             // 2: the held-out error along the greedy path is stored with the rule.
             // 3: forces fitted in the step's compliance norm (other rules).
             // 4: the held-out error over all the test's frames, from the rule's own columns
@@ -169,14 +172,14 @@ mod tests {
         assert_eq!(
             found,
             [
-                ("snapshots", 11),
-                ("snapshots-shard", 11),
+                ("snapshots", 12),
+                ("snapshots-shard", 12),
                 ("pca", 4),
                 ("cubature", 4),
                 ("cubature-neural", 6),
                 ("train", 6),
                 ("complement", 3),
-                ("reference", 10),
+                ("reference", 11),
             ]
         );
         for s in Stage::ALL {

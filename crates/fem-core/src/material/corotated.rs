@@ -287,7 +287,7 @@ fn polar_rotation(F: &Mat3) -> Option<Mat3> {
 /// F = U diag(σ) Vᵀ with U, V proper rotations, σ₀ ≥ σ₁ ≥ |σ₂| and σ₂ carrying the sign of
 /// det F.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct SignedSvd {
+pub(crate) struct SignedSvd {
     pub u: Mat3,
     pub sigma: Vec3,
     pub v: Mat3,
@@ -306,7 +306,7 @@ const JACOBI_MAX_SWEEPS: usize = 16;
 /// σ₂ = u₂ · b₂ is signed. Rank-deficient and zero F are handled (U completes to a rotation);
 /// non-finite F gives non-finite output after at most [`JACOBI_MAX_SWEEPS`] sweeps.
 #[allow(non_snake_case)]
-pub(super) fn signed_svd(F: &Mat3) -> SignedSvd {
+pub(crate) fn signed_svd(F: &Mat3) -> SignedSvd {
     let mut b = *F;
     let mut v = Mat3::identity();
     for _ in 0..JACOBI_MAX_SWEEPS {

@@ -16,6 +16,7 @@ mod stable_neo_hookean;
 mod stvk;
 
 pub use corotated::Corotated;
+pub(crate) use corotated::signed_svd;
 pub use linear::LinearElastic;
 pub use neo_hookean::NeoHookean;
 pub use projection::project_psd;

@@ -170,8 +170,10 @@ pub enum SolverMethod {
 #[serde(rename_all = "kebab-case")]
 pub enum LbfgsPreconditioner {
     /// The projected Hessian + M/h² at the start of a step, refactorised only when the solves
-    /// it serves slow down (or it is [`crate::integrator::PRECOND_MAX_AGE`] steps old). Large
-    /// rotations leave the rest matrix far from the true curvature; this one follows them.
+    /// it serves slow down (or it is [`crate::integrator::PRECOND_MAX_AGE`] steps old), and
+    /// turned with the body's best-fit rotation in between
+    /// ([`crate::integrator::FactoredPreconditioner`]). Large rotations leave the rest matrix
+    /// far from the true curvature; this one follows them.
     #[default]
     CurrentState,
     /// K₀ + M/h² at rest, factorised once (AutoDef's choice): cheapest while deformations stay
