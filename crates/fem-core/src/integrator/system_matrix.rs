@@ -353,13 +353,7 @@ mod tests {
             let n = q.len();
             let v: Vec<f64> = (0..n).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
             let mut av = vec![0.0; n];
-            let a = parts.pattern.matrix(&parts.values);
-            for (j, &vj) in v.iter().enumerate() {
-                let col = a.col_range(j);
-                for (&r, &val) in a.row_idx()[col.clone()].iter().zip(&a.val()[col]) {
-                    av[r] += val * vj;
-                }
-            }
+            parts.pattern.mul_vec(&parts.values, &v, &mut av);
             let mut z = vec![0.0; n];
             let miss = |pre: &mut FactoredPreconditioner, z: &mut Vec<f64>| {
                 pre.apply(&av, z);
