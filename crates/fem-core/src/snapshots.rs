@@ -223,27 +223,26 @@ impl ScheduleConfig {
         }
     }
 
-    /// The forces of schedule `index` on `model`'s mesh, with time step `h`; `probe` measures
-    /// the body's stiffness at a patch (see [`StiffnessProbe`]).
-    pub fn schedule(
-        &self,
-        model: &FullSpaceModel,
-        probe: &StiffnessProbe,
-        index: usize,
-        h: f64,
-    ) -> Vec<ExternalForce> {
+    /// The surface vertices schedule `index` grabs on `model`'s mesh (those of its first and
+    /// only force in [`schedule`](Self::schedule), without measuring the body's stiffness
+    /// there), or `None` when every surface vertex is pinned.
+    pub fn patch(&self, model: &FullSpaceModel, index: usize) -> Option<Vec<usize>> {
+        self.grab(model, index).map(|g| g.vertices)
+    }
+
+    /// Schedule `index`'s draws up to its patch; the rest of its draws continue from `rng`.
+    fn grab(&self, model: &FullSpaceModel, index: usize) -> Option<Grab> {
         let mut rng = SplitMix64::for_item(self.seed, index as u64);
         let mesh = &model.mesh;
         let (lo, hi) = mesh.bounding_box();
         let diag = (hi - lo).norm();
-        let duration = self.frames_per_schedule as f64 * h;
         let candidates: Vec<usize> = mesh
             .surface_vertices()
             .into_iter()
             .filter(|v| model.pinned.binary_search(v).is_err())
             .collect();
         if candidates.is_empty() {
-            return Vec::new();
+            return None;
         }
         let kind = self.kinds[rng.below(self.kinds.len())];
         // Drawn in either placement, so that the other draws of schedule i do not depend on it.
@@ -264,6 +263,33 @@ impl ScheduleConfig {
         if vertices.is_empty() {
             vertices.push(candidates[0]);
         }
+        Some(Grab {
+            kind,
+            vertices,
+            diag,
+            rng,
+        })
+    }
+
+    /// The forces of schedule `index` on `model`'s mesh, with time step `h`; `probe` measures
+    /// the body's stiffness at a patch (see [`StiffnessProbe`]).
+    pub fn schedule(
+        &self,
+        model: &FullSpaceModel,
+        probe: &StiffnessProbe,
+        index: usize,
+        h: f64,
+    ) -> Vec<ExternalForce> {
+        let Some(Grab {
+            kind,
+            vertices,
+            diag,
+            mut rng,
+        }) = self.grab(model, index)
+        else {
+            return Vec::new();
+        };
+        let duration = self.frames_per_schedule as f64 * h;
         let factor = rng.range(self.stiffness[0], self.stiffness[1]);
         let direction = rng.unit_vector();
         let stiffness = factor * probe.stiffness(model, &vertices, direction);
@@ -312,6 +338,15 @@ impl ScheduleConfig {
             end,
         }]
     }
+}
+
+/// A schedule's grab: its kind and patch, the body's bounding-box diagonal, and its random
+/// draws from there on.
+struct Grab {
+    kind: ScheduleKind,
+    vertices: Vec<usize>,
+    diag: f64,
+    rng: SplitMix64,
 }
 
 /// The `index`-th vertex (cyclically) of a farthest-point ordering of `candidates` (mesh

@@ -950,14 +950,10 @@ impl<'a> Pipeline<'a> {
         let mut columns = Vec::with_capacity(3 * patches);
         for i in 0..patches {
             // A body whose surface is pinned everywhere has no patch to load.
-            let Some(grab) = family
-                .schedule(&self.model, &probe, i, step)
-                .into_iter()
-                .next()
-            else {
+            let Some(vertices) = family.patch(&self.model, i) else {
                 break;
             };
-            let (_, response) = probe.patch_response(&self.model, &grab.vertices);
+            let (_, response) = probe.patch_response(&self.model, &vertices);
             columns.extend(response.chunks_exact(n).map(<[f64]>::to_vec));
         }
         Ok(columns)

@@ -456,6 +456,12 @@ fn spread_patches_cover_the_surface_and_change_nothing_else() {
         (0..8)
             .map(|i| {
                 let f = &family.schedule(&m, &probe, i, h)[0];
+                // The patch alone is the schedule's, drawn without the stiffness probe.
+                assert_eq!(
+                    family.patch(&m, i).as_ref(),
+                    Some(&f.vertices),
+                    "schedule {i}"
+                );
                 let c = f.vertices.iter().map(|&v| m.mesh.vertices[v]).sum::<Vec3>()
                     / f.vertices.len() as f64;
                 (c, f.keyframes.len() as f64 + f.end, f.vertices.len())
