@@ -10,18 +10,18 @@ use super::kernels::{
     BasisTimesQ, ElementGaussNewton, PanelsTimesJacobian, StressTimesRows, VertexRowsToF, sandwich,
 };
 use crate::dense_factor::DenseFactor;
-use crate::{ElasticPath, ReducedError, Subspace};
+use crate::{ReducedError, Subspace};
 
 impl<S: Subspace> StepObjective<'_, S> {
     /// Decodes z into work.q and forms the parts of the Newton matrix that do not depend on the
-    /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and, on the vertex
-    /// paths, the decoded vertices (work.u) and U J on the element rows (work.uj, 3·n × d
-    /// row-major); the element-basis path forms B_e J per element from work.jac instead.
+    /// element tangents: J (work.jac), Jᵀ(UᵀMU/h² + springs)J (work.hz_const) and, without
+    /// element bases (the parallel path), the decoded vertices (work.u) and U J on the element
+    /// rows (work.uj, 3·n × d row-major); with them, B_e J comes from work.jac instead.
     pub(super) fn newton_matrix_constant(&mut self, z: &[f64]) {
         let (model, space) = (self.model, self.space);
         let (k, d) = (space.k, self.subspace.latent_dim());
         let w = &mut *self.work;
-        let basis = space.elastic_path() == ElasticPath::ElementBasis;
+        let basis = space.has_element_bases();
         self.subspace.decode(z, &mut w.q);
         if !basis {
             space.decode_touched(&w.q, &mut w.u, &mut w.space);
@@ -68,10 +68,11 @@ impl<S: Subspace> StepObjective<'_, S> {
         factor.factor(&self.work.hz, d, what)
     }
 
-    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J): on the element-basis path as
-    /// two matrix products over the whole element set ([`Self::stacked_element_terms`]), in z
-    /// or, when that is cheaper ([`sum_in_q_is_cheaper`]), as Jᵀ(Σ_e w_e U_eᵀ H_e U_e)J; on the
-    /// vertex path element by element.
+    /// work.hz = work.hz_const + Σ_e w_e (U_e J)ᵀ H_e (U_e J): with the element bases (both
+    /// serial paths) as two matrix products over the whole element set
+    /// ([`Self::stacked_element_terms`]), in z or, when that is cheaper
+    /// ([`sum_in_q_is_cheaper`]), as Jᵀ(Σ_e w_e U_eᵀ H_e U_e)J; without them (the parallel path)
+    /// element by element.
     ///
     /// H_e = W Gᵀ A G with A = ∂P/∂F (9×9) and G = ∂vec(F)/∂x_e (9×12), so with B = U_e J
     /// (12×d) the element's term is W (G B)ᵀ A (G B): G B costs 36·d (row 3j + i of it is
@@ -79,7 +80,7 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// of forming the 12×12 H_e (about 2,300) and B ᵀ H_e B (144·d + 12·d²).
     pub(super) fn newton_matrix(&mut self, projected: bool) {
         let (k, d) = (self.space.k, self.subspace.latent_dim());
-        let basis = self.space.elastic_path() == ElasticPath::ElementBasis;
+        let basis = self.space.has_element_bases();
         let identity = self.subspace.is_linear();
         let in_q = basis && !identity && sum_in_q_is_cheaper(self.space.elements.len(), k, d);
         // The element terms go into a matrix of this size: d×d, or k×k in q.

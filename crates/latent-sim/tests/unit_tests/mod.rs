@@ -587,20 +587,21 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
         // Projected tangents: positive semidefinite elastic part, so the matrix is SPD here.
         neural.newton_matrix(&z, true, &mut hz);
         assert!((0..d).all(|i| hz[i * d + i] > 0.0));
-        // The cubature rule takes the element basis (F = I + B_e q, G B = B_e J); the vertex
-        // path (decoded vertices, U J) forms the same matrix to rounding.
+        // The cubature rule takes the element basis (F = I + B_e q, G B = B_e J), on the serial
+        // vertex path too; the parallel path's element-by-element terms (decoded vertices, U J)
+        // form the same matrix to rounding.
         assert_eq!(neural.space.elastic_path(), ElasticPath::ElementBasis);
-        neural
-            .space
-            .set_elastic_path(&neural.model, ElasticPath::Vertices);
-        let mut by_vertices = vec![0.0; d * d];
-        neural.newton_matrix(&z, true, &mut by_vertices);
-        assert_close(
-            &hz,
-            &by_vertices,
-            1e-12,
-            &format!("{what}: element basis against vertices"),
-        );
+        for path in [ElasticPath::Vertices, ElasticPath::Parallel] {
+            neural.space.set_elastic_path(&neural.model, path);
+            let mut by_path = vec![0.0; d * d];
+            neural.newton_matrix(&z, true, &mut by_path);
+            assert_close(
+                &hz,
+                &by_path,
+                1e-12,
+                &format!("{what}: element basis against {path:?}"),
+            );
+        }
     }
 }
 
