@@ -711,8 +711,8 @@ impl ReducedSpace {
     /// Evaluates the elastic energy by `path` from now on (the default is chosen by
     /// [`Self::new`]); builds the element bases unless `path` is [`ElasticPath::Parallel`]. The
     /// serial paths both form the Gauss–Newton matrix from them: its products over all the
-    /// elements at once beat the vertex path's element-by-element updates (on a 500-element rule
-    /// of the 2,475-tet bar, d = k = 132: 10.3 ms by the vertices, see the closing notes).
+    /// elements at once beat the vertex path's element-by-element updates (a 500-element rule of
+    /// a 2,475-tet bar, d = k = 132: 5.4 against 10.3 ms).
     pub fn set_elastic_path(&mut self, model: &FullSpaceModel, path: ElasticPath) {
         self.elastic_path = path;
         if path == ElasticPath::Parallel {
