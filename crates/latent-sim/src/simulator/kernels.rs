@@ -4,7 +4,7 @@
 use pulp::{Arch, Simd, WithSimd};
 use simd_kernels::rows::{add_combination, dot_rows};
 
-use crate::reduced::{LANES, PANEL};
+use crate::reduced::PANEL;
 
 /// out = Bᵀ A B for a symmetric A (k×k) and B (k×d), column-major; `ab` is k×d scratch.
 pub(crate) fn sandwich(a: &[f64], b: &[f64], k: usize, d: usize, ab: &mut [f64], out: &mut [f64]) {
@@ -221,43 +221,6 @@ impl WithSimd for StressTimesRows<'_> {
         for (r, out) in out.chunks_exact_mut(n).enumerate() {
             out.fill(0.0);
             add_combination(simd, out, std::array::from_fn(|c| a[c * 9 + r]), rows);
-        }
-    }
-}
-
-/// One element's Gauss–Newton term in z, from G B (9×d, row-major; B = U_e J): A G B (A the 9×9
-/// stress derivative, column-major, already scaled by w_e V_e) and hz += (G B)ᵀ A (G B), column
-/// by column, on and below the diagonal. Each row of the two products is one fused linear
-/// combination of whole rows.
-pub(super) struct ElementGaussNewton<'a> {
-    pub(super) a: &'a [f64; 81],
-    pub(super) d: usize,
-    pub(super) fb: &'a [f64],
-    pub(super) afb: &'a mut [f64],
-    pub(super) hz: &'a mut [f64],
-}
-
-impl WithSimd for ElementGaussNewton<'_> {
-    type Output = ();
-
-    #[inline(always)]
-    fn with_simd<S: Simd>(self, simd: S) {
-        let Self { a, d, fb, afb, hz } = self;
-        let fb_rows: [&[f64]; 9] = std::array::from_fn(|c| &fb[c * d..(c + 1) * d]);
-        StressTimesRows {
-            a,
-            rows: fb_rows,
-            out: afb,
-        }
-        .with_simd(simd);
-        let afb: &[f64] = afb;
-        // hz is symmetric: column m from row m on (rounded down to a whole SIMD vector, so the
-        // rows stay vectors) is enough, and the caller mirrors the lower triangle.
-        for m in 0..d {
-            let from = m - m % LANES;
-            let coefficients: [f64; 9] = std::array::from_fn(|r| fb_rows[r][m]);
-            let rows = std::array::from_fn(|r| &afb[r * d + from..(r + 1) * d]);
-            add_combination(simd, &mut hz[m * d + from..(m + 1) * d], coefficients, rows);
         }
     }
 }

@@ -152,15 +152,12 @@ struct Work {
     hq: Vec<f64>,
     hz_elastic: Vec<f64>,
     /// U J on the rows of the element vertices (3·n × d, row-major: a vertex's three rows are
-    /// 3·d contiguous values), one element's 12 rows of it (12×d), their image in F (9×d) and
-    /// ∂P/∂F times that (9×d), all row-major.
+    /// 3·d contiguous values) and one element's 12 rows of it (12×d), row-major.
     uj: Vec<f64>,
     uj_e: Vec<f64>,
-    fj_e: Vec<f64>,
-    afj_e: Vec<f64>,
-    /// On the element-basis path, over the whole element set (m elements, row-major): the
-    /// element bases times J (9m × d, the sum in z only) and the stress derivatives times those
-    /// rows (9m × n, n = k or d).
+    /// Over the whole element set with element bases, else a chunk of it (m elements,
+    /// row-major): the element bases times J or G U_e J (9m × d, the sum in z) and the stress
+    /// derivatives times those rows (9m × n, n = k or d).
     stacked_bj: Vec<f64>,
     stacked_abj: Vec<f64>,
     newton: DenseFactor,
@@ -223,8 +220,6 @@ impl<S: Subspace> ReducedSimulator<S> {
                 hz_elastic: vec![0.0; d * d],
                 uj: Vec::new(),
                 uj_e: vec![0.0; 12 * d],
-                fj_e: vec![0.0; 9 * d],
-                afj_e: vec![0.0; 9 * d],
                 stacked_bj: Vec::new(),
                 stacked_abj: Vec::new(),
                 newton: DenseFactor::default(),
