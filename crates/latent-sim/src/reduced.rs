@@ -36,7 +36,8 @@ pub enum ElasticPath {
     /// element bases are kept beside it for the Gauss–Newton matrix.
     Vertices,
     /// Partial decode, the parallel full-length assembly and the projection: for large sets. The
-    /// same sums in the same order as [`ElasticPath::Vertices`], so bit-identical to it.
+    /// same sums in the same order as [`ElasticPath::Vertices`], so the same energy to the bit
+    /// (its Gauss–Newton matrix, without element bases, differs from theirs by rounding).
     Parallel,
 }
 
@@ -710,9 +711,9 @@ impl ReducedSpace {
 
     /// Evaluates the elastic energy by `path` from now on (the default is chosen by
     /// [`Self::new`]); builds the element bases unless `path` is [`ElasticPath::Parallel`]. The
-    /// serial paths both form the Gauss–Newton matrix from them: its products over all the
-    /// elements at once beat the vertex path's element-by-element updates (a 500-element rule of
-    /// a 2,475-tet bar, d = k = 132: 5.4 against 10.3 ms).
+    /// serial paths both form the Gauss–Newton matrix from them, by products over all the
+    /// elements at once, which beat the vertex path's former element-by-element updates (a
+    /// 500-element rule of a 2,475-tet bar, d = k = 132: 5.4 against 10.3 ms).
     pub fn set_elastic_path(&mut self, model: &FullSpaceModel, path: ElasticPath) {
         self.elastic_path = path;
         if path == ElasticPath::Parallel {
@@ -768,7 +769,7 @@ impl ReducedSpace {
         self.packed.rows
     }
 
-    /// Element i's basis B_e = ∂vec(F)/∂q on the [`ElasticPath::ElementBasis`] path: 9 rows of
+    /// Element i's basis B_e = ∂vec(F)/∂q on the serial paths: 9 rows of
     /// [`Self::basis_stride`] entries (k, then zeros), row-major.
     #[inline]
     pub(crate) fn element_basis(&self, i: usize) -> &[f64] {

@@ -70,7 +70,7 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// serial paths) as two matrix products over the whole element set
     /// ([`Self::stacked_element_terms`]), in z or, when that is cheaper
     /// ([`sum_in_q_is_cheaper`]), as Jᵀ(Σ_e w_e U_eᵀ H_e U_e)J; without them (the parallel path)
-    /// element by element.
+    /// by the same lower-triangle product, 128 elements at a time.
     ///
     /// H_e = W Gᵀ A G with A = ∂P/∂F (9×9) and G = ∂vec(F)/∂x_e (9×12), so with B = U_e J
     /// (12×d) the element's term is W (G B)ᵀ A (G B): G B costs 36·d (row 3j + i of it is
@@ -110,7 +110,7 @@ impl<S: Subspace> StepObjective<'_, S> {
         }
     }
 
-    /// The element-basis path's element terms, lower triangle: with the element bases B_e
+    /// The element terms from the element bases (both serial paths), lower triangle: with B_e
     /// (9×k, ∂vec(F)/∂q) stacked into B (9m × k, m elements), C = B J (9m × d, one product) in z,
     /// or C = B in q and for a linear subspace (`identity`, J = I), and Y the stacked rows
     /// A_e C_e (81·n per element), the sum Σ_e C_eᵀ A_e C_e is the one product Cᵀ Y: into
@@ -257,7 +257,7 @@ fn scaled_tangent<M: Material>(material: &M, f: &Mat3, projected: bool, scale: f
     std::array::from_fn(|i| scale * a[i])
 }
 
-/// Whether the element-basis path forms the cubature's Gauss–Newton term cheaper in q, as
+/// Whether the element terms from the element bases are formed cheaper in q, as
 /// Jᵀ(Σ_e B_eᵀ A_e B_e)J (per element 81k for A B_e, then the product's k²/2 per row of B, and
 /// one k×k by k×d sandwich), than in z (the product B J, then per element 81d and d²/2 per
 /// row): when d is not much smaller than k, as with linear directions beside the latent

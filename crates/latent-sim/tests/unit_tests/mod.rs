@@ -588,8 +588,8 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
         neural.newton_matrix(&z, true, &mut hz);
         assert!((0..d).all(|i| hz[i * d + i] > 0.0));
         // The cubature rule takes the element basis (F = I + B_e q, G B = B_e J), on the serial
-        // vertex path too; the parallel path's element-by-element terms (decoded vertices, U J)
-        // form the same matrix to rounding.
+        // vertex path too; the parallel path's stacked terms from decoded vertices and U J form
+        // the same matrix to rounding.
         assert_eq!(neural.space.elastic_path(), ElasticPath::ElementBasis);
         for path in [ElasticPath::Vertices, ElasticPath::Parallel] {
             neural.space.set_elastic_path(&neural.model, path);
@@ -602,6 +602,60 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
                 &format!("{what}: element basis against {path:?}"),
             );
         }
+    }
+}
+
+/// Without element bases (the parallel path) the Gauss–Newton matrix stacks 128 elements at a
+/// time: over a set of two whole chunks and a partial one it forms the element-basis matrix.
+#[test]
+fn chunked_newton_matrix_matches_the_element_basis_one() {
+    let mesh = box_mesh(&BoxSpec {
+        size: [1.0, 0.2, 0.2],
+        cells: [12, 2, 2],
+        ..Default::default()
+    })
+    .unwrap();
+    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
+        .select(&mesh, "pin")
+        .unwrap();
+    let m = FullSpaceModel::new(
+        mesh,
+        &material(),
+        pinned,
+        Vec3::new(0.0, -9.81, 0.0),
+        vec![],
+    )
+    .unwrap();
+    let elements = m.elements.len();
+    assert!(
+        elements > 2 * 128 && !elements.is_multiple_of(128),
+        "{elements}"
+    );
+    let k = 6;
+    let basis = small_basis(&m, k);
+    let space = reduced_space(&m, &basis, k, None).unwrap();
+    for d in [3, 6] {
+        let ae = nn::Autoencoder::with_architecture(k, d, &[12, 10], nn::Activation::Elu, None, 5)
+            .unwrap();
+        let mut sim = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            NeuralSubspace::new(ae),
+            time(10),
+            solver(SolverMethod::Newton),
+        )
+        .unwrap();
+        sim.step().unwrap();
+        let z = moved_off(&sim.state.z);
+        let mut matrices = Vec::new();
+        for path in [ElasticPath::ElementBasis, ElasticPath::Parallel] {
+            sim.space.set_elastic_path(&sim.model, path);
+            let mut h = vec![0.0; d * d];
+            sim.newton_matrix(&z, true, &mut h);
+            assert!(h.iter().any(|&x| x != 0.0), "{path:?}");
+            matrices.push(h);
+        }
+        assert_close(&matrices[1], &matrices[0], 1e-12, &format!("d = {d}"));
     }
 }
 
