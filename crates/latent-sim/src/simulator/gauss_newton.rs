@@ -186,65 +186,91 @@ impl<S: Subspace> StepObjective<'_, S> {
     /// The element terms in z without element bases (sets too large to keep them), on and below
     /// the diagonal of work.hz: G B from the decoded rows U J of each element's vertices, and
     /// A G B, stacked for [`VERTEX_CHUNK`] elements at a time and summed by one lower-triangle
-    /// product per chunk, as [`Self::stacked_element_terms`] sums them over the whole set.
+    /// product per chunk, as [`Self::stacked_element_terms`] sums them over the whole set. The
+    /// set is cut into two fixed halves of whole chunks, summed on two threads when the pool
+    /// has them and added in the same order on any number of threads.
     pub(super) fn vertex_element_terms(&mut self, projected: bool) {
-        use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
-        use faer::{Accum, MatMut, MatRef, Par};
         let (model, space) = (self.model, self.space);
         let d = self.subspace.latent_dim();
         let w = &mut *self.work;
-        let rows = 9 * VERTEX_CHUNK.min(space.elements.len());
-        w.stacked_bj.resize(rows * d, 0.0);
-        w.stacked_abj.resize(rows * d, 0.0);
-        let (u, uj, b) = (&w.u, &w.uj, &mut w.uj_e);
-        let (c, y, hz) = (&mut w.stacked_bj, &mut w.stacked_abj, &mut w.hz);
-        let elements = space.elements.iter().zip(&space.weights);
-        let elements: Vec<_> = elements.zip(space.element_touched()).collect();
+        let elements: Vec<(usize, f64, [u32; 4])> = space
+            .elements
+            .iter()
+            .zip(&space.weights)
+            .zip(space.element_touched())
+            .map(|((&e, &weight), &at)| (e, weight, at))
+            .collect();
+        let half = elements.len().div_ceil(2 * VERTEX_CHUNK) * VERTEX_CHUNK;
+        let (first, second) = elements.split_at(half.min(elements.len()));
+        let mut other = vec![0.0; if second.is_empty() { 0 } else { d * d }];
+        let (u, uj, hz) = (&w.u[..], &w.uj[..], &mut w.hz[..]);
         with_material!(&model.material, |material| {
-            for chunk in elements.chunks(VERTEX_CHUNK) {
-                for (i, &((&e, &weight), at)) in chunk.iter().enumerate() {
-                    for (v, &p) in at.iter().enumerate() {
-                        let p = p as usize;
-                        b[3 * v * d..3 * (v + 1) * d]
-                            .copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
-                    }
-                    let fb = &mut c[9 * i * d..9 * (i + 1) * d];
-                    Arch::new().dispatch(VertexRowsToF {
-                        b,
-                        g: model.elements.shape_gradients(e),
-                        d,
-                        fb,
-                    });
-                    let f = model.elements.deformation_gradient(e, u);
-                    let a =
-                        scaled_tangent(material, &f, projected, model.elements.volume[e] * weight);
-                    let fb = &c[9 * i * d..9 * (i + 1) * d];
-                    Arch::new().dispatch(StressTimesRows {
-                        a: &a,
-                        rows: std::array::from_fn(|r| &fb[r * d..(r + 1) * d]),
-                        out: &mut y[9 * i * d..9 * (i + 1) * d],
-                    });
-                }
-                let m = 9 * chunk.len();
-                triangular_matmul(
-                    MatMut::from_column_major_slice_mut(hz, d, d),
-                    BlockStructure::TriangularLower,
-                    Accum::Add,
-                    MatRef::from_row_major_slice(&c[..m * d], m, d).transpose(),
-                    BlockStructure::Rectangular,
-                    MatRef::from_row_major_slice(&y[..m * d], m, d),
-                    BlockStructure::Rectangular,
-                    1.0,
-                    Par::Seq,
-                );
-            }
+            let terms = |set: &[(usize, f64, [u32; 4])], sum: &mut [f64]| {
+                chunked_terms(material, model, set, (u, uj), d, projected, sum);
+            };
+            rayon::join(|| terms(first, hz), || terms(second, &mut other));
         });
+        for (h, o) in w.hz.iter_mut().zip(&other) {
+            *h += o;
+        }
     }
 }
 
-/// Elements whose rows [`StepObjective::vertex_element_terms`] stacks for one product: 1,152
-/// rows, whose two d-wide blocks stay in the second-level cache up to d ≈ 50.
+/// Elements whose rows [`chunked_terms`] stacks for one product: 1,152 rows, whose two d-wide
+/// blocks stay in the second-level cache up to d ≈ 50.
 const VERTEX_CHUNK: usize = 128;
+
+/// Adds Σ_e (G B_e)ᵀ A_e (G B_e) over `set` (element, weight, positions of its vertices in the
+/// decoded rows) to the lower triangle of `sum` (d×d, column-major), [`VERTEX_CHUNK`] elements
+/// per product; `decoded` holds the displacements and the rows U J of the touched vertices.
+fn chunked_terms<M: Material>(
+    material: &M,
+    model: &fem_core::integrator::FullSpaceModel,
+    set: &[(usize, f64, [u32; 4])],
+    (u, uj): (&[f64], &[f64]),
+    d: usize,
+    projected: bool,
+    sum: &mut [f64],
+) {
+    use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
+    use faer::{Accum, MatMut, MatRef, Par};
+    let rows = 9 * VERTEX_CHUNK.min(set.len());
+    let (mut b, mut c, mut y) = (vec![0.0; 12 * d], vec![0.0; rows * d], vec![0.0; rows * d]);
+    for chunk in set.chunks(VERTEX_CHUNK) {
+        for (i, &(e, weight, at)) in chunk.iter().enumerate() {
+            for (v, &p) in at.iter().enumerate() {
+                let p = p as usize;
+                b[3 * v * d..3 * (v + 1) * d].copy_from_slice(&uj[3 * p * d..3 * (p + 1) * d]);
+            }
+            Arch::new().dispatch(VertexRowsToF {
+                b: &b,
+                g: model.elements.shape_gradients(e),
+                d,
+                fb: &mut c[9 * i * d..9 * (i + 1) * d],
+            });
+            let f = model.elements.deformation_gradient(e, u);
+            let a = scaled_tangent(material, &f, projected, model.elements.volume[e] * weight);
+            let fb = &c[9 * i * d..9 * (i + 1) * d];
+            Arch::new().dispatch(StressTimesRows {
+                a: &a,
+                rows: std::array::from_fn(|r| &fb[r * d..(r + 1) * d]),
+                out: &mut y[9 * i * d..9 * (i + 1) * d],
+            });
+        }
+        let m = 9 * chunk.len();
+        triangular_matmul(
+            MatMut::from_column_major_slice_mut(sum, d, d),
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            MatRef::from_row_major_slice(&c[..m * d], m, d).transpose(),
+            BlockStructure::Rectangular,
+            MatRef::from_row_major_slice(&y[..m * d], m, d),
+            BlockStructure::Rectangular,
+            1.0,
+            Par::Seq,
+        );
+    }
+}
 
 /// An element's stress derivative ∂P/∂F at F (9×9, column-major), projected to be positive
 /// semidefinite when `projected`, times `scale` (its volume and cubature weight).

@@ -152,12 +152,11 @@ struct Work {
     hq: Vec<f64>,
     hz_elastic: Vec<f64>,
     /// U J on the rows of the element vertices (3·n × d, row-major: a vertex's three rows are
-    /// 3·d contiguous values) and one element's 12 rows of it (12×d), row-major.
+    /// 3·d contiguous values).
     uj: Vec<f64>,
-    uj_e: Vec<f64>,
-    /// Over the whole element set with element bases, else a chunk of it (m elements,
-    /// row-major): the element bases times J or G U_e J (9m × d, the sum in z) and the stress
-    /// derivatives times those rows (9m × n, n = k or d).
+    /// With the element bases, over the whole element set (m elements, row-major): the element
+    /// bases times J (9m × d, the sum in z only) and the stress derivatives times those rows
+    /// (9m × n, n = k or d).
     stacked_bj: Vec<f64>,
     stacked_abj: Vec<f64>,
     newton: DenseFactor,
@@ -219,7 +218,6 @@ impl<S: Subspace> ReducedSimulator<S> {
                 hq: Vec::new(),
                 hz_elastic: vec![0.0; d * d],
                 uj: Vec::new(),
-                uj_e: vec![0.0; 12 * d],
                 stacked_bj: Vec::new(),
                 stacked_abj: Vec::new(),
                 newton: DenseFactor::default(),
