@@ -606,7 +606,8 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
 }
 
 /// Without element bases (the parallel path) the Gauss–Newton matrix stacks 128 elements at a
-/// time: over a set of two whole chunks and a partial one it forms the element-basis matrix.
+/// time: over a set of two whole chunks and a partial one it forms the element-basis matrix, and
+/// the same matrix to the bit on one thread as on the pool.
 #[test]
 fn chunked_newton_matrix_matches_the_element_basis_one() {
     let mesh = box_mesh(&BoxSpec {
@@ -656,6 +657,14 @@ fn chunked_newton_matrix_matches_the_element_basis_one() {
             matrices.push(h);
         }
         assert_close(&matrices[1], &matrices[0], 1e-12, &format!("d = {d}"));
+        // Its two halves are added in the same order on one thread as on two.
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let mut alone = vec![0.0; d * d];
+        one.install(|| sim.newton_matrix(&z, true, &mut alone));
+        assert_eq!(alone, matrices[1], "d = {d}: one thread against the pool");
     }
 }
 
