@@ -59,11 +59,16 @@ fn material() -> MaterialConfig {
     }
 }
 
-fn model() -> FullSpaceModel {
-    let mesh = bar();
+/// `mesh` clamped at its lowest x, under gravity g along y, with `forces`.
+fn clamped(mesh: fem_core::TetMesh, g: f64, forces: Vec<ExternalForce>) -> FullSpaceModel {
     let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
         .select(&mesh, "pin")
         .unwrap();
+    FullSpaceModel::new(mesh, &material(), pinned, Vec3::new(0.0, g, 0.0), forces).unwrap()
+}
+
+fn model() -> FullSpaceModel {
+    let mesh = bar();
     let tip = (0..mesh.num_vertices())
         .filter(|&v| mesh.vertices[v].x > 0.99)
         .collect::<Vec<_>>();
@@ -75,14 +80,7 @@ fn model() -> FullSpaceModel {
         start: 0.0,
         end: 0.08,
     };
-    FullSpaceModel::new(
-        mesh,
-        &material(),
-        pinned,
-        Vec3::new(0.0, -9.81, 0.0),
-        vec![spring],
-    )
-    .unwrap()
+    clamped(mesh, -9.81, vec![spring])
 }
 
 /// U = M^{-1/2} (the identity, scaled): full rank and mass-orthonormal.
@@ -508,6 +506,25 @@ fn assert_close(a: &[f64], b: &[f64], rel: f64, what: &str) {
     assert!(diff <= rel * size, "{what}: {:.2e} relative", diff / size);
 }
 
+/// A neural subspace (an untrained autoencoder k → d, seed 5) stepped by reduced Newton.
+fn neural_newton(
+    m: &FullSpaceModel,
+    space: &ReducedSpace,
+    k: usize,
+    d: usize,
+) -> ReducedSimulator<NeuralSubspace> {
+    let ae =
+        nn::Autoencoder::with_architecture(k, d, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    ReducedSimulator::new(
+        m.clone(),
+        space.clone(),
+        NeuralSubspace::new(ae),
+        time(10),
+        solver(SolverMethod::Newton),
+    )
+    .unwrap()
+}
+
 /// The Newton matrix is formed in z (Σ_e (U_eJ)ᵀH_e(U_eJ) + Jᵀ(M/h² + springs)J), or in q then
 /// sandwiched when d is close to k. For a
 /// linear subspace it is the exact Hessian of the objective; for the decoder it is Jᵀ H_q J with
@@ -543,16 +560,7 @@ fn newton_matrix_in_z_matches_finite_differences_and_the_q_space_hessian() {
     // Neural: Jᵀ H_q J, H_q by differences of the linear objective at the same state. With 3
     // latent coordinates of 6 the element terms are summed in z; with 6 in q, then sandwiched.
     for d in [3, 6] {
-        let ae = nn::Autoencoder::with_architecture(k, d, &[12, 10], nn::Activation::Elu, None, 5)
-            .unwrap();
-        let mut neural = ReducedSimulator::new(
-            m.clone(),
-            space.clone(),
-            NeuralSubspace::new(ae),
-            time(10),
-            solver(SolverMethod::Newton),
-        )
-        .unwrap();
+        let mut neural = neural_newton(&m, &space, k, d);
         for _ in 0..2 {
             neural.step().unwrap();
         }
@@ -616,17 +624,7 @@ fn chunked_newton_matrix_matches_the_element_basis_one() {
         ..Default::default()
     })
     .unwrap();
-    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
-        .select(&mesh, "pin")
-        .unwrap();
-    let m = FullSpaceModel::new(
-        mesh,
-        &material(),
-        pinned,
-        Vec3::new(0.0, -9.81, 0.0),
-        vec![],
-    )
-    .unwrap();
+    let m = clamped(mesh, -9.81, vec![]);
     let elements = m.elements.len();
     assert!(
         elements > 2 * 128 && !elements.is_multiple_of(128),
@@ -636,16 +634,7 @@ fn chunked_newton_matrix_matches_the_element_basis_one() {
     let basis = small_basis(&m, k);
     let space = reduced_space(&m, &basis, k, None).unwrap();
     for d in [3, 6] {
-        let ae = nn::Autoencoder::with_architecture(k, d, &[12, 10], nn::Activation::Elu, None, 5)
-            .unwrap();
-        let mut sim = ReducedSimulator::new(
-            m.clone(),
-            space.clone(),
-            NeuralSubspace::new(ae),
-            time(10),
-            solver(SolverMethod::Newton),
-        )
-        .unwrap();
+        let mut sim = neural_newton(&m, &space, k, d);
         sim.step().unwrap();
         let z = moved_off(&sim.state.z);
         let mut matrices = Vec::new();
@@ -826,11 +815,7 @@ fn truncation(k: usize, d: usize) -> NeuralSubspace {
 }
 
 fn gravity_only(g: f64) -> FullSpaceModel {
-    let mesh = bar();
-    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
-        .select(&mesh, "pin")
-        .unwrap();
-    FullSpaceModel::new(mesh, &material(), pinned, Vec3::new(0.0, g, 0.0), vec![]).unwrap()
+    clamped(bar(), g, vec![])
 }
 
 /// In the linear regime (a tiny gravity) the first m steps from rest lie in the span of the m
