@@ -1,7 +1,9 @@
-//! Procedural box/beam meshes, so scenes need no mesh file.
+//! Procedural meshes, so scenes need no mesh file: a box (a beam when one side is long), or a
+//! figure voxelised in a box (a trunk on a flat base, a head on a neck and two arms).
 //!
 //! Each hexahedral cell is split into six tetrahedra along its main diagonal (the Freudenthal /
-//! Kuhn split), which is conforming across cells without alternating patterns.
+//! Kuhn split), which is conforming across cells without alternating patterns, so any subset of
+//! a grid's cells is a conforming mesh too.
 
 use super::TetMesh;
 use crate::{FemError, Vec3};
@@ -10,7 +12,7 @@ use crate::{FemError, Vec3};
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BoxSpec {
-    /// The only generated shape so far; kept so scene files can say what they generate.
+    /// The shape built in the box: the box itself (the default) or a figure.
     #[serde(default)]
     pub kind: GeneratedShape,
     /// Edge lengths of the box.
@@ -29,6 +31,39 @@ pub enum GeneratedShape {
     /// An axis-aligned box (a beam when one side is long).
     #[default]
     Box,
+    /// A figure standing on its flat base at the box's lowest y, the cells of the grid whose
+    /// centres lie inside it: a vertical trunk up to 60 % of the height, a head at the top on a
+    /// neck of half the trunk's radius, and two arms along x at half the height, spanning the
+    /// box's width. Sizes follow the box: the trunk's radius is the smaller of half the depth
+    /// (z) and a sixth of the width (x); the arms' is 40 % of it; the head's the smallest of half
+    /// the depth, half the width and a fifth of the height. Arms and head swing about the trunk,
+    /// which is what linear subspaces miss.
+    Figure,
+}
+
+impl GeneratedShape {
+    /// Whether point `p`, relative to the box's minimum corner, is inside the shape of a box of
+    /// edge lengths `size`.
+    fn contains(self, p: [f64; 3], size: [f64; 3]) -> bool {
+        match self {
+            GeneratedShape::Box => true,
+            GeneratedShape::Figure => {
+                let [w, h, d] = size;
+                let (cx, cz) = (0.5 * w, 0.5 * d);
+                let trunk = (0.5 * d).min(w / 6.0);
+                let arm = 0.4 * trunk;
+                let head = (0.5 * d).min(0.5 * w).min(0.2 * h);
+                let head_y = h - head;
+                let r2 = |a: f64, b: f64| a * a + b * b;
+                let axial = r2(p[0] - cx, p[2] - cz);
+                let in_trunk = p[1] <= 0.6 * h && axial <= trunk * trunk;
+                let in_neck = p[1] <= head_y && axial <= 0.25 * trunk * trunk;
+                let in_head = axial + (p[1] - head_y).powi(2) <= head * head;
+                let in_arms = r2(p[1] - 0.5 * h, p[2] - cz) <= arm * arm;
+                in_trunk || in_neck || in_head || in_arms
+            }
+        }
+    }
 }
 
 impl Default for BoxSpec {
@@ -88,7 +123,12 @@ impl BoxSpec {
     }
 }
 
-/// Builds a box mesh with 6 tets per cell, positively oriented.
+/// Builds the spec's shape with 6 tets per kept cell of its grid (every cell of a box, the
+/// cells whose centres lie inside a figure), positively oriented, without unused vertices.
+///
+/// # Errors
+/// An invalid spec (one error per field), or a figure whose grid is too coarse to hold it in
+/// one piece (`mesh.generate.cells`).
 pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
     let mut errors = Vec::new();
     spec.check(&mut errors);
@@ -96,14 +136,15 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
     let count = spec.num_vertices().expect("checked above");
     let [nx, ny, nz] = spec.cells;
     let idx = |i: usize, j: usize, k: usize| i + (nx + 1) * (j + (ny + 1) * k);
+    let grid = |a: usize, i: f64| spec.size[a] * i / spec.cells[a] as f64;
     let mut vertices = Vec::with_capacity(count);
     for k in 0..=nz {
         for j in 0..=ny {
             for i in 0..=nx {
                 vertices.push(Vec3::new(
-                    spec.origin[0] + spec.size[0] * i as f64 / nx as f64,
-                    spec.origin[1] + spec.size[1] * j as f64 / ny as f64,
-                    spec.origin[2] + spec.size[2] * k as f64 / nz as f64,
+                    spec.origin[0] + grid(0, i as f64),
+                    spec.origin[1] + grid(1, j as f64),
+                    spec.origin[2] + grid(2, k as f64),
                 ));
             }
         }
@@ -121,6 +162,14 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
+                let centre = [
+                    grid(0, i as f64 + 0.5),
+                    grid(1, j as f64 + 0.5),
+                    grid(2, k as f64 + 0.5),
+                ];
+                if !spec.kind.contains(centre, spec.size) {
+                    continue;
+                }
                 for p in PERMS {
                     let mut c = [0usize; 3];
                     let mut tet = [idx(i, j, k); 4];
@@ -133,13 +182,46 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
             }
         }
     }
-    let mut mesh = TetMesh { vertices, tets };
+    let mut mesh = compacted(TetMesh { vertices, tets });
     for t in 0..mesh.tets.len() {
         if mesh.signed_volume(t) < 0.0 {
             mesh.tets[t].swap(2, 3);
         }
     }
+    let (_, pieces) = mesh.vertex_components();
+    if pieces != 1 {
+        return Err(FemError::InvalidConfig {
+            field: "mesh.generate.cells".into(),
+            reason: format!(
+                "{:?} at {:?} cells is {pieces} pieces, not one body: give more cells along \
+                 each axis",
+                spec.kind, spec.cells
+            ),
+        });
+    }
     Ok(mesh)
+}
+
+/// `mesh` without the vertices no tet uses, the rest in their order.
+fn compacted(mut mesh: TetMesh) -> TetMesh {
+    let mut used = vec![false; mesh.vertices.len()];
+    for &v in mesh.tets.iter().flatten() {
+        used[v] = true;
+    }
+    let mut new_index = vec![usize::MAX; used.len()];
+    let kept = new_index.iter_mut().zip(&used).filter(|(_, u)| **u);
+    for (new, (slot, _)) in kept.enumerate() {
+        *slot = new;
+    }
+    let mut v = 0;
+    mesh.vertices.retain(|_| {
+        v += 1;
+        used[v - 1]
+    });
+    for i in mesh.tets.iter_mut().flatten() {
+        *i = new_index[*i];
+    }
+    mesh
 }
 
 #[cfg(test)]
@@ -163,6 +245,70 @@ mod tests {
         // A closed box surface: 2 triangles per boundary quad.
         let quads = 2 * (4 * 3 + 3 * 2 + 4 * 2);
         assert_eq!(m.surface_triangles().len(), 2 * quads);
+    }
+
+    #[test]
+    fn figure_is_one_body_standing_on_its_base() {
+        let spec = BoxSpec {
+            kind: GeneratedShape::Figure,
+            size: [0.6, 0.6, 0.2],
+            cells: [30, 30, 10],
+            origin: [0.0, 1.0, 0.0],
+        };
+        let m = box_mesh(&spec).unwrap();
+        assert!((0..m.num_tets()).all(|t| m.signed_volume(t) > 0.0));
+        assert_eq!(m.vertex_components().1, 1);
+        // No unused vertex is left, and every tet is one of a kept cell's six.
+        let mut used = vec![false; m.num_vertices()];
+        m.tets.iter().flatten().for_each(|&v| used[v] = true);
+        assert!(used.iter().all(|&u| u));
+        assert_eq!(m.num_tets() % 6, 0);
+        // The arms span the box's width and the head reaches its top; the base is flat.
+        let (lo, hi) = m.bounding_box();
+        assert!(
+            (lo.x - 0.0).abs() < 1e-12 && (hi.x - 0.6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        assert!(
+            (lo.y - 1.0).abs() < 1e-12 && (hi.y - 1.6).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        // Trunk + neck + head + arms: well inside the box, far from empty.
+        let fill = m.volume() / (0.6 * 0.6 * 0.2);
+        assert!((0.15..0.45).contains(&fill), "{fill}");
+        // The arms are thin: at the arms' height the cross-section is much wider than at the
+        // height of the trunk below them.
+        let width_at = |y: f64| {
+            let xs = m
+                .vertices
+                .iter()
+                .filter(|v| (v.y - y).abs() < 1e-9)
+                .map(|v| v.x);
+            let (a, b) = xs.fold((f64::MAX, f64::MIN), |(a, b), x| (a.min(x), b.max(x)));
+            b - a
+        };
+        assert!(
+            width_at(1.3) > 0.55 && width_at(1.1) < 0.25,
+            "{} {}",
+            width_at(1.3),
+            width_at(1.1)
+        );
+    }
+
+    #[test]
+    fn a_figure_too_coarse_to_hold_together_is_refused() {
+        let err = box_mesh(&BoxSpec {
+            kind: GeneratedShape::Figure,
+            size: [0.6, 0.6, 0.2],
+            cells: [2, 2, 2],
+            origin: [0.0; 3],
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("mesh.generate.cells") && err.contains("0 pieces"),
+            "{err}"
+        );
     }
 
     #[test]
