@@ -2,6 +2,7 @@
 //! a user would write (mesh, material, bottom pinned, gravity, time step) runs from an empty
 //! cache through every stage and every method, each mesh with another material.
 
+use fem_core::mesh::generate::GeneratedShape;
 use pipeline::suite::{MATERIALS, METHODS, SuiteMesh, markdown, meshes, run_suite};
 use tests::{no_progress, scratch_dir, shared_dir};
 
@@ -23,9 +24,31 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
     let out = scratch_dir("suite");
     let meshes: Vec<SuiteMesh> = meshes.into_iter().map(SuiteMesh::File).collect();
     let rows = run_suite(&meshes, 1e5, &out, &no_progress, &mut |_| {}).unwrap();
-    let table = markdown(&rows);
-    println!("{table}");
     assert_eq!(rows.len(), meshes.len());
+    every_method_completed(&rows);
+}
+
+/// A generated figure, coarse enough for CI (14 × 14 × 5 cells, 30 cm tall), whose arms and
+/// head swing about its trunk: the minimal scene completes every method without `shared/`.
+#[test]
+fn minimal_scene_on_a_generated_figure_completes_every_method() {
+    let figure = SuiteMesh::Box {
+        name: "figure-small".into(),
+        kind: GeneratedShape::Figure,
+        size: [0.3, 0.3, 0.1],
+        cells: [14, 14, 5],
+    };
+    let out = scratch_dir("suite-figure");
+    let rows = run_suite(&[figure], 1e5, &out, &no_progress, &mut |_| {}).unwrap();
+    assert_eq!(rows.len(), 1);
+    every_method_completed(&rows);
+}
+
+/// Each row ran its material (`MATERIALS[i % 5]`) and every method to a finite error, and the
+/// table has a line for it.
+fn every_method_completed(rows: &[pipeline::suite::SuiteRow]) {
+    let table = markdown(rows);
+    println!("{table}");
     for (i, r) in rows.iter().enumerate() {
         assert!(r.failure.is_none(), "{}: {:?}", r.scene, r.failure);
         let material = serde_json::to_value(MATERIALS[i % MATERIALS.len()]).unwrap();
