@@ -79,10 +79,7 @@ impl SuiteMesh {
                 kind, size, cells, ..
             } => format!(
                 "generate = {{ kind = {:?}, size = [{:?}, {:?}, {:?}], cells = [{}, {}, {}] }}",
-                serde_json::to_value(kind)
-                    .ok()
-                    .and_then(|k| k.as_str().map(str::to_owned))
-                    .unwrap_or_default(),
+                kind.name(),
                 size[0],
                 size[1],
                 size[2],

@@ -42,6 +42,14 @@ pub enum GeneratedShape {
 }
 
 impl GeneratedShape {
+    /// The name a scene gives it (`kind = "figure"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            GeneratedShape::Box => "box",
+            GeneratedShape::Figure => "figure",
+        }
+    }
+
     /// Whether point `p`, relative to the box's minimum corner, is inside the shape of a box of
     /// edge lengths `size`.
     fn contains(self, p: [f64; 3], size: [f64; 3]) -> bool {
@@ -193,9 +201,10 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
         return Err(FemError::InvalidConfig {
             field: "mesh.generate.cells".into(),
             reason: format!(
-                "{:?} at {:?} cells is {pieces} pieces, not one body: give more cells along \
-                 each axis",
-                spec.kind, spec.cells
+                "the {} at cells = {:?} is {pieces} pieces (0: no cell's centre is inside it), \
+                 not one body: give more cells along each axis",
+                spec.kind.name(),
+                spec.cells
             ),
         });
     }
@@ -293,6 +302,14 @@ mod tests {
             width_at(1.3),
             width_at(1.1)
         );
+    }
+
+    #[test]
+    fn kinds_are_named_as_scenes_name_them() {
+        for kind in [GeneratedShape::Box, GeneratedShape::Figure] {
+            let json = serde_json::to_value(kind).unwrap();
+            assert_eq!(json.as_str(), Some(kind.name()));
+        }
     }
 
     #[test]
