@@ -438,6 +438,7 @@ mod tests {
                 failure: None,
                 machine_gfma: None,
                 restart: None,
+                compression: None,
             },
             offline_seconds: 0.0,
             pareto: false,

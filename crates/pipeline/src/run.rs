@@ -120,6 +120,71 @@ pub struct MethodReport {
     /// dynamics make of a small early error.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub restart: Option<Restart>,
+    /// On the full-space row: how far the test trajectory compresses its elements, which says
+    /// whether the full simulation itself gives way ([`crate::trust::COLLAPSED_SHARE`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compression: Option<Compression>,
+}
+
+/// How far a trajectory compresses its elements.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Compression {
+    /// The smallest det F (deformed over rest volume) over the elements and frames.
+    pub volume_ratio: f64,
+    /// The time (s) of its frame.
+    pub time: f64,
+    /// Frames with at least one element inverted or flat (det F ≤ 0).
+    pub inverted_frames: usize,
+    /// The largest share, over the frames, of the body's rest volume in elements squeezed
+    /// below [`Compression::SQUEEZED`] of their volume (inverted ones included): one sliver
+    /// crushed under a spring is a tiny share, a body giving way a large one.
+    pub squeezed_share: f64,
+    /// The time (s) of its frame.
+    pub squeezed_time: f64,
+}
+
+impl Compression {
+    /// An element below this det F counts as squeezed.
+    pub const SQUEEZED: f64 = 0.5;
+
+    /// Over `frames` of free displacements of `model`, each taken `step` seconds after the last
+    /// (the first at `step`). None without frames.
+    pub fn of(model: &FullSpaceModel, frames: &[Vec<f64>], step: f64) -> Option<Self> {
+        let mesh = &model.mesh;
+        let rest: Vec<f64> = (0..mesh.num_tets())
+            .map(|t| mesh.signed_volume(t))
+            .collect();
+        let total: f64 = rest.iter().sum();
+        let (mut u, mut ratios) = (vec![0.0; model.num_full()], Vec::new());
+        let mut out: Option<Self> = None;
+        for (k, f) in frames.iter().enumerate() {
+            let time = (k + 1) as f64 * step;
+            model.dofs.scatter(f, &mut u);
+            mesh.volume_ratios(&u, &mut ratios);
+            let o = out.get_or_insert(Self {
+                volume_ratio: f64::INFINITY,
+                time,
+                inverted_frames: 0,
+                squeezed_share: 0.0,
+                squeezed_time: time,
+            });
+            let smallest = ratios.iter().copied().fold(f64::INFINITY, f64::min);
+            if smallest < o.volume_ratio {
+                (o.volume_ratio, o.time) = (smallest, time);
+            }
+            o.inverted_frames += usize::from(smallest <= 0.0);
+            let squeezed: f64 = ratios
+                .iter()
+                .zip(&rest)
+                .filter(|(r, _)| **r < Self::SQUEEZED)
+                .map(|(_, v)| v)
+                .sum();
+            if squeezed / total > o.squeezed_share {
+                (o.squeezed_share, o.squeezed_time) = (squeezed / total, time);
+            }
+        }
+        out
+    }
 }
 
 /// How much the full-space test trajectory amplifies a small error: the state (displacement
@@ -659,6 +724,7 @@ pub fn measure(
             failure: None,
             machine_gfma: None,
             restart: None,
+            compression: Compression::of(&model, &reference.frames, pipeline.scene.time.step),
         });
     }
     let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
@@ -804,6 +870,7 @@ pub fn measure(
         failure,
         machine_gfma,
         restart: None,
+        compression: None,
     })
 }
 
@@ -1080,6 +1147,44 @@ mod tests {
             errors.trajectory_error()
         );
         assert_eq!(ErrorAccumulator::default().trajectory_error(), 0.0);
+    }
+
+    /// The compression of a trajectory: its smallest det F and when, the frames with an
+    /// inverted element, and the largest share of the volume squeezed under half and when, over
+    /// a pinned box's free displacements.
+    #[test]
+    fn compression_finds_the_most_squeezed_frame() {
+        let scene = crate::scene::Scene::from_str(
+            "name = \"box\"\n[mesh]\ngenerate = { size = [1.0, 1.0, 1.0], cells = [2, 2, 2] }\n\
+             [material]\nmodel = \"linear\"\nyoungs_modulus = 1e5\npoisson_ratio = 0.3\n\
+             [[pin]]\nplane = { axis = \"y\", side = \"min\", tolerance = 1e-6 }\n",
+            std::path::Path::new("."),
+            "box.toml",
+        )
+        .unwrap();
+        let (model, _) = scene.build_model().unwrap();
+        // Each free vertex moved down by `s` times its height: det F = 1 − s everywhere.
+        let frame = |s: f64| {
+            let mut u = vec![0.0; model.num_full()];
+            for (i, v) in model.mesh.vertices.iter().enumerate() {
+                u[3 * i + 1] = -s * v.y;
+            }
+            let mut free = vec![0.0; model.dofs.num_free()];
+            model.dofs.gather(&u, &mut free);
+            free
+        };
+        let frames = [frame(0.1), frame(0.7), frame(1.5), frame(0.2)];
+        let c = super::Compression::of(&model, &frames, 0.01).unwrap();
+        assert!((c.volume_ratio - (-0.5)).abs() < 1e-12, "{c:?}");
+        assert!((c.time - 0.03).abs() < 1e-12, "{c:?}");
+        assert_eq!(c.inverted_frames, 1);
+        // Every element is squeezed from the second frame on: the whole body, first at 0.02 s.
+        assert!((c.squeezed_share - 1.0).abs() < 1e-12, "{c:?}");
+        assert!((c.squeezed_time - 0.02).abs() < 1e-12, "{c:?}");
+        let mild = super::Compression::of(&model, &[frame(0.1)], 0.01).unwrap();
+        assert_eq!((mild.squeezed_share, mild.inverted_frames), (0.0, 0));
+        assert!((mild.volume_ratio - 0.9).abs() < 1e-12, "{mild:?}");
+        assert!(super::Compression::of(&model, &[], 0.01).is_none());
     }
 
     /// A report row's method is written as its name, in JSON as in the tables.

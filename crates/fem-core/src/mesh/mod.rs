@@ -39,6 +39,22 @@ impl TetMesh {
         (0..self.num_tets()).map(|t| self.signed_volume(t)).sum()
     }
 
+    /// Each tet's det F when vertex `i` is displaced by `u[3i..3i + 3]`: its deformed signed
+    /// volume over its rest one (≤ 0 where it is inverted or flat), into `out` (one per tet).
+    ///
+    /// # Panics
+    /// If `u` has not 3 entries per vertex.
+    pub fn volume_ratios(&self, u: &[f64], out: &mut Vec<f64>) {
+        assert_eq!(u.len(), 3 * self.vertices.len(), "u: 3 entries per vertex");
+        let x = |v: usize| self.vertices[v] + Vec3::new(u[3 * v], u[3 * v + 1], u[3 * v + 2]);
+        out.clear();
+        out.extend(self.tets.iter().enumerate().map(|(t, &[a, b, c, d])| {
+            let x0 = x(a);
+            let deformed = (x(b) - x0).cross(&(x(c) - x0)).dot(&(x(d) - x0)) / 6.0;
+            deformed / self.signed_volume(t)
+        }));
+    }
+
     /// Signed volume det[X1−X0, X2−X0, X3−X0] / 6 of tet `t`.
     pub fn signed_volume(&self, t: usize) -> f64 {
         let [a, b, c, d] = self.tets[t];
@@ -140,5 +156,42 @@ impl TetMesh {
         v.sort_unstable();
         v.dedup();
         v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::generate::{BoxSpec, box_mesh};
+
+    #[test]
+    fn volume_ratios_are_det_f() {
+        let m = box_mesh(&BoxSpec {
+            size: [1.0, 1.0, 1.0],
+            cells: [2, 2, 2],
+            ..Default::default()
+        })
+        .unwrap();
+        let n = m.num_vertices();
+        let mut ratios = Vec::new();
+        // At rest every ratio is 1; a uniform squeeze to half the height halves every volume.
+        m.volume_ratios(&vec![0.0; 3 * n], &mut ratios);
+        assert_eq!(ratios.len(), m.num_tets());
+        assert!(ratios.iter().all(|r| (r - 1.0).abs() < 1e-12), "{ratios:?}");
+        let mut u = vec![0.0; 3 * n];
+        for (i, v) in m.vertices.iter().enumerate() {
+            u[3 * i + 1] = -0.5 * v.y;
+        }
+        m.volume_ratios(&u, &mut ratios);
+        assert!(ratios.iter().all(|r| (r - 0.5).abs() < 1e-12), "{ratios:?}");
+        // The top vertices pushed through the bottom ones: exactly the tets of the top layer
+        // invert.
+        for (i, v) in m.vertices.iter().enumerate() {
+            u[3 * i + 1] = if v.y > 0.75 { -1.5 } else { 0.0 };
+        }
+        m.volume_ratios(&u, &mut ratios);
+        for (t, r) in m.tets.iter().zip(&ratios) {
+            let top = t.iter().any(|&v| m.vertices[v].y > 0.75);
+            assert_eq!(*r <= 0.0, top, "{t:?}: {r}");
+        }
     }
 }
