@@ -117,7 +117,7 @@ struct SuiteArgs {
     /// meshes beside the repository).
     #[arg(long)]
     meshes: Option<PathBuf>,
-    /// Leave out meshes with more vertices than this.
+    /// Leave out meshes with more vertices than this (the generated ones too).
     #[arg(long)]
     max_vertices: Option<usize>,
     /// Young's modulus of every scene, Pa.
@@ -466,7 +466,15 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         Err(e) => return Err(e),
     };
     if generated {
-        files.extend(pipeline::suite::generated());
+        for g in pipeline::suite::generated() {
+            let within = match max_vertices {
+                Some(max) => g.read()?.num_vertices() <= max,
+                None => true,
+            };
+            if within {
+                files.push(g);
+            }
+        }
     }
     let out = out.unwrap_or_else(|| cx.root.join("out").join("suite"));
     let progress = |d, t| cx.stage_progress(d, t);

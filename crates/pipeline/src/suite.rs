@@ -90,7 +90,11 @@ impl SuiteMesh {
         }
     }
 
-    fn read(&self) -> Result<TetMesh> {
+    /// The mesh: the file read, or the shape generated.
+    ///
+    /// # Errors
+    /// When the file cannot be read or the spec is invalid.
+    pub fn read(&self) -> Result<TetMesh> {
         match self {
             SuiteMesh::File(path) => Ok(read(path)?.0),
             SuiteMesh::Box {
@@ -243,8 +247,22 @@ pub fn run_suite(
     let mut rows = Vec::new();
     for (i, mesh) in meshes.iter().enumerate() {
         // Read once here for the scene's pin height and the table's sizes; the pipeline reads
-        // it again as the scene's mesh.
-        let m = mesh.read()?;
+        // it again as the scene's mesh. One that cannot be read gets its row, as a pipeline
+        // that stops does.
+        let m = match mesh.read() {
+            Ok(m) => m,
+            Err(e) => {
+                rows.push(SuiteRow {
+                    scene: mesh.name(),
+                    vertices: 0,
+                    tets: 0,
+                    pipeline_seconds: 0.0,
+                    methods: Vec::new(),
+                    failure: Some(format!("{e:#}")),
+                });
+                continue;
+            }
+        };
         let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
