@@ -3,7 +3,9 @@
 //! cache through every stage and every method, each mesh with another material.
 
 use fem_core::mesh::generate::GeneratedShape;
+use pipeline::simulate::Method;
 use pipeline::suite::{MATERIALS, METHODS, SuiteMesh, markdown, meshes, run_suite};
+use pipeline::trust::COLLAPSED_SHARE;
 use tests::{no_progress, scratch_dir, shared_dir};
 
 /// Meshes up to this size run in CI (a minute or two each on 2 cores); `cargo xtask suite`
@@ -41,7 +43,18 @@ fn minimal_scene_on_a_generated_figure_completes_every_method() {
     let out = scratch_dir("suite-figure");
     let rows = run_suite(&[figure], 1e5, &out, &no_progress, &mut |_| {}).unwrap();
     assert_eq!(rows.len(), 1);
+    assert_eq!((rows[0].vertices, rows[0].tets), (422, 1284));
     every_method_completed(&rows);
+    // The full simulation is measured for a collapse, and this one stands.
+    let full = rows[0].methods.iter().find(|r| r.method == Method::Full);
+    let compression = full
+        .and_then(|r| r.compression)
+        .expect("the full row's compression");
+    assert!(compression.volume_ratio > 0.0, "{compression:?}");
+    assert!(
+        compression.squeezed_share < COLLAPSED_SHARE,
+        "{compression:?}"
+    );
 }
 
 /// Each row ran its material (`MATERIALS[i % 5]`) and every method to a finite error, and the

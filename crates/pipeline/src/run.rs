@@ -172,11 +172,12 @@ impl Compression {
             if smallest < o.volume_ratio {
                 (o.volume_ratio, o.time) = (smallest, time);
             }
-            o.inverted_frames += usize::from(smallest <= 0.0);
+            // A ratio that is not a number counts as inverted and squeezed, not as sound.
+            o.inverted_frames += usize::from(ratios.iter().any(|r| r.is_nan() || *r <= 0.0));
             let squeezed: f64 = ratios
                 .iter()
                 .zip(&rest)
-                .filter(|(r, _)| **r < Self::SQUEEZED)
+                .filter(|(r, _)| r.is_nan() || **r < Self::SQUEEZED)
                 .map(|(_, v)| v)
                 .sum();
             if squeezed / total > o.squeezed_share {

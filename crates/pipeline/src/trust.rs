@@ -59,7 +59,8 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
          t = {:.2} s{inverted}): the material gives way there, which is past what it models as \
          a solid (StVK softens under strong compression; linear and corotated elasticity do \
          not resist inversion), and the reduced methods are measured against that; a stiffer \
-         material (`youngs_modulus`) or stable Neo-Hookean (`[material] model`) resists it",
+         material (`youngs_modulus`) resists it, and stable Neo-Hookean (`[material] model`), \
+         where the scene has another, resists inversion",
         r.method,
         100.0 * c.squeezed_share,
         c.squeezed_time,

@@ -197,8 +197,8 @@ pub struct Report {
     rows: Vec<MethodRow>,
     /// The stages the run loaded or computed, in order.
     stages: Vec<Stage>,
-    /// The run's "not to be trusted" warnings (empty when every reduced method is within
-    /// bounds).
+    /// The run's "not to be trusted" warnings (empty when the full simulation does not give way
+    /// and every reduced method is within bounds).
     warnings: Vec<String>,
     /// What held on this test and may not on others (a trajectory that left the training
     /// poses and still ended close to the full one).

@@ -105,7 +105,7 @@ impl MeshConfig {
             }
             (None, Some(spec)) => {
                 let mut mesh = box_mesh(spec)?;
-                let report = validate(&mut mesh, Path::new("<generated box>"))?;
+                let report = validate(&mut mesh, Path::new("<generated mesh>"))?;
                 Ok((mesh, report))
             }
             _ => Err(FemError::InvalidConfig {

@@ -50,17 +50,24 @@ impl GeneratedShape {
         }
     }
 
-    /// Whether point `p`, relative to the box's minimum corner, is inside the shape of a box of
-    /// edge lengths `size`.
-    fn contains(self, p: [f64; 3], size: [f64; 3]) -> bool {
+    /// The figure's head radius in a box of edge lengths `size`.
+    fn head_radius(size: [f64; 3]) -> f64 {
+        let [w, h, d] = size;
+        (0.5 * d).min(0.5 * w).min(0.2 * h)
+    }
+
+    /// The parts of the shape of a box of edge lengths `size` that point `p`, relative to the
+    /// box's minimum corner, lies in: [trunk or neck, head, arms] for a figure; a box is all
+    /// trunk.
+    fn parts(self, p: [f64; 3], size: [f64; 3]) -> [bool; 3] {
         match self {
-            GeneratedShape::Box => true,
+            GeneratedShape::Box => [true, false, false],
             GeneratedShape::Figure => {
                 let [w, h, d] = size;
                 let (cx, cz) = (0.5 * w, 0.5 * d);
                 let trunk = (0.5 * d).min(w / 6.0);
                 let arm = 0.4 * trunk;
-                let head = (0.5 * d).min(0.5 * w).min(0.2 * h);
+                let head = Self::head_radius(size);
                 let head_y = h - head;
                 let r2 = |a: f64, b: f64| a * a + b * b;
                 let axial = r2(p[0] - cx, p[2] - cz);
@@ -68,7 +75,7 @@ impl GeneratedShape {
                 let in_neck = p[1] <= head_y && axial <= 0.25 * trunk * trunk;
                 let in_head = axial + (p[1] - head_y).powi(2) <= head * head;
                 let in_arms = r2(p[1] - 0.5 * h, p[2] - cz) <= arm * arm;
-                in_trunk || in_neck || in_head || in_arms
+                [in_trunk || in_neck, in_head, in_arms]
             }
         }
     }
@@ -136,7 +143,7 @@ impl BoxSpec {
 ///
 /// # Errors
 /// An invalid spec (one error per field), or a figure whose grid is too coarse to hold it in
-/// one piece (`mesh.generate.cells`).
+/// one piece with its base, arms and head (`mesh.generate.cells`).
 pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
     let mut errors = Vec::new();
     spec.check(&mut errors);
@@ -167,6 +174,15 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
         [2, 1, 0],
     ];
     let mut tets = Vec::with_capacity(6 * nx * ny * nz);
+    // Whether a kept cell holds each part where the figure needs it.
+    #[derive(Default)]
+    struct Found {
+        base: bool,
+        head: bool,
+        left_arm: bool,
+        right_arm: bool,
+    }
+    let mut found = Found::default();
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
@@ -175,9 +191,14 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
                     grid(1, j as f64 + 0.5),
                     grid(2, k as f64 + 0.5),
                 ];
-                if !spec.kind.contains(centre, spec.size) {
+                let [trunk, head, arms] = spec.kind.parts(centre, spec.size);
+                if !(trunk || head || arms) {
                     continue;
                 }
+                found.base |= trunk && j == 0;
+                found.head |= head;
+                found.left_arm |= arms && i == 0;
+                found.right_arm |= arms && i + 1 == nx;
                 for p in PERMS {
                     let mut c = [0usize; 3];
                     let mut tet = [idx(i, j, k); 4];
@@ -190,23 +211,43 @@ pub fn box_mesh(spec: &BoxSpec) -> Result<TetMesh, FemError> {
             }
         }
     }
-    let mut mesh = compacted(TetMesh { vertices, tets });
+    let mut mesh = TetMesh { vertices, tets };
     for t in 0..mesh.tets.len() {
         if mesh.signed_volume(t) < 0.0 {
             mesh.tets[t].swap(2, 3);
         }
     }
+    if spec.kind == GeneratedShape::Box {
+        // Every cell kept: every vertex used, one piece.
+        return Ok(mesh);
+    }
+    let mesh = compacted(mesh);
+    let too_coarse = |what: String| FemError::InvalidConfig {
+        field: "mesh.generate.cells".into(),
+        reason: format!(
+            "the {} at cells = {:?} {what}: give more cells along each axis",
+            spec.kind.name(),
+            spec.cells
+        ),
+    };
     let (_, pieces) = mesh.vertex_components();
     if pieces != 1 {
-        return Err(FemError::InvalidConfig {
-            field: "mesh.generate.cells".into(),
-            reason: format!(
-                "the {} at cells = {:?} is {pieces} pieces (0: no cell's centre is inside it), \
-                 not one body: give more cells along each axis",
-                spec.kind.name(),
-                spec.cells
-            ),
-        });
+        return Err(too_coarse(format!(
+            "is {pieces} pieces (0: no cell's centre is inside it), not one body"
+        )));
+    }
+    // The figure's parts at this resolution: the trunk on the box's floor, a head, arms to both
+    // ends of its width.
+    let missing: Vec<&str> = [
+        (found.base, "base"),
+        (found.head, "head"),
+        (found.left_arm && found.right_arm, "arms"),
+    ]
+    .into_iter()
+    .filter_map(|(there, part)| (!there).then_some(part))
+    .collect();
+    if !missing.is_empty() {
+        return Err(too_coarse(format!("has no {}", missing.join(" or "))));
     }
     Ok(mesh)
 }
@@ -266,12 +307,10 @@ mod tests {
         };
         let m = box_mesh(&spec).unwrap();
         assert!((0..m.num_tets()).all(|t| m.signed_volume(t) > 0.0));
-        assert_eq!(m.vertex_components().1, 1);
-        // No unused vertex is left, and every tet is one of a kept cell's six.
+        // No unused vertex is left.
         let mut used = vec![false; m.num_vertices()];
         m.tets.iter().flatten().for_each(|&v| used[v] = true);
         assert!(used.iter().all(|&u| u));
-        assert_eq!(m.num_tets() % 6, 0);
         // The arms span the box's width and the head reaches its top; the base is flat.
         let (lo, hi) = m.bounding_box();
         assert!(
@@ -323,9 +362,47 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(
-            err.contains("mesh.generate.cells") && err.contains("0 pieces"),
+            err.contains("mesh.generate.cells")
+                && err.contains("the figure at cells = [2, 2, 2] is 0 pieces"),
             "{err}"
         );
+        let refused = |size: [f64; 3], cells: [usize; 3]| {
+            let spec = BoxSpec {
+                kind: GeneratedShape::Figure,
+                size,
+                cells,
+                origin: [0.0; 3],
+            };
+            box_mesh(&spec).unwrap_err().to_string()
+        };
+        // Arms apart from the trunk.
+        let err = refused([0.6, 0.6, 0.2], [4, 4, 1]);
+        assert!(err.contains("is 2 pieces"), "{err}");
+        // One cell (trunk and arms, but no head), and trunk and head without arms.
+        let err = refused([0.3, 0.3, 0.1], [1, 1, 1]);
+        assert!(err.contains("has no head"), "{err}");
+        let err = refused([0.3, 0.3, 0.1], [6, 6, 3]);
+        assert!(err.contains("has no arms"), "{err}");
+        // A head floating above the floor.
+        let err = refused([0.2, 0.5, 0.3], [12, 14, 4]);
+        assert!(err.contains("has no base"), "{err}");
+    }
+
+    /// A box keeps the vertex and tet order it always had (cached stages key on the mesh).
+    #[test]
+    fn box_order_is_unchanged() {
+        let m = box_mesh(&BoxSpec {
+            size: [2.0, 1.0, 1.0],
+            cells: [2, 1, 1],
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(m.num_vertices(), 12);
+        assert_eq!(m.vertices[1], Vec3::new(1.0, 0.0, 0.0));
+        assert_eq!(m.vertices[4], Vec3::new(1.0, 1.0, 0.0));
+        assert_eq!(m.vertices[6], Vec3::new(0.0, 0.0, 1.0));
+        // Cell 0, axis orders xyz and xzy (the second turned positive by swapping its last two).
+        assert_eq!(&m.tets[..2], &[[0, 1, 4, 10], [0, 1, 10, 7]]);
     }
 
     #[test]

@@ -41,6 +41,7 @@ impl TetMesh {
 
     /// Each tet's det F when vertex `i` is displaced by `u[3i..3i + 3]`: its deformed signed
     /// volume over its rest one (≤ 0 where it is inverted or flat), into `out` (one per tet).
+    /// The rest volumes are positive on a validated mesh; a flat rest tet gives ±∞ or NaN.
     ///
     /// # Panics
     /// If `u` has not 3 entries per vertex.
