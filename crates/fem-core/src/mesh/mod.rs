@@ -49,21 +49,15 @@ impl TetMesh {
         assert_eq!(u.len(), 3 * self.vertices.len(), "u: 3 entries per vertex");
         let x = |v: usize| self.vertices[v] + Vec3::new(u[3 * v], u[3 * v + 1], u[3 * v + 2]);
         out.clear();
-        out.extend(self.tets.iter().enumerate().map(|(t, &[a, b, c, d])| {
-            let x0 = x(a);
-            let deformed = (x(b) - x0).cross(&(x(c) - x0)).dot(&(x(d) - x0)) / 6.0;
-            deformed / self.signed_volume(t)
-        }));
+        out.extend(
+            (self.tets.iter().enumerate())
+                .map(|(t, tet)| tet_volume(tet.map(x)) / self.signed_volume(t)),
+        );
     }
 
     /// Signed volume det[X1−X0, X2−X0, X3−X0] / 6 of tet `t`.
     pub fn signed_volume(&self, t: usize) -> f64 {
-        let [a, b, c, d] = self.tets[t];
-        let x0 = self.vertices[a];
-        (self.vertices[b] - x0)
-            .cross(&(self.vertices[c] - x0))
-            .dot(&(self.vertices[d] - x0))
-            / 6.0
+        tet_volume(self.tets[t].map(|v| self.vertices[v]))
     }
 
     /// Axis-aligned bounding box (min, max). Returns zeros for an empty mesh.
@@ -158,6 +152,11 @@ impl TetMesh {
         v.dedup();
         v
     }
+}
+
+/// det[x1−x0, x2−x0, x3−x0] / 6: the signed volume of the tet with corners `x`.
+fn tet_volume([x0, x1, x2, x3]: [Vec3; 4]) -> f64 {
+    (x1 - x0).cross(&(x2 - x0)).dot(&(x3 - x0)) / 6.0
 }
 
 #[cfg(test)]
