@@ -10,6 +10,7 @@ use pipeline::pipeline::Pipeline;
 use pipeline::run::{MethodReport, RunOptions, run};
 use pipeline::scene::Scene;
 use pipeline::simulate::Method;
+use pipeline::trajectories::{run_trajectories, spreads, trajectory_dir};
 use tests::{TINY, no_progress, scene, scratch_dir};
 
 /// Runs `methods` on test trajectory 0 of `s`, writing every frame to `out`.
@@ -314,4 +315,109 @@ fn cubature_rules_stay_close_to_every_element() {
             every.mean_rel_error
         );
     }
+}
+
+/// `run --trajectories 3`: each trajectory's report in its folder, trajectory 0's where a plain
+/// run writes it and the same to the bit; the table's errors are the runs' own; raising
+/// `[test] schedules` leaves every stage's cache key alone, so the first reference is shared.
+#[test]
+fn several_trajectories_report_each_and_their_spread() {
+    let out = scratch_dir("report-trajectories");
+    let cache = out.join("cache");
+    let methods = vec![Method::Full, Method::Pca, Method::PcaCubature];
+    let plain = scene(TINY);
+    let single = {
+        let mut p = Pipeline::new(&plain, &cache).unwrap();
+        let opts = RunOptions {
+            out: out.join("plain"),
+            every: 0,
+            methods: methods.clone(),
+            trajectory: 0,
+        };
+        run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap()
+    };
+    let references = || {
+        std::fs::read_dir(&cache)
+            .unwrap()
+            .filter(|e| {
+                let name = e.as_ref().unwrap().file_name();
+                name.to_string_lossy().starts_with("reference-")
+            })
+            .count()
+    };
+    assert_eq!(references(), 1);
+    let mut raised = scene(TINY);
+    raised.raise_test_trajectories(3);
+    assert_eq!(raised.test().schedules, 3);
+    let mut p = Pipeline::new(&raised, &cache).unwrap();
+    let opts = RunOptions {
+        out: out.join("three"),
+        every: 0,
+        methods,
+        trajectory: 0,
+    };
+    let mut seen = Vec::new();
+    let runs = run_trajectories(
+        &mut p,
+        &opts,
+        3,
+        &no_progress,
+        &mut |i| seen.push(i),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(seen, [0, 1, 2]);
+    assert_eq!(
+        references(),
+        3,
+        "trajectory 0's reference is the plain run's"
+    );
+    for (a, b) in runs[0].iter().zip(&single) {
+        assert_eq!(a.method, b.method);
+        assert_eq!(a.frame_errors, b.frame_errors, "{}", a.method);
+    }
+    let table = spreads(&runs);
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(opts.out.join("trajectories.json")).unwrap())
+            .unwrap();
+    for (i, rows) in runs.iter().enumerate() {
+        let dir = trajectory_dir(&opts.out, i);
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap())
+                .unwrap();
+        for (j, r) in rows.iter().enumerate() {
+            assert_eq!(report[j]["method"], r.method.name());
+            assert_eq!(table[j].errors[i], Some(r.mean_rel_error));
+            let w = written[j]["errors"][i].as_f64().unwrap();
+            assert!(
+                close(w, r.mean_rel_error),
+                "{w} against {}",
+                r.mean_rel_error
+            );
+        }
+    }
+    // The trajectories differ, so their errors do.
+    let pca = &table[1];
+    assert_ne!(pca.errors[0], pca.errors[1]);
+    let mean = pca.errors.iter().map(|e| e.unwrap()).sum::<f64>() / 3.0;
+    assert!((pca.mean.unwrap() - mean).abs() <= 1e-15 * mean);
+    let worst = pca.errors.iter().map(|e| e.unwrap()).fold(0.0, f64::max);
+    assert_eq!(pca.worst.map(|w| w.1), Some(worst));
+    let md = std::fs::read_to_string(opts.out.join("trajectories.md")).unwrap();
+    assert!(
+        md.contains("| pca-cubature |") && !md.contains("| full |"),
+        "{md}"
+    );
+    // More trajectories than the scene has is an error that names the setting.
+    let e = run_trajectories(
+        &mut p,
+        &opts,
+        4,
+        &no_progress,
+        &mut |_| {},
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`[test] schedules`"), "{e}");
 }

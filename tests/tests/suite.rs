@@ -25,7 +25,7 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
     );
     let out = scratch_dir("suite");
     let meshes: Vec<SuiteMesh> = meshes.into_iter().map(SuiteMesh::File).collect();
-    let rows = run_suite(&meshes, 1e5, &out, &no_progress, &mut |_| {}).unwrap();
+    let rows = run_suite(&meshes, 1e5, 1, &out, &no_progress, &mut |_| {}).unwrap();
     assert_eq!(rows.len(), meshes.len());
     every_method_completed(&rows);
 }
@@ -41,10 +41,24 @@ fn minimal_scene_on_a_generated_figure_completes_every_method() {
         cells: [14, 14, 5],
     };
     let out = scratch_dir("suite-figure");
-    let rows = run_suite(&[figure], 1e5, &out, &no_progress, &mut |_| {}).unwrap();
+    let rows = run_suite(&[figure], 1e5, 2, &out, &no_progress, &mut |_| {}).unwrap();
     assert_eq!(rows.len(), 1);
     assert_eq!((rows[0].vertices, rows[0].tets), (422, 1284));
     every_method_completed(&rows);
+    // A second test trajectory: the spread starts from the table's errors, and its own run is
+    // written beside the first.
+    let r = &rows[0];
+    assert!(r.trajectories_seconds.is_some_and(|s| s > 0.0));
+    assert!(out.join(&r.scene).join("trajectory-1/report.json").exists());
+    for m in METHODS {
+        let spread = r.trajectories.iter().find(|t| t.method == m).unwrap();
+        let first = r.methods.iter().find(|x| x.method == m).unwrap();
+        assert_eq!(spread.errors.len(), 2, "{}", m.name());
+        assert_eq!(spread.errors[0], Some(first.mean_rel_error), "{}", m.name());
+        assert!(spread.errors[1].is_some_and(f64::is_finite), "{}", m.name());
+    }
+    let table = markdown(&rows);
+    assert!(table.contains("On test trajectories 0..2"), "{table}");
     // The full simulation is measured for a collapse, and this one stands.
     let full = rows[0].methods.iter().find(|r| r.method == Method::Full);
     let compression = full

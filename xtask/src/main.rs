@@ -86,6 +86,12 @@ struct RunArgs {
     /// Held-out test trajectory to simulate.
     #[arg(long, default_value_t = 0)]
     trajectory: usize,
+    /// Run on held-out test trajectories 0..N instead (raising `[test] schedules` to N where it
+    /// is lower, which keeps every cached stage): trajectory 0's report where a plain run writes
+    /// it, trajectory i's in OUT/trajectory-i, and a table of every method's error on each, with
+    /// their mean and the worst, in OUT/trajectories.md.
+    #[arg(long, conflicts_with = "trajectory", value_parser = clap::value_parser!(u64).range(1..=64))]
+    trajectories: Option<u64>,
 }
 
 #[derive(clap::Args)]
@@ -130,6 +136,11 @@ struct SuiteArgs {
     /// of minutes on 2 cores) and a generated figure of 30,078 tets.
     #[arg(long)]
     generated: bool,
+    /// Also run every method on test trajectories 1..N of each mesh, after its pipeline's time
+    /// is taken: a second table gives each method's mean error over trajectories 0..N and the
+    /// worst.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    trajectories: u64,
 }
 
 #[derive(clap::Args)]
@@ -394,8 +405,13 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         every,
         methods,
         trajectory,
+        trajectories,
     } = args;
-    let scene = cx.scene(&common)?;
+    let mut scene = cx.scene(&common)?;
+    let count = trajectories.map(|n| n as usize);
+    if let Some(n) = count {
+        scene.raise_test_trajectories(n);
+    }
     let mut p = cx.pipeline(&scene, &common)?;
     let progress = |d, t| cx.stage_progress(d, t);
     p.pca(&progress)?;
@@ -406,7 +422,31 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         trajectory,
     };
     let method_bar = bar(0, "");
-    let rows = pipeline::run::run(&mut p, &opts, &progress, &mut method_progress(&method_bar))?;
+    let rows = match count {
+        Some(n) => {
+            let mut runs = pipeline::trajectories::run_trajectories(
+                &mut p,
+                &opts,
+                n,
+                &progress,
+                &mut |i| method_bar.println(format!("test trajectory {i} of 0..{n}")),
+                &mut method_progress(&method_bar),
+            )?;
+            let table = pipeline::trajectories::spreads(&runs);
+            method_bar.finish_and_clear();
+            println!(
+                "\n{} — every method on held-out test trajectories 0..{n} (trajectory 0 is \
+                 the default test; its report follows)\n\n{}\ntable: {}; trajectory i's \
+                 report: {}",
+                scene.name,
+                pipeline::trajectories::markdown(&table),
+                opts.out.join("trajectories.md").display(),
+                opts.out.join("trajectory-i").display()
+            );
+            runs.swap_remove(0)
+        }
+        None => pipeline::run::run(&mut p, &opts, &progress, &mut method_progress(&method_bar))?,
+    };
     method_bar.finish_and_clear();
     if opts
         .methods
@@ -454,6 +494,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         youngs_modulus,
         out,
         generated,
+        trajectories,
     } = args;
     let dir = meshes.unwrap_or_else(|| cx.root.join("../shared/meshes"));
     let mut files: Vec<SuiteMesh> = match pipeline::suite::meshes(&dir, max_vertices) {
@@ -478,9 +519,14 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
     }
     let out = out.unwrap_or_else(|| cx.root.join("out").join("suite"));
     let progress = |d, t| cx.stage_progress(d, t);
-    let rows = pipeline::suite::run_suite(&files, youngs_modulus, &out, &progress, &mut |name| {
-        println!("{name}")
-    })?;
+    let rows = pipeline::suite::run_suite(
+        &files,
+        youngs_modulus,
+        trajectories as usize,
+        &out,
+        &progress,
+        &mut |name| println!("{name}"),
+    )?;
     pipeline::suite::write(&out, &rows)?;
     print!("\n{}", pipeline::suite::markdown(&rows));
     println!("table: {}", out.join("suite.md").display());

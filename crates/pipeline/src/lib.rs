@@ -19,6 +19,7 @@ pub mod stage;
 pub mod stage_report;
 pub mod stress;
 pub mod suite;
+pub mod trajectories;
 pub mod trust;
 
 use std::path::PathBuf;

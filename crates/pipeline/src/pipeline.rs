@@ -598,8 +598,16 @@ impl<'a> Pipeline<'a> {
     }
 
     fn reference_key(&self, trajectory: usize) -> u64 {
+        // Trajectory i depends on the test family's seed and i, not on how many trajectories
+        // it has: keyed as a family of one, a scene whose `[test] schedules` grows (`run
+        // --trajectories`) keeps its references and the stages keyed on trajectory 0's, and
+        // the scenes that leave the count alone keep their caches.
+        let family = fem_core::snapshots::ScheduleConfig {
+            schedules: 1,
+            ..self.scene.test()
+        };
         self.physics_key(Stage::Reference, &self.scene.solver)
-            .mix(&self.scene.test())
+            .mix(&family)
             .mix(&trajectory)
             .finish()
     }

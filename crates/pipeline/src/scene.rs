@@ -276,6 +276,13 @@ impl Scene {
         self.test.resolve(ScheduleConfig::test())
     }
 
+    /// Raises `[test] schedules` to at least `count`, so that test trajectories 0..`count`
+    /// exist. Trajectory i does not depend on the count, and neither do the cache keys.
+    pub fn raise_test_trajectories(&mut self, count: usize) {
+        let have = self.test().schedules;
+        self.test.schedules = Some(have.max(count));
+    }
+
     /// Loads the mesh, selects pins and forces, and builds the full-space model.
     pub fn build_model(&self) -> Result<(FullSpaceModel, ValidationReport)> {
         let (mesh, report) = self

@@ -14,6 +14,7 @@ use crate::pipeline::{Pipeline, Progress};
 use crate::run::{MethodReport, RunOptions, run};
 use crate::scene::Scene;
 use crate::simulate::Method;
+use crate::trajectories::{Spread, run_more, spreads};
 
 /// The materials a suite cycles through, one per mesh in turn, so that every material runs on
 /// some mesh.
@@ -229,17 +230,27 @@ pub struct SuiteRow {
     pub tets: usize,
     /// The pipeline's wall time from an empty cache, every stage and every method's run.
     pub pipeline_seconds: f64,
-    /// Every method's report row, or why the pipeline stopped.
+    /// Every method's report row on test trajectory 0 (the yardstick), or why the pipeline
+    /// stopped.
     pub methods: Vec<MethodReport>,
+    /// With more than one test trajectory: every method's error on each
+    /// ([`crate::trajectories`]), and the seconds the trajectories after the first took.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub trajectories: Vec<Spread>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trajectories_seconds: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
 }
 
 /// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`) from an empty cache under
 /// `out/<scene>/`, returning one row a mesh; a scene whose pipeline fails gets a row saying why.
+/// With `trajectories` above 1 every method also runs on test trajectories 1..`trajectories`
+/// (after the pipeline's time is taken), and the row holds their spread.
 pub fn run_suite(
     meshes: &[SuiteMesh],
     youngs_modulus: f64,
+    trajectories: usize,
     out: &Path,
     progress: Progress<'_>,
     on_mesh: &mut dyn FnMut(&str),
@@ -258,12 +269,15 @@ pub fn run_suite(
                     tets: 0,
                     pipeline_seconds: 0.0,
                     methods: Vec::new(),
+                    trajectories: Vec::new(),
+                    trajectories_seconds: None,
                     failure: Some(format!("{e:#}")),
                 });
                 continue;
             }
         };
-        let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
+        let mut scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
+        scene.raise_test_trajectories(trajectories);
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
         let cache = dir.join("cache");
@@ -272,26 +286,49 @@ pub fn run_suite(
                 .with_context(|| format!("cannot empty {}", cache.display()))?;
         }
         let start = Instant::now();
-        let outcome = Pipeline::new(&scene, &cache).and_then(|mut p| {
-            let opts = RunOptions {
-                out: dir.clone(),
-                every: 0,
-                methods: METHODS.to_vec(),
-                trajectory: 0,
-            };
-            run(&mut p, &opts, progress, &mut |_, _, _| {})
-        });
+        let opts = RunOptions {
+            out: dir.clone(),
+            every: 0,
+            methods: METHODS.to_vec(),
+            trajectory: 0,
+        };
+        let mut pipeline = Pipeline::new(&scene, &cache);
+        let outcome = match &mut pipeline {
+            Ok(p) => run(p, &opts, progress, &mut |_, _, _| {}),
+            Err(e) => Err(anyhow::anyhow!("{e:#}")),
+        };
         let pipeline_seconds = start.elapsed().as_secs_f64();
-        let (methods, failure) = match outcome {
+        let (methods, mut failure) = match outcome {
             Ok(m) => (m, None),
             Err(e) => (Vec::new(), Some(format!("{e:#}"))),
         };
+        let (mut spread, mut trajectories_seconds) = (Vec::new(), None);
+        if let (Ok(p), None, true) = (&mut pipeline, &failure, trajectories > 1) {
+            let start = Instant::now();
+            let mut runs = vec![methods.clone()];
+            let more = run_more(
+                p,
+                &opts,
+                &mut runs,
+                trajectories,
+                progress,
+                &mut |_| {},
+                &mut |_, _, _| {},
+            );
+            if let Err(e) = more {
+                failure = Some(format!("test trajectory {}: {e:#}", runs.len()));
+            }
+            spread = spreads(&runs);
+            trajectories_seconds = Some(start.elapsed().as_secs_f64());
+        }
         rows.push(SuiteRow {
             scene: scene.name.clone(),
             vertices: m.num_vertices(),
             tets: m.num_tets(),
             pipeline_seconds,
             methods,
+            trajectories: spread,
+            trajectories_seconds,
             failure,
         });
     }
@@ -363,8 +400,61 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
             s += &format!("\n{}: stopped: {f}\n\n", r.scene);
         }
     }
+    s += &spread_markdown(rows);
     for r in rows {
         s += &crate::trust::assess(&r.methods).text(&format!("{}, ", r.scene));
+    }
+    s
+}
+
+/// With more than one test trajectory, a second table: per mesh and reduced method, the mean
+/// error over the trajectories and the worst with its trajectory (empty with one trajectory).
+fn spread_markdown(rows: &[SuiteRow]) -> String {
+    let Some(count) = rows
+        .iter()
+        .map(|r| r.trajectories.first().map_or(0, |t| t.errors.len()))
+        .max()
+        .filter(|&n| n > 1)
+    else {
+        return String::new();
+    };
+    let reduced = [
+        Method::Pca,
+        Method::PcaCubature,
+        Method::Neural,
+        Method::NeuralCubature,
+    ];
+    let mut s = format!(
+        "\nOn test trajectories 0..{count} (0 is the table's): the mean error, then the worst \
+         and its trajectory.\n\n| scene | trajectories s |"
+    );
+    for m in reduced {
+        s += &format!(" {m} |");
+    }
+    s += "\n|---|---:|";
+    s += &"---|".repeat(reduced.len());
+    s += "\n";
+    for r in rows.iter().filter(|r| !r.trajectories.is_empty()) {
+        s += &format!(
+            "| {} | {:.0} |",
+            r.scene,
+            r.trajectories_seconds.unwrap_or(0.0)
+        );
+        for m in reduced {
+            let cell =
+                r.trajectories
+                    .iter()
+                    .find(|t| t.method == m)
+                    .map_or("—".to_string(), |t| {
+                        let mean = t.mean.map_or("—".into(), |e| format!("{:.1} %", 100.0 * e));
+                        match t.worst {
+                            Some((i, e)) => format!("{mean} ({:.1} % on {i})", 100.0 * e),
+                            None => mean,
+                        }
+                    });
+            s += &format!(" {cell} |");
+        }
+        s += "\n";
     }
     s
 }
