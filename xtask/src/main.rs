@@ -429,7 +429,7 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
                 &opts,
                 n,
                 &progress,
-                &mut |i| method_bar.println(format!("test trajectory {i} of 0..{n}")),
+                &mut |i| method_bar.println(format!("test trajectory {i} ({} of {n})", i + 1)),
                 &mut method_progress(&method_bar),
             )?;
             let table = pipeline::trajectories::spreads(&runs);

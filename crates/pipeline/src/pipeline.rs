@@ -601,7 +601,9 @@ impl<'a> Pipeline<'a> {
         // Trajectory i depends on the test family's seed and i, not on how many trajectories
         // it has: keyed as a family of one, a scene whose `[test] schedules` grows (`run
         // --trajectories`) keeps its references and the stages keyed on trajectory 0's, and
-        // the scenes that leave the count alone keep their caches.
+        // the scenes that leave the count at its default keep their caches (one that sets
+        // another count computed its references, and the cubature rules keyed on the first,
+        // once more after this key changed).
         let family = fem_core::snapshots::ScheduleConfig {
             schedules: 1,
             ..self.scene.test()

@@ -239,6 +239,9 @@ pub struct SuiteRow {
     pub trajectories: Vec<Spread>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub trajectories_seconds: Option<f64>,
+    /// Why a trajectory after the first stopped (its spread then has gaps from there on).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub trajectories_failure: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
 }
@@ -271,6 +274,7 @@ pub fn run_suite(
                     methods: Vec::new(),
                     trajectories: Vec::new(),
                     trajectories_seconds: None,
+                    trajectories_failure: None,
                     failure: Some(format!("{e:#}")),
                 });
                 continue;
@@ -298,11 +302,12 @@ pub fn run_suite(
             Err(e) => Err(anyhow::anyhow!("{e:#}")),
         };
         let pipeline_seconds = start.elapsed().as_secs_f64();
-        let (methods, mut failure) = match outcome {
+        let (methods, failure) = match outcome {
             Ok(m) => (m, None),
             Err(e) => (Vec::new(), Some(format!("{e:#}"))),
         };
-        let (mut spread, mut trajectories_seconds) = (Vec::new(), None);
+        let (mut spread, mut trajectories_seconds, mut trajectories_failure) =
+            (Vec::new(), None, None);
         if let (Ok(p), None, true) = (&mut pipeline, &failure, trajectories > 1) {
             let start = Instant::now();
             let mut runs = vec![methods.clone()];
@@ -316,8 +321,11 @@ pub fn run_suite(
                 &mut |_, _, _| {},
             );
             if let Err(e) = more {
-                failure = Some(format!("test trajectory {}: {e:#}", runs.len()));
+                trajectories_failure = Some(format!("test trajectory {}: {e:#}", runs.len()));
             }
+            // The trajectories a failure left out are gaps: no mean, the worst of the others.
+            runs.resize(trajectories, Vec::new());
+            crate::trajectories::write(&dir, &runs)?;
             spread = spreads(&runs);
             trajectories_seconds = Some(start.elapsed().as_secs_f64());
         }
@@ -329,6 +337,7 @@ pub fn run_suite(
             methods,
             trajectories: spread,
             trajectories_seconds,
+            trajectories_failure,
             failure,
         });
     }
@@ -456,6 +465,11 @@ fn spread_markdown(rows: &[SuiteRow]) -> String {
         }
         s += "\n";
     }
+    for r in rows {
+        if let Some(f) = &r.trajectories_failure {
+            s += &format!("\n{}: stopped at {f}\n", r.scene);
+        }
+    }
     s
 }
 
@@ -489,6 +503,62 @@ mod tests {
             ..at(0.05, 0.01)
         };
         assert_eq!(standing(&failed, &p), "—");
+    }
+
+    /// The second table: a mean over every trajectory, the worst with its index, a gap where
+    /// a trajectory stopped (no mean), and why it stopped; none with one trajectory.
+    #[test]
+    fn the_spread_table_shows_means_worsts_and_gaps() {
+        let at = |method: Method, error: f64| MethodReport {
+            method,
+            mean_rel_error: error,
+            speedup: 100.0,
+            ..Default::default()
+        };
+        let row = |scene: &str, runs: &[Vec<MethodReport>], failure: Option<&str>| SuiteRow {
+            scene: scene.into(),
+            vertices: 10,
+            tets: 20,
+            pipeline_seconds: 1.0,
+            methods: runs[0].clone(),
+            trajectories: crate::trajectories::spreads(runs),
+            trajectories_seconds: Some(2.0),
+            trajectories_failure: failure.map(String::from),
+            failure: None,
+        };
+        let whole = row(
+            "a",
+            &[
+                vec![at(Method::Pca, 0.02), at(Method::NeuralCubature, 0.03)],
+                vec![at(Method::Pca, 0.04), at(Method::NeuralCubature, 0.09)],
+            ],
+            None,
+        );
+        let cut = row(
+            "b",
+            &[vec![at(Method::Pca, 0.05)], Vec::new()],
+            Some("test trajectory 1: diverged"),
+        );
+        let table = spread_markdown(&[whole.clone(), cut]);
+        assert!(table.contains("On test trajectories 0..2"), "{table}");
+        assert!(
+            table.contains("| a | 2 | 3.0 % (4.0 % on 1) | — | — | 6.0 % (9.0 % on 1) |"),
+            "{table}"
+        );
+        assert!(
+            table.contains("| b | 2 | — (5.0 % on 0) | — | — | — |"),
+            "{table}"
+        );
+        assert!(
+            table.contains("b: stopped at test trajectory 1: diverged"),
+            "{table}"
+        );
+        let single = SuiteRow {
+            trajectories: Vec::new(),
+            trajectories_seconds: None,
+            ..whole
+        };
+        assert_eq!(spread_markdown(&[single]), "");
     }
 
     /// A folder's meshes in every readable format, a TetGen pair once; surface meshes and

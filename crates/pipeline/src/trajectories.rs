@@ -89,12 +89,13 @@ pub fn trajectory_dir(out: &Path, i: usize) -> std::path::PathBuf {
 
 /// Runs `opts.methods` on test trajectories 0..`count` ([`run`] for each, its report in
 /// [`trajectory_dir`]), writes `trajectories.md` and `trajectories.json` to `opts.out`, and
-/// returns every trajectory's rows (`opts.trajectory` is not used). `progress` is called with
-/// the trajectory before each.
+/// returns every trajectory's rows (`opts.trajectory` is not used). `on_trajectory` is called
+/// with the trajectory before each.
 ///
 /// # Errors
 /// When `count` is 0, when the scene's `[test] schedules` is below `count`
-/// ([`crate::scene::Scene::raise_test_trajectories`] raises it), or as [`run`].
+/// ([`crate::scene::Scene::raise_test_trajectories`] raises it), or as [`run`]; the table then
+/// holds the trajectories before the one that failed.
 pub fn run_trajectories(
     pipeline: &mut Pipeline<'_>,
     opts: &RunOptions,
@@ -112,7 +113,7 @@ pub fn run_trajectories(
         );
     }
     let mut runs = Vec::with_capacity(count);
-    run_more(
+    let outcome = run_more(
         pipeline,
         opts,
         &mut runs,
@@ -120,17 +121,26 @@ pub fn run_trajectories(
         stage_progress,
         on_trajectory,
         progress,
-    )?;
-    let table = spreads(&runs);
+    );
+    if !runs.is_empty() {
+        write(&opts.out, &runs)?;
+    }
+    outcome.map(|()| runs)
+}
+
+/// Writes the table of `runs` (trajectory i's rows at index i) to `out/trajectories.md` and
+/// `out/trajectories.json`.
+///
+/// # Errors
+/// When a file cannot be written.
+pub fn write(out: &Path, runs: &[Vec<MethodReport>]) -> Result<()> {
+    let table = spreads(runs);
+    fem_core::io::write_atomic(&out.join("trajectories.md"), markdown(&table).as_bytes())?;
     fem_core::io::write_atomic(
-        &opts.out.join("trajectories.md"),
-        markdown(&table).as_bytes(),
-    )?;
-    fem_core::io::write_atomic(
-        &opts.out.join("trajectories.json"),
+        &out.join("trajectories.json"),
         serde_json::to_string_pretty(&table)?.as_bytes(),
     )?;
-    Ok(runs)
+    Ok(())
 }
 
 /// Runs `opts.methods` on test trajectories `runs.len()`..`count`, each one's report in
