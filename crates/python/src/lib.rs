@@ -5,7 +5,8 @@
 //! * `Simulator`: the model stepping (or its mesh in full space): grab, move and
 //!   release handles, gravity, reset, step (without the GIL), and positions read into numpy
 //!   arrays with no copy beyond the one into the array.
-//! * `run_pipeline` and `export_model`: `cargo xtask run` and `export`
+//! * `run_pipeline`, `run_trajectories` and `export_model`: `cargo xtask run` (with
+//!   `--trajectories`) and `export`
 //!   from Python, with the same stages and cache, and the report as Python objects.
 //! * The errors module: the exception classes every library error arrives as.
 //!
@@ -32,6 +33,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<pipeline::MethodRow>()?;
     m.add_class::<pipeline::Stage>()?;
     m.add_function(wrap_pyfunction!(pipeline::run_pipeline, m)?)?;
+    m.add_function(wrap_pyfunction!(pipeline::run_trajectories, m)?)?;
     m.add_function(wrap_pyfunction!(pipeline::export_model, m)?)?;
     for class in errors::Class::ALL {
         m.add(class.name(), class.type_object(py)?)?;

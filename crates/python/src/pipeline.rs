@@ -362,6 +362,86 @@ pub fn run_pipeline(
     Ok(report)
 }
 
+/// Runs the pipeline on a scene and every requested method on held-out test trajectories
+/// 0..``count``, as ``cargo xtask run --trajectories count`` does, and returns one ``Report``
+/// per trajectory. The scene's ``[test] schedules`` is raised to ``count`` where it is lower,
+/// which keeps every cached stage. Trajectory 0's files go to ``out_dir`` as
+/// ``run_pipeline`` writes them, trajectory i's to ``out_dir/trajectory-i``, and the table of
+/// every method's error on each, their mean and the worst to ``out_dir/trajectories.md`` and
+/// ``trajectories.json``. A report's ``stages`` are those its trajectory loaded or computed
+/// (after the first, its reference). Other arguments and errors as ``run_pipeline``;
+/// ``count`` below 1 or above 64 raises ``InvalidArgumentError``.
+#[pyfunction]
+#[pyo3(signature = (scene = None, count = 4, *, out_dir = None, cache_dir = None, methods = None, every = 0, on_stage = None))]
+#[allow(clippy::too_many_arguments)]
+pub fn run_trajectories(
+    py: Python<'_>,
+    scene: Option<PathBuf>,
+    count: i64,
+    out_dir: Option<PathBuf>,
+    cache_dir: Option<PathBuf>,
+    methods: Option<Vec<String>>,
+    every: usize,
+    on_stage: Option<Py<PyAny>>,
+) -> PyResult<Vec<Report>> {
+    if !(1..=64).contains(&count) {
+        return Err(Class::InvalidArgument.err(format!(
+            "count must be from 1 to 64 test trajectories, got {count}"
+        )));
+    }
+    let count = count as usize;
+    let methods = self::methods(methods)?;
+    let failed = std::sync::Mutex::new(None);
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
+    let reports = py.detach(|| -> Result<Vec<Report>, Failure> {
+        let mut scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
+        scene.raise_test_trajectories(count);
+        let (out, cache) = folders(&scene, out_dir, cache_dir);
+        let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+        callback.install(&mut p);
+        let quiet = |_: usize, _: usize| {};
+        p.pca(&quiet).map_err(Failure::Run)?;
+        let opts = RunOptions {
+            out: out.clone(),
+            every,
+            methods: methods.clone(),
+            trajectory: 0,
+        };
+        let (mut runs, mut reports) = (Vec::new(), Vec::new());
+        for i in 0..count {
+            let before = if i == 0 { 0 } else { p.outcomes.len() };
+            pipeline::trajectories::run_more(
+                &mut p,
+                &opts,
+                &mut runs,
+                i + 1,
+                &quiet,
+                &mut |_| {},
+                &mut |_, _, _| {},
+            )
+            .map_err(Failure::Run)?;
+            let rows = &runs[i];
+            let dir = pipeline::trajectories::trajectory_dir(&out, i);
+            let assessment = pipeline::trust::assess(rows);
+            reports.push(Report {
+                scene: scene.name.clone(),
+                rows: rows.iter().map(MethodRow::from).collect(),
+                stages: p.outcomes[before..].iter().map(Stage::from).collect(),
+                warnings: assessment.untrusted,
+                caveats: assessment.caveats,
+                model_path: pipeline::export::run_method(&methods)
+                    .map(|m| pipeline::export::model_path(&dir, m)),
+                out_dir: dir,
+            });
+        }
+        pipeline::trajectories::write(&out, &runs).map_err(Failure::Run)?;
+        Ok(reports)
+    });
+    let reports = reports.map_err(Failure::into_py)?;
+    callback.raised()?;
+    Ok(reports)
+}
+
 /// Exports a reduced method's trained model as one file, as ``cargo xtask export`` does (the
 /// stages load from the cache or are computed), and returns it loaded.
 ///

@@ -8,6 +8,7 @@ import math
 import pathlib
 
 import latent_dynamics as ld
+import pytest
 from conftest import TINY
 
 
@@ -88,3 +89,28 @@ def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.
         assert "callable" in str(e)
     else:
         raise AssertionError("a callback that is not callable was accepted")
+
+
+def test_run_trajectories_reports_each_drag(tmp_path: pathlib.Path) -> None:
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    methods = ["full", "pca"]
+    single = ld.run_pipeline(TINY, out_dir=tmp_path / "one", cache_dir=cache, methods=methods)
+    reports = ld.run_trajectories(TINY, 3, out_dir=out, cache_dir=cache, methods=methods)
+    assert len(reports) == 3
+    assert [r.out_dir for r in reports] == [out, out / "trajectory-1", out / "trajectory-2"]
+    # Trajectory 0 is run_pipeline's test, from the same cache: every stage loaded.
+    assert reports[0].stages and all(s.cached for s in reports[0].stages)
+    assert reports[0].row("pca").frame_errors == single.row("pca").frame_errors
+    # The others compute their reference and nothing else.
+    for r in reports[1:]:
+        assert [s.name for s in r.stages if not s.cached] == ["reference"]
+    errors = [r.row("pca").mean_rel_error for r in reports]
+    assert len(set(errors)) == 3
+    table = json.loads((out / "trajectories.json").read_text())
+    pca = next(t for t in table if t["method"] == "pca")
+    assert pca["errors"] == pytest.approx(errors, rel=1e-15)
+    assert pca["mean"] == pytest.approx(sum(errors) / 3, rel=1e-12)
+    assert (out / "trajectories.md").read_text().startswith("| method |")
+    for count in (0, -1, 65):
+        with pytest.raises(ld.InvalidArgumentError, match="count"):
+            ld.run_trajectories(TINY, count, out_dir=out, cache_dir=cache)

@@ -36,6 +36,7 @@ from ._native import (
     __version__,
     export_model,
     run_pipeline,
+    run_trajectories,
 )
 
 __all__ = [
@@ -58,4 +59,5 @@ __all__ = [
     "__version__",
     "export_model",
     "run_pipeline",
+    "run_trajectories",
 ]

@@ -23,6 +23,7 @@ __all__ = [
     "MethodRow",
     "Stage",
     "run_pipeline",
+    "run_trajectories",
     "export_model",
     "LatentDynamicsError",
     "ModelFileError",
@@ -313,6 +314,18 @@ def run_pipeline(
     on_stage: Optional[Callable[[Stage], object]] = None,
 ) -> Report:
     """cargo xtask run: the cached stages, then each method on a held-out test trajectory."""
+
+def run_trajectories(
+    scene: Optional[_Path] = None,
+    count: int = 4,
+    *,
+    out_dir: Optional[_Path] = None,
+    cache_dir: Optional[_Path] = None,
+    methods: Optional[Sequence[str]] = None,
+    every: int = 0,
+    on_stage: Optional[Callable[[Stage], object]] = None,
+) -> list[Report]:
+    """cargo xtask run --trajectories count: one Report per held-out test trajectory 0..count."""
 
 def export_model(
     scene: Optional[_Path] = None,
