@@ -436,10 +436,11 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
             method_bar.finish_and_clear();
             println!(
                 "\n{} — every method on held-out test trajectories 0..{n} (trajectory 0 is \
-                 the default test; its report follows)\n\n{}\ntable: {}; trajectory i's \
+                 the default test; its report follows)\n\n{}{}\ntable: {}; trajectory i's \
                  report: {}",
                 scene.name,
                 pipeline::trajectories::markdown(&table),
+                pipeline::trajectories::warnings(&runs, 1),
                 opts.out.join("trajectories.md").display(),
                 opts.out.join("trajectory-i").display()
             );

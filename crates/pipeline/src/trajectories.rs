@@ -128,14 +128,15 @@ pub fn run_trajectories(
     outcome.map(|()| runs)
 }
 
-/// Writes the table of `runs` (trajectory i's rows at index i) to `out/trajectories.md` and
-/// `out/trajectories.json`.
+/// Writes the table of `runs` (trajectory i's rows at index i) to `out/trajectories.md`, with
+/// each trajectory's warnings under it ([`warnings`]), and to `out/trajectories.json`.
 ///
 /// # Errors
 /// When a file cannot be written.
 pub fn write(out: &Path, runs: &[Vec<MethodReport>]) -> Result<()> {
     let table = spreads(runs);
-    fem_core::io::write_atomic(&out.join("trajectories.md"), markdown(&table).as_bytes())?;
+    let text = markdown(&table) + &warnings(runs, 0);
+    fem_core::io::write_atomic(&out.join("trajectories.md"), text.as_bytes())?;
     fem_core::io::write_atomic(
         &out.join("trajectories.json"),
         serde_json::to_string_pretty(&table)?.as_bytes(),
@@ -167,6 +168,16 @@ pub fn run_more(
         runs.push(run(pipeline, &o, stage_progress, progress)?);
     }
     Ok(())
+}
+
+/// The warnings and caveats of [`crate::trust::assess`] for trajectories `from`.. of `runs`,
+/// each headed by its trajectory (empty where a run has none).
+pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
+    runs.iter()
+        .enumerate()
+        .skip(from)
+        .map(|(i, rows)| crate::trust::assess(rows).text(&format!("trajectory {i}, ")))
+        .collect()
 }
 
 /// The table: per method, its error on each trajectory, their mean, the worst and the median
@@ -256,6 +267,23 @@ mod tests {
             "{md}"
         );
         assert!(spreads(&[]).is_empty());
+    }
+
+    /// Each trajectory's warnings under its own heading, from the trajectory asked for on.
+    #[test]
+    fn warnings_name_their_trajectory() {
+        let runs = vec![
+            vec![row(Method::Pca, 0.01, 4.0)],
+            vec![row(Method::Pca, 0.6, 4.0)],
+            vec![row(Method::Pca, 0.02, 4.0)],
+        ];
+        let all = warnings(&runs, 0);
+        assert!(all.contains("trajectory 1, not to be trusted:"), "{all}");
+        assert!(
+            !all.contains("trajectory 0,") && !all.contains("trajectory 2,"),
+            "{all}"
+        );
+        assert_eq!(warnings(&runs, 2), "");
     }
 
     #[test]
