@@ -421,3 +421,30 @@ fn several_trajectories_report_each_and_their_spread() {
     .to_string();
     assert!(e.contains("`[test] schedules`"), "{e}");
 }
+
+/// The reference's compression reaches the report whether or not a full-space method ran: on
+/// the full row when it did, on the first row otherwise, the same values.
+#[test]
+fn compression_is_reported_without_a_full_row() {
+    let out = scratch_dir("report-compression");
+    let s = scene(TINY);
+    let with_full = run_all_frames(&s, &out.join("with"), &[Method::Full, Method::Pca]);
+    let mut p = Pipeline::new(&s, &out.join("with").join("cache")).unwrap();
+    let opts = RunOptions {
+        out: out.join("without"),
+        every: 0,
+        methods: vec![Method::Pca, Method::PcaCubature],
+        trajectory: 0,
+    };
+    let without = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let full = with_full[0]
+        .compression
+        .expect("the full row's compression");
+    assert!(
+        full.volume_ratio > 0.0 && full.volume_ratio < 1.0,
+        "{full:?}"
+    );
+    assert_eq!(without[0].compression, Some(full));
+    assert_eq!(without[1].compression, None);
+    assert_eq!(with_full[1].compression, None);
+}

@@ -121,7 +121,9 @@ pub struct MethodReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub restart: Option<Restart>,
     /// On the full-space row: how far the test trajectory compresses its elements, which says
-    /// whether the full simulation itself gives way ([`crate::trust::COLLAPSED_SHARE`]).
+    /// whether the full simulation itself gives way ([`crate::trust::COLLAPSED_SHARE`]). When
+    /// no full-space method ran, [`run`] puts the reference's on the first row instead, so the
+    /// warning does not depend on the methods asked for.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub compression: Option<Compression>,
 }
@@ -491,6 +493,13 @@ pub fn run(
         rows.push(measure(pipeline, &m, stage_progress, progress)?);
     }
     set_speedups(&mut rows);
+    if !rows.iter().any(|r| r.method.is_full())
+        && let Some(first) = rows.first_mut()
+    {
+        let reference = pipeline.reference(opts.trajectory, stage_progress)?;
+        first.compression =
+            Compression::of(&pipeline.model, &reference.frames, pipeline.scene.time.step);
+    }
     for i in 0..rows.len() {
         if !crate::trust::drifting(&rows[i]) {
             continue;
