@@ -122,7 +122,7 @@ pub struct MethodReport {
     pub restart: Option<Restart>,
     /// On the full-space row: how far the test trajectory compresses its elements, which says
     /// whether the full simulation itself gives way ([`crate::trust::COLLAPSED_SHARE`]). When
-    /// no full-space method ran, [`run`] puts the reference's on the first row instead, so the
+    /// `full` did not run, [`run`] puts the reference's on the first row instead, so the
     /// warning does not depend on the methods asked for.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub compression: Option<Compression>,
@@ -493,7 +493,8 @@ pub fn run(
         rows.push(measure(pipeline, &m, stage_progress, progress)?);
     }
     set_speedups(&mut rows);
-    if !rows.iter().any(|r| r.method.is_full())
+    // `full` carries it; `full-newton` and `full-lbfgs` rows do not.
+    if !rows.iter().any(|r| r.compression.is_some())
         && let Some(first) = rows.first_mut()
     {
         let reference = pipeline.reference(opts.trajectory, stage_progress)?;

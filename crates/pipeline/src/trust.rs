@@ -39,8 +39,9 @@ pub const AMPLIFIED_SHARE: f64 = 0.5;
 /// sliver at det F = 0.02), the 30 cm figure with each material under 0.01 %.
 pub const COLLAPSED_SHARE: f64 = 0.01;
 
-/// The full-space row's warning when its trajectory squeezes a share of the body under half
-/// its volume.
+/// The warning of the row that carries the reference's compression (the `full` row, or the
+/// first row of a run without one) when the test trajectory squeezes a share of the body under
+/// half its volume.
 fn collapse_warning(r: &MethodReport) -> Option<String> {
     let c = r
         .compression
@@ -53,15 +54,20 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
     } else {
         String::new()
     };
+    // On a reduced method's row it is the reference's, not the method's.
+    let who = if r.method.is_full() {
+        format!("{}: the full-space simulation of the test", r.method)
+    } else {
+        "the full-space reference of the test".to_string()
+    };
     Some(format!(
-        "{}: the full-space simulation of the test squeezes {:.1} % of the body's volume under \
+        "{who} squeezes {:.1} % of the body's volume under \
          half its rest volume at t = {:.2} s (its most compressed element to det F = {:.2} at \
          t = {:.2} s{inverted}): the material gives way there, which is past what it models as \
          a solid (StVK softens under strong compression; linear and corotated elasticity do \
          not resist inversion), and the reduced methods are measured against that; a stiffer \
          material (`youngs_modulus`) resists it, and stable Neo-Hookean (`[material] model`), \
          where the scene has another, resists inversion",
-        r.method,
         100.0 * c.squeezed_share,
         c.squeezed_time,
         c.volume_ratio,
@@ -169,8 +175,9 @@ impl Assessment {
     }
 }
 
-/// Warnings and caveats for the reduced methods of a run, after a warning on the full-space row
-/// whose trajectory squeezes [`COLLAPSED_SHARE`] of the body under half its volume; both empty
+/// Warnings and caveats for the reduced methods of a run, after a warning where the reference
+/// trajectory squeezes [`COLLAPSED_SHARE`] of the body under half its volume (from the row
+/// that carries its compression: the `full` row, or the first row without one); both empty
 /// when the full trajectory does not, and every method is within [`UNTRUSTED_ERROR`], its
 /// subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`] and its trajectory within
 /// [`OUTSIDE_TRAINING`] of the training poses.
@@ -334,6 +341,19 @@ mod tests {
             "det F = -1.10 at t = 0.75 s, and elements are inverted in 60 of its frames)";
         assert!(inverted[0].contains(expected), "{}", inverted[0]);
         assert!(inverted[0].contains("`[material] model`"));
+        // A run without `full` carries the reference's compression on its first row: named as
+        // the reference's, once.
+        let first = MethodReport {
+            compression: full(0.2, 0.39, 0).compression,
+            ..row(Method::Pca, 0.01, 0.005)
+        };
+        let reduced = assess(&[first, row(Method::NeuralCubature, 0.01, 0.005)]).untrusted;
+        assert_eq!(reduced.len(), 1, "{reduced:?}");
+        assert!(
+            reduced[0].starts_with("the full-space reference of the test squeezes 20.0 %"),
+            "{}",
+            reduced[0]
+        );
     }
 
     /// A drifting method's restart becomes its warning: whether the full dynamics make most of
