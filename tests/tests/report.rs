@@ -422,21 +422,23 @@ fn several_trajectories_report_each_and_their_spread() {
     assert!(e.contains("`[test] schedules`"), "{e}");
 }
 
-/// The reference's compression reaches the report whether or not a full-space method ran: on
-/// the full row when it did, on the first row otherwise, the same values.
+/// The reference's compression reaches the report whether or not `full` ran: on its row when
+/// it did, on the first row otherwise (a `full-lbfgs` row too), the same values.
 #[test]
 fn compression_is_reported_without_a_full_row() {
     let out = scratch_dir("report-compression");
     let s = scene(TINY);
     let with_full = run_all_frames(&s, &out.join("with"), &[Method::Full, Method::Pca]);
     let mut p = Pipeline::new(&s, &out.join("with").join("cache")).unwrap();
-    let opts = RunOptions {
-        out: out.join("without"),
-        every: 0,
-        methods: vec![Method::Pca, Method::PcaCubature],
-        trajectory: 0,
+    let mut without = |methods: Vec<Method>| {
+        let opts = RunOptions {
+            out: out.join("without"),
+            every: 0,
+            methods,
+            trajectory: 0,
+        };
+        run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap()
     };
-    let without = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
     let full = with_full[0]
         .compression
         .expect("the full row's compression");
@@ -444,7 +446,12 @@ fn compression_is_reported_without_a_full_row() {
         full.volume_ratio > 0.0 && full.volume_ratio < 1.0,
         "{full:?}"
     );
-    assert_eq!(without[0].compression, Some(full));
-    assert_eq!(without[1].compression, None);
     assert_eq!(with_full[1].compression, None);
+    let reduced = without(vec![Method::Pca, Method::PcaCubature]);
+    assert_eq!(reduced[0].compression, Some(full));
+    assert_eq!(reduced[1].compression, None);
+    // The other full-space solver's row does not carry it, so the first row does.
+    let lbfgs_first = without(vec![Method::FullLbfgs, Method::Pca]);
+    assert_eq!(lbfgs_first[0].compression, Some(full));
+    assert_eq!(lbfgs_first[1].compression, None);
 }
