@@ -209,6 +209,30 @@ pub struct Report {
     model_path: Option<PathBuf>,
 }
 
+impl Report {
+    /// The report of a run of `methods` whose rows are `rows`, written to `out_dir`, after
+    /// `stages`: the assessment of [`pipeline::trust`] and the model file `run` wrote there.
+    fn of(
+        scene: &str,
+        rows: &[MethodReport],
+        stages: &[StageOutcome],
+        out_dir: PathBuf,
+        methods: &[Method],
+    ) -> Self {
+        let assessment = pipeline::trust::assess(rows);
+        Self {
+            scene: scene.to_string(),
+            rows: rows.iter().map(MethodRow::from).collect(),
+            stages: stages.iter().map(Stage::from).collect(),
+            warnings: assessment.untrusted,
+            caveats: assessment.caveats,
+            model_path: pipeline::export::run_method(methods)
+                .map(|m| pipeline::export::model_path(&out_dir, m)),
+            out_dir,
+        }
+    }
+}
+
 #[pymethods]
 impl Report {
     /// The row of ``method``; raises ``InvalidArgumentError`` when it did not run.
@@ -344,18 +368,7 @@ pub fn run_pipeline(
         };
         let rows =
             pipeline::run::run(&mut p, &opts, &quiet, &mut |_, _, _| {}).map_err(Failure::Run)?;
-        let model_path =
-            pipeline::export::run_method(&methods).map(|m| pipeline::export::model_path(&out, m));
-        let assessment = pipeline::trust::assess(&rows);
-        Ok(Report {
-            scene: scene.name.clone(),
-            rows: rows.iter().map(MethodRow::from).collect(),
-            stages: p.outcomes.iter().map(Stage::from).collect(),
-            warnings: assessment.untrusted,
-            caveats: assessment.caveats,
-            out_dir: out,
-            model_path,
-        })
+        Ok(Report::of(&scene.name, &rows, &p.outcomes, out, &methods))
     });
     let report = report.map_err(Failure::into_py)?;
     callback.raised()?;
@@ -420,19 +433,13 @@ pub fn run_trajectories(
                 &mut |_, _, _| {},
             )
             .map_err(Failure::Run)?;
-            let rows = &runs[i];
-            let dir = pipeline::trajectories::trajectory_dir(&out, i);
-            let assessment = pipeline::trust::assess(rows);
-            reports.push(Report {
-                scene: scene.name.clone(),
-                rows: rows.iter().map(MethodRow::from).collect(),
-                stages: p.outcomes[before..].iter().map(Stage::from).collect(),
-                warnings: assessment.untrusted,
-                caveats: assessment.caveats,
-                model_path: pipeline::export::run_method(&methods)
-                    .map(|m| pipeline::export::model_path(&dir, m)),
-                out_dir: dir,
-            });
+            reports.push(Report::of(
+                &scene.name,
+                &runs[i],
+                &p.outcomes[before..],
+                pipeline::trajectories::trajectory_dir(&out, i),
+                &methods,
+            ));
         }
         pipeline::trajectories::write(&out, &runs).map_err(Failure::Run)?;
         Ok(reports)
