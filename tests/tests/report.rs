@@ -408,18 +408,32 @@ fn several_trajectories_report_each_and_their_spread() {
         md.contains("| pca-cubature |") && !md.contains("| full |"),
         "{md}"
     );
-    // More trajectories than the scene has is an error that names the setting.
+    // Trajectory i exists whatever `[test] schedules` says: the plain scene (one schedule) runs
+    // trajectory 2 to the same errors as the family of three, from the same cached reference.
+    let mut p = Pipeline::new(&plain, &cache).unwrap();
+    let opts = RunOptions {
+        out: out.join("plain-2"),
+        every: 0,
+        methods: vec![Method::Full, Method::Pca],
+        trajectory: 2,
+    };
+    let third = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    assert_eq!(references(), 3);
+    for (a, b) in third.iter().zip(&runs[2]) {
+        assert_eq!(a.method, b.method);
+        assert_eq!(a.frame_errors, b.frame_errors, "{}", a.method);
+    }
     let e = run_trajectories(
         &mut p,
         &opts,
-        4,
+        0,
         &no_progress,
         &mut |_| {},
         &mut |_, _, _| {},
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("`[test] schedules`"), "{e}");
+    assert!(e.contains("at least 1"), "{e}");
 }
 
 /// The reference's compression reaches the report whether or not `full` ran: on its row when

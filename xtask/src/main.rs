@@ -83,13 +83,14 @@ struct RunArgs {
     /// Methods to compare.
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
     methods: Vec<MethodArg>,
-    /// Held-out test trajectory to simulate.
-    #[arg(long, default_value_t = 0)]
-    trajectory: usize,
-    /// Run on held-out test trajectories 0..N instead (raising `[test] schedules` to N where it
-    /// is lower, which keeps every cached stage): trajectory 0's report where a plain run writes
-    /// it, trajectory i's in OUT/trajectory-i, and a table of every method's error on each, with
-    /// their mean and the worst, in OUT/trajectories.md.
+    /// Held-out test trajectory to simulate (any index: trajectory i depends only on the
+    /// test's seed and i). Default: 0, or 0..`[test] schedules` when the scene asks for more
+    /// than one (as `--trajectories`).
+    #[arg(long)]
+    trajectory: Option<usize>,
+    /// Run on held-out test trajectories 0..N instead (every cached stage is kept): trajectory
+    /// 0's report where a plain run writes it, trajectory i's in OUT/trajectory-i, and a table
+    /// of every method's error on each, with their mean and the worst, in OUT/trajectories.md.
     #[arg(long, conflicts_with = "trajectory", value_parser = clap::value_parser!(u64).range(1..=64))]
     trajectories: Option<u64>,
 }
@@ -408,7 +409,13 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         trajectories,
     } = args;
     let mut scene = cx.scene(&common)?;
-    let count = trajectories.map(|n| n as usize);
+    // A scene whose `[test]` asks for several trajectories gets them all, unless one is named.
+    let asked = scene.test().schedules;
+    let count = match (trajectories, trajectory) {
+        (Some(n), _) => Some(n as usize),
+        (None, None) if asked > 1 => Some(asked),
+        _ => None,
+    };
     if let Some(n) = count {
         scene.raise_test_trajectories(n);
     }
@@ -419,7 +426,7 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         out: out.unwrap_or_else(|| cx.out(&scene, &[])),
         every,
         methods: methods.into_iter().map(Method::from).collect(),
-        trajectory,
+        trajectory: trajectory.unwrap_or(0),
     };
     let method_bar = bar(0, "");
     let rows = match count {

@@ -74,8 +74,7 @@ impl Class {
             }
             Class::Pipeline => {
                 "A pipeline run or export that failed: a stage whose solve failed (with the \
-                 solver's message), a test trajectory that does not exist, an output that \
-                 cannot be written."
+                 solver's message), an output that cannot be written."
             }
             Class::Handle => {
                 "A handle this simulator does not have (released already, or another \

@@ -330,7 +330,8 @@ fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (Path
 /// ``scene``: a scene file (TOML), or None for the built-in default scene. ``out_dir``:
 /// default ``out/<scene name>``; ``cache_dir``: default ``out_dir/cache`` (run from the
 /// checkout's root, both are ``cargo xtask``'s). ``methods``: names, default every method.
-/// ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
+/// ``trajectory``: the held-out test trajectory (any index: trajectory i depends only on the
+/// test's seed and i). ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
 /// raised when the run returns). Runs without the GIL.
 ///
@@ -377,8 +378,8 @@ pub fn run_pipeline(
 
 /// Runs the pipeline on a scene and every requested method on held-out test trajectories
 /// 0..``count``, as ``cargo xtask run --trajectories count`` does, and returns one ``Report``
-/// per trajectory. The scene's ``[test] schedules`` is raised to ``count`` where it is lower,
-/// which keeps every cached stage. Trajectory 0's files go to ``out_dir`` as
+/// per trajectory; every cached stage is kept (trajectory i depends only on the test's seed
+/// and i, not on ``[test] schedules``). Trajectory 0's files go to ``out_dir`` as
 /// ``run_pipeline`` writes them, trajectory i's to ``out_dir/trajectory-i``, and the table of
 /// every method's error on each, their mean and the worst to ``out_dir/trajectories.md`` and
 /// ``trajectories.json``. A report's ``stages`` are those its trajectory loaded or computed
@@ -407,8 +408,7 @@ pub fn run_trajectories(
     let failed = std::sync::Mutex::new(None);
     let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
     let reports = py.detach(|| -> Result<Vec<Report>, Failure> {
-        let mut scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
-        scene.raise_test_trajectories(count);
+        let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
         let (out, cache) = folders(&scene, out_dir, cache_dir);
         let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
         callback.install(&mut p);
