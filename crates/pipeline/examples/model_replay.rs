@@ -23,16 +23,12 @@ use latent_sim::{Interactive, ReducedModel};
 use pipeline::export::{DEFAULT_METHOD, model_path};
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
-use pipeline::simulate::{Method, Runner, SimulateOptions, Trajectory, setup};
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use pipeline::simulate::{Method, Runner, SimulateOptions, Trajectory, median, setup};
 
 /// "median (min–max)" of per-run figures.
 fn spread(v: &mut [f64]) -> String {
     let m = median(v);
+    v.sort_by(f64::total_cmp);
     format!("{m:.4} ({:.4}–{:.4})", v[0], v[v.len() - 1])
 }
 
@@ -60,7 +56,7 @@ fn main() -> Result<()> {
 
     // The file: size, parts, load time.
     let bytes = std::fs::metadata(&path)?.len();
-    let mut loads: Vec<f64> = (0..20)
+    let loads: Vec<f64> = (0..20)
         .map(|_| {
             let t = Instant::now();
             let m = ReducedModel::load(&path);
@@ -78,7 +74,7 @@ fn main() -> Result<()> {
         "{}: {:.3} MB; load {:.2} ms (median of 20; decode and check alone {:.2} ms); parts: basis rows {:.3} MB ({} of {} vertices × 3 × k = {}), reduced matrices {:.3} MB, mesh and surface {:.3} MB, subspace (autoencoder, directions) {:.3} MB, cubature rule {:.3} MB",
         path.display(),
         bytes as f64 / 1e6,
-        median(&mut loads) * 1e3,
+        median(&loads) * 1e3,
         decode * 1e3,
         (model.space.rows.len() * 8) as f64 / 1e6,
         model.space.vertices.len(),
@@ -146,8 +142,8 @@ fn main() -> Result<()> {
     // cantilever, as did no other instance, reset or not: where its buffers were allocated.)
     let (mut runner_ms, mut runtime_ms) = (Vec::new(), Vec::new());
     let trajectory = |step: &mut dyn FnMut() -> Result<f64>| -> Result<f64> {
-        let mut times = (0..frames).map(|_| step()).collect::<Result<Vec<f64>>>()?;
-        Ok(median(&mut times) * 1e3)
+        let times = (0..frames).map(|_| step()).collect::<Result<Vec<f64>>>()?;
+        Ok(median(&times) * 1e3)
     };
     for _ in 0..repeats {
         let mut r = runner()?;
@@ -185,8 +181,8 @@ fn main() -> Result<()> {
     );
     println!(
         "surface read-back ({ns} vertices): f32 {:.2} µs/frame, f64 {:.2} µs/frame (medians)",
-        median(&mut read32) * 1e6,
-        median(&mut read64) * 1e6
+        median(&read32) * 1e6,
+        median(&read64) * 1e6
     );
     Ok(())
 }

@@ -515,11 +515,16 @@ pub fn simulate(
     })
 }
 
-/// Median of a list (0 when empty).
+/// Median of a list: its middle value, or the mean of the middle two when it has an even
+/// count (0 when empty).
 pub fn median(values: &[f64]) -> f64 {
     let mut v = values.to_vec();
     v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(0.0)
+    match v.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
 }
 
 /// Writes pretty JSON atomically.

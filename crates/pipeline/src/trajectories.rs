@@ -13,7 +13,7 @@ use anyhow::{Result, bail};
 
 use crate::pipeline::{Pipeline, Progress};
 use crate::run::{MethodReport, RunOptions, run};
-use crate::simulate::Method;
+use crate::simulate::{Method, median};
 
 /// One method's error on each trajectory, and over them.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -59,13 +59,8 @@ pub fn spreads(runs: &[Vec<MethodReport>]) -> Vec<Spread> {
                 .enumerate()
                 .filter_map(|(i, e)| e.map(|e| (i, e)))
                 .max_by(|a, b| a.1.total_cmp(&b.1));
-            let mut speedups: Vec<f64> = completed.iter().flatten().map(|r| r.speedup).collect();
-            speedups.sort_by(f64::total_cmp);
-            let median_speedup = match speedups.len() {
-                0 => None,
-                n if n % 2 == 1 => Some(speedups[n / 2]),
-                n => Some(0.5 * (speedups[n / 2 - 1] + speedups[n / 2])),
-            };
+            let speedups: Vec<f64> = completed.iter().flatten().map(|r| r.speedup).collect();
+            let median_speedup = (!speedups.is_empty()).then(|| median(&speedups));
             Spread {
                 method: row.method,
                 errors,

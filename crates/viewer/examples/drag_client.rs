@@ -17,6 +17,7 @@
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
+use pipeline::simulate::median;
 use tungstenite::{Message, WebSocket};
 use viewer::protocol::{Event, State, decode_frame, decode_mesh};
 
@@ -67,15 +68,6 @@ impl Client {
 
     fn send(&mut self, text: String) -> Result<()> {
         Ok(self.ws.send(Message::text(text))?)
-    }
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
     }
 }
 
@@ -241,7 +233,9 @@ fn measure(c: &mut Client, method: &str, tip: usize, size: f64, seconds: f64) ->
     }
     let elapsed = start.elapsed().as_secs_f64();
     c.send(format!(r#"{{"type":"release","handle":{handle}}}"#))?;
-    let pick = |f: fn(&State) -> f64| median(&mut states.iter().map(f).collect::<Vec<_>>());
+    // NaN, not 0, when the server sent nothing to measure.
+    let med = |v: &[f64]| if v.is_empty() { f64::NAN } else { median(v) };
+    let pick = |f: fn(&State) -> f64| med(&states.iter().map(f).collect::<Vec<_>>());
     let sps = pick(|s| s.steps_per_second);
     let its = pick(|s| s.iterations_per_step);
     let ms = pick(|s| s.step_ms);
@@ -251,7 +245,7 @@ fn measure(c: &mut Client, method: &str, tip: usize, size: f64, seconds: f64) ->
     println!(
         "| {method} | {sps:.0} | {its:.1} | {ms:.2} | {rtf:.2} | {:.0} | {:.1} ms, {max_latency:.1} ms ({samples} moves) |",
         frames as f64 / elapsed,
-        median(&mut latencies)
+        med(&latencies)
     );
     Ok(())
 }
