@@ -106,8 +106,11 @@ def test_a_failed_stage_raises_pipeline_error_with_the_solver_message(tmp_path: 
 
 
 def test_pipeline_error(tmp_path: pathlib.Path, cache_dir: pathlib.Path) -> None:
-    with pytest.raises(ld.PipelineError, match="trajectory"):
-        ld.run_pipeline(TINY, cache_dir=cache_dir, out_dir=tmp_path, methods=["pca"], trajectory=99)
+    # An output folder that cannot be made: a file stands where it would go.
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    with pytest.raises(ld.PipelineError, match="a-file"):
+        ld.run_pipeline(TINY, cache_dir=cache_dir, out_dir=blocker / "out", methods=["pca"])
 
 
 def test_handle_errors(model: ld.Model) -> None:

@@ -2,7 +2,7 @@
 //! rebuilt.
 
 /// The most steps an L-BFGS preconditioner that depends on the state is kept: a bound, not
-/// the rule. [`PRECOND_EXTRA_ITERATIONS`] decides when the solves it serves have got harder;
+/// the rule. A count of extra iterations decides when the solves it serves have got harder;
 /// where they do not (steps of one or two iterations, a body nearly at rest), an older matrix
 /// serves as well. At 8 steps (before 2026-12-01) the rebuilds were half the mean step or more
 /// on AutoDef's bar and X meshes and on the generated bars. With no bound at all,
