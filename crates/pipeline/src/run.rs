@@ -657,7 +657,7 @@ pub struct Measure {
     pub out: PathBuf,
     pub every: usize,
     /// Timed runs of the whole trajectory; errors come from the first, the reported time is
-    /// the median over runs of each run's median step, the spread their minimum and maximum.
+    /// the median over runs of each run's mean step, the spread their minimum and maximum.
     pub repeats: usize,
     /// Time the scene's full-space solver in this process instead of taking the reference
     /// stage's recorded step times.

@@ -344,7 +344,7 @@ pub fn run_suite(
     Ok(rows)
 }
 
-/// Where `neural` stands against `linear` on the error–cost plane (mean error, median ms per
+/// Where `neural` stands against `linear` on the error–cost plane (mean error, mean ms per
 /// step): `ahead` when at least as good on both and better on one, `behind` the other way round,
 /// otherwise on a frontier with it, saying which way.
 pub fn standing(neural: &MethodReport, linear: &MethodReport) -> &'static str {
