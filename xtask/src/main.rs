@@ -34,6 +34,10 @@ struct Common {
     cache: Option<PathBuf>,
 }
 
+/// The most test trajectories one `run` or `suite` measures (`--trajectories`, or a scene's
+/// `[test] schedules` for a plain `run`).
+const MAX_TRAJECTORIES: usize = 64;
+
 #[derive(Subcommand)]
 enum Command {
     /// The main job: every stage (cached), then each method on the held-out test trajectory,
@@ -91,7 +95,7 @@ struct RunArgs {
     /// Run on held-out test trajectories 0..N instead (every cached stage is kept): trajectory
     /// 0's report where a plain run writes it, trajectory i's in OUT/trajectory-i, and a table
     /// of every method's error on each, with their mean and the worst, in OUT/trajectories.md.
-    #[arg(long, conflicts_with = "trajectory", value_parser = clap::value_parser!(u64).range(1..=64))]
+    #[arg(long, conflicts_with = "trajectory", value_parser = clap::value_parser!(u64).range(1..=MAX_TRAJECTORIES as u64))]
     trajectories: Option<u64>,
 }
 
@@ -140,7 +144,7 @@ struct SuiteArgs {
     /// Also run every method on test trajectories 1..N of each mesh, after its pipeline's time
     /// is taken: a second table gives each method's mean error over trajectories 0..N and the
     /// worst.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=MAX_TRAJECTORIES as u64))]
     trajectories: u64,
 }
 
@@ -408,17 +412,19 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         trajectory,
         trajectories,
     } = args;
-    let mut scene = cx.scene(&common)?;
+    let scene = cx.scene(&common)?;
     // A scene whose `[test]` asks for several trajectories gets them all, unless one is named.
     let asked = scene.test().schedules;
     let count = match (trajectories, trajectory) {
         (Some(n), _) => Some(n as usize),
+        (None, None) if asked > MAX_TRAJECTORIES => bail!(
+            "{}: [test] schedules = {asked}: a plain `run` measures at most {MAX_TRAJECTORIES} \
+             test trajectories; lower it, or name one with --trajectory",
+            scene.source
+        ),
         (None, None) if asked > 1 => Some(asked),
         _ => None,
     };
-    if let Some(n) = count {
-        scene.raise_test_trajectories(n);
-    }
     let mut p = cx.pipeline(&scene, &common)?;
     let progress = |d, t| cx.stage_progress(d, t);
     p.pca(&progress)?;

@@ -5,7 +5,7 @@
 //! - the file's size and what makes it up, its load time (median of 20) and the simulator's
 //!   construction time;
 //! - whether the loaded model's trajectory is `run`'s, bit for bit, step by step;
-//! - the median ms per step of both, over R runs of the trajectory each (each a new runner and
+//! - the mean ms per step of both (as `report.json`'s), over R runs of the trajectory each (each a new runner and
 //!   a new runtime of the loaded model, in turn), beside `report.json`'s figure for the method
 //!   when there is one;
 //! - the surface read-back per frame, into f32 and f64 buffers.

@@ -276,8 +276,9 @@ impl Scene {
         self.test.resolve(ScheduleConfig::test())
     }
 
-    /// Raises `[test] schedules` to at least `count`, so that test trajectories 0..`count`
-    /// exist. Trajectory i does not depend on the count, and neither do the cache keys.
+    /// Raises `[test] schedules` to at least `count`: how many test trajectories a plain `run`
+    /// measures. Every index has its trajectory whatever the count (trajectory i depends only
+    /// on the test's seed and i), and no cache key depends on it.
     pub fn raise_test_trajectories(&mut self, count: usize) {
         let have = self.test().schedules;
         self.test.schedules = Some(have.max(count));

@@ -114,6 +114,8 @@ pub struct Summary {
     pub dim: usize,
     pub frames_written: usize,
     pub total_seconds: f64,
+    /// The mean step (what `run` reports as ms/step) and the median one.
+    pub mean_step_ms: f64,
     pub median_step_ms: f64,
     /// Per-step numbers of a full-space run (with energies).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -128,7 +130,7 @@ impl Summary {
     /// written to `out` are.
     pub fn describe(&self, out: &Path) -> String {
         let mut s = format!(
-            "{}: {} steps of {} (dim {}; {} vertices, {} tets) in {:.2} s, median {:.3} ms/step, {} frames written to {}\n",
+            "{}: {} steps of {} (dim {}; {} vertices, {} tets) in {:.2} s, {:.3} ms/step (median {:.3}), {} frames written to {}\n",
             self.scene,
             self.steps
                 .len()
@@ -139,6 +141,7 @@ impl Summary {
             self.vertices,
             self.tets,
             self.total_seconds,
+            self.mean_step_ms,
             self.median_step_ms,
             self.frames_written,
             out.display()
@@ -496,6 +499,7 @@ pub fn simulate(
         dim: runner.dim(),
         frames_written: writer.frames_written(),
         total_seconds,
+        mean_step_ms: times.iter().sum::<f64>() / times.len().max(1) as f64 * 1e3,
         median_step_ms: median(&times) * 1e3,
         steps,
         reduced_steps,

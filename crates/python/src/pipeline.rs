@@ -322,8 +322,8 @@ fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (Path
     (out, cache)
 }
 
-/// Runs the pipeline on a scene and every requested method on a held-out test trajectory, as
-/// ``cargo xtask run`` does: the stages load from the cache or are computed (and cached), then
+/// Runs the pipeline on a scene and every requested method on one held-out test trajectory, as
+/// ``cargo xtask run --trajectory`` does (``run_trajectories`` runs several): the stages load from the cache or are computed (and cached), then
 /// each method is simulated and measured against full space. Writes the report files into
 /// ``out_dir`` and, when a reduced method ran, the model of ``neural-cubature`` (or the first
 /// reduced method) as ``out_dir/<method>.ldm``.

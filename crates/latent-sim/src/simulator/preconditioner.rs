@@ -4,8 +4,8 @@
 /// The most steps an L-BFGS preconditioner that depends on the state is kept: a bound, not
 /// the rule. A count of extra iterations decides when the solves it serves have got harder;
 /// where they do not (steps of one or two iterations, a body nearly at rest), an older matrix
-/// serves as well. At 8 steps (before 2026-12-01) the rebuilds were half the mean step or more
-/// on AutoDef's bar and X meshes and on the generated bars. With no bound at all,
+/// serves as well. At 8 steps (before 2026-12-01) the rebuilds were about half the mean step
+/// (46–65 %) on AutoDef's bar and X meshes and on the generated bars. With no bound at all,
 /// `neural-cubature` on the bar 2k went 0.68 → 0.32 ms a step (1.1 → 1.3 iterations), on bar
 /// 15k 1.9 → 1.4 ms, on X very low 0.19 → 0.09 ms; where the solves do get harder (the
 /// catapult, the dinosaur, the figure) the same rebuilds happen either way.
