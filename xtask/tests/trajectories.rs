@@ -1,0 +1,78 @@
+//! `cargo xtask run` and the test trajectories a scene asks for: `[test] schedules` above 1 runs
+//! them all, `--trajectory i` runs any one (trajectory i does not depend on the count), and a
+//! count a plain run will not take is refused naming the field.
+
+use std::path::Path;
+use std::process::Command;
+
+use tests::{TINY, scratch_dir};
+
+/// `xtask run` on `scene` (written into `dir`), pca only, no frames; its exit status and output.
+fn run(dir: &Path, scene: &str, args: &[&str]) -> (bool, String) {
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, scene).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .arg("run")
+        .arg("--scene")
+        .arg(&path)
+        .arg("--cache")
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(dir.join("out"))
+        .args(["--every", "0", "--methods", "full,pca"])
+        .args(args)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+fn pca_errors(report: &Path) -> Vec<f64> {
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    let pca = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["method"] == "pca")
+        .unwrap();
+    pca["frame_errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
+    let dir = scratch_dir("xtask-trajectories");
+    let several = TINY.replace(
+        "[test]\nframes_per_schedule = 12",
+        "[test]\nframes_per_schedule = 12\nschedules = 3",
+    );
+    assert_ne!(several, TINY, "TINY's [test] section moved");
+    let (ok, text) = run(&dir, &several, &[]);
+    assert!(ok, "{text}");
+    let out = dir.join("out");
+    let table = std::fs::read_to_string(out.join("trajectories.md")).unwrap();
+    assert!(table.contains("trajectory 2"), "{table}");
+    let third = pca_errors(&out.join("trajectory-2").join("report.json"));
+
+    // The plain scene (one test schedule) runs trajectory 2 by name, to the same errors.
+    let (ok, text) = run(&dir, TINY, &["--trajectory", "2"]);
+    assert!(ok, "{text}");
+    assert_eq!(pca_errors(&out.join("report.json")), third);
+
+    let (ok, text) = run(
+        &dir,
+        &several.replace("schedules = 3", "schedules = 65"),
+        &[],
+    );
+    assert!(!ok);
+    assert!(text.contains("[test] schedules = 65"), "{text}");
+}
