@@ -222,6 +222,7 @@ fn speedups_and_rates_follow_from_the_reported_times() {
     };
     let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
     assert_eq!(rows.len(), 4);
+    assert!(p.reference_computed_here(0));
     let mut steps = p.reference(0, &no_progress).unwrap().step_seconds.clone();
     let reference_ms = steps.iter().sum::<f64>() / steps.len() as f64 * 1e3;
     assert!(
@@ -253,6 +254,24 @@ fn speedups_and_rates_follow_from_the_reported_times() {
             r.ms_median
         );
     }
+    // A later run loads the reference, timed then: `full` runs again for its time, with the
+    // reference's frames (no error) and iterations.
+    let mut later = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let again = run(
+        &mut later,
+        &RunOptions {
+            out: out.join("later"),
+            methods: vec![Method::Full],
+            ..opts.clone()
+        },
+        &no_progress,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert!(!later.reference_computed_here(0));
+    assert_ne!(again[0].ms_per_step, rows[0].ms_per_step);
+    assert_eq!(again[0].mean_rel_error, 0.0);
+    assert_eq!(again[0].iterations, rows[0].iterations);
     let fastest_full = rows[0].ms_per_step.min(rows[1].ms_per_step);
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();

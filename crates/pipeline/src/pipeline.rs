@@ -1506,6 +1506,15 @@ impl<'a> Pipeline<'a> {
         })
     }
 
+    /// Whether this pipeline computed test trajectory `trajectory`'s reference, rather than
+    /// loading it from the cache: then the step times it recorded are this process's.
+    pub fn reference_computed_here(&self, trajectory: usize) -> bool {
+        let path = self.path(Stage::Reference, self.reference_key(trajectory));
+        self.outcomes
+            .iter()
+            .any(|o| o.stage == Stage::Reference && !o.cached && o.path == path)
+    }
+
     /// The model with test trajectory `trajectory`'s forces and gravity in place of the scene's.
     /// Every index has one: trajectory i depends only on the test family's seed and i, not on
     /// `[test] schedules`.
