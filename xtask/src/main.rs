@@ -13,6 +13,7 @@ use pipeline::shard::Shard;
 use pipeline::simulate::{Method, SimulateOptions, Trajectory};
 use pipeline::stress::Condition;
 use pipeline::suite::SuiteMesh;
+use pipeline::trajectories::MAX_TRAJECTORIES;
 
 mod view;
 
@@ -33,10 +34,6 @@ struct Common {
     #[arg(long)]
     cache: Option<PathBuf>,
 }
-
-/// The most test trajectories one `run` or `suite` measures (`--trajectories`, or a scene's
-/// `[test] schedules` for a plain `run`).
-const MAX_TRAJECTORIES: usize = 64;
 
 #[derive(Subcommand)]
 enum Command {

@@ -15,6 +15,10 @@ use crate::pipeline::{Pipeline, Progress};
 use crate::run::{MethodReport, RunOptions, run};
 use crate::simulate::{Method, median};
 
+/// The most test trajectories one call measures (`cargo xtask run --trajectories`, a scene's
+/// `[test] schedules` for a plain `run`, Python's `run_trajectories`).
+pub const MAX_TRAJECTORIES: usize = 64;
+
 /// One method's error on each trajectory, and over them.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Spread {

@@ -9,6 +9,7 @@ use pipeline::pipeline::{Pipeline, StageOutcome};
 use pipeline::run::{MethodReport, RunOptions};
 use pipeline::scene::Scene;
 use pipeline::simulate::Method;
+use pipeline::trajectories::MAX_TRAJECTORIES;
 use pyo3::prelude::*;
 
 use crate::errors::{self, Class};
@@ -322,6 +323,33 @@ fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (Path
     (out, cache)
 }
 
+/// Runs `body` without the GIL on the pipeline of `scene` as `cargo xtask run` starts it: the
+/// scene read, its folders, `on_stage` installed and the basis computed or loaded first, so that
+/// its stage is the first reported. `body` gets the scene, the pipeline and the output folder;
+/// the callback's exception, if it raised one, is raised when `body` is done.
+fn in_run_pipeline<T: Send>(
+    py: Python<'_>,
+    scene: Option<PathBuf>,
+    out_dir: Option<PathBuf>,
+    cache_dir: Option<PathBuf>,
+    on_stage: Option<Py<PyAny>>,
+    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf) -> Result<T, Failure> + Send,
+) -> PyResult<T> {
+    let failed = std::sync::Mutex::new(None);
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
+    let value = py.detach(|| -> Result<T, Failure> {
+        let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
+        let (out, cache) = folders(&scene, out_dir, cache_dir);
+        let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+        callback.install(&mut p);
+        p.pca(&|_, _| {}).map_err(Failure::Run)?;
+        body(&scene, &mut p, out)
+    });
+    let value = value.map_err(Failure::into_py)?;
+    callback.raised()?;
+    Ok(value)
+}
+
 /// Runs the pipeline on a scene and every requested method on one held-out test trajectory, as
 /// ``cargo xtask run --trajectory`` does (``run_trajectories`` runs several): the stages load from the cache or are computed (and cached), then
 /// each method is simulated and measured against full space. Writes the report files into
@@ -352,16 +380,7 @@ pub fn run_pipeline(
     on_stage: Option<Py<PyAny>>,
 ) -> PyResult<Report> {
     let methods = self::methods(methods)?;
-    let failed = std::sync::Mutex::new(None);
-    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
-    let report = py.detach(|| -> Result<Report, Failure> {
-        let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
-        let (out, cache) = folders(&scene, out_dir, cache_dir);
-        let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
-        callback.install(&mut p);
-        let quiet = |_: usize, _: usize| {};
-        // As `cargo xtask run`: the basis first, so its stage is the first reported.
-        p.pca(&quiet).map_err(Failure::Run)?;
+    in_run_pipeline(py, scene, out_dir, cache_dir, on_stage, |scene, p, out| {
         let opts = RunOptions {
             out: out.clone(),
             every,
@@ -369,12 +388,9 @@ pub fn run_pipeline(
             trajectory,
         };
         let rows =
-            pipeline::run::run(&mut p, &opts, &quiet, &mut |_, _, _| {}).map_err(Failure::Run)?;
+            pipeline::run::run(p, &opts, &|_, _| {}, &mut |_, _, _| {}).map_err(Failure::Run)?;
         Ok(Report::of(&scene.name, &rows, &p.outcomes, out, &methods))
-    });
-    let report = report.map_err(Failure::into_py)?;
-    callback.raised()?;
-    Ok(report)
+    })
 }
 
 /// Runs the pipeline on a scene and every requested method on held-out test trajectories
@@ -399,22 +415,17 @@ pub fn run_trajectories(
     every: usize,
     on_stage: Option<Py<PyAny>>,
 ) -> PyResult<Vec<Report>> {
-    if !(1..=64).contains(&count) {
-        return Err(Class::InvalidArgument.err(format!(
-            "count must be from 1 to 64 test trajectories, got {count}"
-        )));
-    }
-    let count = count as usize;
+    let count = usize::try_from(count)
+        .ok()
+        .filter(|n| (1..=MAX_TRAJECTORIES).contains(n))
+        .ok_or_else(|| {
+            Class::InvalidArgument.err(format!(
+                "count must be from 1 to {MAX_TRAJECTORIES} test trajectories, got {count}"
+            ))
+        })?;
     let methods = self::methods(methods)?;
-    let failed = std::sync::Mutex::new(None);
-    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
-    let reports = py.detach(|| -> Result<Vec<Report>, Failure> {
-        let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
-        let (out, cache) = folders(&scene, out_dir, cache_dir);
-        let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
-        callback.install(&mut p);
+    in_run_pipeline(py, scene, out_dir, cache_dir, on_stage, |scene, p, out| {
         let quiet = |_: usize, _: usize| {};
-        p.pca(&quiet).map_err(Failure::Run)?;
         let opts = RunOptions {
             out: out.clone(),
             every,
@@ -425,7 +436,7 @@ pub fn run_trajectories(
         for i in 0..count {
             let before = if i == 0 { 0 } else { p.outcomes.len() };
             pipeline::trajectories::run_more(
-                &mut p,
+                p,
                 &opts,
                 &mut runs,
                 i + 1,
@@ -444,10 +455,7 @@ pub fn run_trajectories(
         }
         pipeline::trajectories::write(&out, &runs).map_err(Failure::Run)?;
         Ok(reports)
-    });
-    let reports = reports.map_err(Failure::into_py)?;
-    callback.raised()?;
-    Ok(reports)
+    })
 }
 
 /// Exports a reduced method's trained model as one file, as ``cargo xtask export`` does (the
