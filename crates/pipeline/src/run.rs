@@ -114,8 +114,8 @@ pub struct MethodReport {
     pub failure: Option<String>,
     /// The f64 multiply–add rate of one thread (G/s, [`nn::peak::fma_rate`]) probed just
     /// before this method's timed runs: times taken at different rates (a shared machine, a
-    /// clock that scales) compare only after dividing by it. None where the times were taken
-    /// earlier (`run`'s full space, timed when the cached reference was computed).
+    /// clock that scales) compare only after dividing by it. None on `run`'s full-space row,
+    /// whose times are the reference's own or a plain re-run of it, without the probe.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub machine_gfma: Option<f64>,
     /// On a reduced method's row, when it drifts from the full trajectory

@@ -280,8 +280,7 @@ pub fn run_suite(
                 continue;
             }
         };
-        let mut scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
-        scene.raise_test_trajectories(trajectories);
+        let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
         let cache = dir.join("cache");
