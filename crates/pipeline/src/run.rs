@@ -1335,7 +1335,10 @@ mod tests {
             ),
             "{line}"
         );
-        assert!(line.contains("- less accurate: ") && !line.contains("- slower"), "{line}");
+        assert!(
+            line.contains("- less accurate: ") && !line.contains("- slower"),
+            "{line}"
+        );
         let behind = standing_line(&[
             row(Method::PcaCubature, 0.2, 0.01),
             row(Method::NeuralCubature, 0.3, 0.02),

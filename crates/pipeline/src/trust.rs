@@ -500,7 +500,10 @@ mod tests {
         assert!(advice(0.02, 0.045).is_empty());
         // Without the full rule's row there is nothing to compare with.
         let alone = assess(&[row(Method::PcaCubature, 0.3, 0.001)]).untrusted;
-        assert!(alone.iter().all(|w| !w.contains("cubature rule")), "{alone:#?}");
+        assert!(
+            alone.iter().all(|w| !w.contains("cubature rule")),
+            "{alone:#?}"
+        );
     }
 
     #[test]
