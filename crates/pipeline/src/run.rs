@@ -652,12 +652,15 @@ fn standing_reasons(n: &MethodReport, p: &MethodReport) -> String {
         let cause = if subspace {
             "its subspace holds the test less well (more `[reduced] complement_directions` or \
              a larger `[autoencoder] latent_dim` close it)"
-        } else if ratio(n.step_error, p.step_error) > REASON_RATIO {
+        } else if n.step_error > 0.0
+            && p.step_error > 0.0
+            && ratio(n.step_error, p.step_error) > REASON_RATIO
+        {
             "its steps add more error from the same start (the cubature rule: stage \
              `cubature-neural`'s force error against stage `cubature`'s, or the solve)"
         } else {
-            "its subspace and its steps are as close as pca-cubature's, so the test's dynamics \
-             made more of a small difference"
+            "neither its subspace nor its steps are far enough from pca-cubature's to explain \
+             it, so the test's dynamics made more of a small difference"
         };
         s += &format!(
             "- less accurate: its subspace holds the test to {:.2} against {:.2} %, one step \
@@ -671,11 +674,12 @@ fn standing_reasons(n: &MethodReport, p: &MethodReport) -> String {
     s
 }
 
-/// A figure of neural-cubature's this many times pca-cubature's is where [`standing_reasons`]
-/// places a larger error.
+/// A figure of neural-cubature's more than this many times pca-cubature's is where
+/// [`standing_reasons`] places a larger error (step errors only when both are measured: a
+/// method whose every one-step solve failed reports none).
 const REASON_RATIO: f64 = 1.2;
 
-/// … and the subspace's error only when its excess is at least this share of the error's.
+/// … and the subspace's only when its excess is at least this share of the error's.
 const REASON_SHARE: f64 = 0.25;
 
 /// Where a reduced step's time goes, mean ms per step, as a markdown table under a heading
@@ -1345,6 +1349,42 @@ mod tests {
         ]);
         assert!(behind.contains(": behind ("), "{behind}");
         assert!(behind.contains("- slower: ") && behind.contains("- less accurate: "));
+        // The slower step's figures, neural-cubature's first.
+        let timed = |method, ms_per_step, elements, elastic_ms, precond_ms| MethodReport {
+            dim: 40,
+            cubature_elements: elements,
+            elastic_ms,
+            precond_ms,
+            iterations: if method == Method::PcaCubature {
+                2.0
+            } else {
+                3.0
+            },
+            decode_ms: if method == Method::PcaCubature {
+                0.0
+            } else {
+                0.01
+            },
+            vjp_ms: if method == Method::PcaCubature {
+                0.0
+            } else {
+                0.02
+            },
+            ..row(method, ms_per_step, 0.01)
+        };
+        let line = standing_line(&[
+            timed(Method::PcaCubature, 0.2, 300, 0.1, 0.05),
+            timed(Method::NeuralCubature, 0.3, 400, 0.15, 0.07),
+        ]);
+        assert!(
+            line.contains(
+                "- slower: 400 against 300 elements, both evaluated in the 40 PCA coordinates \
+                 (the decoder's output), 3.0 against 2.0 iterations a step; per step the \
+                 decoder 0.030 ms, the elastic terms 0.150 against 0.100 ms, the \
+                 preconditioner 0.070 against 0.050 ms"
+            ),
+            "{line}"
+        );
         // The cause of a larger error: the subspace's, the steps', or the dynamics'.
         let with = |subspace_error, step_error| MethodReport {
             subspace_error,
@@ -1367,6 +1407,14 @@ mod tests {
         assert!(line.contains("its steps add more error"), "{line}");
         assert!(cause(with(0.01, 0.02)).contains("its steps add more error"));
         assert!(cause(with(0.01, 0.01)).contains("the test's dynamics made more"));
+        // No one-step error measured for pca-cubature: the steps are not blamed.
+        assert!(cause(with(0.01, 0.0)).contains("the test's dynamics made more"));
+        let unmeasured = MethodReport {
+            step_error: 0.0,
+            ..pca.clone()
+        };
+        let line = standing_line(&[unmeasured, with(0.01, 0.02)]);
+        assert!(line.contains("the test's dynamics made more"), "{line}");
         assert!(!cause(with(0.01, 0.01)).contains("- slower"));
         assert_eq!(standing_line(&[row(Method::NeuralCubature, 0.2, 0.01)]), "");
     }
