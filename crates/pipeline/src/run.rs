@@ -1391,29 +1391,25 @@ mod tests {
             step_error,
             ..row(Method::NeuralCubature, 0.1, 0.02)
         };
-        let pca = MethodReport {
-            subspace_error: 0.01,
-            step_error: 0.01,
-            ..row(Method::PcaCubature, 0.2, 0.01)
+        // pca-cubature with its subspace and one-step errors, against neural-cubature `n`.
+        let against = |subspace_error, step_error, n: MethodReport| {
+            let p = MethodReport {
+                subspace_error,
+                step_error,
+                ..row(Method::PcaCubature, 0.2, 0.01)
+            };
+            standing_line(&[p, n])
         };
-        let cause = |n: MethodReport| standing_line(&[pca.clone(), n]);
+        let cause = |n: MethodReport| against(0.01, 0.01, n);
         assert!(cause(with(0.02, 0.02)).contains("its subspace holds the test less well"));
         // A subspace error twice pca-cubature's but far below the error's excess is not it.
-        let close = MethodReport {
-            subspace_error: 0.001,
-            ..pca.clone()
-        };
-        let line = standing_line(&[close, with(0.002, 0.02)]);
+        let line = against(0.001, 0.01, with(0.002, 0.02));
         assert!(line.contains("its steps add more error"), "{line}");
         assert!(cause(with(0.01, 0.02)).contains("its steps add more error"));
         assert!(cause(with(0.01, 0.01)).contains("the test's dynamics made more"));
         // No one-step error measured for pca-cubature: the steps are not blamed.
         assert!(cause(with(0.01, 0.0)).contains("the test's dynamics made more"));
-        let unmeasured = MethodReport {
-            step_error: 0.0,
-            ..pca.clone()
-        };
-        let line = standing_line(&[unmeasured, with(0.01, 0.02)]);
+        let line = against(0.01, 0.0, with(0.01, 0.02));
         assert!(line.contains("the test's dynamics made more"), "{line}");
         assert!(!cause(with(0.01, 0.01)).contains("- slower"));
         assert_eq!(standing_line(&[row(Method::NeuralCubature, 0.2, 0.01)]), "");
