@@ -161,7 +161,8 @@ pub fn validate_located(
     }
     if report.unreferenced_vertices > 0 {
         tracing::warn!(
-            "{}: {} vertices are not referenced by any tet",
+            "{}: {} vertices are not referenced by any tet (they are not part of the body: \
+             they do not move, and its size and pin planes are taken without them)",
             path.display(),
             report.unreferenced_vertices
         );
