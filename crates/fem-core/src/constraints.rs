@@ -157,7 +157,7 @@ impl VertexSelection {
                 return Err(bad(
                     ".indices",
                     format!(
-                        "vertex {i} is out of range (the mesh has {} vertices)",
+                        "vertex {i} is out of range (the mesh has {} vertices, counted from 0)",
                         mesh.num_vertices()
                     ),
                 ));

@@ -252,10 +252,46 @@ impl Scene {
             errors.push(FemError::InvalidConfig {
                 field: "pin".into(),
                 reason: format!(
-                    "no pinned vertex holds {what} (pins on vertices no tet uses hold nothing), so {why}"
+                    "no pinned vertex holds {what} (pins on vertices no tet uses hold nothing), so {why}: add a [[pin]] that selects a vertex of it"
                 ),
             });
         }
+        for line in loosely_held(mesh, pinned, &piece, count) {
+            tracing::warn!("{}: {line}", self.source);
+        }
+    }
+
+    /// With the mesh loaded: the pins must leave some vertex of the body free.
+    fn check_pinned_not_all(&self, mesh: &TetMesh, pinned: &[usize], errors: &mut Vec<FemError>) {
+        let mut used = vec![false; mesh.num_vertices()];
+        for tet in &mesh.tets {
+            for &v in tet {
+                used[v] = true;
+            }
+        }
+        let body = used.iter().filter(|&&u| u).count();
+        let held = pinned.iter().filter(|&&v| used[v]).count();
+        if body == 0 || held < body {
+            return;
+        }
+        let counts: Vec<String> = self
+            .pin
+            .iter()
+            .enumerate()
+            .filter_map(|(i, p)| {
+                let n = p.select(mesh, "").ok()?.len();
+                Some(format!("pin[{i}] selects {n}"))
+            })
+            .collect();
+        errors.push(FemError::InvalidConfig {
+            field: "pin".into(),
+            reason: format!(
+                "the pins hold every one of the body's {body} vertices ({}), so nothing is left \
+                 to move: select fewer (a plane's `tolerance`, like every length under `[mesh] \
+                 scale`, is in metres)",
+                counts.join(", ")
+            ),
+        });
     }
 
     /// The training schedule family, defaults filled in. Its solves stop at `[training]
@@ -301,6 +337,9 @@ impl Scene {
         pinned.sort_unstable();
         pinned.dedup();
         if errors.is_empty() {
+            self.check_pinned_not_all(&mesh, &pinned, &mut errors);
+        }
+        if errors.is_empty() {
             self.check_pieces(&mesh, &pinned, &mut errors);
         }
         let mut forces = Vec::new();
@@ -323,6 +362,63 @@ impl Scene {
         .map_err(|e| anyhow::anyhow!("{}: {e}", self.source))?;
         Ok((model, report))
     }
+}
+
+/// The pieces of a body that needs support which the pins hold at one point or along one line,
+/// each a sentence: such a piece turns about them (a pin plane whose default tolerance caught
+/// the one lowest vertex of a curved body hangs it like a pendulum). Allowed, since a hinge may
+/// be meant, and said. `piece` and `count` are [`TetMesh::vertex_components`].
+fn loosely_held(mesh: &TetMesh, pinned: &[usize], piece: &[usize], count: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    for c in 0..count {
+        let at: Vec<fem_core::Vec3> = pinned
+            .iter()
+            .filter(|&&v| piece.get(v) == Some(&c))
+            .map(|&v| mesh.vertices[v])
+            .collect();
+        if at.is_empty() || !collinear(&at) {
+            continue;
+        }
+        let what = if count == 1 {
+            "the body".to_string()
+        } else {
+            format!("piece {} of the mesh's {count}", c + 1)
+        };
+        let how = if at.len() == 1 {
+            "at a single vertex".to_string()
+        } else {
+            format!("by {} vertices on one line", at.len())
+        };
+        lines.push(format!(
+            "the pins hold {what} {how}, so it can turn about them; a pin plane's larger \
+             `tolerance`, or a `box`, holds it fixed"
+        ));
+    }
+    lines
+}
+
+/// Whether `points` lie on one line (one point, or all within 10⁻⁶ of their extent of the line
+/// through the two farthest apart).
+fn collinear(points: &[fem_core::Vec3]) -> bool {
+    let Some(&a) = points.first() else {
+        return true;
+    };
+    let Some(&b) = points
+        .iter()
+        .max_by(|p, q| (*p - a).norm().total_cmp(&(*q - a).norm()))
+    else {
+        return true;
+    };
+    let axis = b - a;
+    let extent = axis.norm();
+    if extent == 0.0 {
+        return true;
+    }
+    let axis = axis / extent;
+    points.iter().all(|p| {
+        let r = p - a;
+        (r - axis * r.dot(&axis)).norm() <= 1e-6 * extent
+    })
 }
 
 /// The dotted name (`material.poisson_ratio`, `pin[1].sphere.radius`) of the key or table
@@ -357,6 +453,10 @@ fn field_at(text: &str, offset: usize) -> Option<String> {
     }
     if let Some(h) = header(line, &mut counts) {
         return Some(h.split('[').next().unwrap_or_default().to_string());
+    }
+    // A broken header (`[time`) names no field: not the section before it either.
+    if line.trim_start().starts_with('[') {
+        return None;
     }
     // Keys on the line up to the error, through inline tables: `a = { b = { c = 1 } }`.
     let col = offset - line_start;
@@ -507,6 +607,33 @@ fn indent(e: &FemError) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A body pinned at one vertex or along one edge is said to turn about it; three vertices
+    /// off one line hold it.
+    #[test]
+    fn a_body_held_at_a_point_or_a_line_is_said_to_turn() {
+        use fem_core::mesh::generate::{BoxSpec, box_mesh};
+        let mesh = box_mesh(&BoxSpec {
+            size: [1.0, 0.2, 0.2],
+            cells: [4, 1, 1],
+            ..Default::default()
+        })
+        .unwrap();
+        let (piece, count) = mesh.vertex_components();
+        let at_x0: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].x == 0.0)
+            .collect();
+        assert_eq!(at_x0.len(), 4);
+        assert!(loosely_held(&mesh, &at_x0, &piece, count).is_empty());
+        let one = loosely_held(&mesh, &at_x0[..1], &piece, count);
+        assert_eq!(one.len(), 1);
+        assert!(one[0].contains("the body at a single vertex"), "{one:?}");
+        let edge: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].y == 0.0 && mesh.vertices[v].z == 0.0)
+            .collect();
+        let line = loosely_held(&mesh, &edge, &piece, count);
+        assert!(line[0].contains("by 5 vertices on one line"), "{line:?}");
+    }
 
     #[test]
     fn builtin_scene_parses_and_builds() {

@@ -429,9 +429,45 @@ fn every_piece_of_a_disconnected_mesh_needs_a_pin() {
         "box = { min = [-0.1, -0.1, -0.1], max = [0.1, 0.3, 0.3] }",
     );
     let err = build_error(&one, &dir);
-    assert_names(&err, &["`pin`", "piece 2 of the 2", "falls freely"]);
+    assert_names(
+        &err,
+        &[
+            "`pin`",
+            "piece 2 of the 2",
+            "falls freely",
+            "add a [[pin]] that selects",
+        ],
+    );
     // Without gravity the loose piece may float.
     builds(&one.replace("[0.0, -9.81, 0.0]", "[0.0, 0.0, 0.0]"), &dir);
+}
+
+/// A broken table header is reported at its line, not under the section before it.
+#[test]
+fn a_broken_header_names_no_other_section() {
+    let err = read_error(&edit("[time]", "[time"));
+    assert!(err.contains("bad.toml") && err.contains("line 18"), "{err}");
+    assert!(!err.contains("`gravity`"), "{err}");
+}
+
+#[test]
+fn pins_that_hold_every_vertex_are_an_error() {
+    let all = edit(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "box = { min = [-0.1, -0.1, -0.1], max = [1.1, 0.3, 0.3] }",
+    );
+    let err = build_error(&all, Path::new("."));
+    assert_names(
+        &err,
+        &[
+            "`pin`",
+            "every one of the body's 20 vertices",
+            "pin[0] selects 20",
+            "select fewer",
+        ],
+    );
+    // One vertex left free is a body.
+    builds(&all.replace("max = [1.1,", "max = [0.9,"), Path::new("."));
 }
 
 #[test]
