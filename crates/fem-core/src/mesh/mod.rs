@@ -76,7 +76,9 @@ impl TetMesh {
             self.vertices.iter().for_each(&mut add);
         } else {
             for tet in &self.tets {
-                tet.iter().filter_map(|&v| self.vertices.get(v)).for_each(&mut add);
+                tet.iter()
+                    .filter_map(|&v| self.vertices.get(v))
+                    .for_each(&mut add);
             }
         }
         if lo.x > hi.x {

@@ -40,10 +40,22 @@ pub fn validate_located(
         path: path.to_path_buf(),
         reason,
     };
-    // "tet 7 (line 42)"
+    // "tetrahedron 8 of 2475 (line 42)": counted from 1 in the file's order, as the readers
+    // count, so a user finds it in the file.
+    let count = mesh.tets.len();
     let tet = |t: usize| match line_of_tet(t) {
-        Some(line) => format!("tet {t} (line {line})"),
-        None => format!("tet {t}"),
+        Some(line) => format!("tetrahedron {} of {count} (line {line})", t + 1),
+        None => format!("tetrahedron {} of {count}", t + 1),
+    };
+    // A tet's vertices, counted from 1 in the file's order.
+    let vertices_of = |v: &[usize; 4]| {
+        format!(
+            "(vertices {}, {}, {}, {}, counted from 1 in the file's order)",
+            v[0] + 1,
+            v[1] + 1,
+            v[2] + 1,
+            v[3] + 1
+        )
     };
     if mesh.tets.is_empty() {
         return Err(invalid("the mesh has no tetrahedra".into()));
@@ -56,8 +68,11 @@ pub fn validate_located(
         .find(|(_, v)| !v.iter().all(|c| c.is_finite()))
     {
         return Err(invalid(format!(
-            "vertex {i} has a non-finite coordinate ({}, {}, {})",
-            v.x, v.y, v.z
+            "vertex {} of {n} has a non-finite coordinate ({}, {}, {})",
+            i + 1,
+            v.x,
+            v.y,
+            v.z
         )));
     }
     let mut referenced = vec![false; n];
@@ -65,8 +80,9 @@ pub fn validate_located(
         for &i in vertices {
             if i >= n {
                 return Err(invalid(format!(
-                    "{} references vertex {i} but the mesh has {n} vertices",
-                    tet(t)
+                    "{} references vertex {} (counted from 1) but the mesh has {n} vertices",
+                    tet(t),
+                    i + 1
                 )));
             }
             referenced[i] = true;
@@ -75,10 +91,10 @@ pub fn validate_located(
             for b in a + 1..4 {
                 if vertices[a] == vertices[b] {
                     return Err(invalid(format!(
-                        "{} uses vertex {} twice ({:?})",
+                        "{} uses vertex {} twice {}",
                         tet(t),
-                        vertices[a],
-                        vertices
+                        vertices[a] + 1,
+                        vertices_of(vertices)
                     )));
                 }
             }
@@ -90,9 +106,9 @@ pub fn validate_located(
     // Finite coordinates can still overflow a volume (|x| near 1e100 and beyond).
     if let Some(t) = volumes.iter().position(|v| !v.is_finite()) {
         return Err(invalid(format!(
-            "{} {:?} has a non-finite volume: its coordinates are too large",
+            "{} {} has a non-finite volume: its coordinates are too large",
             tet(t),
-            mesh.tets[t]
+            vertices_of(&mesh.tets[t])
         )));
     }
     let mean = volumes.iter().map(|v| v.abs()).sum::<f64>() / volumes.len() as f64;
@@ -112,9 +128,9 @@ pub fn validate_located(
         let rel = v.abs() / mean;
         if rel < DEGENERATE_RELATIVE_VOLUME {
             return Err(invalid(format!(
-                "{} {:?} is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
+                "{} {} is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
                 tet(t),
-                mesh.tets[t]
+                vertices_of(&mesh.tets[t])
             )));
         }
         report.min_relative_volume = report.min_relative_volume.min(rel);
@@ -137,10 +153,10 @@ pub fn validate_located(
     sorted.sort_unstable();
     if let Some(w) = sorted.windows(2).find(|w| w[0].0 == w[1].0) {
         return Err(invalid(format!(
-            "{} and {} use the same four vertices {:?} (a duplicate element)",
+            "{} and {} use the same four vertices {} (a duplicate element)",
             tet(w[0].1),
             tet(w[1].1),
-            w[0].0
+            vertices_of(&w[0].0)
         )));
     }
     report.unreferenced_vertices = referenced.iter().filter(|r| !**r).count();

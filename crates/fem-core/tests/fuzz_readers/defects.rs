@@ -107,23 +107,26 @@ fn assert_line_holds(format: Format, bytes: &[u8], line: usize, token: &str, rea
     );
 }
 
-/// Every "tet T (line L)" in `reason` points at the line of `mesh`'s tet T in the text file
-/// `bytes` (the line holds its four vertices as the format writes them); binary files give no
-/// lines, text files at least one.
+/// Every "tetrahedron T of N (line L)" in `reason` (T counted from 1) points at the line of
+/// `mesh`'s tet T − 1 in the text file `bytes` (the line holds its four vertices as the format
+/// writes them); binary files give no lines, text files at least one.
 fn assert_tet_lines(format: Format, bytes: &[u8], mesh: &TetMesh, reason: &str) {
     let text = String::from_utf8_lossy(bytes);
     let mut found = 0;
-    for (at, _) in reason.match_indices("tet ") {
-        let rest = &reason[at + 4..];
+    // "tetrahedron 8 of 12 (line 42)", counted from 1.
+    for (at, _) in reason.match_indices("tetrahedron ") {
+        let rest = &reason[at + "tetrahedron ".len()..];
         let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+        let of = format!(" of {}", mesh.num_tets());
         let Some(line) = rest[digits.len()..]
-            .strip_prefix(" (line ")
+            .strip_prefix(of.as_str())
+            .and_then(|r| r.strip_prefix(" (line "))
             .and_then(|r| r.split(')').next())
             .and_then(|l| l.parse::<usize>().ok())
         else {
             continue;
         };
-        let t: usize = digits.parse().unwrap();
+        let t: usize = digits.parse::<usize>().unwrap() - 1;
         let held: Vec<&str> = text
             .lines()
             .nth(line - 1)
@@ -229,7 +232,8 @@ fn degenerate_tets_are_refused() {
     in_every_format("degenerate", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(
-            reason.contains(&format!("tet {flat} ")) && reason.contains("degenerate"),
+            reason.contains(&format!("tetrahedron {} of", flat + 1))
+                && reason.contains("degenerate"),
             "{}: {reason}",
             format.name()
         );
@@ -246,8 +250,8 @@ fn duplicate_tets_are_refused() {
     in_every_format("duplicate", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(
-            reason.contains("tet 4 ")
-                && reason.contains(&format!("and tet {copy}"))
+            reason.contains("tetrahedron 5 of")
+                && reason.contains(&format!("and tetrahedron {} of", copy + 1))
                 && reason.contains("duplicate"),
             "{}: {reason}",
             format.name()
@@ -263,7 +267,7 @@ fn a_tet_using_a_vertex_twice_is_refused() {
     in_every_format("repeated-vertex", &mesh, |format, path, bytes, result| {
         let reason = invalid_reason(format, path, result);
         assert!(
-            reason.contains("tet 7 ") && reason.contains("twice"),
+            reason.contains("tetrahedron 8 of") && reason.contains("twice"),
             "{}: {reason}",
             format.name()
         );
