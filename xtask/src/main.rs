@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context as _, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use pipeline::bench::BenchOptions;
@@ -422,11 +422,12 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         (None, None) if asked > 1 => Some(asked),
         _ => None,
     };
+    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &[])))?;
     let mut p = cx.pipeline(&scene, &common)?;
     let progress = |d, t| cx.stage_progress(d, t);
     p.pca(&progress)?;
     let opts = RunOptions {
-        out: out.unwrap_or_else(|| cx.out(&scene, &[])),
+        out,
         every,
         methods: methods.into_iter().map(Method::from).collect(),
         trajectory: trajectory.unwrap_or(0),
@@ -544,11 +545,25 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
     Ok(())
 }
 
+/// `path`, created if needed, as the folder a command writes into: checked before any stage
+/// runs, so that a file in its place is said at once, not after the pipeline's minutes.
+fn output_folder(path: PathBuf) -> Result<PathBuf> {
+    if path.exists() && !path.is_dir() {
+        bail!(
+            "`--out` {} is a file, not a folder: give a folder to write the results into",
+            path.display()
+        );
+    }
+    std::fs::create_dir_all(&path)
+        .with_context(|| format!("cannot create the output folder {}", path.display()))?;
+    Ok(path)
+}
+
 /// `bench`: every method at several sizes, timed in one process.
 fn bench(cx: &Context, args: BenchArgs) -> Result<()> {
     let scene = &cx.scene(&args.common)?;
     let opts = &BenchOptions {
-        out: args.out.unwrap_or_else(|| cx.out(scene, &["bench"])),
+        out: output_folder(args.out.unwrap_or_else(|| cx.out(scene, &["bench"])))?,
         cache: cx.cache(scene, &args.common),
         trajectory: args.trajectory,
         repeats: args.repeats,
@@ -594,7 +609,7 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
             _ => drop(p.pca(&progress)?),
         }
     }
-    let out = out.unwrap_or_else(|| cx.out(&scene, &["stress"]));
+    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
     let results = pipeline::stress::stress(
         &mut p,
         &methods,
@@ -629,7 +644,7 @@ fn simulate(cx: &Context, args: SimulateArgs) -> Result<()> {
     let opts = SimulateOptions {
         method,
         trajectory: test.map(Trajectory::Test).unwrap_or(Trajectory::Scene),
-        out: out.unwrap_or_else(|| cx.out(&scene, &[method.name()])),
+        out: output_folder(out.unwrap_or_else(|| cx.out(&scene, &[method.name()])))?,
         frames,
         every,
         solver: solver.map(|s| match s {

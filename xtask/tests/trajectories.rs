@@ -76,3 +76,14 @@ fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
     assert!(!ok);
     assert!(text.contains("[test] schedules = 65"), "{text}");
 }
+
+/// A file where the output folder should be is refused before any stage runs.
+#[test]
+fn an_output_path_that_is_a_file_is_refused_at_once() {
+    let dir = scratch_dir("xtask-out-file");
+    std::fs::write(dir.join("out"), "not a folder").unwrap();
+    let (ok, text) = run(&dir, TINY, &[]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("is a file, not a folder"), "{text}");
+    assert!(!dir.join("cache").exists(), "a stage ran: {text}");
+}
