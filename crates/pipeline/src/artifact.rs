@@ -40,6 +40,17 @@ pub enum ArtifactError {
     },
 }
 
+impl ArtifactError {
+    /// What is wrong with the artifact, without the advice to rebuild it: for a caller that
+    /// rebuilds it itself.
+    pub fn problem(&self) -> String {
+        match self {
+            Self::Io { path, source, .. } => format!("{path}: cannot read: {source}"),
+            Self::Invalid { path, reason, .. } => format!("{path}: {reason}"),
+        }
+    }
+}
+
 /// FNV-1a, 64 bit: a stable hash for cache keys and checksums (it changes on any single-bit
 /// flip). Not for security.
 pub fn fnv1a(bytes: &[u8]) -> u64 {

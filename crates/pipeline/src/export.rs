@@ -172,7 +172,7 @@ pub fn reduced_model(
 pub fn describe(scene: &str, method: Method, model: &ReducedModel, path: &Path) -> String {
     let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
     format!(
-        "{}: {} model, {} vertices ({} with basis rows), {} tets, k = {}, latent dimension {}, {} elements evaluated → {} ({:.2} MB)",
+        "{}: {} model, {} vertices ({} with basis rows), {} tets, k = {}, {} reduced coordinates{}, {} elements evaluated → {} ({:.2} MB)",
         scene,
         method.name(),
         model.mesh.num_vertices(),
@@ -180,6 +180,11 @@ pub fn describe(scene: &str, method: Method, model: &ReducedModel, path: &Path) 
         model.mesh.num_tets(),
         model.space.k,
         model.latent_dim(),
+        if matches!(method, Method::Neural | Method::NeuralCubature) {
+            " (the latent ones and the linear directions beside them)"
+        } else {
+            ""
+        },
         model
             .cubature
             .as_ref()

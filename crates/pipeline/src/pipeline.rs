@@ -658,7 +658,7 @@ impl<'a> Pipeline<'a> {
                     self.record(stage, true, start, path, v.summary());
                     return Ok(v);
                 }
-                Err(e) => tracing::warn!("{e}; recomputing"),
+                Err(e) => tracing::warn!("{}; computing the stage again", e.problem()),
             }
         }
         let value = compute(self)?;
