@@ -147,6 +147,9 @@ pub struct Compression {
     pub squeezed_share: f64,
     /// The time (s) of its frame.
     pub squeezed_time: f64,
+    /// Whether the material is stable Neo-Hookean, which already resists inversion: then only
+    /// a stiffer body helps.
+    pub inversion_safe: bool,
 }
 
 impl Compression {
@@ -173,6 +176,10 @@ impl Compression {
                 inverted_frames: 0,
                 squeezed_share: 0.0,
                 squeezed_time: time,
+                inversion_safe: matches!(
+                    model.material,
+                    fem_core::material::AnyMaterial::StableNeoHookean(_)
+                ),
             });
             let smallest = ratios.iter().copied().fold(f64::INFINITY, f64::min);
             if smallest < o.volume_ratio {

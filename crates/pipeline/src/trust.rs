@@ -99,14 +99,20 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
     } else {
         "the full-space reference of the test".to_string()
     };
+    let remedy = if c.inversion_safe {
+        "the body is too soft to carry its loads (stable Neo-Hookean resists inversion only as \
+         strongly as its stiffness): a stiffer material (`youngs_modulus`), or lighter loads \
+         (`[gravity]`, `[test] stiffness`, `offset`), keep it a solid"
+    } else {
+        "a stiffer material (`youngs_modulus`) resists it, and stable Neo-Hookean (`[material] \
+         model`) resists inversion"
+    };
     Some(format!(
         "{who} squeezes {:.1} % of the body's volume under \
          half its rest volume at t = {:.2} s (its most compressed element to det F = {:.2} at \
          t = {:.2} s{inverted}): the material gives way there, which is past what it models as \
          a solid (StVK softens under strong compression; linear and corotated elasticity do \
-         not resist inversion), and the reduced methods are measured against that; a stiffer \
-         material (`youngs_modulus`) resists it, and stable Neo-Hookean (`[material] model`), \
-         where the scene has another, resists inversion",
+         not resist inversion), and the reduced methods are measured against that; {remedy}",
         100.0 * c.squeezed_share,
         c.squeezed_time,
         c.volume_ratio,
@@ -365,6 +371,7 @@ mod tests {
                 inverted_frames,
                 squeezed_share: share,
                 squeezed_time: 0.5,
+                inversion_safe: false,
             }),
             ..row(Method::Full, 0.0, 0.0)
         };
@@ -381,6 +388,18 @@ mod tests {
             "det F = -1.10 at t = 0.75 s, and elements are inverted in 60 of its frames)";
         assert!(inverted[0].contains(expected), "{}", inverted[0]);
         assert!(inverted[0].contains("`[material] model`"));
+        // Of a stable Neo-Hookean body, only the stiffness and the loads are advised.
+        let mut safe = full(0.3, -8.3, 95);
+        if let Some(c) = &mut safe.compression {
+            c.inversion_safe = true;
+        }
+        let soft = assess(&[safe]).untrusted;
+        assert!(
+            soft[0].contains("too soft to carry its loads"),
+            "{}",
+            soft[0]
+        );
+        assert!(!soft[0].contains("`[material] model`"), "{}", soft[0]);
         // A run without `full` carries the reference's compression on its first row: named as
         // the reference's, once.
         let first = MethodReport {
