@@ -384,13 +384,13 @@ fn loosely_held(mesh: &TetMesh, pinned: &[usize], piece: &[usize], count: usize)
         } else {
             format!("piece {} of the mesh's {count}", c + 1)
         };
-        let how = if at.len() == 1 {
-            "at a single vertex".to_string()
+        let (how, about) = if at.len() == 1 {
+            ("at a single vertex".to_string(), "it")
         } else {
-            format!("by {} vertices on one line", at.len())
+            (format!("by {} vertices on one line", at.len()), "that line")
         };
         lines.push(format!(
-            "the pins hold {what} {how}, so it can turn about them; a pin plane's larger \
+            "the pins hold {what} {how}, so it can turn about {about}; a pin plane's larger \
              `tolerance`, or a `box`, holds it fixed"
         ));
     }
