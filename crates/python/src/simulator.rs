@@ -212,11 +212,18 @@ impl Simulator {
         let mut view = array
             .try_readwrite()
             .map_err(|e| Class::InvalidArgument.err(format!("out cannot be written: {e}")))?;
-        match view.as_slice_mut() {
-            Ok(slice) => self
+        // In place only in row order: `as_slice_mut` also takes a Fortran-order array, whose
+        // memory holds the columns one after another.
+        let in_place = if array.is_c_contiguous() {
+            view.as_slice_mut().ok()
+        } else {
+            None
+        };
+        match in_place {
+            Some(slice) => self
                 .with(py, |s| read(&mut s.runtime, slice))?
                 .map_err(errors::runtime)?,
-            Err(_) => {
+            None => {
                 let mut buffer = vec![T::from_f64(0.0); 3 * rows];
                 self.with(py, |s| read(&mut s.runtime, &mut buffer))?
                     .map_err(errors::runtime)?;

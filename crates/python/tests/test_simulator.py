@@ -81,6 +81,14 @@ def test_reads_write_into_a_given_array(sim: ld.Simulator) -> None:
     assert sim.surface_positions(out=strided) is strided
     np.testing.assert_array_equal(wide[:, ::2], expected)
     assert not wide[:, 1::2].any()
+    # Contiguous in column order (Fortran's, or a transposed array): the same values, not the
+    # rows' bytes laid over its columns.
+    for columns in (np.empty((m, 3), order="F"), np.empty((3, m)).T):
+        assert sim.surface_positions(out=columns) is columns
+        np.testing.assert_array_equal(columns, expected)
+    full_f = np.empty((sim.vertex_count, 3), order="F")
+    assert sim.positions(out=full_f) is full_f
+    np.testing.assert_array_equal(full_f, sim.positions())
     # Every vertex's position decodes all rows with another kernel than the surface's: the
     # same to round-off.
     full = np.empty((sim.vertex_count, 3))
