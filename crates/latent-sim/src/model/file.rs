@@ -68,23 +68,24 @@ pub enum ModelFormatError {
     Invalid { reason: String },
 }
 
-/// Why a model file could not be read or written; names the file.
+/// Why a model file could not be read or written; names the file. The message holds the
+/// cause (not chained as a source too, which printed it twice).
 #[derive(Debug, thiserror::Error)]
 pub enum ModelFileError {
-    #[error("{}: cannot read: {source}", path.display())]
+    #[error("{}: cannot read: {cause}", path.display())]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("{}: cannot write: {source}", path.display())]
+    #[error("{}: cannot write: {cause}", path.display())]
     Write {
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {cause}", path.display())]
     Format {
         path: PathBuf,
-        source: ModelFormatError,
+        cause: ModelFormatError,
     },
 }
 
@@ -92,7 +93,7 @@ impl ModelFileError {
     /// What is wrong with the content, when the file could be read.
     pub fn format(&self) -> Option<&ModelFormatError> {
         match self {
-            ModelFileError::Format { source, .. } => Some(source),
+            ModelFileError::Format { cause, .. } => Some(cause),
             _ => None,
         }
     }
@@ -223,9 +224,9 @@ impl ReducedModel {
     /// # Errors
     /// [`ModelFileError::Write`].
     pub fn save(&self, path: &Path) -> Result<(), ModelFileError> {
-        fem_core::io::write_atomic(path, &self.to_bytes()).map_err(|source| ModelFileError::Write {
+        fem_core::io::write_atomic(path, &self.to_bytes()).map_err(|cause| ModelFileError::Write {
             path: path.to_path_buf(),
-            source,
+            cause,
         })
     }
 
@@ -235,13 +236,23 @@ impl ReducedModel {
     /// [`ModelFileError::Read`], or [`ModelFileError::Format`] with what is wrong with the
     /// content (truncated, corrupted, foreign, newer, …).
     pub fn load(path: &Path) -> Result<Self, ModelFileError> {
-        let bytes = std::fs::read(path).map_err(|source| ModelFileError::Read {
+        let read = |cause| ModelFileError::Read {
             path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_bytes(&bytes).map_err(|source| ModelFileError::Format {
+            cause,
+        };
+        // Only a regular file: a device or a pipe may never end (/dev/zero filled memory, a
+        // FIFO blocked past Ctrl-C), and a folder is not a model.
+        let meta = std::fs::metadata(path).map_err(read)?;
+        if !meta.is_file() {
+            return Err(read(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a regular file",
+            )));
+        }
+        let bytes = std::fs::read(path).map_err(read)?;
+        Self::from_bytes(&bytes).map_err(|cause| ModelFileError::Format {
             path: path.to_path_buf(),
-            source,
+            cause,
         })
     }
 }

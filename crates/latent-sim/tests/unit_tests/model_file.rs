@@ -267,6 +267,22 @@ fn every_kind_of_damage_is_refused_with_its_own_error() {
         Some(ModelFormatError::Truncated { .. })
     ));
     assert!(e.to_string().contains("damaged.ldm"), "{e}");
+    // The cause is in the message, and not chained again (printed twice before).
+    assert!(std::error::Error::source(&e).is_none());
+    // Not a regular file: refused before reading (a device or a pipe may never end).
+    let dir = temp_path("a-folder.ldm");
+    std::fs::create_dir_all(&dir).unwrap();
+    let e = ReducedModel::load(&dir).unwrap_err();
+    assert!(e.to_string().contains("not a regular file"), "{e}");
+    #[cfg(unix)]
+    {
+        let e = ReducedModel::load(std::path::Path::new("/dev/zero")).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("/dev/zero: cannot read: not a regular file"),
+            "{e}"
+        );
+    }
 }
 
 /// Cases of [`mutated_files_never_panic`]: 48, or `PROPTEST_CASES` (`scripts/fuzz.sh model`
