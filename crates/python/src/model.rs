@@ -46,7 +46,8 @@ impl Model {
         Ok(Self::new(model, Some(path)))
     }
 
-    /// Writes the model to ``path`` (atomically: a reader never sees a half-written file).
+    /// Writes the model to ``path`` (atomically: a reader never sees a half-written file),
+    /// creating the folders it needs.
     ///
     /// Raises ``ModelFileError`` when it cannot be written.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {

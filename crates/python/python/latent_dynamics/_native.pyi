@@ -69,7 +69,8 @@ class Model:
     def load(path: _Path) -> Model:
         """Loads a model file; raises ModelFileError when it is missing or damaged."""
     def save(self, path: _Path) -> None:
-        """Writes the model atomically; raises ModelFileError when it cannot."""
+        """Writes the model atomically, creating the folders it needs; raises ModelFileError
+        when it cannot."""
     @property
     def path(self) -> Optional[pathlib.Path]:
         """The file the model was loaded from or exported to."""
