@@ -145,9 +145,10 @@ pub enum ReducedError {
     /// A reduced matrix with entries that are not finite: e.g. an element it evaluates is
     /// inverted at this state, where the material (classic Neo-Hookean) has no energy.
     #[error(
-        "the reduced {what} matrix has entries that are not finite at this state (e.g. an \
-         element it evaluates is inverted, where classic Neo-Hookean has no energy: a state \
-         given from outside, such as a full-space state projected on the basis, can be)"
+        "the reduced {what} matrix has entries that are not finite at this state: an element \
+         it evaluates may be inverted, where classic Neo-Hookean has no energy (a state given \
+         from outside, such as a full-space state projected on the basis, can be), or a spring \
+         so stiff that its terms overflow"
     )]
     NotFinite { what: &'static str },
     /// The parts of a reduced space do not fit together or the mesh.
