@@ -485,7 +485,7 @@ impl std::fmt::Debug for Pipeline<'_> {
 
 /// Logs a warning the first time this process meets it (a bench builds one pipeline per
 /// variant of the same scene).
-fn warn_once(message: &str) {
+pub(crate) fn warn_once(message: &str) {
     static SEEN: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
     let mut seen = SEEN.lock().unwrap_or_else(|e| e.into_inner());
     if !seen.iter().any(|m| m == message) {
@@ -541,13 +541,21 @@ impl<'a> Pipeline<'a> {
     /// the solver as that simulation runs it.
     fn physics_key(&self, stage: Stage, solver: &fem_core::optim::SolverConfig) -> KeyBuilder {
         let s = self.scene;
-        KeyBuilder::new(stage)
+        let key = KeyBuilder::new(stage)
             .mix_key(self.mesh_hash)
             .mix(&s.material)
             .mix(&self.model.pinned)
             .mix(&s.gravity)
             .mix(&(s.time.step, s.time.quasi_static))
-            .mix(solver)
+            .mix(solver);
+        // Since 2026-12-01 (stop 54) the body's size, which scales the loads, leaves out the
+        // vertices no tet uses: the stages of a mesh that has some are computed again. Every
+        // other mesh's size, and key, stayed as they were.
+        if self.model.mesh.has_unused_vertices() {
+            key.mix(&"the body's size without its unused vertices")
+        } else {
+            key
+        }
     }
 
     pub fn snapshots_key(&self) -> u64 {
