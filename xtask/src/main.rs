@@ -529,7 +529,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
             }
         }
     }
-    let out = out.unwrap_or_else(|| cx.root.join("out").join("suite"));
+    let out = output_folder(out.unwrap_or_else(|| cx.root.join("out").join("suite")))?;
     let progress = |d, t| cx.stage_progress(d, t);
     let rows = pipeline::suite::run_suite(
         &files,
@@ -597,6 +597,7 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
         trajectory,
     } = args;
     let scene = cx.scene(&common)?;
+    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
     let mut p = cx.pipeline(&scene, &common)?;
     let progress = |d, t| cx.stage_progress(d, t);
     let methods: Vec<Method> = methods.into_iter().map(Method::from).collect();
@@ -609,7 +610,6 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
             _ => drop(p.pca(&progress)?),
         }
     }
-    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
     let results = pipeline::stress::stress(
         &mut p,
         &methods,

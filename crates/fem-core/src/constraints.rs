@@ -157,8 +157,8 @@ impl VertexSelection {
                 return Err(bad(
                     ".indices",
                     format!(
-                        "vertex {i} is out of range (the mesh has {} vertices, counted from 0)",
-                        mesh.num_vertices()
+                        "vertex {i} is out of range (indices count from 0: 0 to {})",
+                        mesh.num_vertices().saturating_sub(1)
                     ),
                 ));
             }

@@ -10,6 +10,7 @@ use fem_core::constraints::VertexSelection;
 use fem_core::forces::{ForceConfig, ForceKind};
 use fem_core::integrator::{FullSpaceModel, GravityConfig, TimeConfig};
 use fem_core::material::MaterialConfig;
+use fem_core::mesh::NO_COMPONENT;
 use fem_core::mesh::{MeshConfig, ValidationReport};
 use fem_core::optim::SolverConfig;
 use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
@@ -215,14 +216,21 @@ impl Scene {
 
     /// With a loaded mesh: every connected piece needs a pinned vertex when the body needs
     /// support (a pin that only selects vertices no tet uses holds nothing).
-    fn check_pieces(&self, mesh: &TetMesh, pinned: &[usize], errors: &mut Vec<FemError>) {
+    /// `pieces` is [`TetMesh::vertex_components`].
+    fn check_pieces(
+        &self,
+        mesh: &TetMesh,
+        (piece, count): &(Vec<usize>, usize),
+        pinned: &[usize],
+        errors: &mut Vec<FemError>,
+    ) {
+        let (piece, count) = (piece.as_slice(), *count);
         if pinned.is_empty() {
             return; // reported by `check` (or selection errors), not again per piece
         }
         let Some(why) = self.unsupported_because() else {
             return;
         };
-        let (piece, count) = mesh.vertex_components();
         let mut held = vec![false; count];
         for &v in pinned {
             if let Some(h) = held.get_mut(piece[v]) {
@@ -256,39 +264,37 @@ impl Scene {
                 ),
             });
         }
-        for line in loosely_held(mesh, pinned, &piece, count) {
-            tracing::warn!("{}: {line}", self.source);
+        for line in loosely_held(mesh, pinned, piece, count) {
+            crate::pipeline::warn_once(&format!("{}: {line}", self.source));
         }
     }
 
-    /// With the mesh loaded: the pins must leave some vertex of the body free.
-    fn check_pinned_not_all(&self, mesh: &TetMesh, pinned: &[usize], errors: &mut Vec<FemError>) {
-        let mut used = vec![false; mesh.num_vertices()];
-        for tet in &mesh.tets {
-            for &v in tet {
-                used[v] = true;
-            }
-        }
-        let body = used.iter().filter(|&&u| u).count();
-        let held = pinned.iter().filter(|&&v| used[v]).count();
+    /// With the mesh loaded: the pins must leave some vertex of the body free. `piece` is
+    /// [`TetMesh::vertex_components`]'s labels, `selected` each pin's count of body vertices.
+    fn check_pinned_not_all(
+        &self,
+        piece: &[usize],
+        pinned: &[usize],
+        selected: &[usize],
+        errors: &mut Vec<FemError>,
+    ) {
+        let in_body = |v: &&usize| piece[**v] != NO_COMPONENT;
+        let body = piece.iter().filter(|&&p| p != NO_COMPONENT).count();
+        let held = pinned.iter().filter(in_body).count();
         if body == 0 || held < body {
             return;
         }
-        let counts: Vec<String> = self
-            .pin
+        let counts: Vec<String> = selected
             .iter()
             .enumerate()
-            .filter_map(|(i, p)| {
-                let n = p.select(mesh, "").ok()?.len();
-                Some(format!("pin[{i}] selects {n}"))
-            })
+            .map(|(i, n)| format!("pin[{i}] selects {n}"))
             .collect();
         errors.push(FemError::InvalidConfig {
             field: "pin".into(),
             reason: format!(
                 "the pins hold every one of the body's {body} vertices ({}), so nothing is left \
-                 to move: select fewer (a plane's `tolerance`, like every length under `[mesh] \
-                 scale`, is in metres)",
+                 to move: select fewer (lengths, a plane's `tolerance` included, are in metres \
+                 after `[mesh] scale`)",
                 counts.join(", ")
             ),
         });
@@ -327,20 +333,26 @@ impl Scene {
             .load(&self.base_dir)
             .map_err(|e| anyhow::anyhow!("{}: [mesh]: {e}", self.source))?;
         let mut errors = Vec::new();
+        let pieces = mesh.vertex_components();
         let mut pinned = Vec::new();
+        // Each pin's vertices of the body (stray vertices are no part of it).
+        let mut selected = Vec::new();
         for (i, p) in self.pin.iter().enumerate() {
             match p.select(&mesh, &format!("pin[{i}]")) {
-                Ok(v) => pinned.extend(v),
+                Ok(v) => {
+                    selected.push(v.iter().filter(|&&v| pieces.0[v] != NO_COMPONENT).count());
+                    pinned.extend(v);
+                }
                 Err(e) => errors.push(e),
             }
         }
         pinned.sort_unstable();
         pinned.dedup();
         if errors.is_empty() {
-            self.check_pinned_not_all(&mesh, &pinned, &mut errors);
+            self.check_pinned_not_all(&pieces.0, &pinned, &selected, &mut errors);
         }
         if errors.is_empty() {
-            self.check_pieces(&mesh, &pinned, &mut errors);
+            self.check_pieces(&mesh, &pieces, &pinned, &mut errors);
         }
         let mut forces = Vec::new();
         for (i, f) in self.force.iter().enumerate() {
@@ -397,8 +409,8 @@ fn loosely_held(mesh: &TetMesh, pinned: &[usize], piece: &[usize], count: usize)
     lines
 }
 
-/// Whether `points` lie on one line (one point, or all within 10⁻⁶ of their extent of the line
-/// through the two farthest apart).
+/// Whether `points` lie on one line: one point, or all within 10⁻⁶ of their extent of the line
+/// through the first and the point farthest from it.
 fn collinear(points: &[fem_core::Vec3]) -> bool {
     let Some(&a) = points.first() else {
         return true;
@@ -454,8 +466,12 @@ fn field_at(text: &str, offset: usize) -> Option<String> {
     if let Some(h) = header(line, &mut counts) {
         return Some(h.split('[').next().unwrap_or_default().to_string());
     }
-    // A broken header (`[time`) names no field: not the section before it either.
-    if line.trim_start().starts_with('[') {
+    // A broken header (`[time`, `[[pin`) names no field, not the section before it either;
+    // a line of a multi-line array (`  [0.3, 0.1],`) is no header.
+    let opening = line.trim_start().trim_start_matches('[');
+    if line.trim_start().starts_with('[')
+        && opening.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_' || c == '"')
+    {
         return None;
     }
     // Keys on the line up to the error, through inline tables: `a = { b = { c = 1 } }`.

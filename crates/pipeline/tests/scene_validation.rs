@@ -448,6 +448,12 @@ fn a_broken_header_names_no_other_section() {
     let err = read_error(&edit("[time]", "[time"));
     assert!(err.contains("bad.toml") && err.contains("line 18"), "{err}");
     assert!(!err.contains("`gravity`"), "{err}");
+    // A line of a multi-line array is no header: its error keeps the array's section.
+    let err = read_error(&edit(
+        "keyframes = [[0.0, 0.0, 0.0, 0.0], [0.3, 0.0, 0.1, 0.0]]",
+        "keyframes = [\n  [0.0, 0.0, 0.0, 0.0],\n  [0.3, \"x\", 0.1, 0.0],\n]",
+    ));
+    assert!(err.contains("`force[0]"), "{err}");
 }
 
 #[test]
@@ -466,7 +472,7 @@ fn pins_that_hold_every_vertex_are_an_error() {
             "select fewer",
         ],
     );
-    // One vertex left free is a body.
+    // A face left free (x = 1) is a body.
     builds(&all.replace("max = [1.1,", "max = [0.9,"), Path::new("."));
 }
 

@@ -47,10 +47,10 @@ pub fn validate_located(
         Some(line) => format!("tetrahedron {} of {count} (line {line})", t + 1),
         None => format!("tetrahedron {} of {count}", t + 1),
     };
-    // A tet's vertices, counted from 1 in the file's order.
+    // Four vertices, counted from 1 in the file's order.
     let vertices_of = |v: &[usize; 4]| {
         format!(
-            "(vertices {}, {}, {}, {}, counted from 1 in the file's order)",
+            "{}, {}, {}, {} (counted from 1 in the order the file lists them)",
             v[0] + 1,
             v[1] + 1,
             v[2] + 1,
@@ -91,7 +91,7 @@ pub fn validate_located(
             for b in a + 1..4 {
                 if vertices[a] == vertices[b] {
                     return Err(invalid(format!(
-                        "{} uses vertex {} twice {}",
+                        "{} uses vertex {} twice: its vertices are {}",
                         tet(t),
                         vertices[a] + 1,
                         vertices_of(vertices)
@@ -106,7 +106,7 @@ pub fn validate_located(
     // Finite coordinates can still overflow a volume (|x| near 1e100 and beyond).
     if let Some(t) = volumes.iter().position(|v| !v.is_finite()) {
         return Err(invalid(format!(
-            "{} {} has a non-finite volume: its coordinates are too large",
+            "{}, on vertices {}, has a non-finite volume: its coordinates are too large",
             tet(t),
             vertices_of(&mesh.tets[t])
         )));
@@ -128,7 +128,7 @@ pub fn validate_located(
         let rel = v.abs() / mean;
         if rel < DEGENERATE_RELATIVE_VOLUME {
             return Err(invalid(format!(
-                "{} {} is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
+                "{}, on vertices {}, is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
                 tet(t),
                 vertices_of(&mesh.tets[t])
             )));
@@ -153,7 +153,7 @@ pub fn validate_located(
     sorted.sort_unstable();
     if let Some(w) = sorted.windows(2).find(|w| w[0].0 == w[1].0) {
         return Err(invalid(format!(
-            "{} and {} use the same four vertices {} (a duplicate element)",
+            "{} and {} use the same four vertices, {} (a duplicate element)",
             tet(w[0].1),
             tet(w[1].1),
             vertices_of(&w[0].0)
