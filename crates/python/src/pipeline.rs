@@ -310,8 +310,26 @@ fn methods(names: Option<Vec<String>>) -> PyResult<Vec<Method>> {
         Some(names) if names.is_empty() => {
             Err(Class::InvalidArgument.err("methods must name at least one method"))
         }
-        Some(names) => names.iter().map(|n| method(n)).collect(),
+        Some(names) => {
+            let methods: Vec<Method> = names.iter().map(|n| method(n)).collect::<PyResult<_>>()?;
+            for (i, m) in methods.iter().enumerate() {
+                if methods[..i].contains(m) {
+                    return Err(Class::InvalidArgument.err(format!(
+                        "methods names {} twice; name each method once",
+                        m.name()
+                    )));
+                }
+            }
+            Ok(methods)
+        }
     }
+}
+
+/// A count or index argument `name`, refused with a clear error when negative (a bare
+/// `OverflowError` before).
+fn non_negative(name: &str, value: i64) -> PyResult<usize> {
+    usize::try_from(value)
+        .map_err(|_| Class::InvalidArgument.err(format!("{name} must be 0 or more, got {value}")))
 }
 
 /// The output folder and cache folder of a call: `out/<scene name>` under the current
@@ -375,11 +393,15 @@ pub fn run_pipeline(
     out_dir: Option<PathBuf>,
     cache_dir: Option<PathBuf>,
     methods: Option<Vec<String>>,
-    trajectory: usize,
-    every: usize,
+    trajectory: i64,
+    every: i64,
     on_stage: Option<Py<PyAny>>,
 ) -> PyResult<Report> {
     let methods = self::methods(methods)?;
+    let (trajectory, every) = (
+        non_negative("trajectory", trajectory)?,
+        non_negative("every", every)?,
+    );
     in_run_pipeline(py, scene, out_dir, cache_dir, on_stage, |scene, p, out| {
         let opts = RunOptions {
             out: out.clone(),
@@ -412,9 +434,10 @@ pub fn run_trajectories(
     out_dir: Option<PathBuf>,
     cache_dir: Option<PathBuf>,
     methods: Option<Vec<String>>,
-    every: usize,
+    every: i64,
     on_stage: Option<Py<PyAny>>,
 ) -> PyResult<Vec<Report>> {
+    let every = non_negative("every", every)?;
     let count = usize::try_from(count)
         .ok()
         .filter(|n| (1..=MAX_TRAJECTORIES).contains(n))
