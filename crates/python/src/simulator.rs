@@ -295,6 +295,18 @@ fn is_float32(py: Python<'_>, dtype: &Bound<'_, PyAny>) -> PyResult<bool> {
 
 /// Vertex indices from an int or a sequence (or integer array) of them, none negative.
 fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
+    use pyo3::types::{PyBool, PyInt};
+    // `True` is an int to Python, and would be vertex 1.
+    if vertices.is_instance_of::<PyBool>() {
+        return Err(Class::InvalidArgument
+            .err("vertices must be an int or a sequence of ints, got bool".to_string()));
+    }
+    // An int beyond 64 bits is no vertex either (it said "got int").
+    if vertices.is_instance_of::<PyInt>() && vertices.extract::<i64>().is_err() {
+        return Err(Class::InvalidArgument.err(format!(
+            "vertex {vertices} does not exist (it is beyond any mesh's vertex count)"
+        )));
+    }
     // One index: a Python int or anything with __index__ (a numpy integer).
     let values: Vec<i64> = if let Ok(v) = vertices.extract::<i64>() {
         vec![v]

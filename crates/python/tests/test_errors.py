@@ -138,6 +138,8 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: sim.grab([n], 1.0), f"vertex {n} does not exist"),
         (lambda: sim.grab(-1, 1.0), "negative"),
         (lambda: sim.grab("12", 1.0), "sequence of ints"),
+        (lambda: sim.grab(True, 1.0), "got bool"),
+        (lambda: sim.grab(2**64, 1.0), "vertex 18446744073709551616 does not exist"),
         (lambda: sim.grab([0], 0.0), "stiffness must be positive"),
         (lambda: sim.grab([0], -5.0), "stiffness must be positive"),
         (lambda: sim.grab([0], math.nan), "stiffness must be positive"),
