@@ -610,7 +610,8 @@ impl Simulator {
 
     /// Positions of the surface vertices (in ``surface_vertices``' order), an m×3 array of
     /// ``dtype`` (float64 by default, or float32 as a renderer wants), written into ``out``
-    /// when given (whose dtype then decides). A reduced model decodes only the surface's rows.
+    /// when given (whose dtype then decides; a ``dtype`` given beside it must be the same).
+    /// A reduced model decodes only the surface's rows.
     #[pyo3(signature = (dtype = None, out = None))]
     fn surface_positions<'py>(
         &self,
