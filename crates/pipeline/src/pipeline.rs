@@ -471,6 +471,8 @@ pub struct Pipeline<'a> {
     recorded_seconds: f64,
     /// The training snapshots' PCA coefficients, once a run has needed them.
     pub(crate) training_poses: Option<std::sync::Arc<crate::coverage::TrainingPoses>>,
+    /// Whether the mesh file has vertices no tet uses (from its validation, when it was loaded).
+    stray_vertices: bool,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -497,7 +499,7 @@ pub(crate) fn warn_once(message: &str) {
 impl<'a> Pipeline<'a> {
     /// Builds the scene's model; `cache` is the folder for artifacts.
     pub fn new(scene: &'a Scene, cache: &Path) -> Result<Self> {
-        let (model, _) = scene.build_model()?;
+        let (model, report) = scene.build_model()?;
         let (lo, hi) = model.mesh.bounding_box();
         if let Some(w) = fem_core::mesh::size_warning((hi - lo).norm()) {
             warn_once(&format!("{}: {w}", scene.source));
@@ -534,6 +536,7 @@ impl<'a> Pipeline<'a> {
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,
+            stray_vertices: report.unreferenced_vertices > 0,
         })
     }
 
@@ -551,7 +554,7 @@ impl<'a> Pipeline<'a> {
         // Since 2026-12-01 (stop 54) the body's size, which scales the loads, leaves out the
         // vertices no tet uses: the stages of a mesh that has some are computed again. Every
         // other mesh's size, and key, stayed as they were.
-        if self.model.mesh.has_unused_vertices() {
+        if self.stray_vertices {
             key.mix(&"the body's size without its unused vertices")
         } else {
             key

@@ -630,8 +630,9 @@ pub fn standing_line(rows: &[MethodReport]) -> String {
 /// difference.
 fn standing_reasons(n: &MethodReport, p: &MethodReport) -> String {
     let mut s = String::new();
+    let ratio = |a: f64, b: f64| a / b.max(f64::MIN_POSITIVE);
     if n.ms_per_step > p.ms_per_step {
-        let slower = 100.0 * (n.ms_per_step / p.ms_per_step.max(f64::MIN_POSITIVE) - 1.0);
+        let slower = 100.0 * (ratio(n.ms_per_step, p.ms_per_step) - 1.0);
         let by = if slower < 1.0 {
             format!("{slower:.1} %")
         } else {
@@ -660,7 +661,6 @@ fn standing_reasons(n: &MethodReport, p: &MethodReport) -> String {
         );
     }
     if n.mean_rel_error > p.mean_rel_error {
-        let ratio = |a: f64, b: f64| a / b.max(f64::MIN_POSITIVE);
         // A subspace a little further from the test explains a larger error only when the
         // difference is a fair part of the error's (on the catapult, 0.06 against 0.05 % does
         // not explain 1.59 against 1.16 %).

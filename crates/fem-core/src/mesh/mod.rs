@@ -117,17 +117,6 @@ impl TetMesh {
         out
     }
 
-    /// Whether some vertex is used by no tet (a stray vertex of the file: no part of the body).
-    pub fn has_unused_vertices(&self) -> bool {
-        let mut used = vec![false; self.vertices.len()];
-        for &v in self.tets.iter().flatten() {
-            if let Some(u) = used.get_mut(v) {
-                *u = true;
-            }
-        }
-        used.contains(&false)
-    }
-
     /// The connected piece of each vertex (tets sharing a vertex are connected), numbered from 0
     /// in order of first vertex, and the number of pieces. Vertices no tet uses get
     /// [`NO_COMPONENT`] and count as no piece.
@@ -229,9 +218,7 @@ mod tests {
         })
         .unwrap();
         let body = m.bounding_box();
-        assert!(!m.has_unused_vertices());
         m.vertices.push(nalgebra::Vector3::new(9.0, 5.0, -5.0));
-        assert!(m.has_unused_vertices());
         assert_eq!(m.bounding_box(), body);
         assert!((body.1 - body.0 - nalgebra::Vector3::new(0.25, 0.06, 0.06)).norm() < 1e-12);
         m.tets.clear();
