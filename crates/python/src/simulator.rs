@@ -301,15 +301,14 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
         return Err(Class::InvalidArgument
             .err("vertices must be an int or a sequence of ints, got bool".to_string()));
     }
-    // An int beyond 64 bits is no vertex either (it said "got int").
-    if vertices.is_instance_of::<PyInt>() && vertices.extract::<i64>().is_err() {
-        return Err(Class::InvalidArgument.err(format!(
-            "vertex {vertices} does not exist (it is beyond any mesh's vertex count)"
-        )));
-    }
     // One index: a Python int or anything with __index__ (a numpy integer).
     let values: Vec<i64> = if let Ok(v) = vertices.extract::<i64>() {
         vec![v]
+    } else if vertices.is_instance_of::<PyInt>() {
+        // An int beyond 64 bits is no vertex either (it said "got int").
+        return Err(Class::InvalidArgument.err(format!(
+            "vertex {vertices} does not exist (it is beyond any mesh's vertex count)"
+        )));
     } else {
         vertices.extract().map_err(|_| {
             Class::InvalidArgument.err(format!(
