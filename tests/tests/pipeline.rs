@@ -264,7 +264,14 @@ fn onset_directions_reach_the_neural_methods() {
     for r in &rows {
         assert_eq!(r.dim, 4, "{r:?}");
         assert!(r.failure.is_none() && r.mean_rel_error.is_finite(), "{r:?}");
+        // No full-space solver ran beside them: no speed-up, and a dash in the table.
+        assert_eq!(r.speedup, None, "{r:?}");
     }
+    let table = pipeline::run::markdown(&rows);
+    assert!(
+        table.lines().skip(2).all(|l| l.contains("| — |")),
+        "{table}"
+    );
 }
 
 /// Without `[reduced] onset_directions` and `complement_directions` the neural methods run

@@ -312,7 +312,7 @@ pub fn markdown(rows: &[BenchRow]) -> String {
     for r in rows {
         let m = &r.report;
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
             match &m.failure {
                 Some(f) => format!("{} (failed at {f})", r.variant),
                 None => r.variant.clone(),
@@ -324,7 +324,7 @@ pub fn markdown(rows: &[BenchRow]) -> String {
             m.ms_max,
             m.ms_median,
             m.hz,
-            m.speedup,
+            crate::run::speedup_cell(m.speedup, 1),
             m.mean_rel_error,
             m.trajectory_error,
             m.max_rel_error,
@@ -416,7 +416,7 @@ mod tests {
                 ms_median: ms,
                 ms_max: ms,
                 hz: 1e3 / ms,
-                speedup: 1.0,
+                speedup: None,
                 mean_rel_error: err,
                 max_rel_error: err,
                 trajectory_error: err,

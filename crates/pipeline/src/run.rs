@@ -51,8 +51,10 @@ pub struct MethodReport {
     pub ms_median: f64,
     /// Steps per second, 1000 / `ms_per_step`.
     pub hz: f64,
-    /// The faster full-space solver's ms/step (mean) divided by this method's.
-    pub speedup: f64,
+    /// The faster full-space solver's ms/step (mean) divided by this method's; `None` when no
+    /// full-space solver was timed beside it (`--methods` without `full` or `full-newton`).
+    #[serde(default)]
+    pub speedup: Option<f64>,
     /// Mean and max over frames of ‖u − u_full‖_M / ‖u_full‖_M.
     pub mean_rel_error: f64,
     pub max_rel_error: f64,
@@ -727,18 +729,23 @@ pub fn time_split_markdown(rows: &[MethodReport]) -> String {
     s
 }
 
-/// Speed-ups over the faster full-space solver among `rows` (unchanged when none ran).
+/// Speed-ups over the faster full-space solver among `rows`; none when no full-space solver ran.
 pub fn set_speedups(rows: &mut [MethodReport]) {
     let fastest_full = rows
         .iter()
         .filter(|r| r.method.is_full())
         .map(|r| r.ms_per_step)
         .fold(f64::INFINITY, f64::min);
-    if fastest_full.is_finite() {
-        for r in rows {
-            r.speedup = fastest_full / r.ms_per_step;
-        }
+    for r in rows {
+        r.speedup = fastest_full
+            .is_finite()
+            .then(|| fastest_full / r.ms_per_step);
     }
+}
+
+/// A speed-up as a table cell with `digits` decimals (a dash where no full-space solver ran).
+pub(crate) fn speedup_cell(speedup: Option<f64>, digits: usize) -> String {
+    speedup.map_or_else(|| "—".into(), |x| format!("{x:.digits$}×"))
 }
 
 /// One method measured on a test trajectory.
@@ -836,7 +843,7 @@ pub fn measure(
             ms_median: median(&step_seconds) * 1e3,
             ms_max: full_ms,
             hz: 1e3 / full_ms,
-            speedup: 1.0,
+            speedup: None,
             mean_rel_error: 0.0,
             max_rel_error: 0.0,
             trajectory_error: 0.0,
@@ -982,7 +989,7 @@ pub fn measure(
         ms_median: median(&medians),
         ms_max: means.iter().copied().fold(0.0, f64::max),
         hz: 1e3 / ms,
-        speedup: 1.0,
+        speedup: None,
         mean_rel_error: mean(&errors.rel),
         max_rel_error: errors.rel.iter().fold(0.0, |a, &b| a.max(b)),
         trajectory_error: errors.trajectory_error(),
@@ -1207,7 +1214,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1}× | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2} | {:.1} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
                 None => r.method.to_string(),
@@ -1217,7 +1224,7 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             r.ms_per_step,
             r.ms_median,
             r.hz,
-            r.speedup,
+            speedup_cell(r.speedup, 1),
             r.mean_rel_error,
             r.trajectory_error,
             r.max_rel_error,

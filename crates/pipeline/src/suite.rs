@@ -389,10 +389,10 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
             match r.methods.iter().find(|x| x.method == m) {
                 Some(x) => {
                     s += &format!(
-                        " {:.1} % ({:.1} %) | {:.0}× |",
+                        " {:.1} % ({:.1} %) | {} |",
                         100.0 * x.mean_rel_error,
                         100.0 * x.trajectory_error,
-                        x.speedup
+                        crate::run::speedup_cell(x.speedup, 0)
                     )
                 }
                 None => s += " — | — |",
@@ -511,7 +511,7 @@ mod tests {
         let at = |method: Method, error: f64| MethodReport {
             method,
             mean_rel_error: error,
-            speedup: 100.0,
+            speedup: Some(100.0),
             ..Default::default()
         };
         let row = |scene: &str, runs: &[Vec<MethodReport>], failure: Option<&str>| SuiteRow {

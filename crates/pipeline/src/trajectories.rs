@@ -63,7 +63,11 @@ pub fn spreads(runs: &[Vec<MethodReport>]) -> Vec<Spread> {
                 .enumerate()
                 .filter_map(|(i, e)| e.map(|e| (i, e)))
                 .max_by(|a, b| a.1.total_cmp(&b.1));
-            let speedups: Vec<f64> = completed.iter().flatten().map(|r| r.speedup).collect();
+            let speedups: Vec<f64> = completed
+                .iter()
+                .flatten()
+                .filter_map(|r| r.speedup)
+                .collect();
             let median_speedup = (!speedups.is_empty()).then(|| median(&speedups));
             Spread {
                 method: row.method,
@@ -196,7 +200,7 @@ pub fn markdown(table: &[Spread]) -> String {
         let worst = m
             .worst
             .map_or("—".into(), |(i, e)| format!("{:.2} % ({i})", 100.0 * e));
-        let speedup = m.median_speedup.map_or("—".into(), |x| format!("{x:.0}×"));
+        let speedup = crate::run::speedup_cell(m.median_speedup, 0);
         s += &format!(" {} | {worst} | {speedup} |\n", percent(m.mean));
     }
     s
@@ -210,7 +214,7 @@ mod tests {
         MethodReport {
             method,
             mean_rel_error: error,
-            speedup,
+            speedup: Some(speedup),
             ..Default::default()
         }
     }

@@ -121,8 +121,9 @@ pub struct MethodRow {
     ms_median: f64,
     /// Steps per second.
     hz: f64,
-    /// The faster full-space solver's ms/step (mean) over this method's.
-    speedup: f64,
+    /// The faster full-space solver's ms/step (mean) over this method's; None when no
+    /// full-space method ran beside it.
+    speedup: Option<f64>,
     /// Mean and largest over frames of the relative error ‖u − u_full‖_M / ‖u_full‖_M.
     mean_rel_error: f64,
     max_rel_error: f64,
