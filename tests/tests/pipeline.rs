@@ -272,6 +272,18 @@ fn onset_directions_reach_the_neural_methods() {
         table.lines().skip(2).all(|l| l.contains("| — |")),
         "{table}"
     );
+    // A method named twice is refused before anything is measured.
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: vec![Method::Pca, Method::Neural, Method::Pca],
+        trajectory: 0,
+    };
+    let err = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "the methods name pca twice; name each method once"
+    );
 }
 
 /// Without `[reduced] onset_directions` and `complement_directions` the neural methods run

@@ -409,6 +409,7 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         trajectory,
         trajectories,
     } = args;
+    let methods = methods_once(&methods)?;
     let scene = cx.scene(&common)?;
     // A scene whose `[test]` asks for several trajectories gets them all, unless one is named.
     let asked = scene.test().schedules;
@@ -429,7 +430,7 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     let opts = RunOptions {
         out,
         every,
-        methods: methods.into_iter().map(Method::from).collect(),
+        methods,
         trajectory: trajectory.unwrap_or(0),
     };
     let method_bar = bar(0, "");
@@ -545,6 +546,15 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
     Ok(())
 }
 
+/// `--methods` as the pipeline's methods, each named once: checked before any stage runs.
+pub(crate) fn methods_once(args: &[MethodArg]) -> Result<Vec<Method>> {
+    let methods: Vec<Method> = args.iter().map(|&m| Method::from(m)).collect();
+    if let Some(m) = Method::repeated(&methods) {
+        bail!("--methods names {m} twice; name each method once");
+    }
+    Ok(methods)
+}
+
 /// `path`, created if needed, as the folder a command writes into: checked before any stage
 /// runs, so that a file in its place is said at once, not after the pipeline's minutes.
 fn output_folder(path: PathBuf) -> Result<PathBuf> {
@@ -596,11 +606,11 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
         free_steps,
         trajectory,
     } = args;
+    let methods = methods_once(&methods)?;
     let scene = cx.scene(&common)?;
     let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
     let mut p = cx.pipeline(&scene, &common)?;
     let progress = |d, t| cx.stage_progress(d, t);
-    let methods: Vec<Method> = methods.into_iter().map(Method::from).collect();
     // Every stage first, so the table's progress is not interleaved with training.
     for &m in &methods {
         match m {

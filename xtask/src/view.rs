@@ -70,9 +70,9 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 scene: args.scene.clone(),
                 cache: args.cache.clone(),
             };
+            let mut wanted = crate::methods_once(&args.methods)?;
             let scene = cx.scene(&common)?;
             let mut p = cx.pipeline(&scene, &common)?;
-            let mut wanted: Vec<Method> = args.methods.iter().map(|&m| Method::from(m)).collect();
             if let Some(m) = chosen
                 && !m.is_full()
                 && !wanted.contains(&m)

@@ -87,3 +87,16 @@ fn an_output_path_that_is_a_file_is_refused_at_once() {
     assert!(text.contains("is a file, not a folder"), "{text}");
     assert!(!dir.join("cache").exists(), "a stage ran: {text}");
 }
+
+/// A method named twice is refused before any stage runs; it used to be measured twice.
+#[test]
+fn a_method_named_twice_is_refused_at_once() {
+    let dir = scratch_dir("xtask-method-twice");
+    let (ok, text) = run(&dir, TINY, &["--methods", "pca"]);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("--methods names pca twice; name each method once"),
+        "{text}"
+    );
+    assert!(!dir.join("cache").exists(), "a stage ran: {text}");
+}

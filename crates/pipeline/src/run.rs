@@ -482,6 +482,9 @@ pub fn run(
     stage_progress: Progress<'_>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<MethodReport>> {
+    if let Some(m) = Method::repeated(&opts.methods) {
+        anyhow::bail!("the methods name {m} twice; name each method once");
+    }
     let mut rows = Vec::new();
     for &method in &opts.methods {
         // `full` already is the scene's solver: a row forcing the same solver would repeat it.

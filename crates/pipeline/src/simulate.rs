@@ -57,6 +57,14 @@ impl Method {
         matches!(self, Method::Full | Method::FullLbfgs | Method::FullNewton)
     }
 
+    /// The first method `methods` names a second time, if any: a list of methods to compare
+    /// names each once (twice would measure and write the same method twice).
+    pub fn repeated(methods: &[Method]) -> Option<Method> {
+        (1..methods.len())
+            .find(|&i| methods[..i].contains(&methods[i]))
+            .map(|i| methods[i])
+    }
+
     /// The full-space solver this method forces, whatever the scene's (`None` for `full`, which
     /// uses the scene's, and for the reduced methods).
     pub fn forced_full_solver(self) -> Option<SolverMethod> {

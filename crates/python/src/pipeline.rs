@@ -313,15 +313,11 @@ fn methods(names: Option<Vec<String>>) -> PyResult<Vec<Method>> {
         }
         Some(names) => {
             let methods: Vec<Method> = names.iter().map(|n| method(n)).collect::<PyResult<_>>()?;
-            for (i, m) in methods.iter().enumerate() {
-                if methods[..i].contains(m) {
-                    return Err(Class::InvalidArgument.err(format!(
-                        "methods names {} twice; name each method once",
-                        m.name()
-                    )));
-                }
+            match Method::repeated(&methods) {
+                Some(m) => Err(Class::InvalidArgument
+                    .err(format!("methods names {m} twice; name each method once"))),
+                None => Ok(methods),
             }
-            Ok(methods)
         }
     }
 }
