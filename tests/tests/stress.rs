@@ -170,7 +170,7 @@ end = 0.5
 #[test]
 fn stable_neo_hookean_recovers_from_inversion() {
     let s = inversion_scene("stable-neo-hookean");
-    let (model, _) = s.build_model().unwrap();
+    let model = s.build_model().unwrap().model;
     let mut sim = Simulator::new(model, s.time.clone(), s.solver.clone()).unwrap();
     let mut inverted_during_drag = false;
     for step in 1..=s.time.frames {
@@ -205,7 +205,7 @@ fn stable_neo_hookean_recovers_from_inversion() {
 #[test]
 fn classic_neo_hookean_never_produces_garbage_under_inverting_forces() {
     let s = inversion_scene("neo-hookean");
-    let (model, _) = s.build_model().unwrap();
+    let model = s.build_model().unwrap().model;
     let mut sim = Simulator::new(model, s.time.clone(), s.solver.clone()).unwrap();
     // Handed a state with an inverted element, it refuses with an error naming the element.
     let mut inverted = sim.state.u.clone();

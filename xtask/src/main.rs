@@ -350,6 +350,7 @@ impl Context {
     /// A pipeline for the scene, printing each stage's outcome.
     fn pipeline<'a>(&self, scene: &'a Scene, common: &Common) -> Result<Pipeline<'a>> {
         let mut p = Pipeline::new(scene, &self.cache(scene, common))?;
+        println!("{}", p.body_summary());
         p.on_stage = Box::new(print_stage);
         Ok(p)
     }

@@ -44,7 +44,7 @@ fn main() -> Result<()> {
     if let Some(t) = args.get(5) {
         solver.tolerance = t.parse().context("tolerance")?;
     }
-    let (model, _) = scene.build_model()?;
+    let model = scene.build_model()?.model;
     let pattern = fem_core::sparse::HessianPattern::new(&model.elements.tets, &model.dofs);
     let chol = fem_core::sparse_cholesky::SparseCholesky::analyse(&pattern)?;
     println!(

@@ -455,6 +455,14 @@ const PATCH_RESPONSE_NEW: f64 = 0.03;
 /// The patch responses appended are at most 1/this of the basis's columns before them.
 const PATCH_RESPONSE_SHARE: usize = 10;
 
+/// The body's vertices (those some tet uses), how many the pins hold, and each pin's count.
+#[derive(Debug, Clone)]
+struct BodyCounts {
+    vertices: usize,
+    held: usize,
+    each_pin: Vec<usize>,
+}
+
 /// A scene's pipeline with its cache folder and the model every stage shares.
 pub struct Pipeline<'a> {
     pub scene: &'a Scene,
@@ -473,6 +481,8 @@ pub struct Pipeline<'a> {
     pub(crate) training_poses: Option<std::sync::Arc<crate::coverage::TrainingPoses>>,
     /// Whether the mesh file has vertices no tet uses (from its validation, when it was loaded).
     stray_vertices: bool,
+    /// The body's vertex counts, for [`Pipeline::body_summary`].
+    body: BodyCounts,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -499,7 +509,8 @@ pub(crate) fn warn_once(message: &str) {
 impl<'a> Pipeline<'a> {
     /// Builds the scene's model; `cache` is the folder for artifacts.
     pub fn new(scene: &'a Scene, cache: &Path) -> Result<Self> {
-        let (model, report) = scene.build_model()?;
+        let built = scene.build_model()?;
+        let model = built.model;
         let (lo, hi) = model.mesh.bounding_box();
         if let Some(w) = fem_core::mesh::size_warning((hi - lo).norm()) {
             warn_once(&format!("{}: {w}", scene.source));
@@ -536,8 +547,47 @@ impl<'a> Pipeline<'a> {
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,
-            stray_vertices: report.unreferenced_vertices > 0,
+            stray_vertices: built.validation.unreferenced_vertices > 0,
+            body: BodyCounts {
+                vertices: built.body_vertices,
+                held: built.held_vertices,
+                each_pin: built.pin_vertices,
+            },
         })
+    }
+
+    /// One line on the body as the scene built it: its vertices and tets, its size, and how
+    /// many vertices the pins hold, each pin's count beside (`cargo xtask` prints it first, so
+    /// that a pin's tolerance that caught too much or too little shows before any stage).
+    pub fn body_summary(&self) -> String {
+        let mesh = &self.model.mesh;
+        let (lo, hi) = mesh.bounding_box();
+        let size = hi - lo;
+        let BodyCounts {
+            vertices,
+            held,
+            each_pin,
+        } = &self.body;
+        let pins = match each_pin.as_slice() {
+            [] => "no pins".to_string(),
+            [_] => format!("the pin holds {held} of them"),
+            each => format!(
+                "the pins hold {held} of them ({})",
+                each.iter()
+                    .enumerate()
+                    .map(|(i, n)| format!("pin[{i}] {n}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
+        format!(
+            "{}: {vertices} vertices and {} tets, {:.3} × {:.3} × {:.3} m; {pins}",
+            self.scene.source,
+            mesh.num_tets(),
+            size.x,
+            size.y,
+            size.z
+        )
     }
 
     /// What every full-space simulation reads: mesh, material, pins, gravity, time step, and

@@ -1306,7 +1306,7 @@ mod tests {
             "box.toml",
         )
         .unwrap();
-        let (model, _) = scene.build_model().unwrap();
+        let model = scene.build_model().unwrap().model;
         // Each free vertex moved down by `s` times its height: det F = 1 − s everywhere.
         let frame = |s: f64| {
             let mut u = vec![0.0; model.num_full()];

@@ -269,18 +269,14 @@ impl Scene {
         }
     }
 
-    /// With the mesh loaded: the pins must leave some vertex of the body free. `piece` is
-    /// [`TetMesh::vertex_components`]'s labels, `selected` each pin's count of body vertices.
+    /// With the mesh loaded: the pins must leave some vertex of the body free. `body` counts
+    /// the body's vertices, `held` those the pins hold, `selected` each pin's.
     fn check_pinned_not_all(
-        &self,
-        piece: &[usize],
-        pinned: &[usize],
+        body: usize,
+        held: usize,
         selected: &[usize],
         errors: &mut Vec<FemError>,
     ) {
-        let in_body = |v: &&usize| piece[**v] != NO_COMPONENT;
-        let body = piece.iter().filter(|&&p| p != NO_COMPONENT).count();
-        let held = pinned.iter().filter(in_body).count();
         if body == 0 || held < body {
             return;
         }
@@ -327,20 +323,23 @@ impl Scene {
     }
 
     /// Loads the mesh, selects pins and forces, and builds the full-space model.
-    pub fn build_model(&self) -> Result<(FullSpaceModel, ValidationReport)> {
+    pub fn build_model(&self) -> Result<BuiltModel> {
         let (mesh, report) = self
             .mesh
             .load(&self.base_dir)
             .map_err(|e| anyhow::anyhow!("{}: [mesh]: {e}", self.source))?;
         let mut errors = Vec::new();
         let pieces = mesh.vertex_components();
+        // Vertices no tet uses are no part of the body.
+        let in_body = |v: &&usize| pieces.0[**v] != NO_COMPONENT;
+        let body = pieces.0.iter().filter(|&&p| p != NO_COMPONENT).count();
         let mut pinned = Vec::new();
-        // Each pin's vertices of the body (stray vertices are no part of it).
+        // Each pin's vertices of the body.
         let mut selected = Vec::new();
         for (i, p) in self.pin.iter().enumerate() {
             match p.select(&mesh, &format!("pin[{i}]")) {
                 Ok(v) => {
-                    selected.push(v.iter().filter(|&&v| pieces.0[v] != NO_COMPONENT).count());
+                    selected.push(v.iter().filter(in_body).count());
                     pinned.extend(v);
                 }
                 Err(e) => errors.push(e),
@@ -348,8 +347,9 @@ impl Scene {
         }
         pinned.sort_unstable();
         pinned.dedup();
+        let held = pinned.iter().filter(in_body).count();
         if errors.is_empty() {
-            self.check_pinned_not_all(&pieces.0, &pinned, &selected, &mut errors);
+            Self::check_pinned_not_all(body, held, &selected, &mut errors);
         }
         if errors.is_empty() {
             self.check_pieces(&mesh, &pieces, &pinned, &mut errors);
@@ -372,8 +372,29 @@ impl Scene {
             forces,
         )
         .map_err(|e| anyhow::anyhow!("{}: {e}", self.source))?;
-        Ok((model, report))
+        Ok(BuiltModel {
+            model,
+            validation: report,
+            body_vertices: body,
+            held_vertices: held,
+            pin_vertices: selected,
+        })
     }
+}
+
+/// What [`Scene::build_model`] builds, and what it found on the way.
+#[derive(Debug)]
+pub struct BuiltModel {
+    pub model: FullSpaceModel,
+    /// What validating the mesh found.
+    pub validation: ValidationReport,
+    /// The body's vertices: those some tet uses.
+    pub body_vertices: usize,
+    /// How many of them the pins hold.
+    pub held_vertices: usize,
+    /// How many of them each `[[pin]]` selects, in the scene's order (two pins may select the
+    /// same vertex).
+    pub pin_vertices: Vec<usize>,
 }
 
 /// The pieces of a body that needs support which the pins hold at one point or along one line,
@@ -655,7 +676,7 @@ mod tests {
     fn builtin_scene_parses_and_builds() {
         let s = Scene::builtin();
         assert_eq!(s.name, "cantilever");
-        let (model, _) = s.build_model().unwrap();
+        let model = s.build_model().unwrap().model;
         assert!(!model.pinned.is_empty());
         assert_eq!(model.forces.len(), 1);
     }

@@ -609,7 +609,7 @@ mod tests {
         let bar = &generated()[1];
         let scene = minimal_scene_of(&bar.read().unwrap(), bar, MATERIALS[1], 1e5).unwrap();
         assert_eq!(scene.name, "bar-60k-neo-hookean");
-        let (model, _) = scene.build_model().unwrap();
+        let model = scene.build_model().unwrap().model;
         assert_eq!(model.mesh.num_tets(), 58800);
         // The bottom layer of vertices (y = 0; 2 % of 0.28 m is above no other layer).
         assert_eq!(model.pinned.len(), 51 * 15);
@@ -617,7 +617,7 @@ mod tests {
         let figure = &generated()[2];
         let scene = minimal_scene_of(&figure.read().unwrap(), figure, MATERIALS[3], 1e5).unwrap();
         assert_eq!(scene.name, "figure-30k-stvk");
-        let (model, _) = scene.build_model().unwrap();
+        let model = scene.build_model().unwrap().model;
         let base = model.mesh.vertices.iter().filter(|v| v.y == 0.0).count();
         assert_eq!(model.pinned.len(), base);
     }

@@ -732,7 +732,7 @@ fn a_mesh_file_is_keyed_by_its_content_not_its_path() {
     let shared = dir.join("cache");
     let base_scene = Scene::from_str(BASE, Path::new("."), "base").unwrap();
     let (base, _) = run_stages(&base_scene, &shared);
-    let mesh = base_scene.build_model().unwrap().0.mesh;
+    let mesh = base_scene.build_model().unwrap().model.mesh;
     write_medit(&dir.join("beam.mesh"), &mesh);
     let from_file = BASE.replacen(
         "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [5, 1, 1] }",

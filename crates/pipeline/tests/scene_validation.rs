@@ -495,6 +495,43 @@ fn pins_on_vertices_no_tet_uses_hold_nothing() {
     assert_names(&err, &["`pin`", "no pinned vertex holds the mesh"]);
 }
 
+/// The body's counts a built model reports, and the line `cargo xtask` prints first: a vertex
+/// no tet uses is no part of the body, and a vertex two pins select is held once.
+#[test]
+fn the_body_line_counts_the_vertices_each_pin_holds() {
+    let dir = scratch("body-line");
+    let mut mesh = beam([4, 1, 1], [0.0, 0.0, 0.0]);
+    let x_max: Vec<usize> = (0..mesh.num_vertices())
+        .filter(|&v| mesh.vertices[v].x == 1.0)
+        .collect();
+    let x_min = (0..mesh.num_vertices())
+        .find(|&v| mesh.vertices[v].x == 0.0)
+        .unwrap();
+    mesh.vertices.push(fem_core::Vec3::new(-1.0, 0.0, 0.0));
+    let loose = mesh.num_vertices() - 1;
+    write_medit(&dir.join("loose.mesh"), &mesh);
+    let text = edit(
+        "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }",
+        "path = \"loose.mesh\"",
+    ) + &format!("\n[[pin]]\nindices = [{loose}, {x_min}, {}]\n", x_max[0]);
+    let scene = Scene::from_str(&text, &dir, "ok.toml").unwrap();
+    let built = scene.build_model().unwrap();
+    assert_eq!(built.validation.unreferenced_vertices, 1);
+    assert_eq!(built.body_vertices, 20);
+    assert_eq!(built.pin_vertices, [4, 2]);
+    assert_eq!(built.held_vertices, 5);
+    let p = pipeline::pipeline::Pipeline::new(&scene, &dir.join("cache")).unwrap();
+    assert_eq!(
+        p.body_summary(),
+        format!(
+            "{}: 20 vertices and {} tets, 1.000 × 0.200 × 0.200 m; the pins hold 5 of them \
+             (pin[0] 4, pin[1] 2)",
+            scene.source,
+            mesh.num_tets()
+        )
+    );
+}
+
 #[test]
 fn errors_from_files_name_the_file() {
     let dir = scratch("files");
@@ -579,9 +616,10 @@ fn every_shipped_scene_reads_and_builds() {
             continue;
         }
         let scene = Scene::from_file(path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
-        let (model, _) = scene
+        let model = scene
             .build_model()
-            .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+            .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()))
+            .model;
         assert!(model.dofs.num_free() > 0, "{}", path.display());
         built += 1;
     }
