@@ -479,9 +479,8 @@ pub struct Pipeline<'a> {
     recorded_seconds: f64,
     /// The training snapshots' PCA coefficients, once a run has needed them.
     pub(crate) training_poses: Option<std::sync::Arc<crate::coverage::TrainingPoses>>,
-    /// Whether the mesh file has vertices no tet uses (from its validation, when it was loaded).
-    stray_vertices: bool,
-    /// The body's vertex counts, for [`Pipeline::body_summary`].
+    /// The body's vertex counts (fewer than the mesh's when some vertex no tet uses), for
+    /// [`Pipeline::body_summary`] and the cache keys.
     body: BodyCounts,
 }
 
@@ -547,7 +546,6 @@ impl<'a> Pipeline<'a> {
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,
-            stray_vertices: built.validation.unreferenced_vertices > 0,
             body: BodyCounts {
                 vertices: built.body_vertices,
                 held: built.held_vertices,
@@ -604,7 +602,7 @@ impl<'a> Pipeline<'a> {
         // Since 2026-12-01 (stop 54) the body's size, which scales the loads, leaves out the
         // vertices no tet uses: the stages of a mesh that has some are computed again. Every
         // other mesh's size, and key, stayed as they were.
-        if self.stray_vertices {
+        if self.body.vertices < self.model.mesh.num_vertices() {
             key.mix(&"the body's size without its unused vertices")
         } else {
             key
