@@ -29,6 +29,10 @@ const NEW_FRACTION: f64 = 1e-3;
 /// Gauss–Newton steps [`Augmented::refine`] takes at most.
 const REFINE_STEPS: usize = 8;
 
+/// Diagonal shifts a refinement step tries in turn, from round-off's size up by 100× each (the
+/// last is 10⁻² of the normal matrix's mean diagonal), each with up to four halvings.
+const REFINE_DAMPINGS: i32 = 6;
+
 /// The subspace `S` with linear directions V (k × m) beside it: latent coordinates (z, w),
 /// q = f(z) + V w, J = [J_f | V].
 #[derive(Debug, Clone)]
@@ -366,26 +370,40 @@ impl<S: Subspace> Augmented<S> {
                 }
             }
             let trace: f64 = (0..n).map(|i| normal[i * n + i]).sum();
-            if !factor.try_factor(&normal, n, 1e-12 * trace / n as f64) {
-                break;
-            }
-            factor.solve_in_place(&mut step);
-            let (mut t, before) = (1.0, cost);
+            // The Gauss–Newton step and its halvings first; when none lowers the misfit, shorter
+            // steps nearer the gradient's direction (Levenberg–Marquardt). Where the decoder's
+            // tangent nearly lies in the span of V (a small latent dimension whose directions
+            // fill the PCA basis), the Gauss–Newton step is huge along the near-null direction,
+            // and until 2026-12-02 the fit stopped there: at d = 3 beside 112 directions the
+            // test's frames came back 11.9 % off on average, 2.5 % with the shifts.
+            let (rhs, before) = (step.clone(), cost);
             let mut better = false;
-            for _ in 0..4 {
-                trial
-                    .iter_mut()
-                    .zip(z.iter())
-                    .zip(&step)
-                    .for_each(|((x, z), s)| *x = z + t * s);
-                let c = misfit(self, &trial, &mut fit);
-                if c < cost {
-                    cost = c;
-                    z.copy_from_slice(&trial);
-                    better = true;
+            for attempt in 0..REFINE_DAMPINGS {
+                let shift = 1e-12 * trace / n as f64 * 100f64.powi(attempt);
+                if !factor.try_factor(&normal, n, shift) {
+                    continue;
+                }
+                step.copy_from_slice(&rhs);
+                factor.solve_in_place(&mut step);
+                let mut t = 1.0;
+                for _ in 0..4 {
+                    trial
+                        .iter_mut()
+                        .zip(z.iter())
+                        .zip(&step)
+                        .for_each(|((x, z), s)| *x = z + t * s);
+                    let c = misfit(self, &trial, &mut fit);
+                    if c < cost {
+                        cost = c;
+                        z.copy_from_slice(&trial);
+                        better = true;
+                        break;
+                    }
+                    t *= 0.5;
+                }
+                if better {
                     break;
                 }
-                t *= 0.5;
             }
             // Converged: a step that gains nothing measurable ends it.
             if !better || before - cost <= 1e-10 * before {

@@ -1004,6 +1004,43 @@ fn encode_finds_the_nearest_point_of_the_subspace() {
     }
 }
 
+/// Where the decoder's tangent lies in the span of the linear directions (here by
+/// construction: they include the tangent at z*, away from rest, and fill the coefficients
+/// beside d = 2), encode still finds the poses the subspace holds around z*.
+#[test]
+fn encode_finds_poses_where_the_tangent_lies_in_the_directions() {
+    let m = model();
+    let k = 6;
+    let space = reduced_space(&m, &small_basis(&m, k), k, None).unwrap();
+    let ae =
+        nn::Autoencoder::with_architecture(k, 2, &[12, 10], nn::Activation::Elu, None, 5).unwrap();
+    let mut inner = NeuralSubspace::new(ae);
+    let star = [1.5, -2.0];
+    let mut tangent = vec![0.0; 2 * k];
+    inner.jacobian(&star, &mut tangent);
+    let generic: Vec<f64> = (0..2 * k).map(|i| (1.3 * i as f64 + 0.5).sin()).collect();
+    let complement = [&tangent[..], &generic].concat();
+    let mut sub = Augmented::with_directions(inner, &space, &time(1), 0, &complement).unwrap();
+    assert_eq!(sub.directions(), 4);
+    let d = sub.latent_dim();
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    for t in 0..50 {
+        let mut target = vec![0.0; d];
+        target[0] = star[0] + 0.3 * (0.7 * t as f64).sin();
+        target[1] = star[1] + 0.3 * (1.1 * t as f64).cos();
+        for (i, w) in target[2..].iter_mut().enumerate() {
+            *w = 0.3 * (0.37 * (t + i) as f64).cos();
+        }
+        let mut q = vec![0.0; k];
+        sub.decode(&target, &mut q);
+        let (mut z, mut back) = (vec![0.0; d], vec![0.0; k]);
+        sub.encode(&q, &mut z);
+        sub.decode(&z, &mut back);
+        let off = norm(&back.iter().zip(&q).map(|(x, y)| x - y).collect::<Vec<_>>());
+        assert!(off <= 1e-8 * norm(&q), "pose {t}: {off} of {}", norm(&q));
+    }
+}
+
 /// Complement directions join the subspace where they are new: one already in the tangent at
 /// rest, or a repeat, is dropped; the kept ones are A-orthogonal to the tangent and to the onset
 /// directions before them; they are added without gravity too; a column of the wrong length is a
