@@ -62,7 +62,9 @@ struct Variant {
     solver: Option<SolverMethod>,
 }
 
-fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant> {
+/// `chosen_k` is the PCA rule's k, `basis_k` the basis's columns with those appended to it (the
+/// autoencoder's input, whose half is the default latent dimension).
+fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions) -> Vec<Variant> {
     let mut v = Vec::new();
     let base = |method: Method, label: String| Variant {
         method,
@@ -90,7 +92,7 @@ fn variants(scene: &Scene, chosen_k: usize, opts: &BenchOptions) -> Vec<Variant>
             .autoencoder
             .latent_dim
             .or(scene.autoencoder.latent_dims.map(|r| r[0]))
-            .unwrap_or(nn::DEFAULT_LATENT_DIM);
+            .unwrap_or_else(|| crate::pipeline::default_latent_dim(basis_k));
         latent_dims = vec![d.div_ceil(2), d, 2 * d];
     }
     latent_dims.sort_unstable();
@@ -230,16 +232,17 @@ pub fn bench(
     stage_progress: Progress<'_>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<BenchRow>> {
-    let chosen_k = {
+    let (chosen_k, basis_k) = {
         let mut p = Pipeline::new(scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
         p.reference(opts.trajectory, stage_progress)?;
         // The rule's k: a variant `dimension = k` then has the scene's own basis, with the same
         // gravity directions appended.
-        p.pca(stage_progress)?.chosen_k()
+        let fit = p.pca(stage_progress)?;
+        (fit.chosen_k(), fit.basis.k())
     };
     let mut rows = Vec::new();
-    for v in variants(scene, chosen_k, opts) {
+    for v in variants(scene, chosen_k, basis_k, opts) {
         on_variant(&v.label);
         let mut p = Pipeline::new(&v.scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
@@ -454,7 +457,7 @@ mod tests {
             complement_dims: vec![8, 0, 8],
             ..options()
         };
-        let found: Vec<(String, Option<usize>)> = variants(&scene, 10, &opts)
+        let found: Vec<(String, Option<usize>)> = variants(&scene, 10, 10, &opts)
             .into_iter()
             .map(|v| (v.label, v.scene.reduced.complement_directions))
             .filter(|(label, _)| label.contains(" c=") && !label.contains(" d="))
@@ -475,7 +478,7 @@ mod tests {
             ..opts
         };
         assert!(
-            variants(&scene, 10, &none)
+            variants(&scene, 10, 10, &none)
                 .iter()
                 .all(|v| !v.label.contains(" c=") || v.label.contains(" d="))
         );
@@ -491,7 +494,7 @@ mod tests {
             ..options()
         };
         let own_rows = |opts: &BenchOptions| {
-            variants(&scene, 10, opts)
+            variants(&scene, 10, 10, opts)
                 .into_iter()
                 .filter(|v| {
                     let at_own_k = v.method == Method::PcaCubature
@@ -507,6 +510,36 @@ mod tests {
         assert_eq!(own_rows(&opts), 1, "as `pca-cubature tol={own}`");
     }
 
+    /// Without `--latent-dims` the sweep takes half, once and twice the scene's latent dimension:
+    /// `[autoencoder] latent_dim` when set, else the pipeline's default for the basis's k (it
+    /// took AutoDef's fixed 6 until 2026-12-02).
+    #[test]
+    fn latent_sizes_default_to_the_scenes_own() {
+        let mut scene = Scene::builtin();
+        scene.autoencoder.latent_dim = None;
+        scene.autoencoder.latent_dims = None;
+        let neural = |scene: &Scene| -> Vec<String> {
+            let opts = BenchOptions {
+                latent_dims: Vec::new(),
+                ..options()
+            };
+            variants(scene, 30, 40, &opts)
+                .into_iter()
+                .filter(|v| v.method == Method::Neural)
+                .map(|v| v.label)
+                .collect()
+        };
+        let d = crate::pipeline::default_latent_dim(40);
+        assert_eq!(d, 20);
+        assert_eq!(
+            neural(&scene),
+            ["neural d=10", "neural d=20"],
+            "2d = 40 > k = 30"
+        );
+        scene.autoencoder.latent_dim = Some(8);
+        assert_eq!(neural(&scene), ["neural d=4", "neural d=8", "neural d=16"]);
+    }
+
     /// Each swept latent dimension also runs `neural-cubature` without complement directions,
     /// unless the scene already has none.
     #[test]
@@ -517,7 +550,7 @@ mod tests {
             ..options()
         };
         let bare = |scene: &Scene| -> Vec<(String, Option<usize>)> {
-            variants(scene, 10, &opts)
+            variants(scene, 10, 10, &opts)
                 .into_iter()
                 .filter(|v| v.label.ends_with(" c=0"))
                 .map(|v| (v.label, v.scene.reduced.complement_directions))
