@@ -88,6 +88,28 @@ fn every_method_survives_every_condition_or_reports_an_error() {
     }
 }
 
+/// With L-BFGS as the scene's solver, `full-lbfgs` beside `full` would repeat it: skipped, as
+/// `run` skips it, where `full-newton` runs.
+#[test]
+fn a_method_forcing_the_scenes_own_solver_is_not_repeated() {
+    let s = scene(&tiny().replace("method = \"newton\"", "method = \"lbfgs\""));
+    assert_eq!(s.solver.method, fem_core::optim::SolverMethod::Lbfgs);
+    let cache = scratch_dir("stress-repeat");
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let methods = [Method::Full, Method::FullLbfgs, Method::FullNewton];
+    let results = stress(
+        &mut p,
+        &methods,
+        &[Condition::Base],
+        0,
+        &no_progress,
+        &mut |_| {},
+    )
+    .unwrap();
+    let ran: Vec<Method> = results.iter().map(|r| r.method).collect();
+    assert_eq!(ran, [Method::Full, Method::FullNewton]);
+}
+
 /// 10,000 steps: the test drag, then no external force. Implicit Euler is dissipative, so the
 /// total energy (elastic + kinetic + gravity) of every method must never rise after the release
 /// (beyond the solver tolerance's slack), and the displacement stays bounded.

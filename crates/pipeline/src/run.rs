@@ -488,9 +488,7 @@ pub fn run(
     let mut rows = Vec::new();
     for &method in &opts.methods {
         // `full` already is the scene's solver: a row forcing the same solver would repeat it.
-        if opts.methods.contains(&Method::Full)
-            && method.forced_full_solver() == Some(pipeline.scene.solver.method)
-        {
+        if method.repeats_full(&opts.methods, pipeline.scene.solver.method) {
             tracing::info!(
                 "{} is the scene's solver, measured as `full`",
                 method.name()

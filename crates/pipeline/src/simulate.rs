@@ -65,6 +65,12 @@ impl Method {
             .map(|i| methods[i])
     }
 
+    /// Whether this method, among `methods`, repeats `full`: it forces the solver that already
+    /// is the scene's (`scene_solver`), and `full` runs too. `run` and `stress` skip it.
+    pub fn repeats_full(self, methods: &[Method], scene_solver: SolverMethod) -> bool {
+        methods.contains(&Method::Full) && self.forced_full_solver() == Some(scene_solver)
+    }
+
     /// The full-space solver this method forces, whatever the scene's (`None` for `full`, which
     /// uses the scene's, and for the reduced methods).
     pub fn forced_full_solver(self) -> Option<SolverMethod> {

@@ -179,6 +179,10 @@ pub fn stress(
         // Full space under the same condition first: the others' error is measured against it.
         let mut reference: Option<Vec<Vec<f64>>> = None;
         for &method in methods {
+            // `full` already is the scene's solver: as in `run`, a method forcing it is skipped.
+            if method.repeats_full(methods, base_scene.solver.method) {
+                continue;
+            }
             let (outcome, trace) = run_one(
                 base,
                 &scene,
