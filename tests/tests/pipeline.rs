@@ -652,3 +652,28 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
     let (_, _, set, _, _) = with("set", "youngs_modulus = 2.0e4", "frames_per_schedule = 60");
     assert_eq!(set.later_start, None, "the scene's length");
 }
+
+/// A simulation that writes no frames (`every` = 0) leaves none of an earlier run's behind: no
+/// `frames/` folder and no `series.pvd` naming files that are gone.
+#[test]
+fn a_run_without_frames_leaves_no_frames_behind() {
+    let s = scene(TINY);
+    let out = scratch_dir("pipeline-no-frames");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let simulate = |p: &mut Pipeline<'_>, every: usize| {
+        let opts = pipeline::simulate::SimulateOptions {
+            method: Method::Full,
+            trajectory: pipeline::simulate::Trajectory::Scene,
+            out: out.join("sim"),
+            frames: Some(4),
+            every,
+            solver: None,
+        };
+        pipeline::simulate::simulate(p, &opts, &|_, _| {}, &mut |_, _| {}).unwrap()
+    };
+    simulate(&mut p, 2);
+    assert!(out.join("sim/series.pvd").is_file() && out.join("sim/frames").is_dir());
+    simulate(&mut p, 0);
+    assert!(!out.join("sim/series.pvd").exists() && !out.join("sim/frames").exists());
+    assert!(out.join("sim/summary.json").is_file());
+}

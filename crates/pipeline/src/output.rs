@@ -15,7 +15,8 @@ pub struct FrameWriter {
 }
 
 impl FrameWriter {
-    /// Prepares `out/frames/`, removing frames an earlier run left there.
+    /// Prepares `out`, removing the frames and the series file an earlier run left there;
+    /// `out/frames/` is made by the first frame written (none when no frame is).
     pub fn new(out: &Path) -> Result<Self> {
         let frames = out.join("frames");
         if frames.is_dir() {
@@ -26,9 +27,15 @@ impl FrameWriter {
                         .with_context(|| format!("cannot remove old frame {}", p.display()))?;
                 }
             }
+            // Left only when something else is in it.
+            let _ = std::fs::remove_dir(&frames);
         }
-        std::fs::create_dir_all(&frames)
-            .with_context(|| format!("cannot create {}", frames.display()))?;
+        let series = out.join("series.pvd");
+        if series.is_file() {
+            std::fs::remove_file(&series)
+                .with_context(|| format!("cannot remove old {}", series.display()))?;
+        }
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
         Ok(Self {
             dir: out.to_path_buf(),
             entries: Vec::new(),
@@ -37,6 +44,11 @@ impl FrameWriter {
 
     /// Writes one frame with displacement `u` (3 per vertex).
     pub fn write(&mut self, mesh: &TetMesh, step: usize, time: f64, u: &[f64]) -> Result<()> {
+        if self.entries.is_empty() {
+            let frames = self.dir.join("frames");
+            std::fs::create_dir_all(&frames)
+                .with_context(|| format!("cannot create {}", frames.display()))?;
+        }
         let name = format!("frames/frame_{step:05}.vtu");
         let disp: Vec<Vec3> = u
             .chunks_exact(3)

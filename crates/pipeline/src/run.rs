@@ -588,10 +588,16 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
     }
     s.push_str(&crate::trust::assess(rows).text(""));
     s.push_str(&format!(
-        "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg); frames: {}/<method>/series.pvd\n",
-        opts.out.join("report.json").display(),
-        opts.out.display()
+        "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg)",
+        opts.out.join("report.json").display()
     ));
+    if opts.every > 0 {
+        s.push_str(&format!(
+            "; frames: {}/<method>/series.pvd",
+            opts.out.display()
+        ));
+    }
+    s.push('\n');
     if let Some(m) = crate::export::run_method(&opts.methods) {
         s.push_str(&format!(
             "model: {}\n",
