@@ -483,8 +483,16 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
     } = args;
     let method = Method::from(method);
     let scene = cx.scene(&common)?;
-    let mut p = cx.pipeline(&scene, &common)?;
     let path = out.unwrap_or_else(|| pipeline::export::model_path(&cx.out(&scene, &[]), method));
+    // Said before any stage runs, not after them.
+    if path.is_dir() {
+        bail!(
+            "`--out` {} is a folder: give the model file's path, e.g. {}",
+            path.display(),
+            pipeline::export::model_path(&path, method).display()
+        );
+    }
+    let mut p = cx.pipeline(&scene, &common)?;
     let rows = if all_rows {
         latent_sim::model::Rows::All
     } else {

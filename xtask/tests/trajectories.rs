@@ -100,3 +100,37 @@ fn a_method_named_twice_is_refused_at_once() {
     );
     assert!(!dir.join("cache").exists(), "a stage ran: {text}");
 }
+
+/// A cache path that is a file is said plainly, before any stage.
+#[test]
+fn a_cache_path_that_is_a_file_is_refused() {
+    let dir = scratch_dir("xtask-cache-file");
+    std::fs::write(dir.join("cache"), "not a folder").unwrap();
+    let (ok, text) = run(&dir, TINY, &[]);
+    assert!(!ok, "{text}");
+    assert!(text.contains("is a file, not a folder"), "{text}");
+}
+
+/// `export --out` naming a folder is refused before any stage runs, with the file path to give.
+#[test]
+fn export_to_a_folder_is_refused_at_once() {
+    let dir = scratch_dir("xtask-export-folder");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, TINY).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["export", "--method", "pca", "--scene"])
+        .arg(&scene)
+        .arg("--cache")
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{text}");
+    assert!(
+        text.contains("is a folder: give the model file's path"),
+        "{text}"
+    );
+    assert!(!dir.join("cache").exists(), "a stage ran: {text}");
+}
