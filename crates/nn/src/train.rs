@@ -491,11 +491,14 @@ pub fn train_search(
         .enumerate()
         .min_by(|a, b| a.1.error.total_cmp(&b.1.error))
         .map_or(0, |(i, _)| i);
-    tracing::warn!(
-        tolerance,
-        best = trials[chosen].error,
-        "no latent dimension met the tolerance"
-    );
+    if let Some(t) = tolerance {
+        tracing::warn!(
+            "no latent dimension met `max_vertex_error` = {t:e}; the closest, d = {}, is {:e} \
+             off",
+            trials[chosen].latent_dim,
+            trials[chosen].error
+        );
+    }
     Ok(LatentSearch {
         trials,
         chosen,
