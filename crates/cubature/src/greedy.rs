@@ -44,7 +44,7 @@ pub struct FitProgress<'a> {
     pub relative_error: f64,
     /// The element budget (`max_elements`, capped by the mesh).
     pub budget: usize,
-    /// The current rule: selected elements (in selection order) and their weights.
+    /// The current rule: selected elements of the mesh (in selection order) and their weights.
     pub selected: &'a [usize],
     pub weights: &'a [f64],
 }
@@ -61,7 +61,8 @@ pub fn fit_with_progress(
     progress: &mut dyn FnMut(&FitProgress<'_>),
 ) -> Result<CubatureRule, CubatureError> {
     config.validate()?;
-    let m = data.num_elements();
+    // Column indices throughout; the rule and the progress name the mesh's elements.
+    let m = data.num_columns();
     let rows = data.rows();
     let b = data.b();
     let b_norm = norm(b);
@@ -157,12 +158,13 @@ pub fn fit_with_progress(
         }
         error = new_error;
         curve.push((selected.len(), error));
+        let elements: Vec<usize> = selected.iter().map(|&c| data.element_of(c)).collect();
         progress(&FitProgress {
             step,
             elements: selected.len(),
             relative_error: error,
             budget,
-            selected: &selected,
+            selected: &elements,
             weights: &w,
         });
         if stalls >= MAX_STALLS {
@@ -171,6 +173,7 @@ pub fn fit_with_progress(
         }
     }
 
+    let selected: Vec<usize> = selected.iter().map(|&c| data.element_of(c)).collect();
     let mut order: Vec<usize> = (0..selected.len()).collect();
     order.sort_unstable_by_key(|&i| selected[i]);
     let rule = CubatureRule {
@@ -182,7 +185,8 @@ pub fn fit_with_progress(
     };
     tracing::info!(
         elements = rule.len(),
-        of = m,
+        of = data.num_elements(),
+        candidates = m,
         training_error = rule.training_error,
         tolerance = config.tolerance,
         steps = step,

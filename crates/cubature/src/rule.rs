@@ -138,7 +138,13 @@ impl CubatureRule {
         self.check_elements(data.num_elements())?;
         let mut r: Vec<f64> = data.b().iter().map(|x| -x).collect();
         for (&e, &w) in self.elements.iter().zip(&self.weights) {
-            for (ri, a) in r.iter_mut().zip(data.column(e)) {
+            let Some(c) = data.column_of(e) else {
+                return Err(CubatureError::InvalidRule(format!(
+                    "element {e} is not among the {} candidate elements the training data keeps",
+                    data.num_columns()
+                )));
+            };
+            for (ri, a) in r.iter_mut().zip(data.column(c)) {
                 *ri += w * a;
             }
         }

@@ -13,10 +13,13 @@
 //!
 //! Memory: A takes 8·P·d·m bytes (m elements) plus 8·P·3n for the pose displacements; 150 poses of
 //! a 49-dimensional basis on 30,000 elements is 1.8 GB. [`CubatureConfig::max_poses`] caps P (a
-//! seeded subsample, as AutoDef fitted on a subset of poses); when those do not fit
-//! [`CubatureConfig::memory_limit_mb`], the subsample shrinks to what does (a warning says so),
-//! and only below [`MIN_POSES`] poses is it [`CubatureError::MemoryLimit`], never an allocation
-//! failure. Poses where an element's force is not finite (inverted under a material undefined
+//! seeded subsample, as AutoDef fitted on a subset of poses). When those do not fit
+//! [`CubatureConfig::memory_limit_mb`], A keeps the columns of a seeded subsample of the elements
+//! only, the candidates the rule is chosen from, down to [`CANDIDATES_PER_RULE_ELEMENT`] times
+//! [`CubatureConfig::max_elements`]; the target b still sums every element's force, evaluated
+//! and added up without being kept. Only then does the pose subsample shrink (a warning says
+//! so), and only below [`MIN_POSES`] poses is it [`CubatureError::MemoryLimit`], never an
+//! allocation failure. Poses where an element's force is not finite (inverted under a material undefined
 //! there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
 //!
 //! [`HeldOutForces`] measures a rule on poses it was not fitted to without that matrix: the
@@ -42,8 +45,19 @@ pub const ZERO_POSE_TOLERANCE: f64 = 1e-10;
 /// The fewest training poses the memory budget may cut a fit down to.
 pub const MIN_POSES: usize = 16;
 
+/// The fewest candidate elements, per element of the rule's budget, that the memory budget may
+/// cut A's columns down to before it cuts poses: a 500-element rule is chosen from at least
+/// 4,000 elements.
+pub const CANDIDATES_PER_RULE_ELEMENT: usize = 8;
+
 /// Salt of the pose-subsample stream, so it differs from the candidate stream of the same seed.
 const POSE_SALT: u64 = 0x7053_4D50_4C45_0001;
+
+/// Salt of the candidate-element subsample of a mesh whose A does not fit the memory budget.
+const ELEMENT_SALT: u64 = 0x454C_454D_454E_0003;
+
+/// Elements per parallel task when summing the forces of the elements A does not keep.
+const OTHERS_BLOCK: usize = 512;
 
 /// Training poses: PCA coefficients and, for a nonlinear subspace, the decoder Jacobians.
 #[derive(Debug, Clone, Copy)]
@@ -75,7 +89,11 @@ impl<'a> Poses<'a> {
 pub struct TrainingMatrix {
     rows: usize,
     dim: usize,
+    /// The mesh's elements.
     elements: usize,
+    /// The element of each column when A keeps a subsample of them (increasing), `None` when
+    /// it keeps every element in order.
+    candidates: Option<Vec<usize>>,
     a: Vec<f64>,
     b: Vec<f64>,
     pose_indices: Vec<usize>,
@@ -102,15 +120,27 @@ impl TrainingMatrix {
         let m = model.elements.len();
         let num_poses = poses.q.ncols();
 
-        // Poses beyond what the memory budget holds are left out of the subsample (with a
-        // warning), down to MIN_POSES: a large mesh then fits the default budget instead of
-        // stopping the stage. Below that the fit would be too thin to trust, and that is an error
-        // naming the settings that would work.
-        let m128 = m as u128;
-        let n_full = model.num_full();
-        let per_pose = 8 * (dim as u128 * m128 + n_full as u128);
+        // A matrix beyond the memory budget keeps the columns of fewer elements first, down to
+        // CANDIDATES_PER_RULE_ELEMENT per element of the rule's budget: the rule is chosen from
+        // those, and the target still sums every element. Then poses are left out of the
+        // subsample (with a warning), down to MIN_POSES: a large mesh fits the default budget
+        // instead of stopping the stage. Below that the fit would be too thin to trust, and that
+        // is an error naming the settings that would work.
+        let n_full = model.num_full() as u128;
         let limit = config.memory_limit_mb as u128 * (1 << 20);
         let wanted = num_poses.min(config.max_poses);
+        let bytes = |poses: usize, columns: usize| {
+            8 * poses as u128 * (dim as u128 * columns as u128 + n_full)
+        };
+        let floor = m.min(CANDIDATES_PER_RULE_ELEMENT.saturating_mul(config.max_elements));
+        let columns = if bytes(wanted, m) <= limit {
+            m
+        } else {
+            let room = limit.saturating_sub(8 * wanted as u128 * n_full)
+                / (8 * wanted as u128 * dim as u128);
+            (room.min(m as u128) as usize).max(floor)
+        };
+        let per_pose = bytes(1, columns);
         let fit = (limit / per_pose).min(wanted as u128) as usize;
         if fit < wanted.min(MIN_POSES) {
             let needed = per_pose * wanted.min(MIN_POSES) as u128;
@@ -119,17 +149,26 @@ impl TrainingMatrix {
                 limit_mb: config.memory_limit_mb,
                 poses: wanted.min(MIN_POSES),
                 dim,
-                elements: m,
+                elements: columns,
             });
+        }
+        if columns < m {
+            tracing::info!(
+                "cubature: the training matrix keeps {columns} of the {m} elements as                  candidates, so that {fit} poses × {dim} reduced coordinates fit                  `cubature.memory_limit_mb` = {}; the target forces sum every element",
+                config.memory_limit_mb
+            );
         }
         if fit < wanted {
             tracing::warn!(
                 "cubature: {fit} of {wanted} training poses fit `cubature.memory_limit_mb` = {} \
-                 ({dim} reduced coordinates × {m} elements, {} MiB a pose); fitting on those",
+                 ({dim} reduced coordinates × {columns} candidate elements of {m}, {} MiB a \
+                 pose); fitting on those",
                 config.memory_limit_mb,
                 per_pose.div_ceil(1 << 20)
             );
         }
+        let candidates =
+            (columns < m).then(|| subsample_with(m, columns, config.seed ^ ELEMENT_SALT));
         let chosen = subsample(num_poses, fit, config.seed);
         let np = chosen.len();
         let rows = np * dim;
@@ -138,34 +177,63 @@ impl TrainingMatrix {
             poses = np,
             dim,
             elements = m,
+            columns,
             mib = (bytes >> 20) as u64,
             "building the cubature training matrix"
         );
 
         let (displacements, jacobians) = chosen_poses(model, basis, &poses, &chosen);
 
-        let mut a = vec![0.0; rows * m];
+        let element_of = |c: usize| candidates.as_ref().map_or(c, |ids| ids[c]);
+        let mut a = vec![0.0; rows * columns];
+        // The forces of the elements A does not keep, summed (zero when it keeps them all).
+        let mut rest = vec![0.0; rows];
+        let mut rest_not_finite = None;
         with_material!(&model.material, |material| {
+            let forces = ElementForces {
+                model,
+                basis,
+                k,
+                displacements: &displacements,
+                jacobians: jacobians.as_deref(),
+            };
             a.par_chunks_mut(rows).enumerate().for_each_init(
                 || (vec![0.0; 12 * k], vec![0.0; k]),
-                |(ue, g), (e, column)| {
-                    let forces = ElementForces {
-                        model,
-                        basis,
-                        k,
-                        displacements: &displacements,
-                        jacobians: jacobians.as_deref(),
-                    };
-                    forces.column(material, e, column, ue, g);
-                },
+                |(ue, g), (c, column)| forces.column(material, element_of(c), column, ue, g),
             );
+            if let Some(ids) = &candidates {
+                let mut kept = vec![false; m];
+                ids.iter().for_each(|&e| kept[e] = true);
+                let others: Vec<usize> = (0..m).filter(|&e| !kept[e]).collect();
+                // Fixed blocks summed in order, so that a seed always gives the same target.
+                let sums: Vec<(Vec<f64>, Option<usize>)> = others
+                    .par_chunks(OTHERS_BLOCK)
+                    .map(|block| {
+                        let (mut sum, mut column) = (vec![0.0; rows], vec![0.0; rows]);
+                        let (mut ue, mut g) = (vec![0.0; 12 * k], vec![0.0; k]);
+                        let mut not_finite = None;
+                        for &e in block {
+                            forces.column(material, e, &mut column, &mut ue, &mut g);
+                            if not_finite.is_none() && column.iter().any(|x| !x.is_finite()) {
+                                not_finite = Some(e);
+                            }
+                            sum.iter_mut().zip(&column).for_each(|(s, x)| *s += x);
+                        }
+                        (sum, not_finite)
+                    })
+                    .collect();
+                for (sum, bad) in sums {
+                    rest.iter_mut().zip(&sum).for_each(|(r, x)| *r += x);
+                    rest_not_finite = rest_not_finite.or(bad);
+                }
+            }
         });
         drop(displacements);
         // A pose where some element's force is not finite (an element that a reconstructed or
         // decoded pose inverts, under a material undefined there) is left out of the fit like a
         // pose at rest; only when every pose is, the stage fails, naming the first such element.
         let mut invalid = vec![false; np];
-        for column in a.chunks(rows) {
+        for column in a.chunks(rows).chain([&rest[..]]) {
             for (p, block) in column.chunks(dim).enumerate() {
                 if !invalid[p] && block.iter().any(|x| !x.is_finite()) {
                     invalid[p] = true;
@@ -173,10 +241,16 @@ impl TrainingMatrix {
             }
         }
         if invalid.iter().all(|&bad| bad) {
-            let idx = a.iter().position(|x| !x.is_finite()).unwrap_or(0);
-            return Err(CubatureError::NonFiniteForce {
-                element: idx / rows,
-                pose: chosen[(idx % rows) / dim],
+            return Err(match a.iter().position(|x| !x.is_finite()) {
+                Some(idx) => CubatureError::NonFiniteForce {
+                    element: element_of(idx / rows),
+                    pose: chosen[(idx % rows) / dim],
+                },
+                // Only among the elements A does not keep.
+                None => CubatureError::NonFiniteForce {
+                    element: rest_not_finite.unwrap_or(0),
+                    pose: chosen[rest.iter().position(|x| !x.is_finite()).unwrap_or(0) / dim],
+                },
             });
         }
         let invalid_poses: Vec<usize> =
@@ -187,7 +261,7 @@ impl TrainingMatrix {
                  there (inverted under the material) and are left out of the fit",
                 invalid_poses.len()
             );
-            for column in a.chunks_mut(rows) {
+            for column in a.chunks_mut(rows).chain([&mut rest[..]]) {
                 for (p, block) in column.chunks_mut(dim).enumerate() {
                     if invalid[p] {
                         block.fill(0.0);
@@ -195,7 +269,8 @@ impl TrainingMatrix {
                 }
             }
         }
-        let b = column_sum(&a, rows, m);
+        let mut b = column_sum(&a, rows, columns);
+        b.iter_mut().zip(&rest).for_each(|(b, r)| *b += r);
         let scales: Vec<f64> = b.chunks(dim).map(norm).collect();
         let largest = scales.iter().copied().fold(0.0, f64::max);
         if largest == 0.0 {
@@ -216,23 +291,29 @@ impl TrainingMatrix {
         }
         let new_rows = keep.len() * dim;
         let inv: Vec<f64> = keep.iter().map(|&p| 1.0 / scales[p]).collect();
-        // Compact and normalise in place: the new column e starts at or before the old one.
-        for e in 0..m {
+        // Compact and normalise in place: the new column c starts at or before the old one.
+        let compact = |column: &mut [f64], c: usize| {
             for (kp, &p) in keep.iter().enumerate() {
-                let (src, dst) = (e * rows + p * dim, e * new_rows + kp * dim);
-                a.copy_within(src..src + dim, dst);
-                for x in &mut a[dst..dst + dim] {
+                let (src, dst) = (c * rows + p * dim, c * new_rows + kp * dim);
+                column.copy_within(src..src + dim, dst);
+                for x in &mut column[dst..dst + dim] {
                     *x *= inv[kp];
                 }
             }
+        };
+        for c in 0..columns {
+            compact(&mut a, c);
         }
-        a.truncate(new_rows * m);
+        compact(&mut rest, 0);
+        a.truncate(new_rows * columns);
         a.shrink_to_fit();
-        let b = column_sum(&a, new_rows, m);
+        let mut b = column_sum(&a, new_rows, columns);
+        b.iter_mut().zip(&rest).for_each(|(b, r)| *b += r);
         Ok(Self {
             rows: new_rows,
             dim,
             elements: m,
+            candidates,
             a,
             b,
             pose_indices: keep.iter().map(|&p| chosen[p]).collect(),
@@ -273,6 +354,7 @@ impl TrainingMatrix {
             rows,
             dim,
             elements: m,
+            candidates: None,
             a: data,
             b: b.to_vec(),
             pose_indices: (0..rows / dim).collect(),
@@ -282,14 +364,34 @@ impl TrainingMatrix {
         })
     }
 
-    /// A as a faer view, rows × elements.
+    /// A as a faer view, rows × columns (a column per element, or per candidate element when
+    /// the matrix keeps a subsample of them: [`TrainingMatrix::element_of`]).
     pub fn a(&self) -> MatRef<'_, f64> {
-        MatRef::from_column_major_slice(&self.a, self.rows, self.elements)
+        MatRef::from_column_major_slice(&self.a, self.rows, self.num_columns())
     }
 
-    /// Column of element `e`: its normalised reduced forces over all poses.
-    pub fn column(&self, e: usize) -> &[f64] {
-        &self.a[e * self.rows..(e + 1) * self.rows]
+    /// Column `c`: the normalised reduced forces of element [`TrainingMatrix::element_of`]`(c)`
+    /// over all poses.
+    pub fn column(&self, c: usize) -> &[f64] {
+        &self.a[c * self.rows..(c + 1) * self.rows]
+    }
+
+    /// Number of columns: the elements a rule is chosen from.
+    pub fn num_columns(&self) -> usize {
+        self.candidates.as_ref().map_or(self.elements, Vec::len)
+    }
+
+    /// The element of column `c`.
+    pub fn element_of(&self, c: usize) -> usize {
+        self.candidates.as_ref().map_or(c, |ids| ids[c])
+    }
+
+    /// The column of element `e`, if the matrix keeps it.
+    pub fn column_of(&self, e: usize) -> Option<usize> {
+        match &self.candidates {
+            None => (e < self.elements).then_some(e),
+            Some(ids) => ids.binary_search(&e).ok(),
+        }
     }
 
     /// The target b = Σ_e a_e (each pose block has unit norm after normalisation).
@@ -307,7 +409,8 @@ impl TrainingMatrix {
         self.dim
     }
 
-    /// Number of elements (columns).
+    /// Number of the mesh's elements (as many as the columns, unless the matrix keeps a
+    /// subsample of them).
     pub fn num_elements(&self) -> usize {
         self.elements
     }
@@ -759,9 +862,14 @@ fn column_sum(a: &[f64], rows: usize, m: usize) -> Vec<f64> {
 
 /// The poses kept: all of them, or a seeded uniform subsample of `max` in increasing order.
 fn subsample(n: usize, max: usize, seed: u64) -> Vec<usize> {
+    subsample_with(n, max, seed ^ POSE_SALT)
+}
+
+/// All of 0..n, or a uniform subsample of `max` in increasing order drawn from `stream`.
+fn subsample_with(n: usize, max: usize, stream: u64) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..n).collect();
     if n > max {
-        let mut rng = SplitMix64::new(seed ^ POSE_SALT);
+        let mut rng = SplitMix64::new(stream);
         for i in 0..max {
             let j = i + rng.below(n - i);
             idx.swap(i, j);

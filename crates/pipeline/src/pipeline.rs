@@ -163,7 +163,13 @@ impl StageSummary for FittedCubature {
                 " (the element budget stopped it before the tolerance)"
             },
             100.0 * self.held_out_error
-        )
+        ) + &self.candidates.map_or(String::new(), |c| {
+            format!(
+                "; chosen from {c} elements drawn at random, so that the forces of {} training \
+                 poses fit `[cubature] memory_limit_mb` (the target forces sum every element)",
+                self.poses
+            )
+        })
     }
 }
 
@@ -268,6 +274,12 @@ pub struct FittedCubature {
     /// fit time, which covers building the training matrix and the greedy fit).
     pub held_out_curve: Vec<(usize, f64)>,
     pub fit_seconds: f64,
+    /// The training poses and, when the training data keeps a subsample of the elements to fit
+    /// `[cubature] memory_limit_mb`, how many the rule was chosen from (`None`: every element).
+    #[serde(default)]
+    pub poses: usize,
+    #[serde(default)]
+    pub candidates: Option<usize>,
 }
 
 /// W F with FFᵀ = (WᵀÂW)⁺ (`w` k×m, `a` = Â k×k): the tangent whose reduced forces Fᵀ Wᵀ f
@@ -1228,6 +1240,8 @@ impl<'a> Pipeline<'a> {
             held_out_error,
             held_out_curve,
             fit_seconds,
+            poses: train.num_poses(),
+            candidates: (train.num_columns() < train.num_elements()).then(|| train.num_columns()),
         })
     }
 

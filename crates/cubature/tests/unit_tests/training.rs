@@ -225,6 +225,63 @@ fn the_memory_limit_shrinks_the_pose_subsample_and_below_the_minimum_is_an_error
     }
 }
 
+/// Beyond the memory budget the matrix first keeps a seeded subsample of the elements as
+/// candidates (down to 8 per element of the rule's budget) and every pose; its columns are the
+/// full matrix's, its target still sums every element, and a rule fitted on it names the mesh's
+/// elements and measures the same on the full matrix.
+#[test]
+fn the_memory_limit_keeps_every_pose_and_fewer_candidate_elements_first() {
+    let model = beam([20, 4, 4]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 40, 1);
+    let m = model.elements.len();
+    let config = CubatureConfig {
+        max_elements: 100,
+        ..Default::default()
+    };
+    let all = TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+    assert_eq!((all.num_columns(), all.num_elements()), (m, m));
+    let tight = CubatureConfig {
+        memory_limit_mb: 5,
+        ..config.clone()
+    };
+    let sub = TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &tight).unwrap();
+    // 40 displacements of 3n values, then as many columns of 40 × k values as 5 MiB holds.
+    let columns = ((5 << 20) - 8 * 40 * model.num_full()) / (8 * 40 * k);
+    assert!(columns < m && columns >= 8 * 100, "{columns}");
+    assert_eq!(sub.num_poses(), 40);
+    assert_eq!((sub.num_columns(), sub.num_elements()), (columns, m));
+    assert_eq!(sub.pose_indices(), all.pose_indices());
+    // The same to round-off: the targets that normalise each pose are summed in another order.
+    let same = |x: &[f64], y: &[f64]| {
+        let size = y.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+        x.iter().zip(y).all(|(a, b)| (a - b).abs() <= 1e-12 * size)
+    };
+    for c in 0..sub.num_columns() {
+        let e = sub.element_of(c);
+        assert_eq!(sub.column_of(e), Some(c));
+        assert!(same(sub.column(c), all.column(e)), "element {e}");
+    }
+    assert!(same(sub.b(), all.b()));
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-10 * y.abs();
+    let rule = fit(&sub, &config).unwrap();
+    assert!(rule.elements.iter().all(|&e| sub.column_of(e).is_some()));
+    let (on_sub, on_all) = (rule.evaluate(&sub).unwrap(), rule.evaluate(&all).unwrap());
+    assert!(close(on_sub, on_all), "{on_sub} against {on_all}");
+    // An element the subsample left out is no part of its data.
+    let left_out = (0..m).find(|&e| sub.column_of(e).is_none()).unwrap();
+    let other = CubatureRule {
+        elements: vec![left_out],
+        weights: vec![1.0],
+        ..rule.clone()
+    };
+    assert!(matches!(
+        other.evaluate(&sub),
+        Err(CubatureError::InvalidRule(_))
+    ));
+    assert!(other.evaluate(&all).is_ok());
+}
+
 #[test]
 fn bad_input_is_reported() {
     let model = beam([4, 1, 1]);
