@@ -711,7 +711,18 @@ fn snapshots(cx: &Context, args: SnapshotsArgs) -> Result<()> {
         }
         (None, Some(n)) => {
             let set = p.merge_shards(n)?;
-            println!("merged {n} shards: {} frames", set.num_frames());
+            let cached = p
+                .outcomes
+                .last()
+                .is_some_and(|o| o.stage == pipeline::stage::Stage::Snapshots && o.cached);
+            if cached {
+                println!(
+                    "the merged snapshots are already in the cache ({} frames): no shard was read",
+                    set.num_frames()
+                );
+            } else {
+                println!("merged {n} shards: {} frames", set.num_frames());
+            }
         }
         (None, None) => {
             let set = p.snapshots(&progress)?;

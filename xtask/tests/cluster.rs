@@ -80,6 +80,17 @@ fn run_array(
         "{}",
         String::from_utf8_lossy(&merge.stderr)
     );
+    let said = String::from_utf8_lossy(&merge.stdout);
+    assert!(said.contains(&format!("merged {SHARDS} shards")), "{said}");
+    // Merging again reads no shard: the merged snapshots are cached, and it says so.
+    let again = xtask(scene, cache, &[], &["--merge", &SHARDS.to_string()])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&again.stdout);
+    assert!(
+        again.status.success() && said.contains("no shard was read"),
+        "{said}"
+    );
     printed
 }
 
