@@ -676,4 +676,21 @@ fn a_run_without_frames_leaves_no_frames_behind() {
     simulate(&mut p, 0);
     assert!(!out.join("sim/series.pvd").exists() && !out.join("sim/frames").exists());
     assert!(out.join("sim/summary.json").is_file());
+    // `run` as well, method by method.
+    for every in [2, 0] {
+        let opts = RunOptions {
+            out: out.join("run"),
+            every,
+            methods: vec![Method::Full],
+            trajectory: 0,
+        };
+        run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+        let method = out.join("run").join("full");
+        assert_eq!(
+            method.join("series.pvd").is_file(),
+            every > 0,
+            "every {every}"
+        );
+        assert_eq!(method.join("frames").is_dir(), every > 0, "every {every}");
+    }
 }

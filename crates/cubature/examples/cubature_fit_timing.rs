@@ -40,7 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         model.dofs.num_free(),
         train.num_poses(),
         train.rows(),
-        (train.rows() * train.num_elements() * 8) as f64 / (1 << 20) as f64
+        (train.rows() * train.num_columns() * 8) as f64 / (1 << 20) as f64
     );
     for tolerance in [0.05, 0.02, 0.01, 0.005, 0.001, 0.0001] {
         let config = CubatureConfig {

@@ -48,7 +48,8 @@ pub struct CubatureConfig {
     pub candidates: usize,
     /// Keep at most this many training poses, chosen by a seeded subsample when more are given
     /// (held-out poses too, [`crate::HeldOutForces`]).
-    /// Each kept pose costs `d · elements` doubles of training matrix.
+    /// Each kept pose costs `d · elements` doubles of training matrix (`d · candidates` on a
+    /// mesh whose matrix keeps a subsample of the elements to fit `memory_limit_mb`).
     pub max_poses: usize,
     /// Seed of the pose subsample and of the candidate draws.
     pub seed: u64,

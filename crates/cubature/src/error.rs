@@ -40,9 +40,10 @@ pub enum CubatureError {
     /// Not even [`crate::training::MIN_POSES`] poses' training matrix fits the memory budget.
     #[error(
         "the cubature training data needs {needed_mb} MiB for the fewest poses a fit uses \
-         ({poses} poses × {dim} reduced coordinates × {elements} elements), above \
+         ({poses} poses × {dim} reduced coordinates × {elements} candidate elements), above \
          `cubature.memory_limit_mb` = {limit_mb}; set `cubature.memory_limit_mb` to at least \
-         {needed_mb}"
+         {needed_mb} (a smaller `cubature.max_elements` also takes fewer candidates, 8 for \
+         each element of the rule)"
     )]
     MemoryLimit {
         needed_mb: u64,

@@ -59,6 +59,10 @@ const ELEMENT_SALT: u64 = 0x454C_454D_454E_0003;
 /// Elements per parallel task when summing the forces of the elements A does not keep.
 const OTHERS_BLOCK: usize = 512;
 
+/// One task's sum of those forces, and the first of its elements whose force is not finite
+/// with the pose block where.
+type BlockSum = (Vec<f64>, Option<(usize, usize)>);
+
 /// Training poses: PCA coefficients and, for a nonlinear subspace, the decoder Jacobians.
 #[derive(Debug, Clone, Copy)]
 pub struct Poses<'a> {
@@ -154,7 +158,9 @@ impl TrainingMatrix {
         }
         if columns < m {
             tracing::info!(
-                "cubature: the training matrix keeps {columns} of the {m} elements as                  candidates, so that {fit} poses × {dim} reduced coordinates fit                  `cubature.memory_limit_mb` = {}; the target forces sum every element",
+                "cubature: the training matrix keeps {columns} of the {m} elements as \
+                 candidates, so that {fit} poses × {dim} reduced coordinates fit \
+                 `cubature.memory_limit_mb` = {}; the target forces sum every element",
                 config.memory_limit_mb
             );
         }
@@ -206,7 +212,7 @@ impl TrainingMatrix {
                 ids.iter().for_each(|&e| kept[e] = true);
                 let others: Vec<usize> = (0..m).filter(|&e| !kept[e]).collect();
                 // Fixed blocks summed in order, so that a seed always gives the same target.
-                let sums: Vec<(Vec<f64>, Option<usize>)> = others
+                let sums: Vec<BlockSum> = others
                     .par_chunks(OTHERS_BLOCK)
                     .map(|block| {
                         let (mut sum, mut column) = (vec![0.0; rows], vec![0.0; rows]);
@@ -214,8 +220,10 @@ impl TrainingMatrix {
                         let mut not_finite = None;
                         for &e in block {
                             forces.column(material, e, &mut column, &mut ue, &mut g);
-                            if not_finite.is_none() && column.iter().any(|x| !x.is_finite()) {
-                                not_finite = Some(e);
+                            if not_finite.is_none()
+                                && let Some(i) = column.iter().position(|x| !x.is_finite())
+                            {
+                                not_finite = Some((e, i / dim));
                             }
                             sum.iter_mut().zip(&column).for_each(|(s, x)| *s += x);
                         }
@@ -247,10 +255,13 @@ impl TrainingMatrix {
                     pose: chosen[(idx % rows) / dim],
                 },
                 // Only among the elements A does not keep.
-                None => CubatureError::NonFiniteForce {
-                    element: rest_not_finite.unwrap_or(0),
-                    pose: chosen[rest.iter().position(|x| !x.is_finite()).unwrap_or(0) / dim],
-                },
+                None => {
+                    let (element, block) = rest_not_finite.unwrap_or((0, 0));
+                    CubatureError::NonFiniteForce {
+                        element,
+                        pose: chosen[block],
+                    }
+                }
             });
         }
         let invalid_poses: Vec<usize> =

@@ -165,8 +165,9 @@ impl StageSummary for FittedCubature {
             100.0 * self.held_out_error
         ) + &self.candidates.map_or(String::new(), |c| {
             format!(
-                "; chosen from {c} elements drawn at random, so that the forces of {} training \
-                 poses fit `[cubature] memory_limit_mb` (the target forces sum every element)",
+                "; chosen from {c} elements drawn at random, so that the training poses' forces \
+                 fit `[cubature] memory_limit_mb` ({} poses fitted; the target forces sum every \
+                 element)",
                 self.poses
             )
         })
@@ -274,11 +275,10 @@ pub struct FittedCubature {
     /// fit time, which covers building the training matrix and the greedy fit).
     pub held_out_curve: Vec<(usize, f64)>,
     pub fit_seconds: f64,
-    /// The training poses and, when the training data keeps a subsample of the elements to fit
-    /// `[cubature] memory_limit_mb`, how many the rule was chosen from (`None`: every element).
-    #[serde(default)]
+    /// The training poses fitted and, when the training data keeps a subsample of the elements
+    /// to fit `[cubature] memory_limit_mb`, how many the rule was chosen from (`None`: every
+    /// element).
     pub poses: usize,
-    #[serde(default)]
     pub candidates: Option<usize>,
 }
 

@@ -809,11 +809,9 @@ pub fn measure(
         every: m.every,
         solver: m.solver,
     };
-    let mut writer = if m.every > 0 {
-        Some(FrameWriter::new(&sim_opts.out)?)
-    } else {
-        None
-    };
+    // Made whatever `every` is: it removes the frames an earlier run left, and makes `frames/`
+    // only for a first frame written.
+    let mut writer = Some(FrameWriter::new(&sim_opts.out)?).filter(|_| m.every > 0);
     if method == Method::Full && !m.time_full {
         // A reference loaded from the cache was timed by another process, on a machine then
         // busier or idler than now: the scene's solver runs the trajectory again here, for its

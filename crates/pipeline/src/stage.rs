@@ -95,13 +95,16 @@ impl Stage {
             // 3: forces fitted in the step's compliance norm (other rules).
             // 4: the held-out error over all the test's frames, from the rule's own columns
             //    (`cubature::HeldOutForces`), not the memory limit's subsample.
-            Stage::Cubature => 4,
+            // 5: on a mesh past the memory limit, every pose and a subsample of the elements as
+            //    candidates (other rules); the poses and candidates stored (new fields).
+            Stage::Cubature => 5,
             // 3: the decoder's Jacobian from SIMD kernels (round-off).
             // 4: forces fitted in the step's compliance norm, with the complement directions
             //    beside the decoder's Jacobian (other rules).
             // 5: poses completed by the complement directions (other rules).
             // 6: the held-out error as for `cubature` 4.
-            Stage::CubatureNeural => 6,
+            // 7: candidates and stored fields as for `cubature` 5.
+            Stage::CubatureNeural => 7,
             // 2: the default explained energy 1 − 10⁻⁷ instead of 1 − 10⁻⁶ (scenes naming no rule).
             // 3: the positions of the fall under gravity appended (`PcaFit::appended`, a new
             //    field the old artifacts lack).
@@ -175,8 +178,8 @@ mod tests {
                 ("snapshots", 12),
                 ("snapshots-shard", 12),
                 ("pca", 4),
-                ("cubature", 4),
-                ("cubature-neural", 6),
+                ("cubature", 5),
+                ("cubature-neural", 7),
                 ("train", 6),
                 ("complement", 3),
                 ("reference", 11),
