@@ -19,8 +19,8 @@
 //! [`CubatureConfig::max_elements`]; the target b still sums every element's force, evaluated
 //! and added up without being kept. Only then does the pose subsample shrink (a warning says
 //! so), and only below [`MIN_POSES`] poses is it [`CubatureError::MemoryLimit`], never an
-//! allocation failure. Poses where an element's force is not finite (inverted under a material undefined
-//! there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
+//! allocation failure. Poses where an element's force is not finite (inverted under a material
+//! undefined there) are left out of the fit and listed ([`TrainingMatrix::invalid_poses`]).
 //!
 //! [`HeldOutForces`] measures a rule on poses it was not fitted to without that matrix: the
 //! targets from one assembly of the whole mesh per pose, the columns of the elements asked

@@ -52,7 +52,7 @@ pub struct MethodReport {
     /// Steps per second, 1000 / `ms_per_step`.
     pub hz: f64,
     /// The faster full-space solver's ms/step (mean) divided by this method's; `None` when no
-    /// full-space solver was timed beside it (`--methods` without `full` or `full-newton`).
+    /// full-space solver was timed beside it (`--methods` naming no full-space method).
     #[serde(default)]
     pub speedup: Option<f64>,
     /// Mean and max over frames of ‖u − u_full‖_M / ‖u_full‖_M.
