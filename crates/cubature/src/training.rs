@@ -59,8 +59,8 @@ const ELEMENT_SALT: u64 = 0x454C_454D_454E_0003;
 /// Elements per parallel task when summing the forces of the elements A does not keep.
 const OTHERS_BLOCK: usize = 512;
 
-/// One task's sum of those forces, and the first of its elements whose force is not finite
-/// with the pose block where.
+/// One task's sum of those forces (poses × k), and the first of its elements whose force is
+/// not finite with the pose where.
 type BlockSum = (Vec<f64>, Option<(usize, usize)>);
 
 /// Training poses: PCA coefficients and, for a nonlinear subspace, the decoder Jacobians.
@@ -211,29 +211,28 @@ impl TrainingMatrix {
                 let mut kept = vec![false; m];
                 ids.iter().for_each(|&e| kept[e] = true);
                 let others: Vec<usize> = (0..m).filter(|&e| !kept[e]).collect();
-                // Fixed blocks summed in order, so that a seed always gives the same target.
+                // Fixed blocks summed in order, so that a seed always gives the same target;
+                // summed in the k PCA coordinates, each pose's tangent applied once after.
                 let sums: Vec<BlockSum> = others
                     .par_chunks(OTHERS_BLOCK)
                     .map(|block| {
-                        let (mut sum, mut column) = (vec![0.0; rows], vec![0.0; rows]);
+                        let mut sum = vec![0.0; np * k];
                         let (mut ue, mut g) = (vec![0.0; 12 * k], vec![0.0; k]);
                         let mut not_finite = None;
                         for &e in block {
-                            forces.column(material, e, &mut column, &mut ue, &mut g);
-                            if not_finite.is_none()
-                                && let Some(i) = column.iter().position(|x| !x.is_finite())
-                            {
-                                not_finite = Some((e, i / dim));
-                            }
-                            sum.iter_mut().zip(&column).for_each(|(s, x)| *s += x);
+                            let bad =
+                                forces.add_reduced_forces(material, e, &mut sum, &mut ue, &mut g);
+                            not_finite = not_finite.or(bad.map(|p| (e, p)));
                         }
                         (sum, not_finite)
                     })
                     .collect();
+                let mut total = vec![0.0; np * k];
                 for (sum, bad) in sums {
-                    rest.iter_mut().zip(&sum).for_each(|(r, x)| *r += x);
+                    total.iter_mut().zip(&sum).for_each(|(t, x)| *t += x);
                     rest_not_finite = rest_not_finite.or(bad);
                 }
+                forces.apply_tangents(&total, &mut rest);
             }
         });
         drop(displacements);
@@ -741,21 +740,11 @@ struct ElementForces<'a, 'b> {
 }
 
 impl ElementForces<'_, '_> {
-    /// g_{e,i} = J_iᵀ U_eᵀ f_e(u_i) of element `e` for every pose i, stacked into `column`
-    /// (poses × d); `ue` (12·k) and `g` (k) are scratch.
-    fn column<M: fem_core::material::Material>(
-        &self,
-        material: &M,
-        e: usize,
-        column: &mut [f64],
-        ue: &mut [f64],
-        g: &mut [f64],
-    ) {
+    /// U_e, 12 × k row-major, zero rows for fixed DOFs, into `ue`.
+    fn basis_rows(&self, e: usize, ue: &mut [f64]) {
         let (k, dofs) = (self.k, &self.model.dofs);
         let nf = dofs.num_free();
-        let elements = &self.model.elements;
-        // U_e, 12 × k row-major, zero rows for fixed DOFs.
-        for (a_local, &v) in elements.tets[e].iter().enumerate() {
+        for (a_local, &v) in self.model.elements.tets[e].iter().enumerate() {
             for c in 0..3 {
                 let row = &mut ue[(3 * a_local + c) * k..(3 * a_local + c + 1) * k];
                 match dofs.index[3 * v + c] {
@@ -768,19 +757,82 @@ impl ElementForces<'_, '_> {
                 }
             }
         }
-        let dim = column.len() / self.displacements.len().max(1);
-        for (p, u) in self.displacements.iter().enumerate() {
-            let (_, f, _) = elements.energy_gradient(material, e, u, 1.0);
-            g.fill(0.0);
-            for (l, &fl) in f.iter().enumerate() {
-                if fl != 0.0 {
-                    for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
-                        *gj += uj * fl;
-                    }
+    }
+
+    /// g = U_eᵀ f_e(u) of element `e` at displacement `u`, U_e in `ue` ([`Self::basis_rows`]).
+    fn reduced_force<M: fem_core::material::Material>(
+        &self,
+        material: &M,
+        e: usize,
+        u: &[f64],
+        ue: &[f64],
+        g: &mut [f64],
+    ) {
+        let k = self.k;
+        let (_, f, _) = self.model.elements.energy_gradient(material, e, u, 1.0);
+        g.fill(0.0);
+        for (l, &fl) in f.iter().enumerate() {
+            if fl != 0.0 {
+                for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
+                    *gj += uj * fl;
                 }
             }
+        }
+    }
+
+    /// g_{e,i} = J_iᵀ U_eᵀ f_e(u_i) of element `e` for every pose i, stacked into `column`
+    /// (poses × d); `ue` (12·k) and `g` (k) are scratch.
+    fn column<M: fem_core::material::Material>(
+        &self,
+        material: &M,
+        e: usize,
+        column: &mut [f64],
+        ue: &mut [f64],
+        g: &mut [f64],
+    ) {
+        self.basis_rows(e, ue);
+        let dim = column.len() / self.displacements.len().max(1);
+        for (p, u) in self.displacements.iter().enumerate() {
+            self.reduced_force(material, e, u, ue, g);
             let out = &mut column[p * dim..(p + 1) * dim];
             tangent_transpose_product(self.jacobians.map(|js| js[p]), g, out);
+        }
+    }
+
+    /// Adds U_eᵀ f_e(u_i) of element `e` for every pose i into `sum` (poses × k, before any
+    /// tangent: J_iᵀ is applied once to the sum); returns the first pose where it is not
+    /// finite.
+    fn add_reduced_forces<M: fem_core::material::Material>(
+        &self,
+        material: &M,
+        e: usize,
+        sum: &mut [f64],
+        ue: &mut [f64],
+        g: &mut [f64],
+    ) -> Option<usize> {
+        self.basis_rows(e, ue);
+        let mut not_finite = None;
+        for (p, u) in self.displacements.iter().enumerate() {
+            self.reduced_force(material, e, u, ue, g);
+            if not_finite.is_none() && g.iter().any(|x| !x.is_finite()) {
+                not_finite = Some(p);
+            }
+            for (s, x) in sum[p * self.k..(p + 1) * self.k].iter_mut().zip(g.iter()) {
+                *s += x;
+            }
+        }
+        not_finite
+    }
+
+    /// `out` (poses × d) = J_iᵀ `sum_i` for each pose block of `sum` (poses × k).
+    fn apply_tangents(&self, sum: &[f64], out: &mut [f64]) {
+        let dim = out.len() / self.displacements.len().max(1);
+        for (p, (s, o)) in sum
+            .chunks_exact(self.k)
+            .zip(out.chunks_exact_mut(dim))
+            .enumerate()
+        {
+            tangent_transpose_product(self.jacobians.map(|js| js[p]), s, o);
         }
     }
 }

@@ -280,6 +280,25 @@ fn the_memory_limit_keeps_every_pose_and_fewer_candidate_elements_first() {
         Err(CubatureError::InvalidRule(_))
     ));
     assert!(other.evaluate(&all).is_ok());
+    // With a tangent per pose (a nonlinear subspace's d = 3 forces), the elements not kept are
+    // summed in the k coordinates and the tangent applied once: the same target to round-off.
+    let tangents: Vec<Mat<f64>> = (0..40)
+        .map(|p| Mat::from_fn(k, 3, |i, j| ((i + 2 * j + p) as f64 * 0.7).sin()))
+        .collect();
+    let refs: Vec<MatRef<'_, f64>> = tangents.iter().map(|t| t.as_ref()).collect();
+    let nonlinear = || Poses::nonlinear(q.as_ref(), &refs);
+    let all = TrainingMatrix::build(&model, &basis, k, nonlinear(), &config).unwrap();
+    // 2 MiB hold every pose with 1,659 of the 1,920 columns of three forces.
+    let tight = CubatureConfig {
+        memory_limit_mb: 2,
+        ..config.clone()
+    };
+    let sub = TrainingMatrix::build(&model, &basis, k, nonlinear(), &tight).unwrap();
+    assert!(sub.num_columns() < m && sub.num_poses() == all.num_poses());
+    assert!(same(sub.b(), all.b()));
+    for c in 0..sub.num_columns() {
+        assert!(same(sub.column(c), all.column(sub.element_of(c))));
+    }
 }
 
 #[test]
