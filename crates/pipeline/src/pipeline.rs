@@ -522,6 +522,11 @@ impl<'a> Pipeline<'a> {
     pub fn new(scene: &'a Scene, cache: &Path) -> Result<Self> {
         let built = scene.build_model()?;
         let model = built.model;
+        let body = BodyCounts {
+            vertices: model.mesh.num_vertices() - built.validation.unreferenced_vertices,
+            held: built.held_vertices,
+            each_pin: built.pin_vertices,
+        };
         let (lo, hi) = model.mesh.bounding_box();
         if let Some(w) = fem_core::mesh::size_warning((hi - lo).norm()) {
             warn_once(&format!("{}: {w}", scene.source));
@@ -565,11 +570,7 @@ impl<'a> Pipeline<'a> {
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,
-            body: BodyCounts {
-                vertices: built.body_vertices,
-                held: built.held_vertices,
-                each_pin: built.pin_vertices,
-            },
+            body,
         })
     }
 

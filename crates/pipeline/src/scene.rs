@@ -332,7 +332,7 @@ impl Scene {
         let pieces = mesh.vertex_components();
         // Vertices no tet uses are no part of the body.
         let in_body = |v: &&usize| pieces.0[**v] != NO_COMPONENT;
-        let body = pieces.0.iter().filter(|&&p| p != NO_COMPONENT).count();
+        let body = mesh.num_vertices() - report.unreferenced_vertices;
         let mut pinned = Vec::new();
         // Each pin's vertices of the body.
         let mut selected = Vec::new();
@@ -375,7 +375,6 @@ impl Scene {
         Ok(BuiltModel {
             model,
             validation: report,
-            body_vertices: body,
             held_vertices: held,
             pin_vertices: selected,
         })
@@ -386,14 +385,13 @@ impl Scene {
 #[derive(Debug)]
 pub struct BuiltModel {
     pub model: FullSpaceModel,
-    /// What validating the mesh found.
+    /// What validating the mesh found (the body's vertices are the mesh's but its
+    /// `unreferenced_vertices`).
     pub validation: ValidationReport,
-    /// The body's vertices: those some tet uses.
-    pub body_vertices: usize,
-    /// How many of them the pins hold.
+    /// How many of the body's vertices the pins hold.
     pub held_vertices: usize,
-    /// How many of them each `[[pin]]` selects, in the scene's order (two pins may select the
-    /// same vertex).
+    /// How many of the body's vertices each `[[pin]]` selects, in the scene's order (two pins
+    /// may select the same vertex).
     pub pin_vertices: Vec<usize>,
 }
 

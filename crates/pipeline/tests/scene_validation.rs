@@ -476,9 +476,9 @@ fn pins_that_hold_every_vertex_are_an_error() {
     builds(&all.replace("max = [1.1,", "max = [0.9,"), Path::new("."));
 }
 
-#[test]
-fn pins_on_vertices_no_tet_uses_hold_nothing() {
-    let dir = scratch("unreferenced");
+/// BASE's beam with one more vertex, which no tet uses, written to `dir/loose.mesh`: the
+/// mesh, that vertex, and BASE reading the file.
+fn beam_with_a_loose_vertex(dir: &Path) -> (TetMesh, usize, String) {
     let mut mesh = beam([4, 1, 1], [0.0, 0.0, 0.0]);
     mesh.vertices.push(fem_core::Vec3::new(-1.0, 0.0, 0.0));
     let loose = mesh.num_vertices() - 1;
@@ -486,8 +486,15 @@ fn pins_on_vertices_no_tet_uses_hold_nothing() {
     let text = edit(
         "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }",
         "path = \"loose.mesh\"",
-    )
-    .replace(
+    );
+    (mesh, loose, text)
+}
+
+#[test]
+fn pins_on_vertices_no_tet_uses_hold_nothing() {
+    let dir = scratch("unreferenced");
+    let (_, loose, text) = beam_with_a_loose_vertex(&dir);
+    let text = text.replace(
         "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
         &format!("indices = [{loose}]"),
     );
@@ -500,24 +507,21 @@ fn pins_on_vertices_no_tet_uses_hold_nothing() {
 #[test]
 fn the_body_line_counts_the_vertices_each_pin_holds() {
     let dir = scratch("body-line");
-    let mut mesh = beam([4, 1, 1], [0.0, 0.0, 0.0]);
-    let x_max: Vec<usize> = (0..mesh.num_vertices())
-        .filter(|&v| mesh.vertices[v].x == 1.0)
-        .collect();
+    let (mesh, loose, text) = beam_with_a_loose_vertex(&dir);
+    let x_max = (0..mesh.num_vertices())
+        .find(|&v| mesh.vertices[v].x == 1.0)
+        .unwrap();
     let x_min = (0..mesh.num_vertices())
         .find(|&v| mesh.vertices[v].x == 0.0)
         .unwrap();
-    mesh.vertices.push(fem_core::Vec3::new(-1.0, 0.0, 0.0));
-    let loose = mesh.num_vertices() - 1;
-    write_medit(&dir.join("loose.mesh"), &mesh);
-    let text = edit(
-        "generate = { kind = \"box\", size = [1.0, 0.2, 0.2], cells = [4, 1, 1] }",
-        "path = \"loose.mesh\"",
-    ) + &format!("\n[[pin]]\nindices = [{loose}, {x_min}, {}]\n", x_max[0]);
+    let text = text + &format!("\n[[pin]]\nindices = [{loose}, {x_min}, {x_max}]\n");
     let scene = Scene::from_str(&text, &dir, "ok.toml").unwrap();
     let built = scene.build_model().unwrap();
     assert_eq!(built.validation.unreferenced_vertices, 1);
-    assert_eq!(built.body_vertices, 20);
+    assert_eq!(
+        built.model.mesh.num_vertices() - built.validation.unreferenced_vertices,
+        20
+    );
     assert_eq!(built.pin_vertices, [4, 2]);
     assert_eq!(built.held_vertices, 5);
     let p = pipeline::pipeline::Pipeline::new(&scene, &dir.join("cache")).unwrap();
