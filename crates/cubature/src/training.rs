@@ -759,24 +759,29 @@ impl ElementForces<'_, '_> {
         }
     }
 
-    /// g = U_eᵀ f_e(u) of element `e` at displacement `u`, U_e in `ue` ([`Self::basis_rows`]).
-    fn reduced_force<M: fem_core::material::Material>(
+    /// g_i = U_eᵀ f_e(u_i) of element `e` at every pose i, each handed to `use_force(i, g_i)`;
+    /// `ue` (12·k) and `g` (k) are scratch.
+    fn each_pose_force<M: fem_core::material::Material>(
         &self,
         material: &M,
         e: usize,
-        u: &[f64],
-        ue: &[f64],
+        ue: &mut [f64],
         g: &mut [f64],
+        mut use_force: impl FnMut(usize, &[f64]),
     ) {
         let k = self.k;
-        let (_, f, _) = self.model.elements.energy_gradient(material, e, u, 1.0);
-        g.fill(0.0);
-        for (l, &fl) in f.iter().enumerate() {
-            if fl != 0.0 {
-                for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
-                    *gj += uj * fl;
+        self.basis_rows(e, ue);
+        for (p, u) in self.displacements.iter().enumerate() {
+            let (_, f, _) = self.model.elements.energy_gradient(material, e, u, 1.0);
+            g.fill(0.0);
+            for (l, &fl) in f.iter().enumerate() {
+                if fl != 0.0 {
+                    for (gj, uj) in g.iter_mut().zip(&ue[l * k..(l + 1) * k]) {
+                        *gj += uj * fl;
+                    }
                 }
             }
+            use_force(p, g);
         }
     }
 
@@ -790,13 +795,11 @@ impl ElementForces<'_, '_> {
         ue: &mut [f64],
         g: &mut [f64],
     ) {
-        self.basis_rows(e, ue);
         let dim = column.len() / self.displacements.len().max(1);
-        for (p, u) in self.displacements.iter().enumerate() {
-            self.reduced_force(material, e, u, ue, g);
+        self.each_pose_force(material, e, ue, g, |p, g| {
             let out = &mut column[p * dim..(p + 1) * dim];
             tangent_transpose_product(self.jacobians.map(|js| js[p]), g, out);
-        }
+        });
     }
 
     /// Adds U_eᵀ f_e(u_i) of element `e` for every pose i into `sum` (poses × k, before any
@@ -810,17 +813,16 @@ impl ElementForces<'_, '_> {
         ue: &mut [f64],
         g: &mut [f64],
     ) -> Option<usize> {
-        self.basis_rows(e, ue);
+        let k = self.k;
         let mut not_finite = None;
-        for (p, u) in self.displacements.iter().enumerate() {
-            self.reduced_force(material, e, u, ue, g);
+        self.each_pose_force(material, e, ue, g, |p, g| {
             if not_finite.is_none() && g.iter().any(|x| !x.is_finite()) {
                 not_finite = Some(p);
             }
-            for (s, x) in sum[p * self.k..(p + 1) * self.k].iter_mut().zip(g.iter()) {
+            for (s, x) in sum[p * k..(p + 1) * k].iter_mut().zip(g) {
                 *s += x;
             }
-        }
+        });
         not_finite
     }
 
