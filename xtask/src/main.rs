@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context as _, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use pipeline::bench::BenchOptions;
@@ -567,14 +567,7 @@ pub(crate) fn methods_once(args: &[MethodArg]) -> Result<Vec<Method>> {
 /// `path`, created if needed, as the folder a command writes into: checked before any stage
 /// runs, so that a file in its place is said at once, not after the pipeline's minutes.
 fn output_folder(path: PathBuf) -> Result<PathBuf> {
-    if path.exists() && !path.is_dir() {
-        bail!(
-            "`--out` {} is a file, not a folder: give a folder to write the results into",
-            path.display()
-        );
-    }
-    std::fs::create_dir_all(&path)
-        .with_context(|| format!("cannot create the output folder {}", path.display()))?;
+    pipeline::output::create_folder(&path, "`--out`", "to write the results into")?;
     Ok(path)
 }
 

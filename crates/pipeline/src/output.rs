@@ -7,6 +7,20 @@ use anyhow::{Context, Result};
 use fem_core::io::vtu;
 use fem_core::{TetMesh, Vec3};
 
+/// Creates folder `path` if needed; `name` says what it is in errors (`the cache folder`,
+/// `` `--out` ``) and `purpose` what it is for. A file in its place is refused plainly, not as
+/// "File exists".
+pub fn create_folder(path: &Path, name: &str, purpose: &str) -> Result<()> {
+    if path.exists() && !path.is_dir() {
+        anyhow::bail!(
+            "{name} {} is a file, not a folder: give a folder {purpose}",
+            path.display()
+        );
+    }
+    std::fs::create_dir_all(path)
+        .with_context(|| format!("cannot create {name} {}", path.display()))
+}
+
 /// Writes the frames of one simulation and, at the end, the series file.
 #[derive(Debug)]
 pub struct FrameWriter {

@@ -543,15 +543,7 @@ impl<'a> Pipeline<'a> {
                 bytes.extend_from_slice(&(i as u64).to_le_bytes());
             }
         }
-        if cache.exists() && !cache.is_dir() {
-            bail!(
-                "the cache folder {} is a file, not a folder: give a folder for the stages' \
-                 artifacts",
-                cache.display()
-            );
-        }
-        std::fs::create_dir_all(cache)
-            .with_context(|| format!("cannot create cache folder {}", cache.display()))?;
+        crate::output::create_folder(cache, "the cache folder", "for the stages' artifacts")?;
         match fem_core::io::remove_stale_temporaries(cache, STALE_TEMPORARY_AGE) {
             Ok(0) => {}
             Ok(n) => tracing::info!(
