@@ -72,9 +72,13 @@ fn run_array(
             text
         })
         .collect();
-    let merge = xtask(scene, cache, &[], &["--merge", &SHARDS.to_string()])
-        .output()
-        .unwrap();
+    let shards = SHARDS.to_string();
+    let merging = || {
+        xtask(scene, cache, &[], &["--merge", &shards])
+            .output()
+            .unwrap()
+    };
+    let merge = merging();
     assert!(
         merge.status.success(),
         "{}",
@@ -83,9 +87,7 @@ fn run_array(
     let said = String::from_utf8_lossy(&merge.stdout);
     assert!(said.contains(&format!("merged {SHARDS} shards")), "{said}");
     // Merging again reads no shard: the merged snapshots are cached, and it says so.
-    let again = xtask(scene, cache, &[], &["--merge", &SHARDS.to_string()])
-        .output()
-        .unwrap();
+    let again = merging();
     let said = String::from_utf8_lossy(&again.stdout);
     assert!(
         again.status.success() && said.contains("no shard was read"),

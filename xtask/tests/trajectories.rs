@@ -2,24 +2,23 @@
 //! them all, `--trajectory i` runs any one (trajectory i does not depend on the count), and a
 //! count a plain run will not take is refused naming the field.
 
+use std::ffi::OsStr;
 use std::path::Path;
 use std::process::Command;
 
 use tests::{TINY, scratch_dir};
 
-/// `xtask run` on `scene` (written into `dir`), pca only, no frames; its exit status and output.
-fn run(dir: &Path, scene: &str, args: &[&str]) -> (bool, String) {
+/// `xtask COMMAND --scene S --cache DIR/cache` with `scene` written into `dir` as S, then
+/// `args`: its exit status and output (stdout, then stderr).
+fn xtask(dir: &Path, scene: &str, command: &str, args: &[&OsStr]) -> (bool, String) {
     let path = dir.join("scene.toml");
     std::fs::write(&path, scene).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
-        .arg("run")
+        .arg(command)
         .arg("--scene")
         .arg(&path)
         .arg("--cache")
         .arg(dir.join("cache"))
-        .arg("--out")
-        .arg(dir.join("out"))
-        .args(["--every", "0", "--methods", "full,pca"])
         .args(args)
         .output()
         .unwrap();
@@ -29,6 +28,19 @@ fn run(dir: &Path, scene: &str, args: &[&str]) -> (bool, String) {
         String::from_utf8_lossy(&out.stderr)
     );
     (out.status.success(), text)
+}
+
+/// `xtask run` on `scene` (written into `dir`), pca only, no frames; its exit status and output.
+fn run(dir: &Path, scene: &str, args: &[&str]) -> (bool, String) {
+    let out = dir.join("out");
+    let mut all: Vec<&OsStr> = vec!["--out".as_ref(), out.as_os_str()];
+    all.extend(
+        ["--every", "0", "--methods", "full,pca"]
+            .iter()
+            .chain(args)
+            .map(OsStr::new),
+    );
+    xtask(dir, scene, "run", &all)
 }
 
 fn pca_errors(report: &Path) -> Vec<f64> {
@@ -115,19 +127,14 @@ fn a_cache_path_that_is_a_file_is_refused() {
 #[test]
 fn export_to_a_folder_is_refused_at_once() {
     let dir = scratch_dir("xtask-export-folder");
-    let scene = dir.join("scene.toml");
-    std::fs::write(&scene, TINY).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
-        .args(["export", "--method", "pca", "--scene"])
-        .arg(&scene)
-        .arg("--cache")
-        .arg(dir.join("cache"))
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{text}");
+    let args: Vec<&OsStr> = vec![
+        "--method".as_ref(),
+        "pca".as_ref(),
+        "--out".as_ref(),
+        dir.as_os_str(),
+    ];
+    let (ok, text) = xtask(&dir, TINY, "export", &args);
+    assert!(!ok, "{text}");
     assert!(
         text.contains("is a folder: give the model file's path"),
         "{text}"
