@@ -211,8 +211,8 @@ struct ExportArgs {
     #[command(flatten)]
     common: Common,
     /// The reduced method whose model to write.
-    #[arg(long, value_enum, default_value_t = MethodArg::NeuralCubature)]
-    method: MethodArg,
+    #[arg(long, value_enum, default_value_t = ReducedMethodArg::NeuralCubature)]
+    method: ReducedMethodArg,
     /// Model file (default: out/SCENE/METHOD.ldm).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -255,6 +255,26 @@ impl From<MethodArg> for Method {
             MethodArg::PcaCubature => Method::PcaCubature,
             MethodArg::Neural => Method::Neural,
             MethodArg::NeuralCubature => Method::NeuralCubature,
+        }
+    }
+}
+
+/// The methods a model file can hold: the reduced ones (full space has no trained model).
+#[derive(Clone, Copy, ValueEnum)]
+enum ReducedMethodArg {
+    Pca,
+    PcaCubature,
+    Neural,
+    NeuralCubature,
+}
+
+impl From<ReducedMethodArg> for Method {
+    fn from(m: ReducedMethodArg) -> Self {
+        match m {
+            ReducedMethodArg::Pca => Method::Pca,
+            ReducedMethodArg::PcaCubature => Method::PcaCubature,
+            ReducedMethodArg::Neural => Method::Neural,
+            ReducedMethodArg::NeuralCubature => Method::NeuralCubature,
         }
     }
 }

@@ -141,3 +141,16 @@ fn export_to_a_folder_is_refused_at_once() {
     );
     assert!(!dir.join("cache").exists(), "a stage ran: {text}");
 }
+
+/// `export` offers only the methods that have a model: a full-space one is refused by the
+/// command line itself, with the reduced ones listed.
+#[test]
+fn export_refuses_a_full_space_method_at_once() {
+    let dir = scratch_dir("xtask-export-full");
+    let args: Vec<&OsStr> = vec!["--method".as_ref(), "full".as_ref()];
+    let (ok, text) = xtask(&dir, TINY, "export", &args);
+    assert!(!ok, "{text}");
+    assert!(text.contains("invalid value 'full'"), "{text}");
+    assert!(text.contains("neural-cubature"), "{text}");
+    assert!(!dir.join("cache").exists(), "a stage ran: {text}");
+}
