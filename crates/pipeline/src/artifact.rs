@@ -26,11 +26,13 @@ pub const FORMAT_VERSION: u32 = 2;
 /// Why an artifact could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ArtifactError {
-    #[error("{path}: cannot read: {source}; re-run `{}` to rebuild it", .stage.rebuild_command())]
+    /// The I/O error is part of the message, not a source error: a chain printed whole
+    /// (`{:#}`) would say it twice.
+    #[error("{path}: cannot read: {cause}; re-run `{}` to rebuild it", .stage.rebuild_command())]
     Io {
         path: String,
         stage: Stage,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{path}: {reason}; re-run `{}` to rebuild it", .stage.rebuild_command())]
     Invalid {
@@ -45,7 +47,7 @@ impl ArtifactError {
     /// rebuilds it itself.
     pub fn problem(&self) -> String {
         match self {
-            Self::Io { path, source, .. } => format!("{path}: cannot read: {source}"),
+            Self::Io { path, cause, .. } => format!("{path}: cannot read: {cause}"),
             Self::Invalid { path, reason, .. } => format!("{path}: {reason}"),
         }
     }
@@ -137,10 +139,10 @@ pub struct Expect {
 pub fn load<T: DeserializeOwned>(path: &Path, expect: Expect) -> Result<T, ArtifactError> {
     let shown = path.display().to_string();
     let stage = expect.stage;
-    let bytes = std::fs::read(path).map_err(|source| ArtifactError::Io {
+    let bytes = std::fs::read(path).map_err(|cause| ArtifactError::Io {
         path: shown.clone(),
         stage,
-        source,
+        cause,
     })?;
     let invalid = |reason: String| ArtifactError::Invalid {
         path: shown.clone(),

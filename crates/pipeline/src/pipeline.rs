@@ -919,7 +919,12 @@ impl<'a> Pipeline<'a> {
                         mesh: Some(p.mesh_hash),
                     },
                 )
-                .with_context(|| format!("shard {index}/{count} is missing or unusable; run `cargo xtask snapshots --shard {index}/{count}`"))?;
+                .map_err(|e| {
+                    anyhow::anyhow!(
+                        "shard {index}/{count} is missing or unusable ({}); run `cargo xtask snapshots --shard {index}/{count}`",
+                        e.problem()
+                    )
+                })?;
                 parts.push(part);
             }
             let set =

@@ -208,6 +208,9 @@ fn corrupt_and_load<T: DeserializeOwned>(good: &Path, mesh: u64, other_mesh: u64
     match artifact::load::<T>(&path, expect) {
         Err(e @ ArtifactError::Io { .. }) => {
             assert!(e.to_string().contains(stage.rebuild_command()), "{e}");
+            // The error's whole chain says the I/O error once.
+            let chain = format!("{:#}", anyhow::Error::new(e));
+            assert_eq!(chain.matches("(os error").count(), 1, "{chain}");
             tally.detected += 1;
         }
         other => tally
