@@ -565,6 +565,21 @@ fn errors_from_files_name_the_file() {
     Scene::from_file(&path).unwrap().build_model().unwrap();
 }
 
+/// A surface mesh is refused beside the scene's other errors (here the missing pin), with the
+/// commands that tetrahedralize it; it used to wait until the pin was added.
+#[test]
+fn a_surface_mesh_is_said_with_the_other_errors() {
+    let dir = scratch("surface");
+    std::fs::write(dir.join("body.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, "name = \"s\"\n[mesh]\npath = \"body.obj\"\n").unwrap();
+    let err = format!("{:#}", Scene::from_file(&path).unwrap_err());
+    assert!(err.contains("mesh.path"), "{err}");
+    assert!(err.contains("a surface mesh"), "{err}");
+    assert!(err.contains("tetgen -pqg"), "{err}");
+    assert!(err.contains("add a [[pin]] section"), "{err}");
+}
+
 /// This package's folder, read when the test runs: `cargo test` sets `CARGO_MANIFEST_DIR` for
 /// the test process too, so a copy of the checkout tested against the same build (`.ci/run`
 /// does this) reads the copy's `data/` and looks for `shared/` beside the copy.

@@ -102,6 +102,15 @@ fn format_of(path: &Path) -> Result<Format, MeshError> {
     }
 }
 
+/// Whether [`read_mesh`] takes `path`'s format (by its extension), without reading it: the
+/// error says what to do with a format it does not read (a surface mesh, say).
+///
+/// # Errors
+/// [`MeshError::UnsupportedFormat`] with that advice.
+pub fn check_format(path: &Path) -> Result<(), MeshError> {
+    format_of(path).map(|_| ())
+}
+
 /// Whether [`read_mesh`] reads `path` by its extension, counting a TetGen pair once (by its
 /// `.ele` file): for listing the meshes of a folder.
 pub fn is_mesh_file(path: &Path) -> bool {

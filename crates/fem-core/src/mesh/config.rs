@@ -48,7 +48,8 @@ impl MeshConfig {
     }
 
     /// Appends one error per problem that shows without reading or building the mesh: not
-    /// exactly one of `path` and `generate`, a file that does not exist, an invalid box.
+    /// exactly one of `path` and `generate`, a file that does not exist or is of a format no
+    /// reader takes, an invalid box.
     pub fn check(&self, base_dir: &Path, errors: &mut Vec<FemError>) {
         match (&self.path, &self.generate) {
             (Some(_), None) => {
@@ -57,6 +58,12 @@ impl MeshConfig {
                     errors.push(FemError::InvalidConfig {
                         field: "mesh.path".into(),
                         reason: format!("no mesh file at {}", path.display()),
+                    });
+                } else if let Err(e) = crate::io::check_format(&path) {
+                    // Said beside the scene's other errors, not after them are mended.
+                    errors.push(FemError::InvalidConfig {
+                        field: "mesh.path".into(),
+                        reason: e.to_string(),
                     });
                 }
             }
