@@ -531,6 +531,9 @@ impl<'a> Pipeline<'a> {
         if let Some(w) = fem_core::mesh::size_warning((hi - lo).norm()) {
             warn_once(&format!("{}: {w}", scene.source));
         }
+        if let Some(w) = crate::scene::weight_warning(scene, (hi - lo).into()) {
+            warn_once(&format!("{}: {w}", scene.source));
+        }
         let mut bytes =
             Vec::with_capacity(model.mesh.num_vertices() * 24 + model.mesh.num_tets() * 32);
         for v in &model.mesh.vertices {

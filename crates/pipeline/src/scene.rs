@@ -16,6 +16,39 @@ use fem_core::optim::SolverConfig;
 use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
 use pca::PcaConfig;
 
+/// The share of a body's extent along a pin plane's axis that [`Scene::build_model`]'s advice
+/// (and the mesh suite's minimal scenes) pin: 2 %, the bottom of a standing body.
+pub const WIDER_PIN: f64 = 0.02;
+
+/// A body whose own weight would strain it by more than this (ρ g H / E, H its height along
+/// gravity) cannot stand or hang as the solid it is modelled as: a 25 cm body of E = 10⁵ Pa
+/// is at 0.025, a 2 m one at 0.2; a 15 m bunny whose file was in centimetres at 1.5.
+pub const HEAVY_BODY: f64 = 0.25;
+
+/// What to say of a body that its own weight strains by more than [`HEAVY_BODY`]: most often a
+/// mesh in other units than metres, else too soft a material. `extent` is the body's bounding
+/// box size (metres).
+pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
+    let g = scene.gravity.acceleration;
+    let g_norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if !scene.gravity.is_on() || !g_norm.is_finite() {
+        return None;
+    }
+    let height: f64 = (0..3).map(|i| (g[i] / g_norm).abs() * extent[i]).sum();
+    let m = &scene.material;
+    let strain = m.density * g_norm * height / m.youngs_modulus;
+    (strain > HEAVY_BODY).then(|| {
+        format!(
+            "its own weight strains the body by about ρgH/E = {strain:.2} (ρ = {} kg/m³, g = \
+             {g_norm:.2} m/s², H = {height:.3} m its height along gravity, E = {:.1e} Pa), more \
+             than a solid carries: it will sag or collapse under gravity alone. If the mesh is not \
+             in metres, set `[mesh] scale` (0.01 for centimetres, 0.001 for millimetres); else a \
+             stiffer `[material] youngs_modulus`",
+            m.density, m.youngs_modulus
+        )
+    })
+}
+
 /// The built-in default scene, also shipped as `data/cantilever.toml`.
 pub const DEFAULT_SCENE: &str = include_str!("../../../data/cantilever.toml");
 
@@ -264,9 +297,41 @@ impl Scene {
                 ),
             });
         }
-        for line in loosely_held(mesh, pinned, piece, count) {
+        let weight = self.gravity.is_on() && !self.time.quasi_static;
+        let remedy = self.wider_pin(mesh);
+        for line in loosely_held(mesh, pinned, piece, count, weight, &remedy) {
             crate::pipeline::warn_once(&format!("{}: {line}", self.source));
         }
+    }
+
+    /// What holds a body the pins hold at a point or along a line: the first pin plane with a
+    /// tolerance of [`WIDER_PIN`] of the body's extent along its axis, and how many vertices
+    /// that selects; or a `box` when no pin is a plane (or the wider plane adds nothing).
+    fn wider_pin(&self, mesh: &TetMesh) -> String {
+        let (lo, hi) = mesh.bounding_box();
+        let wider = self.pin.iter().enumerate().find_map(|(i, p)| {
+            let plane = p.plane.as_ref()?;
+            let a = plane.axis.index();
+            let tolerance = WIDER_PIN * (hi[a] - lo[a]);
+            let mut wide = plane.clone();
+            wide.tolerance = Some(tolerance);
+            let selection = VertexSelection {
+                plane: Some(wide),
+                ..Default::default()
+            };
+            let held = selection.select(mesh, "pin").ok()?.len();
+            (held > 1).then(|| {
+                format!(
+                    "pin[{i}]'s plane with `tolerance = {tolerance:.3e}` ({:.0} % of the body's \
+                     extent along {}) holds {held} vertices, or a `box` holds it fixed",
+                    100.0 * WIDER_PIN,
+                    ["x", "y", "z"][a],
+                )
+            })
+        });
+        wider.unwrap_or_else(|| {
+            "a pin plane's larger `tolerance`, or a `box`, holds it fixed".to_string()
+        })
     }
 
     /// With the mesh loaded: the pins must leave some vertex of the body free. `body` counts
@@ -399,7 +464,16 @@ pub struct BuiltModel {
 /// each a sentence: such a piece turns about them (a pin plane whose default tolerance caught
 /// the one lowest vertex of a curved body hangs it like a pendulum). Allowed, since a hinge may
 /// be meant, and said. `piece` and `count` are [`TetMesh::vertex_components`].
-fn loosely_held(mesh: &TetMesh, pinned: &[usize], piece: &[usize], count: usize) -> Vec<String> {
+/// `weight`: whether gravity loads the body, so that one vertex would carry it all; `remedy`
+/// what holds it instead.
+fn loosely_held(
+    mesh: &TetMesh,
+    pinned: &[usize],
+    piece: &[usize],
+    count: usize,
+    weight: bool,
+    remedy: &str,
+) -> Vec<String> {
     let mut lines = Vec::new();
     for c in 0..count {
         let at: Vec<fem_core::Vec3> = pinned
@@ -420,9 +494,17 @@ fn loosely_held(mesh: &TetMesh, pinned: &[usize], piece: &[usize], count: usize)
         } else {
             (format!("by {} vertices on one line", at.len()), "that line")
         };
+        // One vertex cannot carry a weight: a point load on a finite-element mesh stretches the
+        // elements around it without limit (a bunny hung so stretched them 3.6× in 1 s while
+        // the rest fell freely).
+        let carried = if weight && at.len() == 1 {
+            ", and one vertex cannot carry its weight: the elements around it stretch without \
+             limit while the rest falls"
+        } else {
+            ""
+        };
         lines.push(format!(
-            "the pins hold {what} {how}, so it can turn about {about}; a pin plane's larger \
-             `tolerance`, or a `box`, holds it fixed"
+            "the pins hold {what} {how}, so it can turn about {about}{carried}; {remedy}"
         ));
     }
     lines
@@ -659,15 +741,39 @@ mod tests {
             .filter(|&v| mesh.vertices[v].x == 0.0)
             .collect();
         assert_eq!(at_x0.len(), 4);
-        assert!(loosely_held(&mesh, &at_x0, &piece, count).is_empty());
-        let one = loosely_held(&mesh, &at_x0[..1], &piece, count);
+        let held =
+            |pinned: &[usize], weight| loosely_held(&mesh, pinned, &piece, count, weight, "R");
+        assert!(held(&at_x0, true).is_empty());
+        let one = held(&at_x0[..1], true);
         assert_eq!(one.len(), 1);
         assert!(one[0].contains("the body at a single vertex"), "{one:?}");
+        assert!(one[0].contains("cannot carry its weight"), "{one:?}");
+        assert!(one[0].ends_with("; R"), "{one:?}");
+        assert!(!held(&at_x0[..1], false)[0].contains("weight"));
         let edge: Vec<usize> = (0..mesh.num_vertices())
             .filter(|&v| mesh.vertices[v].y == 0.0 && mesh.vertices[v].z == 0.0)
             .collect();
-        let line = loosely_held(&mesh, &edge, &piece, count);
+        let line = held(&edge, true);
         assert!(line[0].contains("by 5 vertices on one line"), "{line:?}");
+        assert!(!line[0].contains("weight"), "{line:?}");
+    }
+
+    /// A body its own weight would strain past [`HEAVY_BODY`] is said, with `[mesh] scale`
+    /// first: the built-in scene is far below it, the same bar 100 times larger above.
+    #[test]
+    fn a_body_too_heavy_for_its_stiffness_is_said() {
+        let s = Scene::builtin();
+        let model = s.build_model().unwrap().model;
+        let (lo, hi) = model.mesh.bounding_box();
+        let extent: [f64; 3] = (hi - lo).into();
+        assert_eq!(weight_warning(&s, extent), None);
+        let large = extent.map(|x| 100.0 * x);
+        let w = weight_warning(&s, large).expect("a bar 100 times larger");
+        assert!(w.contains("`[mesh] scale`"), "{w}");
+        assert!(w.contains("youngs_modulus"), "{w}");
+        let mut weightless = s.clone();
+        weightless.gravity.acceleration = [0.0; 3];
+        assert_eq!(weight_warning(&weightless, large), None);
     }
 
     #[test]

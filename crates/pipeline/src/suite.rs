@@ -38,8 +38,9 @@ pub const METHODS: [Method; 6] = [
 ];
 
 /// The fraction of the mesh's height pinned at its bottom (AutoDef pinned the vertices within
-/// a tolerance of the lowest plane; 2 % is the dinosaur's 5 mm of 25 cm).
-pub const PIN_FRACTION: f64 = 0.02;
+/// a tolerance of the lowest plane; 2 % is the dinosaur's 5 mm of 25 cm): what a scene's
+/// single-vertex pin is advised to widen to.
+pub const PIN_FRACTION: f64 = crate::scene::WIDER_PIN;
 
 /// A mesh of the suite: a file, or a shape generated in code (the long run's large meshes).
 #[derive(Debug, Clone, PartialEq)]
