@@ -152,11 +152,20 @@ pub struct Compression {
     /// Whether the material is stable Neo-Hookean, which already resists inversion: then only
     /// a stiffer body helps.
     pub inversion_safe: bool,
+    /// The largest principal stretch of any element over the frames, when one passes
+    /// [`Compression::STRETCHED`], and the time (s) of its frame: a body hung from one vertex,
+    /// or pulled past what a solid takes, stretches the elements at the grip without limit.
+    pub stretched: Option<(f64, f64)>,
 }
 
 impl Compression {
     /// An element below this det F counts as squeezed.
     pub const SQUEEZED: f64 = 0.5;
+
+    /// A principal stretch past this (three times an element's length along one direction) is
+    /// far past what the test's loads do to a body that carries them: the drags pull by at most
+    /// a tenth of the body's size.
+    pub const STRETCHED: f64 = 3.0;
 
     /// Over `frames` of free displacements of `model`, each taken `step` seconds after the last
     /// (the first at `step`). None without frames.
@@ -182,7 +191,25 @@ impl Compression {
                     model.material,
                     fem_core::material::AnyMaterial::StableNeoHookean(_)
                 ),
+                stretched: None,
             });
+            // The largest singular value of F is at most its Frobenius norm, so only the elements
+            // whose norm passes the limit need it.
+            for e in 0..model.elements.len() {
+                let f = model.elements.deformation_gradient(e, &u);
+                if f.norm() <= Self::STRETCHED {
+                    continue;
+                }
+                let largest = (f.transpose() * f)
+                    .symmetric_eigenvalues()
+                    .iter()
+                    .copied()
+                    .fold(0.0, f64::max)
+                    .sqrt();
+                if largest > Self::STRETCHED && o.stretched.is_none_or(|(s, _)| largest > s) {
+                    o.stretched = Some((largest, time));
+                }
+            }
             let smallest = ratios.iter().copied().fold(f64::INFINITY, f64::min);
             if smallest < o.volume_ratio {
                 (o.volume_ratio, o.time) = (smallest, time);
@@ -1331,6 +1358,17 @@ mod tests {
         assert_eq!((mild.squeezed_share, mild.inverted_frames), (0.0, 0));
         assert!((mild.volume_ratio - 0.9).abs() < 1e-12, "{mild:?}");
         assert!(super::Compression::of(&model, &[], 0.01).is_none());
+        // No frame above stretched anything past the limit; one pulled up to 5 times its height
+        // (F = diag(1, 5, 1)) does, and when.
+        assert_eq!(c.stretched, None);
+        let pulled = super::Compression::of(&model, &[frame(0.1), frame(-4.0), frame(-1.5)], 0.01)
+            .unwrap()
+            .stretched
+            .expect("stretched 5 times");
+        assert!(
+            (pulled.0 - 5.0).abs() < 1e-9 && (pulled.1 - 0.02).abs() < 1e-12,
+            "{pulled:?}"
+        );
     }
 
     /// A report row's method is written as its name, in JSON as in the tables.

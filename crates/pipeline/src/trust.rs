@@ -127,6 +127,27 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
     ))
 }
 
+/// The warning of the row that carries the reference's compression when the test trajectory
+/// stretches an element past [`Compression::STRETCHED`](crate::run::Compression::STRETCHED):
+/// the pins or the loads pull the body apart, which the volume alone does not show (a body
+/// hung from one vertex keeps its elements' volumes while those at the vertex lengthen).
+fn stretch_warning(r: &MethodReport) -> Option<String> {
+    let (stretch, time) = r.compression.as_ref()?.stretched?;
+    let who = if r.method.is_full() {
+        format!("{}: the full-space simulation of the test", r.method)
+    } else {
+        "the full-space reference of the test".to_string()
+    };
+    Some(format!(
+        "{who} stretches an element to {stretch:.1} times its length along one direction at \
+         t = {time:.2} s: the pins or the loads pull the body apart, past what it models as a \
+         solid (one vertex holding its weight, or loads far beyond its stiffness), and the \
+         reduced methods are measured against that; more pinned vertices (a pin plane's \
+         `tolerance`, a `box`), a stiffer material (`youngs_modulus`) or lighter loads keep it \
+         whole"
+    ))
+}
+
 /// What the full simulation started from a drifting method's state says of its drift.
 fn restart_warning(r: &MethodReport) -> Option<String> {
     let s = r.restart?;
@@ -235,6 +256,7 @@ impl Assessment {
 /// [`OUTSIDE_TRAINING`] of the training poses.
 pub fn assess(rows: &[MethodReport]) -> Assessment {
     let mut out: Vec<String> = rows.iter().filter_map(collapse_warning).collect();
+    out.extend(rows.iter().filter_map(stretch_warning));
     // Methods whose trajectory left the training poses and still held, with the advice.
     let mut held_outside: Vec<(&MethodReport, String)> = Vec::new();
     for r in rows.iter().filter(|r| !r.method.is_full()) {
@@ -379,6 +401,7 @@ mod tests {
                 squeezed_share: share,
                 squeezed_time: 0.5,
                 inversion_safe: false,
+                stretched: None,
             }),
             ..row(Method::Full, 0.0, 0.0)
         };
@@ -420,6 +443,40 @@ mod tests {
             reduced[0].starts_with("the full-space reference of the test squeezes 20.0 %"),
             "{}",
             reduced[0]
+        );
+    }
+
+    /// A full trajectory that stretches an element past the limit is named, with the pins
+    /// first among the remedies; no stretch, no warning.
+    #[test]
+    fn a_full_trajectory_that_pulls_the_body_apart_is_named() {
+        let full = |stretched| MethodReport {
+            compression: Some(crate::run::Compression {
+                volume_ratio: 0.26,
+                time: 0.75,
+                inverted_frames: 0,
+                squeezed_share: 1e-4,
+                squeezed_time: 0.5,
+                inversion_safe: true,
+                stretched,
+            }),
+            ..row(Method::Full, 0.0, 0.0)
+        };
+        assert_eq!(assess(&[full(None)]), Assessment::default());
+        let pulled = assess(&[full(Some((3.6, 1.0)))]).untrusted;
+        assert_eq!(pulled.len(), 1, "{pulled:?}");
+        assert!(
+            pulled[0].starts_with(
+                "full: the full-space simulation of the test stretches an element to 3.6 times \
+                 its length along one direction at t = 1.00 s"
+            ),
+            "{}",
+            pulled[0]
+        );
+        assert!(
+            pulled[0].contains("a pin plane's `tolerance`"),
+            "{}",
+            pulled[0]
         );
     }
 
