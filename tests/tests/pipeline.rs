@@ -328,15 +328,20 @@ fn linear_directions_default_to_the_counts_chosen() {
         0 => String::new(),
         r => format!(", the PCA basis's {r} patch responses"),
     };
+    let most = (2 + 2 + count + fit.responses).min(fit.basis.k());
     assert_eq!(
         line,
         format!(
             "neural methods: d = 2 latent coordinates, 2 gravity-onset directions (the default \
              under gravity), {count} complement directions (what the data asks for, see stage \
-             complement){responses}"
+             complement){responses}: at most {most} coordinates, fewer where a direction lies in \
+             the span of the decoder and the others (the table's dim)"
         )
     );
     let chosen = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);
+    for r in &chosen {
+        assert!(r.dim <= most, "{} coordinates, at most {most} said", r.dim);
+    }
     let written = scene(&format!(
         "{TINY}[reduced]\nonset_directions = {}\ncomplement_directions = {count}\n",
         latent_sim::DEFAULT_ONSET_DIRECTIONS

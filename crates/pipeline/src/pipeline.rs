@@ -1456,14 +1456,18 @@ impl<'a> Pipeline<'a> {
             None => "what the data asks for, see stage complement",
         };
         let responses = self.pca(progress)?.responses;
-        let responses = if responses > 0 {
+        let responses_text = if responses > 0 {
             format!(", the PCA basis's {responses} patch responses")
         } else {
             String::new()
         };
+        // The table's dim is what remains once the model is built.
+        let most = (d + onset + complement + responses).min(self.pca(progress)?.basis.k());
         Ok(format!(
             "neural methods: d = {d} latent coordinates, {onset} gravity-onset directions \
-             ({onset_why}), {complement} complement directions ({complement_why}){responses}"
+             ({onset_why}), {complement} complement directions ({complement_why}){responses_text}: \
+             at most {most} coordinates, fewer where a direction lies in the span of the decoder \
+             and the others (the table's dim)"
         ))
     }
 

@@ -777,9 +777,16 @@ pub fn set_speedups(rows: &mut [MethodReport]) {
     }
 }
 
-/// A speed-up as a table cell with `digits` decimals (a dash where no full-space solver ran).
+/// A speed-up as a table cell with `digits` decimals, at least one below 10× (a suite's 0.4×
+/// read `0×` with none), and a dash where no full-space solver ran.
 pub(crate) fn speedup_cell(speedup: Option<f64>, digits: usize) -> String {
-    speedup.map_or_else(|| "—".into(), |x| format!("{x:.digits$}×"))
+    speedup.map_or_else(
+        || "—".into(),
+        |x| {
+            let digits = if x < 10.0 { digits.max(1) } else { digits };
+            format!("{x:.digits$}×")
+        },
+    )
 }
 
 /// One method measured on a test trajectory.

@@ -405,8 +405,11 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
             _ => s += " — |",
         }
         s += "\n";
+    }
+    // Below the table, not between its rows, which would end it there.
+    for r in rows {
         if let Some(f) = &r.failure {
-            s += &format!("\n{}: stopped: {f}\n\n", r.scene);
+            s += &format!("\n{}: stopped: {f}\n", r.scene);
         }
     }
     s += &spread_markdown(rows);
@@ -503,6 +506,41 @@ mod tests {
             ..at(0.05, 0.01)
         };
         assert_eq!(standing(&failed, &p), "—");
+    }
+
+    /// A mesh whose pipeline stopped is said below the table, which stays one table (a note
+    /// between its rows ended it there); a speed-up below 10× keeps a decimal.
+    #[test]
+    fn a_stopped_mesh_is_said_below_the_table() {
+        let row = |scene: &str, failure: Option<&str>, speedup| SuiteRow {
+            scene: scene.into(),
+            vertices: 10,
+            tets: 20,
+            pipeline_seconds: 1.0,
+            methods: vec![MethodReport {
+                method: Method::Pca,
+                mean_rel_error: 0.02,
+                speedup,
+                ..Default::default()
+            }],
+            trajectories: Vec::new(),
+            trajectories_seconds: None,
+            trajectories_failure: None,
+            failure: failure.map(String::from),
+        };
+        let md = markdown(&[
+            row("a", Some("stage pca: empty"), None),
+            row("b", None, Some(0.42)),
+            row("c", None, Some(123.4)),
+        ]);
+        let table: Vec<&str> = md.lines().take_while(|l| l.starts_with('|')).collect();
+        assert_eq!(table.len(), 5, "{md}");
+        assert!(
+            table[3].starts_with("| b |") && table[3].contains("| 0.4× |"),
+            "{md}"
+        );
+        assert!(table[4].contains("| 123× |"), "{md}");
+        assert!(md.contains("\na: stopped: stage pca: empty\n"), "{md}");
     }
 
     /// The second table: a mean over every trajectory, the worst with its index, a gap where

@@ -257,7 +257,7 @@ mod tests {
         assert_eq!(t[1].median_speedup, Some(200.0));
         let md = markdown(&t);
         assert!(
-            md.contains("| pca | 8.00 % | 1.00 % | 2.00 % | 3.00 % | 3.50 % | 8.00 % (0) | 4× |"),
+            md.contains("| pca | 8.00 % | 1.00 % | 2.00 % | 3.00 % | 3.50 % | 8.00 % (0) | 4.5× |"),
             "{md}"
         );
         assert!(

@@ -183,6 +183,47 @@ fn restart_warning(r: &MethodReport) -> Option<String> {
     })
 }
 
+/// The caveat of a run where no reduced method steps faster than full space: a mesh whose
+/// full simulation is already cheap, or whose motion needs nearly as many coordinates as it has
+/// (a 496-tet sheet kept 252 of its 291; every reduced method stepped at 0.3–0.9×).
+fn slower_than_full(rows: &[MethodReport]) -> Option<String> {
+    let speedups: Vec<f64> = rows
+        .iter()
+        .filter(|r| !r.method.is_full())
+        .map(|r| r.speedup)
+        .collect::<Option<_>>()?;
+    let fastest = speedups.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if speedups.is_empty() || fastest >= 1.0 {
+        return None;
+    }
+    let slowest = speedups.iter().copied().fold(f64::INFINITY, f64::min);
+    let free = rows.iter().find(|r| r.method.is_full()).map(|r| r.dim)?;
+    let kept = rows
+        .iter()
+        .filter(|r| !r.method.is_full())
+        .map(|r| r.dim)
+        .max()?;
+    Some(format!(
+        "no reduced method steps faster than full space here ({slowest:.1}–{fastest:.1}× its \
+         speed): the full simulation has {free} free coordinates and the reduced ones keep up to \
+         {kept}; reduction pays where a mesh's coordinates far outnumber what its motion needs \
+         (thousands of vertices), so on a mesh this small full space is the one to use"
+    ))
+}
+
+/// What of `method` was fitted to the training poses and so extrapolates beyond them, as the
+/// subject of "… there": the basis alone for `pca` (any pose in its span is exact, but the
+/// span was chosen from those poses).
+fn fitted_parts(method: crate::simulate::Method) -> &'static str {
+    use crate::simulate::Method;
+    match method {
+        Method::PcaCubature => "the cubature rule extrapolates",
+        Method::Neural => "the decoder extrapolates",
+        Method::NeuralCubature => "the decoder and the cubature rule extrapolate",
+        _ => "the basis, chosen from the training poses, may miss the motion",
+    }
+}
+
 /// One caveat for the methods whose trajectories left the training poses and still held, all
 /// given the same advice `what`: one method as "its pose", several as "their poses" with the
 /// ranges of their times, distances and errors.
@@ -203,10 +244,16 @@ fn held_outside_caveat(rows: &[&MethodReport], what: &str) -> String {
     } else {
         ("their poses go", "their", "they stay")
     };
+    let fitted = match rows {
+        [one] => fitted_parts(one.method).to_string(),
+        _ => "what each fitted to the training poses (basis, decoder, cubature rule) \
+              extrapolates"
+            .to_string(),
+    };
     format!(
-        "{}: at t = {} s {goes} {} % of {its} size beyond the training poses, so the decoder and \
-         the cubature rule extrapolate there (on this test {stays} {} % from the full \
-         trajectory: the extrapolation held here, a harder pull may not), {what}",
+        "{}: at t = {} s {goes} {} % of {its} size beyond the training poses, so {fitted} there \
+         (on this test {stays} {} % from the full trajectory: the extrapolation held here, a \
+         harder pull may not), {what}",
         names.join(", "),
         range(&|r| r.training_distance_time, 3, 1.0),
         range(&|r| r.training_distance, 0, 100.0),
@@ -223,8 +270,9 @@ pub struct Assessment {
     /// [`UNCOVERED_SUBSPACE_ERROR`] off, and what the full simulation started from a drifting
     /// method's state says of its drift.
     pub untrusted: Vec<String>,
-    /// Figures that held but may not hold elsewhere: a trajectory that left the training poses
-    /// and still ended within [`UNCOVERED_SUBSPACE_ERROR`] of the full one.
+    /// What the figures do not say by themselves: a trajectory that left the training poses
+    /// and still ended within [`UNCOVERED_SUBSPACE_ERROR`] of the full one (it held on this
+    /// test, may not on others), or reduction that does not pay on this mesh.
     pub caveats: Vec<String>,
 }
 
@@ -235,7 +283,7 @@ impl Assessment {
         let mut s = String::new();
         for (title, list) in [
             ("not to be trusted", &self.untrusted),
-            ("held on this test, may not on others", &self.caveats),
+            ("worth knowing", &self.caveats),
         ] {
             if !list.is_empty() {
                 s.push_str(&format!("\n{heading}{title}:\n"));
@@ -302,10 +350,11 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             if !held {
                 out.push(format!(
                     "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
-                     poses, so the decoder and the cubature rule extrapolate there, {what}",
+                     poses, so {} there, {what}",
                     r.method,
                     r.training_distance_time,
-                    pct(r.training_distance)
+                    pct(r.training_distance),
+                    fitted_parts(r.method)
                 ));
             } else {
                 held_outside.push((r, what));
@@ -341,7 +390,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         out.extend(restart_warning(r));
         out.extend(cubature_warning(r, rows));
     }
-    let mut caveats = Vec::new();
+    let mut caveats: Vec<String> = slower_than_full(rows).into_iter().collect();
     while let Some((_, what)) = held_outside.first() {
         let what = what.clone();
         let (group, rest): (Vec<_>, Vec<_>) =
@@ -444,6 +493,36 @@ mod tests {
             "{}",
             reduced[0]
         );
+    }
+
+    /// When every reduced method is slower than full space, a caveat says so with the sizes;
+    /// one faster method, or a run without a full-space row, gets none.
+    #[test]
+    fn reduction_that_does_not_pay_is_said() {
+        let timed = |method, dim, speedup| MethodReport {
+            dim,
+            speedup,
+            ..row(method, 0.01, 0.005)
+        };
+        let slow = [
+            timed(Method::Full, 291, Some(1.0)),
+            timed(Method::Pca, 252, Some(0.6)),
+            timed(Method::NeuralCubature, 240, Some(0.3)),
+        ];
+        let w = assess(&slow).caveats;
+        assert_eq!(w.len(), 1, "{w:#?}");
+        assert!(
+            w[0].starts_with("no reduced method steps faster than full space here (0.3–0.6×")
+                && w[0].contains("291 free coordinates")
+                && w[0].contains("keep up to 252"),
+            "{}",
+            w[0]
+        );
+        let mut one_fast = slow.clone();
+        one_fast[2].speedup = Some(1.4);
+        assert!(assess(&one_fast).caveats.is_empty());
+        let untimed = [timed(Method::Pca, 252, None)];
+        assert!(assess(&untimed).caveats.is_empty());
     }
 
     /// A full trajectory that stretches an element past the limit is named, with the pins
@@ -707,6 +786,14 @@ mod tests {
             "{}",
             w[1]
         );
+        // Each method is said to extrapolate with what it has: `neural` no cubature rule, `pca`
+        // neither a decoder nor a rule.
+        assert!(
+            w[1].contains("so the decoder extrapolates there"),
+            "{}",
+            w[1]
+        );
+        assert!(w[0].contains("(basis, decoder, cubature rule)"), "{}", w[0]);
         // Far from training later than the schedules last: the schedules' length is named.
         let late = MethodReport {
             training_distance: 0.3,
@@ -716,6 +803,12 @@ mod tests {
         };
         let w = assess(&[late]).caveats;
         assert_eq!(w.len(), 1, "{w:#?}");
+        assert!(w[0].contains("so the basis, chosen from the training poses, may miss"));
+        assert!(
+            !w[0].contains("decoder") && !w[0].contains("cubature"),
+            "{}",
+            w[0]
+        );
         assert!(
             w[0].contains("later than any training schedule lasts (0.60 s)")
                 && w[0].contains("`[training] frames_per_schedule`"),

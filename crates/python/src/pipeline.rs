@@ -203,8 +203,8 @@ pub struct Report {
     /// The run's "not to be trusted" warnings (empty when the full simulation does not give way
     /// and every reduced method is within bounds).
     warnings: Vec<String>,
-    /// What held on this test and may not on others (a trajectory that left the training
-    /// poses and still ended close to the full one).
+    /// What the figures do not say by themselves (a trajectory that left the training poses
+    /// and still ended close to the full one, reduction slower than full space on this mesh).
     caveats: Vec<String>,
     /// The folder of ``report.json``, ``report.md``, ``report.svg``, ``errors.csv``, ...
     out_dir: PathBuf,
