@@ -127,7 +127,10 @@ fn mesh_format(bytes: &[u8], path: &Path) -> Result<MeshFormat, MeshError> {
             path,
             line,
             format!(
-                "expected $MeshFormat on the first line, found '{}'",
+                "expected $MeshFormat on the first line, found '{}': a `.msh` file is read as \
+                 Gmsh's, and some tools (IPC's examples, for one) write their own format under \
+                 that name; export Gmsh MSH 4.1 or 2.2, or convert it (`meshio convert FILE \
+                 out.mesh`)",
                 snippet(&String::from_utf8_lossy(first))
             ),
         ));
@@ -333,6 +336,15 @@ mod tests {
                 .contains("1.0")
         );
         assert!(parse_error(b"").1.contains("empty"));
+        // Another tool's `.msh` (IPC's starts with its nodes): said not to be Gmsh's, with the
+        // conversion.
+        let other = parse_error(b"$Nodes\n4\n0 0 0\n");
+        assert_eq!(other.0, 1);
+        assert!(
+            other.1.contains("found '$Nodes'") && other.1.contains("meshio convert"),
+            "{}",
+            other.1
+        );
         assert!(
             parse_error(b"$MeshFormat\n5.0 0 8\n$EndMeshFormat\n")
                 .1
