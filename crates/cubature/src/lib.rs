@@ -66,4 +66,4 @@ pub use error::CubatureError;
 pub use greedy::{FitProgress, fit, fit_with_progress};
 pub use nnls::{NnlsParams, NnlsSolution, nnls, nnls_with};
 pub use rule::CubatureRule;
-pub use training::{HeldOutForces, Poses, TrainingMatrix};
+pub use training::{HeldOutForces, Poses, TrainingMatrix, kept_poses};

@@ -925,6 +925,15 @@ fn column_sum(a: &[f64], rows: usize, m: usize) -> Vec<f64> {
     b
 }
 
+/// The poses of `num_poses` that [`TrainingMatrix::build`] keeps when they fit
+/// `config.memory_limit_mb` (at most `config.max_poses`, a seeded subsample in increasing
+/// order): a caller whose poses are costly to form (a decoder's Jacobian and tangent each, 1.5
+/// GB over a 2,000-frame training set on a 496-tet sheet) forms only these and passes them, all
+/// of which `build` then keeps.
+pub fn kept_poses(num_poses: usize, config: &CubatureConfig) -> Vec<usize> {
+    subsample(num_poses, config.max_poses, config.seed)
+}
+
 /// The poses kept: all of them, or a seeded uniform subsample of `max` in increasing order.
 fn subsample(n: usize, max: usize, seed: u64) -> Vec<usize> {
     subsample_with(n, max, seed ^ POSE_SALT)

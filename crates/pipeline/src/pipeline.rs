@@ -1182,7 +1182,14 @@ impl<'a> Pipeline<'a> {
                 })
                 .collect()
         };
-        let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
+        // Only the training frames the fit keeps are formed into poses: a neural pose carries a
+        // k × d Jacobian and its tangent, which over every frame of a small mesh's training set
+        // took 1.6 GB (a 496-tet sheet, k = 252).
+        let kept = cubature::kept_poses(snaps.num_frames(), cfg);
+        let s = faer::Mat::<f64>::from_fn(snaps.dim, kept.len(), |i, j| {
+            snaps.data[kept[j] * snaps.dim + i]
+        });
+        let s = s.as_ref();
         let held: Vec<f64> = reference.frames.iter().flatten().copied().collect();
         let h = faer::MatRef::from_column_major_slice(&held, snaps.dim, reference.frames.len());
         // The training poses and the held-out test's frames, each as coefficients in the
