@@ -151,6 +151,8 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         | RuntimeError::NothingInReach { .. } => Class::Handle,
         RuntimeError::NoSuchVertex { .. }
         | RuntimeError::NoVertices
+        | RuntimeError::NotInBody { .. }
+        | RuntimeError::ActiveSpan { .. }
         | RuntimeError::NotPositive { .. }
         | RuntimeError::NotFinite { .. }
         | RuntimeError::BufferLength { .. }

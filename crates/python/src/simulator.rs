@@ -309,13 +309,20 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
         return Err(Class::InvalidArgument.err(format!(
             "vertex {vertices} does not exist (it is beyond any mesh's vertex count)"
         )));
+    } else if let Ok(values) = vertices.extract::<Vec<i64>>() {
+        // A bool in a list extracts as 0 or 1, as `True` alone would.
+        if let Some(i) = (0..values.len()).find(|&i| {
+            vertices
+                .get_item(i)
+                .is_ok_and(|item| item.is_instance_of::<PyBool>())
+        }) {
+            return Err(Class::InvalidArgument.err(format!(
+                "vertices[{i}] is a bool, not a vertex index"
+            )));
+        }
+        values
     } else {
-        vertices.extract().map_err(|_| {
-            Class::InvalidArgument.err(format!(
-                "vertices must be an int or a sequence of ints, got {}",
-                describe(vertices)
-            ))
-        })?
+        return Err(Class::InvalidArgument.err(bad_vertex_item(vertices)));
     };
     values
         .into_iter()
@@ -325,6 +332,64 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
             })
         })
         .collect()
+}
+
+/// Why `vertices`, which is not a sequence of 64-bit ints, is no vertex list: its first
+/// element that is not an int (or is too large), or the object itself when it is no sequence.
+fn bad_vertex_item(vertices: &Bound<'_, PyAny>) -> String {
+    use pyo3::types::{PyBool, PyInt, PyString};
+    // A string iterates over its characters, which are no list of vertices.
+    let items = vertices
+        .try_iter()
+        .ok()
+        .filter(|_| !vertices.is_instance_of::<PyString>());
+    let Some(items) = items else {
+        return format!(
+            "vertices must be an int or a sequence of ints, got {}",
+            describe(vertices)
+        );
+    };
+    for (i, item) in items.enumerate() {
+        let Ok(item) = item else { break };
+        if item.is_instance_of::<PyBool>() {
+            return format!("vertices[{i}] is a bool, not a vertex index");
+        }
+        if item.extract::<i64>().is_err() {
+            return if item.is_instance_of::<PyInt>() {
+                format!("vertices[{i}] = {item} does not exist (beyond any mesh's vertex count)")
+            } else {
+                format!(
+                    "vertices[{i}] must be an int, got {item} ({})",
+                    describe(&item)
+                )
+            };
+        }
+    }
+    format!(
+        "vertices must be an int or a sequence of ints, got {}",
+        describe(vertices)
+    )
+}
+
+/// Three finite-or-not numbers (x, y, z) from any sequence of three (a tuple, a list, a
+/// 1-D array), or the `InvalidArgumentError` naming `what` and what was given: a (3, 1) array
+/// or a string said "only 0-dimensional arrays can be converted" or "must be real number".
+fn point3(what: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
+    let values: Option<Vec<f64>> = value.extract().ok();
+    match values.as_deref() {
+        Some(&[x, y, z]) => Ok([x, y, z]),
+        Some(other) => Err(Class::InvalidArgument.err(format!(
+            "{what} must be 3 numbers (x, y, z), got {}",
+            other.len()
+        ))),
+        None => Err(Class::InvalidArgument.err(format!(
+            "{what} must be 3 numbers (x, y, z), got {}",
+            match value.cast::<numpy::PyUntypedArray>() {
+                Ok(a) => format!("an array of shape {:?}", a.shape()),
+                Err(_) => describe(value),
+            }
+        ))),
+    }
 }
 
 fn array_n3<'py, T: Element>(py: Python<'py>, rows: Vec<[T; 3]>) -> Bound<'py, PyArray2<T>> {
@@ -432,10 +497,11 @@ impl Simulator {
     fn grab_near(
         &self,
         py: Python<'_>,
-        point: [f64; 3],
+        point: &Bound<'_, PyAny>,
         radius: f64,
         stiffness: f64,
     ) -> PyResult<Handle> {
+        let point = point3("point", point)?;
         let handle = self
             .with(
                 py,
@@ -511,7 +577,13 @@ impl Simulator {
     ///
     /// Raises ``HandleError`` for a handle released already or of another simulator, and
     /// ``InvalidArgumentError`` for a target that is not finite.
-    fn move_handle(&self, py: Python<'_>, handle: &Handle, target: [f64; 3]) -> PyResult<()> {
+    fn move_handle(
+        &self,
+        py: Python<'_>,
+        handle: &Handle,
+        target: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let target = point3("target", target)?;
         let handle = self.own(handle)?;
         self.with(
             py,
