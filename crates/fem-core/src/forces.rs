@@ -41,13 +41,22 @@ pub struct ForceConfig {
     pub end: Option<f64>,
 }
 
-/// A force resolved against a mesh.
+/// A force resolved against a mesh: a scene's `[[force]]` ([`ForceConfig::resolve`]), or one
+/// built by a program and given to a runtime (`latent_sim::Interactive::add_force`, which
+/// checks it).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ExternalForce {
     pub kind: ForceKind,
+    /// The vertices it acts on: indices into the mesh's vertices, counted from 0 in the order
+    /// the mesh file lists them.
     pub vertices: Vec<usize>,
+    /// Total spring stiffness k in N/m, split over the vertices (0 for a point load).
     pub stiffness: f64,
+    /// Keyframes `[t, x, y, z]` in time order: the spring's target offset from the vertices'
+    /// rest positions in m, or the point load's total force in N.
     pub keyframes: Vec<[f64; 4]>,
+    /// The force acts while `start ≤ t < end` (s): `f64::NEG_INFINITY` and `f64::INFINITY` for
+    /// always.
     pub start: f64,
     pub end: f64,
 }

@@ -111,6 +111,9 @@ pub use config::{
     REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
 };
 
+/// The forces a program adds to a runtime ([`Interactive::add_force`]), so that one crate
+/// is all it needs.
+pub use fem_core::forces::{ExternalForce, ForceKind};
 pub use model::{ModelFileError, ModelFormatError, ReducedModel};
 pub use neural::NeuralSubspace;
 pub use onset::{Augmented, DirectionParts};

@@ -228,7 +228,7 @@ impl StageSummary for Reference {
     fn summary(&self) -> String {
         let n = self.step_seconds.len().max(1) as f64;
         let mut s = format!(
-            "{} frames of the full-space test trajectory, {:.1} ms a step",
+            "{} frames of the full-space test trajectory, {:.1} ms of wall time a step",
             self.frames.len(),
             1e3 * self.step_seconds.iter().sum::<f64>() / n
         );

@@ -285,7 +285,9 @@ impl ReducedModel {
         }
     }
 
-    /// The dimension of the latent space (coordinates and linear directions).
+    /// The number of reduced coordinates a step solves for: for a neural model the
+    /// autoencoder's latent coordinates *and* the linear directions beside them (so more than
+    /// the `d` the `train` stage chose), for a PCA model the basis's k.
     pub fn latent_dim(&self) -> usize {
         match &self.subspace {
             SubspaceParts::Linear => self.space.k,

@@ -79,6 +79,10 @@ impl Backend for FullRuntime {
         &self.sim.model.mesh.vertices
     }
 
+    fn tets(&self) -> &[[usize; 4]] {
+        &self.sim.model.mesh.tets
+    }
+
     fn surface(&self) -> &Surface {
         &self.surface
     }

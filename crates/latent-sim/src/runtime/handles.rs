@@ -75,6 +75,8 @@ impl Handles {
 /// What a simulator provides for its handles.
 pub(crate) trait Backend {
     fn rest(&self) -> &[Vec3];
+    /// The mesh's tetrahedra: a vertex none of them uses is no part of the body.
+    fn tets(&self) -> &[[usize; 4]];
     fn surface(&self) -> &Surface;
     /// The current displacement of vertex `v` (which exists).
     fn displacement(&self, v: usize) -> Result<Vec3, RuntimeError>;
@@ -107,8 +109,10 @@ fn attach<B: Backend>(
     Ok(b.handles().insert(index, Some(base)))
 }
 
-/// Sorted, unique, existing vertices, at least one.
-fn vertex_set(vertices: &[usize], count: usize) -> Result<Vec<usize>, RuntimeError> {
+/// Sorted, unique vertices of the body, at least one: each exists and some tetrahedron uses it
+/// (a vertex the file lists and no tet uses moves nothing: a spring on it did nothing).
+fn vertex_set<B: Backend>(b: &B, vertices: &[usize]) -> Result<Vec<usize>, RuntimeError> {
+    let count = b.rest().len();
     if vertices.is_empty() {
         return Err(RuntimeError::NoVertices);
     }
@@ -118,6 +122,15 @@ fn vertex_set(vertices: &[usize], count: usize) -> Result<Vec<usize>, RuntimeErr
     let mut set = vertices.to_vec();
     set.sort_unstable();
     set.dedup();
+    let mut used = vec![false; count];
+    for t in b.tets() {
+        for &v in t {
+            used[v] = true;
+        }
+    }
+    if let Some(&vertex) = set.iter().find(|&&v| !used[v]) {
+        return Err(RuntimeError::NotInBody { vertex });
+    }
     Ok(set)
 }
 
@@ -127,7 +140,7 @@ pub(crate) fn grab<B: Backend>(
     stiffness: f64,
 ) -> Result<Handle, RuntimeError> {
     positive("stiffness", stiffness)?;
-    let set = vertex_set(vertices, b.rest().len())?;
+    let set = vertex_set(b, vertices)?;
     let (mut mean_u, mut mean_x) = (Vec3::zeros(), Vec3::zeros());
     for &v in &set {
         mean_u += b.displacement(v)?;
@@ -189,7 +202,7 @@ pub(crate) fn add_force<B: Backend>(
 ) -> Result<Handle, RuntimeError> {
     // Checked, not reordered: the order of a force's vertices is the order its terms are summed
     // in, which a replayed schedule keeps so that its trajectory is the same bit for bit.
-    vertex_set(&force.vertices, b.rest().len())?;
+    vertex_set(b, &force.vertices)?;
     let k = &force.keyframes;
     if k.is_empty()
         || k.iter().flatten().any(|x| !x.is_finite())
@@ -198,9 +211,9 @@ pub(crate) fn add_force<B: Backend>(
         return Err(ReducedError::Keyframes.into());
     }
     if force.start.is_nan() || force.end.is_nan() || force.end < force.start {
-        return Err(RuntimeError::NotPositive {
-            what: "force's active span (end − start)",
-            value: force.end - force.start,
+        return Err(RuntimeError::ActiveSpan {
+            start: force.start,
+            end: force.end,
         });
     }
     let base = match force.kind {

@@ -83,6 +83,18 @@ pub enum RuntimeError {
     /// A handle on no vertex.
     #[error("a handle needs at least one vertex")]
     NoVertices,
+    /// A vertex the mesh file lists that no tetrahedron uses: no part of the body moves with it.
+    #[error(
+        "vertex {vertex} belongs to no tetrahedron (the mesh file lists it, no tet uses it), so \
+         nothing of the body moves with it: grab a vertex of the body"
+    )]
+    NotInBody { vertex: usize },
+    /// A force whose active span is not a span: start or end not a number, or end before start.
+    #[error(
+        "a force's active span runs from `start` to `end` (s; start may be −∞ and end +∞, for \
+         always), so start ≤ end, got start = {start}, end = {end}"
+    )]
+    ActiveSpan { start: f64, end: f64 },
     /// A number that must be positive and finite (a stiffness, a radius) is not.
     #[error("the {what} must be positive and finite, got {value}")]
     NotPositive { what: &'static str, value: f64 },
@@ -123,8 +135,8 @@ pub trait Interactive {
     ///
     /// # Errors
     /// [`RuntimeError::NoVertices`], [`RuntimeError::NoSuchVertex`],
-    /// [`RuntimeError::NotPositive`]; a reduced model without the rows of a vertex:
-    /// [`ReducedError::NoBasisRows`].
+    /// [`RuntimeError::NotInBody`], [`RuntimeError::NotPositive`]; a reduced model without the
+    /// rows of a vertex: [`ReducedError::NoBasisRows`].
     fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError>;
     /// Grabs the surface vertices within `radius` of `point` (where they are now) with a spring
     /// of total stiffness `stiffness`, its target at `point`.
@@ -155,8 +167,10 @@ pub trait Interactive {
     /// (from its vertices' rest centroid).
     ///
     /// # Errors
-    /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`], [`ReducedError::Keyframes`]
-    /// ; a reduced model without the rows of a vertex: [`ReducedError::NoBasisRows`].
+    /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`],
+    /// [`RuntimeError::NotInBody`], [`ReducedError::Keyframes`], [`RuntimeError::ActiveSpan`],
+    /// a spring's [`RuntimeError::NotPositive`] stiffness; a reduced model without the rows of
+    /// a vertex: [`ReducedError::NoBasisRows`].
     fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError>;
     /// Turns gravity on (the model's acceleration) or off.
     fn set_gravity(&mut self, enabled: bool);

@@ -48,7 +48,8 @@ impl AnyReducedSimulator {
         each!(self, s => &s.state)
     }
 
-    /// Latent coordinates (with the linear directions).
+    /// The number of reduced coordinates a step solves for (the autoencoder's latent ones and
+    /// the linear directions beside them: [`ReducedModel::latent_dim`](crate::ReducedModel::latent_dim)).
     pub fn latent_dim(&self) -> usize {
         each!(self, s => s.subspace.latent_dim())
     }
@@ -195,6 +196,10 @@ fn dent_at(dents: &[ActiveDent<'_>], index: &[usize], v: usize, c: usize) -> f64
 impl Backend for ReducedRuntime {
     fn rest(&self) -> &[Vec3] {
         &self.sim.model().mesh.vertices
+    }
+
+    fn tets(&self) -> &[[usize; 4]] {
+        &self.sim.model().mesh.tets
     }
 
     fn surface(&self) -> &Surface {

@@ -188,6 +188,48 @@ fn interaction_errors_are_typed() {
     let (model, mut full) = simulators(-9.81);
     refusals(&mut model.simulator().unwrap(), "reduced");
     refusals(&mut full, "full");
+    // A force whose span ends before it starts is refused, naming the span.
+    let mut backwards = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], 0.5);
+    backwards.start = 1.0;
+    match full.add_force(backwards) {
+        Err(e @ RuntimeError::ActiveSpan { .. }) => {
+            assert!(e.to_string().contains("start = 1, end = 0.5"), "{e}")
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// A vertex the mesh lists and no tet uses is no part of the body: grabbing it is refused (a
+/// spring on it moved nothing), in full space as in a reduced model with every row.
+#[test]
+fn a_vertex_no_tet_uses_cannot_be_grabbed() {
+    let mut m = bar([6, 2, 2], -9.81);
+    let mut mesh = m.mesh.clone();
+    mesh.vertices.push(Vec3::new(0.5, 1.0, 0.0));
+    let loose = mesh.num_vertices() - 1;
+    m = fem_core::integrator::FullSpaceModel::new(
+        mesh,
+        &super::material(),
+        m.pinned.clone(),
+        m.gravity,
+        vec![],
+    )
+    .unwrap();
+    let time = fem_core::integrator::TimeConfig {
+        step: 0.01,
+        frames: 10,
+        quasi_static: false,
+    };
+    let mut full = FullRuntime::new(m, time, Default::default()).unwrap();
+    for vertices in [vec![loose], vec![0, loose]] {
+        match full.grab(&vertices, 10.0) {
+            Err(e @ RuntimeError::NotInBody { vertex }) if vertex == loose => {
+                assert!(e.to_string().contains("belongs to no tetrahedron"), "{e}")
+            }
+            other => panic!("{vertices:?}: {other:?}"),
+        }
+    }
+    full.grab(&[0], 10.0).unwrap();
 }
 
 /// Under gravity, for 20 steps: the trajectory of the surface.
