@@ -162,10 +162,12 @@ impl Compression {
     /// An element below this det F counts as squeezed.
     pub const SQUEEZED: f64 = 0.5;
 
-    /// A principal stretch past this (three times an element's length along one direction) is
-    /// far past what the test's loads do to a body that carries them: the drags pull by at most
-    /// a tenth of the body's size.
-    pub const STRETCHED: f64 = 3.0;
+    /// A principal stretch past this (four times an element's length along one direction) is
+    /// past what the test's loads do to a body that carries them, and past where rubber-like
+    /// solids tear. Measured: hung from one vertex, a bunny stretched 8.5× in the test's 1 s and
+    /// a chain link 4.1×; pinned as the suite pins them, the armadillo's test drag stretched one
+    /// element 3.0×, and a drag on a 10 cm slab glued by its whole bottom face 3.7×.
+    pub const STRETCHED: f64 = 4.0;
 
     /// Over `frames` of free displacements of `model`, each taken `step` seconds after the last
     /// (the first at `step`). None without frames.
@@ -1382,9 +1384,9 @@ mod tests {
         assert!((mild.volume_ratio - 0.9).abs() < 1e-12, "{mild:?}");
         assert!(super::Compression::of(&model, &[], 0.01).is_none());
         // No frame above stretched anything past the limit; one pulled up to 5 times its height
-        // (F = diag(1, 5, 1)) does, and when.
+        // (F = diag(1, 5, 1)) does, and when (and one to 3.5 times does not).
         assert_eq!(c.stretched, None);
-        let pulled = super::Compression::of(&model, &[frame(0.1), frame(-4.0), frame(-1.5)], 0.01)
+        let pulled = super::Compression::of(&model, &[frame(0.1), frame(-4.0), frame(-2.5)], 0.01)
             .unwrap()
             .stretched
             .expect("stretched 5 times");

@@ -542,11 +542,11 @@ mod tests {
             ..row(Method::Full, 0.0, 0.0)
         };
         assert_eq!(assess(&[full(None)]), Assessment::default());
-        let pulled = assess(&[full(Some((3.6, 1.0)))]).untrusted;
+        let pulled = assess(&[full(Some((4.6, 1.0)))]).untrusted;
         assert_eq!(pulled.len(), 1, "{pulled:?}");
         assert!(
             pulled[0].starts_with(
-                "full: the full-space simulation of the test stretches an element to 3.6 times \
+                "full: the full-space simulation of the test stretches an element to 4.6 times \
                  its length along one direction at t = 1.00 s"
             ),
             "{}",
