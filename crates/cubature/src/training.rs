@@ -929,7 +929,8 @@ fn column_sum(a: &[f64], rows: usize, m: usize) -> Vec<f64> {
 /// `config.memory_limit_mb` (at most `config.max_poses`, a seeded subsample in increasing
 /// order): a caller whose poses are costly to form (a decoder's Jacobian and tangent each, 1.5
 /// GB over a 2,000-frame training set on a 496-tet sheet) forms only these and passes them, all
-/// of which `build` then keeps.
+/// of which `build` then keeps (where the memory limit leaves room for fewer, it draws those
+/// from these, a subsample of the same size as it would have drawn from all).
 pub fn kept_poses(num_poses: usize, config: &CubatureConfig) -> Vec<usize> {
     subsample(num_poses, config.max_poses, config.seed)
 }
