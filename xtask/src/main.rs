@@ -299,6 +299,10 @@ fn main() {
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
         )
         .with_writer(std::io::stderr)
+        // A warning a user reads before the run's first line: its level and text, without the
+        // clock and the module path ("2026-12-02T04:18:08.731909Z  WARN pipeline::pipeline:").
+        .without_time()
+        .with_target(false)
         // Colour codes only on a terminal (and not under NO_COLOR): a log redirected to a file
         // reads as plain text.
         .with_ansi(
