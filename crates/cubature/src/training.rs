@@ -70,12 +70,19 @@ pub struct Poses<'a> {
     pub q: MatRef<'a, f64>,
     /// J_i = ∂q/∂z at each pose, P matrices of k × d; `None` for the linear subspace (J = I).
     pub jacobians: Option<&'a [MatRef<'a, f64>]>,
+    /// `Some(n)` when these are the [`kept_poses`] of a set of `n` ([`Poses::kept_of`]): the fit
+    /// then keeps, and numbers, the poses it would have kept of all `n`.
+    pub kept_of: Option<usize>,
 }
 
 impl<'a> Poses<'a> {
     /// Poses of the linear subspace (u = Uq, reduced coordinates q).
     pub fn linear(q: MatRef<'a, f64>) -> Self {
-        Self { q, jacobians: None }
+        Self {
+            q,
+            jacobians: None,
+            kept_of: None,
+        }
     }
 
     /// Poses of a nonlinear subspace q = q(z), with J_i = ∂q/∂z at pose i.
@@ -83,6 +90,17 @@ impl<'a> Poses<'a> {
         Self {
             q,
             jacobians: Some(jacobians),
+            kept_of: None,
+        }
+    }
+
+    /// These poses as the [`kept_poses`] of a set of `total` (in that order): the fit keeps
+    /// exactly the poses, numbered as in the whole set, that it would keep of all `total`, also
+    /// where the memory limit makes it keep fewer.
+    pub fn kept_of(self, total: usize) -> Self {
+        Self {
+            kept_of: Some(total),
+            ..self
         }
     }
 }
@@ -122,7 +140,22 @@ impl TrainingMatrix {
         config.validate()?;
         let dim = check_inputs(model, basis, k, &poses)?;
         let m = model.elements.len();
-        let num_poses = poses.q.ncols();
+        // Poses are numbered, and subsampled, as in the whole set they were kept from.
+        let given = match poses.kept_of {
+            Some(total) => {
+                let kept = kept_poses(total, config);
+                if kept.len() != poses.q.ncols() {
+                    return Err(CubatureError::ShapeMismatch {
+                        what: "poses kept of the whole set (kept_poses)",
+                        expected: (k, kept.len()),
+                        found: (k, poses.q.ncols()),
+                    });
+                }
+                Some(kept)
+            }
+            None => None,
+        };
+        let num_poses = poses.kept_of.unwrap_or(poses.q.ncols());
 
         // A matrix beyond the memory budget keeps the columns of fewer elements first, down to
         // CANDIDATES_PER_RULE_ELEMENT per element of the rule's budget: the rule is chosen from
@@ -176,6 +209,18 @@ impl TrainingMatrix {
         let candidates =
             (columns < m).then(|| subsample_with(m, columns, config.seed ^ ELEMENT_SALT));
         let chosen = subsample(num_poses, fit, config.seed);
+        // Where each chosen pose is among those given: itself, or its place among the kept ones
+        // (a subsample of fit is within the subsample of more: the same draws, fewer of them).
+        let local: Vec<usize> = match &given {
+            Some(kept) => chosen
+                .iter()
+                .map(|c| {
+                    kept.binary_search(c)
+                        .expect("a subsample lies within a larger one")
+                })
+                .collect(),
+            None => chosen.clone(),
+        };
         let np = chosen.len();
         let rows = np * dim;
         let bytes = per_pose * np as u128;
@@ -188,7 +233,7 @@ impl TrainingMatrix {
             "building the cubature training matrix"
         );
 
-        let (displacements, jacobians) = chosen_poses(model, basis, &poses, &chosen);
+        let (displacements, jacobians) = chosen_poses(model, basis, &poses, &local);
 
         let element_of = |c: usize| candidates.as_ref().map_or(c, |ids| ids[c]);
         let mut a = vec![0.0; rows * columns];
@@ -928,9 +973,9 @@ fn column_sum(a: &[f64], rows: usize, m: usize) -> Vec<f64> {
 /// The poses of `num_poses` that [`TrainingMatrix::build`] keeps when they fit
 /// `config.memory_limit_mb` (at most `config.max_poses`, a seeded subsample in increasing
 /// order): a caller whose poses are costly to form (a decoder's Jacobian and tangent each, 1.5
-/// GB over a 2,000-frame training set on a 496-tet sheet) forms only these and passes them, all
-/// of which `build` then keeps (where the memory limit leaves room for fewer, it draws those
-/// from these, a subsample of the same size as it would have drawn from all).
+/// GB over a 2,000-frame training set on a 496-tet sheet) forms only these and passes them
+/// marked with [`Poses::kept_of`]: `build` then keeps and numbers exactly the poses it would
+/// have of the whole set, also where the memory limit leaves room for fewer.
 pub fn kept_poses(num_poses: usize, config: &CubatureConfig) -> Vec<usize> {
     subsample(num_poses, config.max_poses, config.seed)
 }

@@ -1212,7 +1212,7 @@ impl<'a> Pipeline<'a> {
         let mut held =
             cubature::HeldOutForces::new(&self.model, basis_used, k, p_held, cfg).map_err(err)?;
         let start = Instant::now();
-        let p_train = cubature_poses(&q_train, &refs_train);
+        let p_train = cubature_poses(&q_train, &refs_train).kept_of(snaps.num_frames());
         let train = cubature::TrainingMatrix::build(&self.model, basis_used, k, p_train, cfg)
             .map_err(err)?;
         // The held-out error along the greedy path, at element counts about 20 % apart (its

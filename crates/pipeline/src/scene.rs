@@ -422,7 +422,31 @@ impl Scene {
         let mut forces = Vec::new();
         for (i, f) in self.force.iter().enumerate() {
             match f.resolve(&mesh, &format!("force[{i}]")) {
-                Ok(f) => forces.push(f),
+                // Vertices no tet uses are left out, as for the pins: a spring's stiffness goes
+                // to the body's vertices, and the runtime refuses the others.
+                Ok(mut f) => {
+                    let selected = f.vertices.len();
+                    f.vertices.retain(|v| in_body(&v));
+                    let stray = selected - f.vertices.len();
+                    if f.vertices.is_empty() {
+                        errors.push(FemError::InvalidConfig {
+                            field: format!("force[{i}].select"),
+                            reason: format!(
+                                "selects only vertices no tet uses ({stray}), which are no part \
+                                 of the body: select vertices of the body"
+                            ),
+                        });
+                    } else {
+                        if stray > 0 {
+                            crate::pipeline::warn_once(&format!(
+                                "{}: force[{i}] selects {stray} vertices no tet uses; they are \
+                                 left out of it",
+                                self.source
+                            ));
+                        }
+                        forces.push(f);
+                    }
+                }
                 Err(e) => errors.push(e),
             }
         }

@@ -502,6 +502,32 @@ fn pins_on_vertices_no_tet_uses_hold_nothing() {
     assert_names(&err, &["`pin`", "no pinned vertex holds the mesh"]);
 }
 
+/// A force's vertices no tet uses are left out of it, as for the pins (the runtime refuses them,
+/// which stopped every reduced method of such a scene); a force on them alone is an error.
+#[test]
+fn forces_on_vertices_no_tet_uses_leave_them_out() {
+    let dir = scratch("force-stray");
+    let (mesh, loose, text) = beam_with_a_loose_vertex(&dir);
+    let tip = (0..mesh.num_vertices())
+        .find(|&v| mesh.vertices[v].x == 1.0)
+        .unwrap();
+    let both = text.replace(
+        "select = { sphere = { center = [1.0, 0.1, 0.1], radius = 0.15 } }",
+        &format!("select = {{ indices = [{tip}, {loose}] }}"),
+    );
+    let built = Scene::from_str(&both, &dir, "both.toml")
+        .unwrap()
+        .build_model()
+        .unwrap();
+    assert_eq!(built.model.forces[0].vertices, [tip]);
+    let alone = text.replace(
+        "select = { sphere = { center = [1.0, 0.1, 0.1], radius = 0.15 } }",
+        &format!("select = {{ indices = [{loose}] }}"),
+    );
+    let err = build_error(&alone, &dir);
+    assert_names(&err, &["force[0].select", "only vertices no tet uses"]);
+}
+
 /// The body's counts a built model reports, and the line `cargo xtask` prints first: a vertex
 /// no tet uses is no part of the body, and a vertex two pins select is held once.
 #[test]

@@ -316,9 +316,9 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
                 .get_item(i)
                 .is_ok_and(|item| item.is_instance_of::<PyBool>())
         }) {
-            return Err(Class::InvalidArgument.err(format!(
-                "vertices[{i}] is a bool, not a vertex index"
-            )));
+            return Err(
+                Class::InvalidArgument.err(format!("vertices[{i}] is a bool, not a vertex index"))
+            );
         }
         values
     } else {

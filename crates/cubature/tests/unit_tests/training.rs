@@ -225,6 +225,54 @@ fn the_memory_limit_shrinks_the_pose_subsample_and_below_the_minimum_is_an_error
     }
 }
 
+/// Poses formed only where the fit keeps them (`kept_poses`, marked `kept_of`) give the matrix
+/// of every pose given, numbers included: with room for all it keeps, and where the memory
+/// limit leaves room for fewer. A count that is not the kept one is refused.
+#[test]
+fn the_kept_poses_alone_give_the_matrix_of_all() {
+    let model = beam([20, 4, 4]);
+    let (basis, k, lambda) = modal_basis(&model);
+    let q = random_poses(&model, &basis, &lambda, 60, 3);
+    for memory_limit_mb in [2048, 4] {
+        let config = CubatureConfig {
+            max_poses: 30,
+            memory_limit_mb,
+            ..Default::default()
+        };
+        let kept = cubature::kept_poses(60, &config);
+        assert_eq!(kept.len(), 30);
+        let q_kept = Mat::from_fn(k, kept.len(), |i, j| q[(i, kept[j])]);
+        let all =
+            TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &config).unwrap();
+        let some = TrainingMatrix::build(
+            &model,
+            &basis,
+            k,
+            Poses::linear(q_kept.as_ref()).kept_of(60),
+            &config,
+        )
+        .unwrap();
+        if memory_limit_mb == 4 {
+            assert!(all.num_poses() < 30, "{}", all.num_poses());
+        }
+        assert_eq!(all, some, "memory limit {memory_limit_mb} MiB");
+    }
+    let config = CubatureConfig {
+        max_poses: 30,
+        ..Default::default()
+    };
+    assert!(matches!(
+        TrainingMatrix::build(
+            &model,
+            &basis,
+            k,
+            Poses::linear(q.as_ref()).kept_of(60),
+            &config
+        ),
+        Err(CubatureError::ShapeMismatch { .. })
+    ));
+}
+
 /// Beyond the memory budget the matrix first keeps a seeded subsample of the elements as
 /// candidates (down to 8 per element of the rule's budget) and every pose; its columns are the
 /// full matrix's, its target still sums every element, and a rule fitted on it names the mesh's

@@ -86,7 +86,7 @@ pub enum RuntimeError {
     /// A vertex the mesh file lists that no tetrahedron uses: no part of the body moves with it.
     #[error(
         "vertex {vertex} belongs to no tetrahedron (the mesh file lists it, no tet uses it), so \
-         nothing of the body moves with it: grab a vertex of the body"
+         nothing of the body moves with it: choose vertices of the body"
     )]
     NotInBody { vertex: usize },
     /// A force whose active span is not a span: start or end not a number, or end before start.
