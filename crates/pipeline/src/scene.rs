@@ -298,17 +298,20 @@ impl Scene {
             });
         }
         let weight = self.gravity.is_on() && !self.time.quasi_static;
-        let remedy = self.wider_pin(mesh);
+        let remedy = self.wider_pin(mesh, piece, pinned);
         for line in loosely_held(mesh, pinned, piece, count, weight, &remedy) {
             crate::pipeline::warn_once(&format!("{}: {line}", self.source));
         }
     }
 
-    /// What holds a body the pins hold at a point or along a line: the first pin plane with a
-    /// tolerance of [`WIDER_PIN`] of the body's extent along its axis, and how many vertices
-    /// that selects; or a `box` when no pin is a plane (or the wider plane adds nothing).
-    fn wider_pin(&self, mesh: &TetMesh) -> String {
+    /// What holds a body the pins hold at a point or along a line: the first pin plane that,
+    /// with a tolerance of [`WIDER_PIN`] of the body's extent along its axis, holds more of the
+    /// body's vertices than the pins do now and not all on one line, and how many; else a
+    /// `box`. `piece` is [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
+    fn wider_pin(&self, mesh: &TetMesh, piece: &[usize], pinned: &[usize]) -> String {
         let (lo, hi) = mesh.bounding_box();
+        let in_body = |v: &usize| piece.get(*v).is_some_and(|&c| c != NO_COMPONENT);
+        let held_now = pinned.iter().filter(|v| in_body(v)).count();
         let wider = self.pin.iter().enumerate().find_map(|(i, p)| {
             let plane = p.plane.as_ref()?;
             let a = plane.axis.index();
@@ -319,8 +322,15 @@ impl Scene {
                 plane: Some(wide),
                 ..Default::default()
             };
-            let held = selection.select(mesh, "pin").ok()?.len();
-            (held > 1).then(|| {
+            let at: Vec<fem_core::Vec3> = selection
+                .select(mesh, "pin")
+                .ok()?
+                .into_iter()
+                .filter(in_body)
+                .map(|v| mesh.vertices[v])
+                .collect();
+            let held = at.len();
+            (held > held_now && !collinear(&at)).then(|| {
                 format!(
                     "pin[{i}]'s plane with `tolerance = {tolerance:.3e}` ({:.0} % of the body's \
                      extent along {}) holds {held} vertices, or a `box` holds it fixed",
@@ -519,8 +529,8 @@ fn loosely_held(
             (format!("by {} vertices on one line", at.len()), "that line")
         };
         // One vertex cannot carry a weight: a point load on a finite-element mesh stretches the
-        // elements around it without limit (a bunny hung so stretched them 3.6× in 1 s while
-        // the rest fell freely).
+        // elements around it without limit (a bunny hung so stretched them 3.6× in 1 s under
+        // gravity alone while the rest fell freely).
         let carried = if weight && at.len() == 1 {
             ", and one vertex cannot carry its weight: the elements around it stretch without \
              limit while the rest falls"
@@ -782,6 +792,31 @@ mod tests {
         assert!(!line[0].contains("weight"), "{line:?}");
     }
 
+    /// The advice for a body held at one vertex: the pin plane that holds 2 % of its extent,
+    /// with its count, when that holds more of the body than the pins do; else a box.
+    #[test]
+    fn a_wider_pin_is_advised_only_where_it_holds_more() {
+        let text = "name = \"w\"\n[mesh]\ngenerate = { kind = \"box\", size = [1.0, 0.2, \
+                    0.2], cells = [4, 1, 1] }\n[[pin]]\nplane = { axis = \"x\", side = \"min\", \
+                    tolerance = 0.0 }\n";
+        let scene = Scene::from_str(text, Path::new("."), "w.toml").unwrap();
+        let mesh = scene.build_model().unwrap().model.mesh;
+        let (piece, _) = mesh.vertex_components();
+        let face: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].x == 0.0)
+            .collect();
+        let one = scene.wider_pin(&mesh, &piece, &face[..1]);
+        assert!(
+            one.starts_with(
+                "pin[0]'s plane with `tolerance = 2.000e-2` (2 % of the body's extent \
+                             along x) holds 4 vertices"
+            ),
+            "{one}"
+        );
+        let all = scene.wider_pin(&mesh, &piece, &face);
+        assert!(all.starts_with("a pin plane's larger `tolerance`"), "{all}");
+    }
+
     /// A body its own weight would strain past [`HEAVY_BODY`] is said, with `[mesh] scale`
     /// first: the built-in scene is far below it, the same bar 100 times larger above.
     #[test]
@@ -798,6 +833,11 @@ mod tests {
         let mut weightless = s.clone();
         weightless.gravity.acceleration = [0.0; 3];
         assert_eq!(weight_warning(&weightless, large), None);
+        // The height along gravity counts, not the size: a long, low body lying across it.
+        let mut down = s.clone();
+        down.gravity.acceleration = [0.0, -9.81, 0.0];
+        assert_eq!(weight_warning(&down, [100.0, 0.1, 0.1]), None);
+        assert!(weight_warning(&down, [0.1, 100.0, 0.1]).is_some());
     }
 
     #[test]

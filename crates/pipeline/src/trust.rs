@@ -93,12 +93,7 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
     } else {
         String::new()
     };
-    // On a reduced method's row it is the reference's, not the method's.
-    let who = if r.method.is_full() {
-        format!("{}: the full-space simulation of the test", r.method)
-    } else {
-        "the full-space reference of the test".to_string()
-    };
+    let who = reference_subject(r);
     let (why, remedy) = if c.inversion_safe {
         (
             "the body is too soft to carry its loads (stable Neo-Hookean resists inversion \
@@ -127,17 +122,23 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
     ))
 }
 
+/// Who a warning on the reference's compression speaks of, by the row that carries it: on a
+/// reduced method's row (a run without `full`) it is the reference's, not the method's.
+fn reference_subject(r: &MethodReport) -> String {
+    if r.method.is_full() {
+        format!("{}: the full-space simulation of the test", r.method)
+    } else {
+        "the full-space reference of the test".to_string()
+    }
+}
+
 /// The warning of the row that carries the reference's compression when the test trajectory
 /// stretches an element past [`Compression::STRETCHED`](crate::run::Compression::STRETCHED):
 /// the pins or the loads pull the body apart, which the volume alone does not show (a body
 /// hung from one vertex keeps its elements' volumes while those at the vertex lengthen).
 fn stretch_warning(r: &MethodReport) -> Option<String> {
     let (stretch, time) = r.compression.as_ref()?.stretched?;
-    let who = if r.method.is_full() {
-        format!("{}: the full-space simulation of the test", r.method)
-    } else {
-        "the full-space reference of the test".to_string()
-    };
+    let who = reference_subject(r);
     Some(format!(
         "{who} stretches an element to {stretch:.1} times its length along one direction at \
          t = {time:.2} s: the pins or the loads pull the body apart, past what it models as a \
@@ -187,9 +188,10 @@ fn restart_warning(r: &MethodReport) -> Option<String> {
 /// full simulation is already cheap, or whose motion needs nearly as many coordinates as it has
 /// (a 496-tet sheet kept 252 of its 291; every reduced method stepped at 0.3–0.9×).
 fn slower_than_full(rows: &[MethodReport]) -> Option<String> {
+    // The methods that reached the last frame: a stopped one's time covers only part of it.
     let speedups: Vec<f64> = rows
         .iter()
-        .filter(|r| !r.method.is_full())
+        .filter(|r| !r.method.is_full() && r.failure.is_none())
         .map(|r| r.speedup)
         .collect::<Option<_>>()?;
     let fastest = speedups.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -197,6 +199,11 @@ fn slower_than_full(rows: &[MethodReport]) -> Option<String> {
         return None;
     }
     let slowest = speedups.iter().copied().fold(f64::INFINITY, f64::min);
+    let range = if format!("{slowest:.1}") == format!("{fastest:.1}") {
+        format!("{fastest:.1}")
+    } else {
+        format!("{slowest:.1}–{fastest:.1}")
+    };
     let free = rows.iter().find(|r| r.method.is_full()).map(|r| r.dim)?;
     let kept = rows
         .iter()
@@ -204,8 +211,7 @@ fn slower_than_full(rows: &[MethodReport]) -> Option<String> {
         .map(|r| r.dim)
         .max()?;
     Some(format!(
-        "no reduced method steps faster than full space here ({slowest:.1}–{fastest:.1}× its \
-         speed): the full simulation has {free} free coordinates and the reduced ones keep up to \
+        "no reduced method steps faster than full space here ({range}× its speed): the full simulation has {free} free coordinates and the reduced ones keep up to \
          {kept}; reduction pays where a mesh's coordinates far outnumber what its motion needs \
          (thousands of vertices), so on a mesh this small full space is the one to use"
     ))
@@ -523,6 +529,8 @@ mod tests {
         assert!(assess(&one_fast).caveats.is_empty());
         let untimed = [timed(Method::Pca, 252, None)];
         assert!(assess(&untimed).caveats.is_empty());
+        let one = assess(&slow[..2]).caveats;
+        assert!(one[0].contains("here (0.6× its speed)"), "{}", one[0]);
     }
 
     /// A full trajectory that stretches an element past the limit is named, with the pins

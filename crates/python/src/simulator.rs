@@ -293,36 +293,71 @@ fn is_float32(py: Python<'_>, dtype: &Bound<'_, PyAny>) -> PyResult<bool> {
     }
 }
 
-/// Vertex indices from an int or a sequence (or integer array) of them, none negative.
+/// Vertex indices from an int or a sequence (or integer array) of them, none negative; the
+/// error names the element that is not one (a bool, a float, an int past 64 bits).
 fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
-    use pyo3::types::{PyBool, PyInt};
-    // `True` is an int to Python, and would be vertex 1.
-    if vertices.is_instance_of::<PyBool>() {
-        return Err(Class::InvalidArgument
-            .err("vertices must be an int or a sequence of ints, got bool".to_string()));
+    use pyo3::types::{PyBool, PyInt, PyString};
+    fn bad<T>(message: String) -> PyResult<T> {
+        Err(Class::InvalidArgument.err(message))
     }
+    // The index `item` holds; `place` is its place in a list, `None` for a lone index.
+    let index = |item: &Bound<'_, PyAny>, place: Option<usize>| -> PyResult<i64> {
+        // `True` is an int to Python, and would be vertex 1.
+        if item.is_instance_of::<PyBool>() {
+            return bad(match place {
+                Some(i) => format!("vertices[{i}] is a bool, not a vertex index"),
+                None => "vertices must be an int or a sequence of ints, got bool".to_string(),
+            });
+        }
+        match item.extract::<i64>() {
+            Ok(v) => Ok(v),
+            Err(_) if item.is_instance_of::<PyInt>() => bad(match place {
+                Some(i) => format!(
+                    "vertices[{i}] = {item} does not exist (beyond any mesh's vertex count)"
+                ),
+                None => {
+                    format!("vertex {item} does not exist (beyond any mesh's vertex count)")
+                }
+            }),
+            Err(_) => bad(format!(
+                "vertices[{}] must be an int, got {item} ({})",
+                place.unwrap_or(0),
+                describe(item)
+            )),
+        }
+    };
     // One index: a Python int or anything with __index__ (a numpy integer).
-    let values: Vec<i64> = if let Ok(v) = vertices.extract::<i64>() {
-        vec![v]
-    } else if vertices.is_instance_of::<PyInt>() {
-        // An int beyond 64 bits is no vertex either (it said "got int").
-        return Err(Class::InvalidArgument.err(format!(
-            "vertex {vertices} does not exist (it is beyond any mesh's vertex count)"
-        )));
-    } else if let Ok(values) = vertices.extract::<Vec<i64>>() {
-        // A bool in a list extracts as 0 or 1, as `True` alone would.
-        if let Some(i) = (0..values.len()).find(|&i| {
-            vertices
-                .get_item(i)
-                .is_ok_and(|item| item.is_instance_of::<PyBool>())
-        }) {
-            return Err(
-                Class::InvalidArgument.err(format!("vertices[{i}] is a bool, not a vertex index"))
+    let values: Vec<i64> = if vertices.is_instance_of::<PyBool>()
+        || vertices.is_instance_of::<PyInt>()
+        || vertices.extract::<i64>().is_ok()
+    {
+        vec![index(vertices, None)?]
+    } else {
+        if let Ok(a) = vertices.cast::<numpy::PyUntypedArray>()
+            && a.dtype().kind() == b'b'
+        {
+            return bad(
+                "vertices is a boolean array (a mask): give the indices it selects, e.g. \
+                 numpy.flatnonzero(mask)"
+                    .to_string(),
             );
         }
+        // A string iterates over its characters, which are no list of vertices.
+        let items = vertices
+            .try_iter()
+            .ok()
+            .filter(|_| !vertices.is_instance_of::<PyString>());
+        let Some(items) = items else {
+            return bad(format!(
+                "vertices must be an int or a sequence of ints, got {}",
+                describe(vertices)
+            ));
+        };
+        let mut values = Vec::new();
+        for (i, item) in items.enumerate() {
+            values.push(index(&item?, Some(i))?);
+        }
         values
-    } else {
-        return Err(Class::InvalidArgument.err(bad_vertex_item(vertices)));
     };
     values
         .into_iter()
@@ -334,48 +369,16 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
         .collect()
 }
 
-/// Why `vertices`, which is not a sequence of 64-bit ints, is no vertex list: its first
-/// element that is not an int (or is too large), or the object itself when it is no sequence.
-fn bad_vertex_item(vertices: &Bound<'_, PyAny>) -> String {
-    use pyo3::types::{PyBool, PyInt, PyString};
-    // A string iterates over its characters, which are no list of vertices.
-    let items = vertices
-        .try_iter()
-        .ok()
-        .filter(|_| !vertices.is_instance_of::<PyString>());
-    let Some(items) = items else {
-        return format!(
-            "vertices must be an int or a sequence of ints, got {}",
-            describe(vertices)
-        );
-    };
-    for (i, item) in items.enumerate() {
-        let Ok(item) = item else { break };
-        if item.is_instance_of::<PyBool>() {
-            return format!("vertices[{i}] is a bool, not a vertex index");
-        }
-        if item.extract::<i64>().is_err() {
-            return if item.is_instance_of::<PyInt>() {
-                format!("vertices[{i}] = {item} does not exist (beyond any mesh's vertex count)")
-            } else {
-                format!(
-                    "vertices[{i}] must be an int, got {item} ({})",
-                    describe(&item)
-                )
-            };
-        }
-    }
-    format!(
-        "vertices must be an int or a sequence of ints, got {}",
-        describe(vertices)
-    )
-}
-
 /// Three finite-or-not numbers (x, y, z) from any sequence of three (a tuple, a list, a
 /// 1-D array), or the `InvalidArgumentError` naming `what` and what was given: a (3, 1) array
 /// or a string said "only 0-dimensional arrays can be converted" or "must be real number".
 fn point3(what: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
-    let values: Option<Vec<f64>> = value.extract().ok();
+    // An array other than 1-D is refused whatever numpy would convert (older numpy turned a
+    // (3, 1) array's size-1 rows into floats).
+    let flat = value
+        .cast::<numpy::PyUntypedArray>()
+        .map_or(true, |a| a.ndim() == 1);
+    let values: Option<Vec<f64>> = value.extract().ok().filter(|_| flat);
     match values.as_deref() {
         Some(&[x, y, z]) => Ok([x, y, z]),
         Some(other) => Err(Class::InvalidArgument.err(format!(
@@ -576,7 +579,7 @@ impl Simulator {
     /// grabbed, moved by ``target`` minus the grab point.
     ///
     /// Raises ``HandleError`` for a handle released already or of another simulator, and
-    /// ``InvalidArgumentError`` for a target that is not finite.
+    /// ``InvalidArgumentError`` for a target that is not 3 numbers or not finite.
     fn move_handle(
         &self,
         py: Python<'_>,

@@ -143,6 +143,8 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: sim.grab([0, 2**64], 1.0), r"vertices\[1\] = 18446744073709551616 does not exist"),
         (lambda: sim.grab([0, 1.5], 1.0), r"vertices\[1\] must be an int, got 1.5"),
         (lambda: sim.grab([True], 1.0), r"vertices\[0\] is a bool"),
+        (lambda: sim.grab(np.array([True, False]), 1.0), "boolean array"),
+        (lambda: sim.grab(np.array([0.0, 1.0]), 1.0), r"vertices\[0\] must be an int"),
         (lambda: sim.grab([0], 0.0), "stiffness must be positive"),
         (lambda: sim.grab([0], -5.0), "stiffness must be positive"),
         (lambda: sim.grab([0], math.nan), "stiffness must be positive"),

@@ -286,7 +286,7 @@ impl ReducedModel {
     }
 
     /// The number of reduced coordinates a step solves for: for a neural model the
-    /// autoencoder's latent coordinates *and* the linear directions beside them (so more than
+    /// autoencoder's latent coordinates *and* the linear directions beside them (so at least
     /// the `d` the `train` stage chose), for a PCA model the basis's k.
     pub fn latent_dim(&self) -> usize {
         match &self.subspace {

@@ -129,8 +129,8 @@ fn mesh_format(bytes: &[u8], path: &Path) -> Result<MeshFormat, MeshError> {
             format!(
                 "expected $MeshFormat on the first line, found '{}': a `.msh` file is read as \
                  Gmsh's, and some tools (IPC's examples, for one) write their own format under \
-                 that name; export Gmsh MSH 4.1 or 2.2, or convert it (`meshio convert FILE \
-                 out.mesh`)",
+                 that name; write it from the tool that made it as Gmsh MSH 4.1 or 2.2, MEDIT \
+                 `.mesh`, legacy VTK or TetGen `.node`/`.ele`",
                 snippet(&String::from_utf8_lossy(first))
             ),
         ));
@@ -341,7 +341,7 @@ mod tests {
         let other = parse_error(b"$Nodes\n4\n0 0 0\n");
         assert_eq!(other.0, 1);
         assert!(
-            other.1.contains("found '$Nodes'") && other.1.contains("meshio convert"),
+            other.1.contains("found '$Nodes'") && other.1.contains("from the tool that made it"),
             "{}",
             other.1
         );
