@@ -29,17 +29,27 @@ pub struct ViewArgs {
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// The reduced methods offered with --scene (full space is always offered).
-    #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::NeuralCubature, MethodArg::Neural, MethodArg::PcaCubature, MethodArg::Pca])]
+    #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., conflicts_with = "model", default_values_t = [MethodArg::NeuralCubature, MethodArg::Neural, MethodArg::PcaCubature, MethodArg::Pca])]
     methods: Vec<MethodArg>,
     /// Port; 0 picks a free one. When the default port is taken, a free one is used instead.
     #[arg(long, default_value_t = DEFAULT_PORT)]
     port: u16,
     /// Address to listen on. Anything but loopback lets other machines drive the session.
-    #[arg(long, default_value = "127.0.0.1")]
+    #[arg(long, default_value = "127.0.0.1", value_parser = parse_host)]
     host: IpAddr,
 }
 
 const DEFAULT_PORT: u16 = 8080;
+
+/// `--host`: an IP address, or `localhost` (the loopback address the docs name).
+fn parse_host(text: &str) -> Result<IpAddr, String> {
+    if text.eq_ignore_ascii_case("localhost") {
+        return Ok(IpAddr::from([127, 0, 0, 1]));
+    }
+    text.parse().map_err(|_| {
+        "give an IP address, e.g. 127.0.0.1 (or localhost), or 0.0.0.0 for every one".to_string()
+    })
+}
 
 /// The name full space goes by on the page.
 const FULL: &str = "full";
@@ -50,8 +60,7 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
     let chosen = args.method.map(Method::from);
     let (settings, mut methods, default_start) = match &args.model {
         Some(path) => {
-            let model = ReducedModel::load(path)
-                .with_context(|| format!("cannot load the model {}", path.display()))?;
+            let model = ReducedModel::load(path).context("cannot load the model")?;
             let name = model.provenance.method.clone();
             println!(
                 "{}: {name} model of scene {}, {} vertices",
@@ -137,7 +146,14 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
         }
         other => other,
     }
-    .with_context(|| format!("cannot listen on {}:{}", args.host, args.port))?;
+    .map_err(|e| {
+        let hint = if e.kind() == std::io::ErrorKind::AddrInUse {
+            "; `--port 0` picks a free one"
+        } else {
+            ""
+        };
+        anyhow::anyhow!("cannot listen on {}:{}: {e}{hint}", args.host, args.port)
+    })?;
     let server = Server::serve(listener, session)?;
     let port = server.local_addr().port();
     let url = if args.host.is_unspecified() {
@@ -151,4 +167,23 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
     );
     server.wait();
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--host localhost` is the loopback address; anything else not an IP address says what
+    /// to give.
+    #[test]
+    fn hosts_are_ip_addresses_or_localhost() {
+        assert_eq!(parse_host("localhost"), Ok(IpAddr::from([127, 0, 0, 1])));
+        assert_eq!(parse_host("0.0.0.0"), Ok(IpAddr::from([0, 0, 0, 0])));
+        assert_eq!(parse_host("::1"), Ok("::1".parse().unwrap()));
+        assert!(
+            parse_host("example.org")
+                .unwrap_err()
+                .contains("give an IP address")
+        );
+    }
 }

@@ -400,7 +400,16 @@ fn request(text: &str, client: u64, ctx: &Context) -> Option<Message> {
     }
     let request: Request = match serde_json::from_str(text) {
         Ok(r) => r,
-        Err(e) => return Some(error_text(None, format!("not a valid request: {e}"))),
+        Err(e) => {
+            // Its type, where the message has one, so that the reply names the request.
+            let kind = serde_json::from_str::<serde_json::Value>(text)
+                .ok()
+                .and_then(|v| v.get("type")?.as_str().map(str::to_string));
+            return Some(error_text(
+                kind.as_deref(),
+                format!("not a valid request: {e}"),
+            ));
+        }
     };
     let kind = request.kind();
     match ctx.commands.try_send(Command::Request { client, request }) {

@@ -719,13 +719,25 @@ impl Session {
     }
 }
 
+/// `x` with four significant digits, without an exponent: 1.813, 1813, 0.001813.
+fn four_digits(x: f64) -> String {
+    let magnitude = if x == 0.0 || !x.is_finite() {
+        0
+    } else {
+        x.abs().log10().floor() as i32
+    };
+    let decimals = (3 - magnitude).max(0) as usize;
+    format!("{x:.decimals$}")
+}
+
 /// `value` when positive, finite and at most `max`.
 fn bounded(what: &str, value: f64, max: f64) -> Result<f64, String> {
     if value.is_finite() && value > 0.0 && value <= max {
         Ok(value)
     } else {
         Err(format!(
-            "the {what} must be positive and at most {max:.4e}, got {value}"
+            "the {what} must be positive and at most {}, got {value}",
+            four_digits(max)
         ))
     }
 }

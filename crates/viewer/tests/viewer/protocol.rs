@@ -142,6 +142,15 @@ fn every_malformed_message_gets_an_error_and_the_session_steps_on() {
             "{message:.80}: the reply {reply:?} does not say {expected:?}"
         );
     }
+    // A bound is said in plain numbers, not as 1.8128e0.
+    let reply = c.expect_error(r#"{"type":"grab","point":[0,0,0],"radius":-1}"#);
+    assert!(!reply.contains("e0") && !reply.contains("e-"), "{reply}");
+    // A message of a known type with a field that does not parse names its request.
+    c.send(r#"{"type":"pause","paused":"yes"}"#);
+    match c.wait_event(|e| matches!(e, Event::Error { .. }), "an error reply") {
+        Event::Error { request, .. } => assert_eq!(request.as_deref(), Some("pause")),
+        _ => unreachable!(),
+    }
     // Binary and non-UTF-8 text frames.
     c.ws.send(Message::binary(vec![1u8, 2, 3])).expect("send");
     let reply = c.wait_event(|e| matches!(e, Event::Error { .. }), "binary reply");
