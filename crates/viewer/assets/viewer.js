@@ -281,6 +281,13 @@
   socket.onclose = () => {
     $('status').textContent = 'disconnected from the server (reload when it runs again)';
     $('status').className = 'failed';
+    // Nothing steps any more: no figures of a simulation that is gone, no controls that would
+    // do nothing.
+    for (const id of ['sps', 'its', 'rtf']) $(id).textContent = '–';
+    for (const control of document.querySelectorAll('#hud button, #hud input, #hud select')) {
+      control.disabled = true;
+    }
+    $('hud').classList.add('disconnected');
   };
   socket.onmessage = (event) => {
     if (typeof event.data === 'string') { onEvent(JSON.parse(event.data)); return; }

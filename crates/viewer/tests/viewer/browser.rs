@@ -344,10 +344,23 @@ fn drag_on_the_page(input: Input) {
     let url = std::env::var("VIEWER_BROWSER_URL")
         .unwrap_or_else(|_| server.as_ref().map(Server::url).unwrap_or_default());
     let dir = tests::scratch_dir(&format!("viewer-browser-{input:?}"));
-    let result = drive(&binary, &dir, &url, input);
-    if let Some(s) = server {
-        s.shutdown();
-    }
+    // The test's own server is stopped with the page open, to see the page say so (a server
+    // given by VIEWER_BROWSER_URL is not the test's to stop).
+    let mut server = server;
+    let ours = server.is_some();
+    let mut stop = move || {
+        if let Some(s) = server.take() {
+            s.shutdown();
+        }
+    };
+    let result = drive(
+        &binary,
+        &dir,
+        &url,
+        input,
+        ours.then_some(&mut stop as &mut dyn FnMut()),
+    );
+    stop();
     if let Err(e) = result {
         panic!("{e}");
     }
@@ -472,7 +485,13 @@ fn watch_the_fall(binary: &Path, dir: &Path, url: &str) -> Result<()> {
     Ok(())
 }
 
-fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
+fn drive(
+    binary: &Path,
+    dir: &Path,
+    url: &str,
+    input: Input,
+    stop_server: Option<&mut dyn FnMut()>,
+) -> Result<()> {
     let mut browser = Browser::start(binary, &dir.join("profile"))?;
     let mut page = open_page(&mut browser, url, input)?;
     if page.eval("viewerDebug.following()")? != json!(true) {
@@ -534,6 +553,22 @@ fn drive(binary: &Path, dir: &Path, url: &str, input: Input) -> Result<()> {
     }
     if !(sps > 0.0 && hud.as_str().is_some_and(|h| h.contains("steps/s"))) {
         return Err(format!("the HUD shows no steps/s figure: {hud}"));
+    }
+    // With the server gone the page says so, shows no figures and offers no controls.
+    if let Some(stop) = stop_server {
+        stop();
+        page.wait_for(
+            "document.getElementById('status').textContent.startsWith('disconnected') \
+             && document.getElementById('sps').textContent === '–' \
+             && document.getElementById('pause').disabled \
+             && document.getElementById('radius').disabled",
+            "the page greyed out once the server stopped",
+        )?;
+        let shot = page.call("Page.captureScreenshot", json!({ "format": "png" }))?;
+        let png = base64(shot["data"].as_str().ok_or("no screenshot data")?);
+        let path = dir.join("viewer-disconnected.png");
+        std::fs::write(&path, &png).map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("screenshot: {}", path.display());
     }
     Ok(())
 }
