@@ -24,8 +24,8 @@ pub struct ViewArgs {
     /// Artifact cache folder (default: out/SCENE/cache).
     #[arg(long, conflicts_with = "model")]
     cache: Option<PathBuf>,
-    /// The method shown first (`full` for full space; default: neural-cubature, or the model
-    /// file's method).
+    /// The method shown first (`full` for full space with the scene's solver, `full-newton` or
+    /// `full-lbfgs` to choose it; default: neural-cubature, or the model file's method).
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// The reduced methods offered with --scene (full space is always offered).
@@ -40,6 +40,34 @@ pub struct ViewArgs {
 }
 
 const DEFAULT_PORT: u16 = 8080;
+
+/// Full space on `model`'s mesh with the scene's solver, or the one `--method full-newton` or
+/// `full-lbfgs` names (the page calls it `full` either way), said on a line of its own.
+fn full_runtime(model: &ReducedModel, chosen: Option<Method>) -> Result<FullRuntime> {
+    use fem_core::optim::{SolverConfig, SolverMethod};
+    let mut solver = SolverConfig::from(&model.full_solver);
+    let why = match chosen {
+        Some(Method::FullNewton) => {
+            solver.method = SolverMethod::Newton;
+            "as --method full-newton asks"
+        }
+        Some(Method::FullLbfgs) => {
+            solver.method = SolverMethod::Lbfgs;
+            "as --method full-lbfgs asks"
+        }
+        _ => "the scene's solver",
+    };
+    let name = match solver.method {
+        SolverMethod::Newton => "Newton",
+        SolverMethod::Lbfgs => "L-BFGS",
+    };
+    println!("full space solves its steps with {name} ({why})");
+    Ok(FullRuntime::new(
+        model.full_space_model()?,
+        model.time(),
+        solver,
+    )?)
+}
 
 /// `--host`: an IP address, or `localhost` (the loopback address the docs name).
 fn parse_host(text: &str) -> Result<IpAddr, String> {
@@ -70,7 +98,7 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             );
             let methods = vec![
                 viewer::Method::new(name.clone(), model.simulator()?),
-                viewer::Method::new(FULL, FullRuntime::from_model(&model)?),
+                viewer::Method::new(FULL, full_runtime(&model, chosen)?),
             ];
             (Settings::for_model(&model), methods, name)
         }
@@ -96,7 +124,7 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 let model = pipeline::export::scene_model(&mut p, m, Rows::Used, progress)?;
                 if settings.is_none() {
                     settings = Some(Settings::for_model(&model));
-                    methods.push(viewer::Method::new(FULL, FullRuntime::from_model(&model)?));
+                    methods.push(viewer::Method::new(FULL, full_runtime(&model, chosen)?));
                 }
                 methods.push(viewer::Method::new(m.name(), model.simulator()?));
             }
