@@ -132,6 +132,9 @@ fn merged_shards_equal_the_unsharded_snapshots() {
     r.snapshot_shard(0, 2, &no_progress).unwrap();
     let err = format!("{:#}", r.merge_shards(2).unwrap_err());
     assert!(err.contains("shard 1/2"), "{err}");
+    // One command to run, and the I/O error said once.
+    assert_eq!(err.matches("`cargo xtask snapshots").count(), 1, "{err}");
+    assert_eq!(err.matches("(os error").count(), 1, "{err}");
 }
 
 #[test]
