@@ -248,12 +248,17 @@
     // Markers: pinned vertices, then the drag's grab point and target.
     gl.useProgram(markerProgram);
     gl.uniformMatrix4fv(gl.getUniformLocation(markerProgram, 'viewProjection'), false, vp);
-    gl.uniform1f(gl.getUniformLocation(markerProgram, 'size'), 5 * dpr);
+    // A few pins (a body held at a point or along a line) are drawn larger and in front of the
+    // surface, so that where it hangs from shows from every side.
+    const fewPins = mesh.pinned.length < 8;
+    gl.uniform1f(gl.getUniformLocation(markerProgram, 'size'), (fewPins ? 10 : 5) * dpr);
     gl.uniform3fv(gl.getUniformLocation(markerProgram, 'tint'), [0.9, 0.2, 0.2]);
     gl.bindBuffer(gl.ARRAY_BUFFER, buffers.position);
     gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, buffers.pinned);
+    if (fewPins) gl.disable(gl.DEPTH_TEST);
     if (mesh.pinned.length) gl.drawElements(gl.POINTS, mesh.pinned.length, gl.UNSIGNED_INT, 0);
+    if (fewPins) gl.enable(gl.DEPTH_TEST);
     if (drag && drag.target) {
       const line = new Float32Array([...vertex(drag.vertex), ...drag.target]);
       gl.bindBuffer(gl.ARRAY_BUFFER, buffers.marker);
