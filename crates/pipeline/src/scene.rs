@@ -310,7 +310,7 @@ impl Scene {
     /// `box`. `piece` is [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
     fn wider_pin(&self, mesh: &TetMesh, piece: &[usize], pinned: &[usize]) -> String {
         let (lo, hi) = mesh.bounding_box();
-        let in_body = |v: &usize| piece.get(*v).is_some_and(|&c| c != NO_COMPONENT);
+        let in_body = |v: &usize| of_body(piece, *v);
         let held_now = pinned.iter().filter(|v| in_body(v)).count();
         let wider = self.pin.iter().enumerate().find_map(|(i, p)| {
             let plane = p.plane.as_ref()?;
@@ -405,8 +405,7 @@ impl Scene {
             .map_err(|e| anyhow::anyhow!("{}: [mesh]: {e}", self.source))?;
         let mut errors = Vec::new();
         let pieces = mesh.vertex_components();
-        // Vertices no tet uses are no part of the body.
-        let in_body = |v: &&usize| pieces.0[**v] != NO_COMPONENT;
+        let in_body = |v: &&usize| of_body(&pieces.0, **v);
         let body = mesh.num_vertices() - report.unreferenced_vertices;
         let mut pinned = Vec::new();
         // Each pin's vertices of the body.
@@ -478,6 +477,13 @@ impl Scene {
             pin_vertices: selected,
         })
     }
+}
+
+/// Whether vertex `v` is part of the body: some tet uses it, so it has a piece among
+/// [`TetMesh::vertex_components`]'s labels `piece` (pins and forces on other vertices hold and
+/// pull nothing).
+fn of_body(piece: &[usize], v: usize) -> bool {
+    piece[v] != NO_COMPONENT
 }
 
 /// What [`Scene::build_model`] builds, and what it found on the way.
