@@ -375,9 +375,8 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
 fn point3(what: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
     // An array other than 1-D is refused whatever numpy would convert (older numpy turned a
     // (3, 1) array's size-1 rows into floats).
-    let flat = value
-        .cast::<numpy::PyUntypedArray>()
-        .map_or(true, |a| a.ndim() == 1);
+    let array = value.cast::<numpy::PyUntypedArray>().ok();
+    let flat = array.is_none_or(|a| a.ndim() == 1);
     let values: Option<Vec<f64>> = value.extract().ok().filter(|_| flat);
     match values.as_deref() {
         Some(&[x, y, z]) => Ok([x, y, z]),
@@ -387,9 +386,9 @@ fn point3(what: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
         ))),
         None => Err(Class::InvalidArgument.err(format!(
             "{what} must be 3 numbers (x, y, z), got {}",
-            match value.cast::<numpy::PyUntypedArray>() {
-                Ok(a) => format!("an array of shape {:?}", a.shape()),
-                Err(_) => describe(value),
+            match array {
+                Some(a) => format!("an array of shape {:?}", a.shape()),
+                None => describe(value),
             }
         ))),
     }
