@@ -49,6 +49,22 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     })
 }
 
+/// Why `name` cannot name a scene, if it cannot: it becomes a folder name (`out/<name>`, the
+/// cache in `out/<name>/cache`), so it must be one plain file name, not a path that would
+/// write elsewhere.
+fn name_problem(name: &str) -> Option<String> {
+    if name.trim().is_empty() {
+        return Some("must not be empty".into());
+    }
+    let path_like = name == "." || name == ".." || name.contains(['/', '\\']);
+    (path_like || name.chars().any(char::is_control)).then(|| {
+        format!(
+            "got {name:?}; it names the output folder `out/<name>`, so it must be one plain file \
+             name such as \"my-part\", without `/`, `\\` or control characters"
+        )
+    })
+}
+
 /// The built-in default scene, also shipped as `data/cantilever.toml`.
 pub const DEFAULT_SCENE: &str = include_str!("../../../data/cantilever.toml");
 
@@ -138,10 +154,10 @@ impl Scene {
     /// Checks every section and reports all problems together.
     pub fn check(&self) -> Result<()> {
         let mut errors = Vec::new();
-        if self.name.trim().is_empty() {
+        if let Some(reason) = name_problem(&self.name) {
             errors.push(FemError::InvalidConfig {
                 field: "name".into(),
-                reason: "must not be empty".into(),
+                reason,
             });
         }
         self.material.check(&mut errors);
@@ -869,6 +885,34 @@ mod tests {
         assert!(err.contains("bad.toml"), "{err}");
         assert!(err.contains("material.poisson_ratio"), "{err}");
         assert!(err.contains("time.step"), "{err}");
+    }
+
+    /// The name becomes the folder `out/<name>`: a path in it would write elsewhere.
+    #[test]
+    fn a_name_that_is_a_path_is_refused() {
+        let named = |name: &str| {
+            let text =
+                DEFAULT_SCENE.replacen("name = \"cantilever\"", &format!("name = {name:?}"), 1);
+            Scene::from_str(&text, Path::new("."), "n.toml")
+        };
+        for bad in [
+            "../../elsewhere",
+            "/tmp/abs",
+            "a\\b",
+            "..",
+            ".",
+            "tab\there",
+            " ",
+        ] {
+            let err = named(bad).unwrap_err().to_string();
+            assert!(
+                err.contains("n.toml") && err.contains("name"),
+                "{bad:?}: {err}"
+            );
+        }
+        for good in ["my-part", "bunny 2", "x.v2", "a:b"] {
+            assert_eq!(named(good).unwrap().name, good);
+        }
     }
 
     /// The training data's solves stop at 10⁻² unless the solver's own tolerance is looser or
