@@ -147,6 +147,7 @@ impl Class {
 pub fn runtime_class(e: &RuntimeError) -> Class {
     match e {
         RuntimeError::UnknownHandle(_)
+        | RuntimeError::ForeignHandle(_)
         | RuntimeError::NotASpring(_)
         | RuntimeError::NothingInReach { .. } => Class::Handle,
         RuntimeError::NoSuchVertex { .. }

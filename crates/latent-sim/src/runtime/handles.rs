@@ -8,14 +8,22 @@ use super::{RuntimeError, Surface, finite, positive};
 use crate::ReducedError;
 
 /// A grabbed set of vertices (or a force added as data), to move or release.
+/// Each simulator's handles carry its own number, so that a handle used on another
+/// simulator is refused instead of naming the handle there that has the same count.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct Handle(u64);
+pub struct Handle {
+    owner: u64,
+    id: u64,
+}
 
 impl std::fmt::Display for Handle {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "#{}", self.0)
+        write!(f, "#{}", self.id)
     }
 }
+
+/// The next simulator's number for its handles.
+static NEXT_OWNER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// A handle and the force it is.
 #[derive(Debug, Clone, Copy)]
@@ -29,15 +37,29 @@ struct Entry {
 }
 
 /// The handles of one simulator.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub(crate) struct Handles {
+    owner: u64,
     next: u64,
     entries: Vec<Entry>,
 }
 
+impl Default for Handles {
+    fn default() -> Self {
+        Self {
+            owner: NEXT_OWNER.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            next: 0,
+            entries: Vec::new(),
+        }
+    }
+}
+
 impl Handles {
     fn insert(&mut self, force: usize, base: Option<Vec3>) -> Handle {
-        let handle = Handle(self.next);
+        let handle = Handle {
+            owner: self.owner,
+            id: self.next,
+        };
         self.next += 1;
         self.entries.push(Entry {
             handle,
@@ -48,6 +70,7 @@ impl Handles {
     }
 
     fn find(&self, handle: Handle) -> Result<Entry, RuntimeError> {
+        self.owned(handle)?;
         self.entries
             .iter()
             .find(|e| e.handle == handle)
@@ -55,8 +78,17 @@ impl Handles {
             .ok_or(RuntimeError::UnknownHandle(handle))
     }
 
+    fn owned(&self, handle: Handle) -> Result<(), RuntimeError> {
+        if handle.owner == self.owner {
+            Ok(())
+        } else {
+            Err(RuntimeError::ForeignHandle(handle))
+        }
+    }
+
     /// Forgets `handle` and returns its force's index; the forces after it move down by one.
     fn remove(&mut self, handle: Handle) -> Result<usize, RuntimeError> {
+        self.owned(handle)?;
         let at = self
             .entries
             .iter()

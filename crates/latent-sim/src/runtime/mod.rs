@@ -71,9 +71,12 @@ pub enum RuntimeError {
     Reduced(#[from] ReducedError),
     #[error(transparent)]
     Fem(#[from] FemError),
-    /// A handle this simulator does not have (released already, or another simulator's).
+    /// A handle this simulator does not have any more (released already).
     #[error("no handle {0} in this simulator (released already?)")]
     UnknownHandle(Handle),
+    /// Another simulator's handle.
+    #[error("handle {0} belongs to another simulator, not to this one")]
+    ForeignHandle(Handle),
     /// No surface vertex within the radius of the point.
     #[error("no surface vertex within {radius} of ({}, {}, {})", point[0], point[1], point[2])]
     NothingInReach { point: [f64; 3], radius: f64 },
@@ -154,13 +157,13 @@ pub trait Interactive {
     /// grabbed, moved by `target` minus the grab point.
     ///
     /// # Errors
-    /// [`RuntimeError::UnknownHandle`], [`RuntimeError::NotASpring`],
+    /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`], [`RuntimeError::NotASpring`],
     /// [`RuntimeError::NotFinite`].
     fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError>;
     /// Lets go of a handle (or removes a force added with [`Interactive::add_force`]).
     ///
     /// # Errors
-    /// [`RuntimeError::UnknownHandle`].
+    /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`].
     fn release(&mut self, handle: Handle) -> Result<(), RuntimeError>;
     /// Adds a force given as data (a spring or point load with its schedule, as a scene's
     /// `[[force]]` resolves to); it can be released like a handle, and a spring's target moved

@@ -144,6 +144,35 @@ fn two_handles_pull_at_once_and_release_independently() {
     two_handles(&mut model.simulator().unwrap(), &tip, middle, "reduced");
 }
 
+/// A handle is its simulator's: on another one (of the same model, where the count of handles
+/// is the same) it is refused, not taken for that simulator's own handle of the same number.
+#[test]
+fn a_handle_of_another_simulator_is_refused() {
+    let (model, mut full) = simulators(-9.81);
+    let mut reduced = model.simulator().unwrap();
+    let mut other = model.simulator().unwrap();
+    let n = full.rest_positions().len();
+    let theirs = reduced.grab(&[n - 1], 10.0).unwrap();
+    let own = other.grab(&[n - 1], 10.0).unwrap();
+    assert_eq!(
+        theirs.to_string(),
+        own.to_string(),
+        "both are the first handle"
+    );
+    assert_ne!(theirs, own);
+    for r in [
+        other.move_handle(theirs, [0.0; 3]),
+        other.release(theirs),
+        full.release(own),
+    ] {
+        let err = r.unwrap_err();
+        assert!(matches!(err, RuntimeError::ForeignHandle(_)), "{err}");
+        assert!(err.to_string().contains("another simulator"), "{err}");
+    }
+    other.release(own).unwrap();
+    reduced.release(theirs).unwrap();
+}
+
 /// Errors of the interaction calls, the same for both simulators.
 fn refusals<S: Interactive>(sim: &mut S, what: &str) {
     let n = sim.rest_positions().len();
