@@ -258,6 +258,9 @@ pub(crate) fn add_force<B: Backend>(
                 / force.vertices.len() as f64;
             Some(-centroid)
         }
+        ForceKind::Point if force.stiffness != 0.0 => {
+            return Err(RuntimeError::PointStiffness(force.stiffness));
+        }
         ForceKind::Point => None,
     };
     let index = b.push_force(force)?;

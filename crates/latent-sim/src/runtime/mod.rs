@@ -104,6 +104,12 @@ pub enum RuntimeError {
     /// A point or target with a coordinate that is not finite.
     #[error("the {what} must be finite, got ({}, {}, {})", value[0], value[1], value[2])]
     NotFinite { what: &'static str, value: [f64; 3] },
+    /// A point load given a stiffness, which only a spring has.
+    #[error(
+        "a point load has no stiffness, got {0}: give it 0 (its keyframes are its force), or make \
+         it a spring"
+    )]
+    PointStiffness(f64),
     /// A point load has no target to move.
     #[error("handle {0} is a point load; only a spring has a target to move")]
     NotASpring(Handle),

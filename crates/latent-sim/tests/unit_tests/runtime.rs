@@ -226,6 +226,18 @@ fn interaction_errors_are_typed() {
         }
         other => panic!("{other:?}"),
     }
+    // A point load with a stiffness, which only springs have (as a scene's `[[force]]` says).
+    let mut point = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], 0.5);
+    point.kind = latent_sim::ForceKind::Point;
+    point.stiffness = 5.0;
+    match full.add_force(point.clone()) {
+        Err(e @ RuntimeError::PointStiffness(k)) if k == 5.0 => {
+            assert!(e.to_string().contains("give it 0"), "{e}")
+        }
+        other => panic!("{other:?}"),
+    }
+    point.stiffness = 0.0;
+    full.add_force(point).unwrap();
 }
 
 /// A vertex the mesh lists and no tet uses is no part of the body: grabbing it is refused (a
