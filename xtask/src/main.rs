@@ -79,7 +79,7 @@ struct RunArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Write every K-th frame of each method (0: none).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5)]
     every: usize,
     /// Methods to compare.
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
@@ -87,12 +87,12 @@ struct RunArgs {
     /// Held-out test trajectory to simulate (any index: trajectory i depends only on the
     /// test's seed and i). Default: 0, or 0..`[test] schedules` when the scene asks for more
     /// than one (as `--trajectories`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     trajectory: Option<usize>,
     /// Run on held-out test trajectories 0..N instead (every cached stage is kept): trajectory
     /// 0's report where a plain run writes it, trajectory i's in OUT/trajectory-i, and a table
     /// of every method's error on each, with their mean and the worst, in OUT/trajectories.md.
-    #[arg(long, conflicts_with = "trajectory", value_parser = clap::value_parser!(u64).range(1..=MAX_TRAJECTORIES as u64))]
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "trajectory", value_parser = clap::value_parser!(u64).range(1..=MAX_TRAJECTORIES as u64))]
     trajectories: Option<u64>,
 }
 
@@ -103,13 +103,13 @@ struct SimulateArgs {
     #[arg(long, value_enum, default_value_t = MethodArg::Full)]
     method: MethodArg,
     /// Drive the simulation with held-out test trajectory N instead of the scene's forces.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     test: Option<usize>,
     /// Number of frames (overrides the scene).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     frames: Option<usize>,
     /// Write every K-th frame (and the last); 0 writes only the summary.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     every: usize,
     /// Overrides the scene's `[solver] method`.
     #[arg(long, value_enum)]
@@ -126,10 +126,10 @@ struct SuiteArgs {
     #[arg(long)]
     meshes: Option<PathBuf>,
     /// Leave out meshes with more vertices than this (the generated ones too).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     max_vertices: Option<usize>,
     /// Young's modulus of every scene, Pa.
-    #[arg(long, default_value_t = 1.0e5)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1.0e5)]
     youngs_modulus: f64,
     /// Output folder (default: out/suite).
     #[arg(long)]
@@ -141,7 +141,7 @@ struct SuiteArgs {
     /// Also run every method on test trajectories 1..N of each mesh, after its pipeline's time
     /// is taken: a second table gives each method's mean error over trajectories 0..N and the
     /// worst.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=MAX_TRAJECTORIES as u64))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=MAX_TRAJECTORIES as u64))]
     trajectories: u64,
 }
 
@@ -156,7 +156,7 @@ struct SnapshotsArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<String>,
     /// Combine shards 0..N into the snapshots artifact.
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     merge: Option<usize>,
 }
 
@@ -168,23 +168,23 @@ struct BenchArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Timed runs of the trajectory per variant (after one warm-up run).
-    #[arg(long, default_value_t = 3)]
-    repeats: usize,
+    #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    repeats: u64,
     /// PCA dimensions (default: the latent dimensions, half and all of the scene's basis).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
     pca_dims: Vec<usize>,
     /// Latent dimensions (default: half, once and twice the scene's).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
     latent_dims: Vec<usize>,
     /// Cubature tolerances (default: 0.1, 0.05, 0.02).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
     tolerances: Vec<f64>,
     /// Complement-direction counts for the neural methods at the scene's latent dimension
     /// (default: none beyond the scene's own; see `[reduced] complement_directions`).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
     complement_dims: Vec<usize>,
     /// Held-out test trajectory to simulate.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0)]
     trajectory: usize,
 }
 
@@ -199,10 +199,10 @@ struct StressArgs {
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
     methods: Vec<MethodArg>,
     /// Steps of the free-run condition (test trajectory, then no external force).
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 2000)]
     free_steps: usize,
     /// Held-out test trajectory to simulate.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0)]
     trajectory: usize,
 }
 
@@ -602,7 +602,7 @@ fn bench(cx: &Context, args: BenchArgs) -> Result<()> {
         out: output_folder(args.out.unwrap_or_else(|| cx.out(scene, &["bench"])))?,
         cache: cx.cache(scene, &args.common),
         trajectory: args.trajectory,
-        repeats: args.repeats,
+        repeats: args.repeats as usize,
         pca_dims: args.pca_dims,
         latent_dims: args.latent_dims,
         tolerances: args.tolerances,

@@ -32,7 +32,7 @@ pub struct ViewArgs {
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., conflicts_with = "model", default_values_t = [MethodArg::NeuralCubature, MethodArg::Neural, MethodArg::PcaCubature, MethodArg::Pca])]
     methods: Vec<MethodArg>,
     /// Port; 0 picks a free one. When the default port is taken, a free one is used instead.
-    #[arg(long, default_value_t = DEFAULT_PORT)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = DEFAULT_PORT)]
     port: u16,
     /// Address to listen on. Anything but loopback lets other machines drive the session.
     #[arg(long, default_value = "127.0.0.1", value_parser = parse_host)]

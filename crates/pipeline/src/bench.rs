@@ -62,6 +62,38 @@ struct Variant {
     solver: Option<SolverMethod>,
 }
 
+/// Refuses a sweep that would time nothing or leave out what it was asked for: before the
+/// stages, the repeats and tolerances; once the PCA basis is known (`sizes`: the rule's k and
+/// the basis's columns), dimensions it cannot have.
+fn check_options(opts: &BenchOptions, sizes: Option<(usize, usize)>) -> Result<()> {
+    if opts.repeats == 0 {
+        anyhow::bail!("`repeats` (`--repeats`) must be at least 1: the timed runs of each variant");
+    }
+    if let Some(t) = opts.tolerances.iter().find(|t| !(**t > 0.0 && **t < 1.0)) {
+        anyhow::bail!(
+            "cubature tolerance {t} (`--tolerances`): each must lie between 0 and 1, a relative \
+             force error such as 0.05"
+        );
+    }
+    let Some((chosen_k, basis_k)) = sizes else {
+        return Ok(());
+    };
+    let past = |dims: &[usize], max: usize| dims.iter().copied().find(|&k| k == 0 || k > max);
+    if let Some(k) = past(&opts.pca_dims, chosen_k) {
+        anyhow::bail!(
+            "PCA dimension {k} (`--pca-dims`): the scene's PCA rule keeps k = {chosen_k}, so a \
+             variant can have 1 to {chosen_k} (a larger basis needs `[pca]` to keep more)"
+        );
+    }
+    if let Some(d) = past(&opts.latent_dims, basis_k) {
+        anyhow::bail!(
+            "latent dimension {d} (`--latent-dims`): the autoencoder's input has the basis's \
+             {basis_k} columns, so a variant can have 1 to {basis_k}"
+        );
+    }
+    Ok(())
+}
+
 /// `chosen_k` is the PCA rule's k, `basis_k` the basis's columns with those appended to it (the
 /// autoencoder's input, whose half is the default latent dimension).
 fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions) -> Vec<Variant> {
@@ -233,6 +265,7 @@ pub fn bench(
     stage_progress: Progress<'_>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<BenchRow>> {
+    check_options(opts, None)?;
     let (chosen_k, basis_k) = {
         let mut p = Pipeline::new(scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
@@ -242,6 +275,7 @@ pub fn bench(
         let fit = p.pca(stage_progress)?;
         (fit.chosen_k(), fit.basis.k())
     };
+    check_options(opts, Some((chosen_k, basis_k)))?;
     let mut rows = Vec::new();
     for v in variants(scene, chosen_k, basis_k, opts) {
         on_variant(&v.label);
@@ -261,7 +295,7 @@ pub fn bench(
             trajectory: opts.trajectory,
             out: opts.out.join("frames"),
             every: 0,
-            repeats: opts.repeats.max(1),
+            repeats: opts.repeats,
             time_full: true,
             solver: v.solver,
         };
@@ -447,6 +481,76 @@ mod tests {
             offline_seconds: 0.0,
             pareto: false,
         }
+    }
+
+    /// A sweep that would time nothing, or leave out a size or tolerance it names, is refused
+    /// naming the value and the range that works; the defaults pass.
+    #[test]
+    fn a_sweep_that_would_leave_out_what_it_names_is_refused() {
+        let sizes = Some((10, 12));
+        for (opts, says) in [
+            (
+                BenchOptions {
+                    repeats: 0,
+                    ..options()
+                },
+                "`--repeats`",
+            ),
+            (
+                BenchOptions {
+                    tolerances: vec![0.05, -1.0],
+                    ..options()
+                },
+                "tolerance -1",
+            ),
+            (
+                BenchOptions {
+                    tolerances: vec![f64::NAN],
+                    ..options()
+                },
+                "tolerance NaN",
+            ),
+            (
+                BenchOptions {
+                    pca_dims: vec![4, 11],
+                    ..options()
+                },
+                "1 to 10",
+            ),
+            (
+                BenchOptions {
+                    pca_dims: vec![0],
+                    ..options()
+                },
+                "PCA dimension 0",
+            ),
+            (
+                BenchOptions {
+                    latent_dims: vec![13],
+                    ..options()
+                },
+                "1 to 12",
+            ),
+        ] {
+            let err = check_options(&opts, sizes).unwrap_err().to_string();
+            assert!(err.contains(says), "{err}");
+        }
+        check_options(&options(), sizes).unwrap();
+        let at_the_limits = BenchOptions {
+            pca_dims: vec![10],
+            latent_dims: vec![12],
+            ..options()
+        };
+        check_options(&at_the_limits, sizes).unwrap();
+        // Before the basis is known only the repeats and tolerances are checked.
+        check_options(
+            &BenchOptions {
+                pca_dims: vec![99],
+                ..options()
+            },
+            None,
+        )
+        .unwrap();
     }
 
     /// `--complement-dims` adds both neural methods per count, each with its scene's
