@@ -111,7 +111,8 @@ struct SimulateArgs {
     /// Write every K-th frame (and the last); 0 writes only the summary.
     #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     every: usize,
-    /// Overrides the scene's `[solver] method`.
+    /// Overrides the method's solver: the scene's `[solver] method` for `full`, its `[reduced]
+    /// method` for the reduced methods (`full-lbfgs` and `full-newton` name theirs).
     #[arg(long, value_enum)]
     solver: Option<SolverArg>,
     /// Output folder (default: out/SCENE/METHOD).

@@ -154,3 +154,28 @@ fn export_refuses_a_full_space_method_at_once() {
     assert!(text.contains("neural-cubature"), "{text}");
     assert!(!dir.join("cache").exists(), "a stage ran: {text}");
 }
+
+/// Flags that contradict each other or cannot be taken are refused naming the flag, before any
+/// stage runs: a solver against a method that names its own, a negative count, a sweep that
+/// times nothing.
+#[test]
+fn contradicting_or_impossible_flags_name_the_flag() {
+    let dir = scratch_dir("xtask-flags");
+    for (command, args, says) in [
+        (
+            "simulate",
+            &["--method", "full-lbfgs", "--solver", "newton"][..],
+            "`--solver newton` contradicts `--method full-lbfgs`",
+        ),
+        ("simulate", &["--every", "-1"][..], "'--every <EVERY>'"),
+        ("bench", &["--repeats", "0"][..], "'--repeats <REPEATS>'"),
+        ("bench", &["--tolerances", "-1"][..], "(`--tolerances`)"),
+    ] {
+        let args: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
+        let (ok, text) = xtask(&dir, TINY, command, &args);
+        assert!(!ok, "{command} {args:?}: {text}");
+        assert!(text.contains(says), "{command} {args:?}: {text}");
+        let cached = std::fs::read_dir(dir.join("cache")).map_or(0, |d| d.count());
+        assert_eq!(cached, 0, "a stage ran: {text}");
+    }
+}

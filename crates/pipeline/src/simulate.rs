@@ -111,7 +111,8 @@ pub struct SimulateOptions {
     pub frames: Option<usize>,
     /// Write every K-th frame (and the last); 0 writes no frames.
     pub every: usize,
-    /// Overrides `[solver] method`.
+    /// Overrides the method's solver: `[solver] method` for `full`, `[reduced] method` for the
+    /// reduced methods. `full-lbfgs` and `full-newton` name theirs, so the other one is refused.
     pub solver: Option<SolverMethod>,
 }
 
@@ -400,9 +401,27 @@ pub fn setup(
     };
     let mut solver = solver_for(scene, opts.method);
     if let Some(m) = opts.solver {
+        if let Some(forced) = opts.method.forced_full_solver()
+            && forced != m
+        {
+            anyhow::bail!(
+                "`--solver {}` contradicts `--method {}`, which names its solver: use `--method \
+                 full --solver {0}` or `--method full-{0}`",
+                solver_name(m),
+                opts.method.name(),
+            );
+        }
         solver.method = m;
     }
     Ok((model, time, solver))
+}
+
+/// A solver's name as the command line and the scene file write it.
+fn solver_name(m: SolverMethod) -> &'static str {
+    match m {
+        SolverMethod::Newton => "newton",
+        SolverMethod::Lbfgs => "lbfgs",
+    }
 }
 
 /// The solver settings of `method` on `scene`: `[solver]` for the full-space methods,
