@@ -287,6 +287,13 @@ fn onset_directions_reach_the_neural_methods() {
         err.to_string(),
         "the methods name pca twice; name each method once"
     );
+    // So is a run of no method, which would report nothing.
+    let none = RunOptions {
+        methods: Vec::new(),
+        ..opts
+    };
+    let err = run(&mut p, &none, &no_progress, &mut |_, _, _| {}).unwrap_err();
+    assert!(err.to_string().contains("name at least one"), "{err}");
 }
 
 /// Without `[reduced] onset_directions` and `complement_directions` the neural methods run

@@ -512,6 +512,9 @@ pub fn run(
     stage_progress: Progress<'_>,
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<MethodReport>> {
+    if opts.methods.is_empty() {
+        anyhow::bail!("the methods name none; name at least one (`Method::NeuralCubature`, …)");
+    }
     if let Some(m) = Method::repeated(&opts.methods) {
         anyhow::bail!("the methods name {m} twice; name each method once");
     }
