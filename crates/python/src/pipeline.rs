@@ -63,6 +63,14 @@ impl Failure {
     }
 }
 
+/// The scene's pipeline over `cache`: a cache folder that cannot be made is a failure of the
+/// run (`PipelineError`, as any other output's), the model's build one of the scene.
+fn pipeline_of<'a>(scene: &'a Scene, cache: &Path) -> Result<Pipeline<'a>, Failure> {
+    pipeline::output::create_folder(cache, "the cache folder", "for the stages' artifacts")
+        .map_err(Failure::Run)?;
+    Pipeline::new(scene, cache).map_err(Failure::Scene)
+}
+
 /// One stage of a pipeline call: computed or loaded from the cache.
 #[pyclass(module = "latent_dynamics", frozen, get_all)]
 #[derive(Debug, Clone)]
@@ -355,7 +363,7 @@ fn in_run_pipeline<T: Send>(
     let value = py.detach(|| -> Result<T, Failure> {
         let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
         let (out, cache) = folders(&scene, out_dir, cache_dir);
-        let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+        let mut p = pipeline_of(&scene, &cache)?;
         callback.install(&mut p);
         p.pca(&|_, _| {}).map_err(Failure::Run)?;
         body(&scene, &mut p, out)
@@ -516,7 +524,7 @@ pub fn export_model(
         .detach(|| -> Result<_, Failure> {
             let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
             let (out, cache) = folders(&scene, None, cache_dir);
-            let mut p = Pipeline::new(&scene, &cache).map_err(Failure::Scene)?;
+            let mut p = pipeline_of(&scene, &cache)?;
             callback.install(&mut p);
             let quiet = |_: usize, _: usize| {};
             let model = pipeline::export::scene_model(&mut p, method, rows, &quiet)

@@ -111,6 +111,9 @@ def test_pipeline_error(tmp_path: pathlib.Path, cache_dir: pathlib.Path) -> None
     blocker.write_text("not a folder")
     with pytest.raises(ld.PipelineError, match="a-file"):
         ld.run_pipeline(TINY, cache_dir=cache_dir, out_dir=blocker / "out", methods=["pca"])
+    # So is a cache folder that cannot be made: the scene is fine, the run cannot write.
+    with pytest.raises(ld.PipelineError, match="cache folder"):
+        ld.run_pipeline(TINY, cache_dir=blocker / "cache", out_dir=tmp_path / "out", methods=["pca"])
 
 
 def test_handle_errors(model: ld.Model) -> None:
