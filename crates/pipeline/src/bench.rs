@@ -325,8 +325,8 @@ pub fn bench(
 
 fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
     write_json(&out.join("bench.json"), &rows)?;
-    fem_core::io::write_atomic(&out.join("bench.md"), markdown(rows).as_bytes())?;
-    fem_core::io::write_atomic(&out.join("bench.svg"), plot(scene, rows).as_bytes())?;
+    crate::output::write_file(&out.join("bench.md"), markdown(rows).as_bytes())?;
+    crate::output::write_file(&out.join("bench.svg"), plot(scene, rows).as_bytes())?;
     Ok(())
 }
 

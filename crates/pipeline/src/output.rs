@@ -21,6 +21,12 @@ pub fn create_folder(path: &Path, name: &str, purpose: &str) -> Result<()> {
         .with_context(|| format!("cannot create {name} {}", path.display()))
 }
 
+/// Writes `bytes` to `path` atomically (its folder created if needed); an error names the file.
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    fem_core::io::write_atomic(path, bytes)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Writes the frames of one simulation and, at the end, the series file.
 #[derive(Debug)]
 pub struct FrameWriter {
@@ -82,5 +88,29 @@ impl FrameWriter {
         let path = self.dir.join("series.pvd");
         vtu::write_pvd(&path, &self.entries)?;
         Ok(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file that cannot be written is named in the error, not only the system's reason.
+    #[test]
+    fn a_write_that_fails_names_the_file() {
+        let dir = std::env::temp_dir().join(format!("output-write-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let blocker = dir.join("a-file");
+        std::fs::write(&blocker, "not a folder").unwrap();
+        let target = blocker.join("curves").join("spectrum.csv");
+        let err = format!("{:#}", write_file(&target, b"x").unwrap_err());
+        assert!(err.contains(&target.display().to_string()), "{err}");
+        let err = format!(
+            "{:#}",
+            create_folder(&blocker, "the output folder", "for it").unwrap_err()
+        );
+        assert!(err.contains("is a file, not a folder"), "{err}");
+        write_file(&dir.join("ok.csv"), b"x").unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

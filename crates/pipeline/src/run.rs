@@ -583,17 +583,17 @@ pub fn run(
         }
         model.save(&crate::export::model_path(&opts.out, method))?;
     }
-    fem_core::io::write_atomic(&opts.out.join("report.md"), markdown(&rows).as_bytes())?;
-    fem_core::io::write_atomic(
+    crate::output::write_file(&opts.out.join("report.md"), markdown(&rows).as_bytes())?;
+    crate::output::write_file(
         &opts.out.join("report.svg"),
         error_plot(&pipeline.scene.name, &rows).as_bytes(),
     )?;
     let h = pipeline.scene.time.step;
-    fem_core::io::write_atomic(
+    crate::output::write_file(
         &opts.out.join("errors.csv"),
         errors_csv(&rows, h).as_bytes(),
     )?;
-    fem_core::io::write_atomic(
+    crate::output::write_file(
         &opts.out.join("errors.svg"),
         frame_error_plot(&pipeline.scene.name, &rows, h).as_bytes(),
     )?;

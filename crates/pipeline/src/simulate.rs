@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use fem_core::integrator::{FullSpaceModel, Simulator, StepReport, TimeConfig};
-use fem_core::io::write_atomic;
 use fem_core::material::MaterialConfig;
 use fem_core::optim::{SolverConfig, SolverMethod};
 use latent_sim::model::Rows;
@@ -567,5 +566,5 @@ pub fn median(values: &[f64]) -> f64 {
 /// Writes pretty JSON atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
-    write_atomic(path, text.as_bytes()).with_context(|| format!("cannot write {}", path.display()))
+    crate::output::write_file(path, text.as_bytes())
 }

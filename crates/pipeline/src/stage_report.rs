@@ -35,18 +35,18 @@ pub fn describe_pca(fit: &PcaFit) -> String {
 /// Writes `spectrum.csv` (index, singular value) and, for the vertex-error rule,
 /// `vertex_error.csv` (k, maximum vertex error over the snapshots) into `dir`.
 pub fn write_pca_curves(dir: &Path, fit: &PcaFit) -> Result<()> {
-    std::fs::create_dir_all(dir)?;
+    crate::output::create_folder(dir, "the output folder", "for the curves")?;
     let mut csv = String::from("index,singular_value\n");
     for (i, v) in fit.basis.singular_values().iter().enumerate() {
         csv.push_str(&format!("{},{v}\n", i + 1));
     }
-    fem_core::io::write_atomic(&dir.join("spectrum.csv"), csv.as_bytes())?;
+    crate::output::write_file(&dir.join("spectrum.csv"), csv.as_bytes())?;
     if !fit.max_vertex_error_per_k.is_empty() {
         let mut csv = String::from("k,max_vertex_error\n");
         for (i, e) in fit.max_vertex_error_per_k.iter().enumerate() {
             csv.push_str(&format!("{},{e}\n", i + 1));
         }
-        fem_core::io::write_atomic(&dir.join("vertex_error.csv"), csv.as_bytes())?;
+        crate::output::write_file(&dir.join("vertex_error.csv"), csv.as_bytes())?;
     }
     Ok(())
 }
@@ -85,7 +85,7 @@ impl TrainedModel {
             let v = r.validation_loss.map(|v| v.to_string()).unwrap_or_default();
             csv.push_str(&format!("{},{},{}\n", r.epoch, r.train_loss, v));
         }
-        fem_core::io::write_atomic(&dir.join("loss.csv"), csv.as_bytes())?;
+        crate::output::write_file(&dir.join("loss.csv"), csv.as_bytes())?;
         let mut series = vec![plot::Series {
             name: "training".into(),
             points: self
@@ -118,7 +118,7 @@ impl TrainedModel {
             x_scale: plot::Scale::Linear,
             y_scale: plot::Scale::Log,
         };
-        fem_core::io::write_atomic(&dir.join("loss.svg"), plot::svg(&plot, &series).as_bytes())?;
+        crate::output::write_file(&dir.join("loss.svg"), plot::svg(&plot, &series).as_bytes())?;
         Ok(())
     }
 }
@@ -155,7 +155,7 @@ impl FittedCubature {
                 .unwrap_or_default();
             csv.push_str(&format!("{n},{e},{held}\n"));
         }
-        fem_core::io::write_atomic(&dir.join("error.csv"), csv.as_bytes())?;
+        crate::output::write_file(&dir.join("error.csv"), csv.as_bytes())?;
         let series = vec![
             plot::Series {
                 name: "training poses".into(),
@@ -186,7 +186,7 @@ impl FittedCubature {
             x_scale: plot::Scale::Linear,
             y_scale: plot::Scale::Log,
         };
-        fem_core::io::write_atomic(&dir.join("error.svg"), plot::svg(&plot, &series).as_bytes())?;
+        crate::output::write_file(&dir.join("error.svg"), plot::svg(&plot, &series).as_bytes())?;
         Ok(())
     }
 }

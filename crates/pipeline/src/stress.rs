@@ -352,6 +352,6 @@ pub fn markdown(results: &[StressResult]) -> String {
 /// Writes `stress.json` and `stress.md` into `out`.
 pub fn write(out: &Path, results: &[StressResult]) -> Result<()> {
     write_json(&out.join("stress.json"), &results)?;
-    fem_core::io::write_atomic(&out.join("stress.md"), markdown(results).as_bytes())?;
+    crate::output::write_file(&out.join("stress.md"), markdown(results).as_bytes())?;
     Ok(())
 }

@@ -214,9 +214,9 @@ pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
 
 /// Writes `suite.md` and `suite.json` into `out`.
 pub fn write(out: &Path, rows: &[SuiteRow]) -> Result<()> {
-    std::fs::create_dir_all(out)?;
-    fem_core::io::write_atomic(&out.join("suite.md"), markdown(rows).as_bytes())?;
-    fem_core::io::write_atomic(
+    crate::output::create_folder(out, "the output folder", "for the results")?;
+    crate::output::write_file(&out.join("suite.md"), markdown(rows).as_bytes())?;
+    crate::output::write_file(
         &out.join("suite.json"),
         serde_json::to_string_pretty(&rows)?.as_bytes(),
     )?;

@@ -136,8 +136,8 @@ pub fn run_trajectories(
 pub fn write(out: &Path, runs: &[Vec<MethodReport>]) -> Result<()> {
     let table = spreads(runs);
     let text = markdown(&table) + &warnings(runs, 0);
-    fem_core::io::write_atomic(&out.join("trajectories.md"), text.as_bytes())?;
-    fem_core::io::write_atomic(
+    crate::output::write_file(&out.join("trajectories.md"), text.as_bytes())?;
+    crate::output::write_file(
         &out.join("trajectories.json"),
         serde_json::to_string_pretty(&table)?.as_bytes(),
     )?;
