@@ -64,9 +64,17 @@ impl Condition {
         ]
     }
 
-    /// The scene under this condition.
+    /// The scene under this condition; its source names the condition, so that a warning the
+    /// varied scene draws (a body E × 0.01 cannot carry) is not taken for the user's scene's.
     fn apply(&self, scene: &Scene) -> Scene {
         let mut s = scene.clone();
+        if !matches!(self, Condition::Base | Condition::FreeRun(_)) {
+            s.source = format!(
+                "{} under the stress condition {}",
+                scene.source,
+                self.label()
+            );
+        }
         match *self {
             Condition::Base | Condition::FreeRun(_) => {}
             Condition::TimeStep(h) => s.time.step = h,
@@ -354,4 +362,28 @@ pub fn write(out: &Path, results: &[StressResult]) -> Result<()> {
     write_json(&out.join("stress.json"), &results)?;
     crate::output::write_file(&out.join("stress.md"), markdown(results).as_bytes())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A varied scene says which condition it is under (its warnings are the variant's), and
+    /// the unvaried ones keep the user's scene's name.
+    #[test]
+    fn a_varied_scene_names_its_condition() {
+        let scene = Scene::builtin();
+        let soft = Condition::Stiffness(0.01).apply(&scene);
+        assert_eq!(
+            soft.source,
+            format!("{} under the stress condition E × 0.01", scene.source)
+        );
+        assert_eq!(
+            soft.material.youngs_modulus,
+            scene.material.youngs_modulus * 0.01
+        );
+        for c in [Condition::Base, Condition::FreeRun(10)] {
+            assert_eq!(c.apply(&scene).source, scene.source);
+        }
+    }
 }
