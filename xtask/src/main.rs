@@ -106,8 +106,8 @@ struct SimulateArgs {
     #[arg(long, allow_negative_numbers = true)]
     test: Option<usize>,
     /// Number of frames (overrides the scene).
-    #[arg(long, allow_negative_numbers = true)]
-    frames: Option<usize>,
+    #[arg(long, allow_negative_numbers = true, value_parser = clap::value_parser!(u64).range(1..))]
+    frames: Option<u64>,
     /// Write every K-th frame (and the last); 0 writes only the summary.
     #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     every: usize,
@@ -682,7 +682,7 @@ fn simulate(cx: &Context, args: SimulateArgs) -> Result<()> {
         method,
         trajectory: test.map(Trajectory::Test).unwrap_or(Trajectory::Scene),
         out: output_folder(out.unwrap_or_else(|| cx.out(&scene, &[method.name()])))?,
-        frames,
+        frames: frames.map(|f| f as usize),
         every,
         solver: solver.map(|s| match s {
             SolverArg::Newton => fem_core::optim::SolverMethod::Newton,

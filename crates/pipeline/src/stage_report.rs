@@ -15,7 +15,7 @@ pub fn describe_pca(fit: &PcaFit) -> String {
     let s = fit.basis.singular_values();
     let shown: Vec<String> = s.iter().take(12).map(|v| format!("{v:.3e}")).collect();
     format!(
-        "singular values: {} …\nk = {}{}{} ({:?}; tolerance met: {}), explained energy {:.6}\n",
+        "singular values: {} …\nk = {}{}{} (by {}, {}), explained energy {:.6}\n",
         shown.join(" "),
         fit.chosen_k(),
         match fit.appended {
@@ -27,7 +27,11 @@ pub fn describe_pca(fit: &PcaFit) -> String {
             r => format!(" + {r} static responses to patch loads"),
         },
         fit.rule,
-        fit.tolerance_met,
+        if fit.tolerance_met {
+            "met"
+        } else {
+            "not met within `[pca] max_dimension`"
+        },
         fit.basis.explained_energy(fit.chosen_k())
     )
 }
