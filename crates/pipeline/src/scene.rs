@@ -118,6 +118,19 @@ pub use latent_sim::ReducedSolverConfig;
 impl Scene {
     /// Reads and checks a scene file.
     pub fn from_file(path: &Path) -> Result<Self> {
+        const MESH_FILES: [&str; 11] = [
+            "mesh", "msh", "vtk", "vtu", "node", "ele", "face", "obj", "stl", "ply", "off",
+        ];
+        if let Some(ext) = path.extension().and_then(|e| e.to_str())
+            && MESH_FILES.contains(&ext.to_ascii_lowercase().as_str())
+        {
+            let name = path.file_name().unwrap_or_default().to_string_lossy();
+            bail!(
+                "{} is a mesh file, not a scene: write a scene file (.toml) that names it, \
+                 `[mesh] path = \"{name}\"` (the README's \"Your own mesh\" has the smallest one)",
+                path.display()
+            );
+        }
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read scene file {}", path.display()))?;
         let base = path
@@ -885,6 +898,19 @@ mod tests {
         assert!(err.contains("bad.toml"), "{err}");
         assert!(err.contains("material.poisson_ratio"), "{err}");
         assert!(err.contains("time.step"), "{err}");
+    }
+
+    /// A mesh file given where a scene goes is named as such, with the line that takes it.
+    #[test]
+    fn a_mesh_file_given_as_the_scene_is_named() {
+        for file in ["bunny.mesh", "part.MSH", "a.node"] {
+            let err = Scene::from_file(Path::new(file)).unwrap_err().to_string();
+            assert!(err.contains("is a mesh file, not a scene"), "{err}");
+            assert!(
+                err.contains(&format!("`[mesh] path = \"{file}\"`")),
+                "{err}"
+            );
+        }
     }
 
     /// The name becomes the folder `out/<name>`: a path in it would write elsewhere.
