@@ -17,11 +17,22 @@
 
 use std::time::Instant;
 
-use latent_sim::{FullRuntime, Interactive, ReducedModel};
+use latent_sim::{FullRuntime, Interactive, ReducedModel, Vec3};
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
-fn main() -> Result<()> {
+/// Prints an error as its message, not Rust's debug form of it.
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.iter().find(|a| !a.starts_with("--")) else {
         eprintln!("usage: drag MODEL [--full]   (a model file from `cargo xtask export`)");
@@ -31,7 +42,7 @@ fn main() -> Result<()> {
     let start = Instant::now();
     let model = ReducedModel::load(path.as_ref())?;
     let load_ms = start.elapsed().as_secs_f64() * 1e3;
-    let bytes = std::fs::metadata(path)?.len();
+    let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
     let p = &model.provenance;
     println!(
         "{path}: {} model of scene {} ({:.2} MB, loaded in {load_ms:.1} ms): {} vertices ({} with \
@@ -76,10 +87,7 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
     } else {
         &model.pinned[..]
     };
-    let centre = anchor
-        .iter()
-        .fold(fem_core::Vec3::zeros(), |s, &v| s + rest[v])
-        / anchor.len() as f64;
+    let centre = anchor.iter().fold(Vec3::zeros(), |s, &v| s + rest[v]) / anchor.len() as f64;
     let (at, &vertex) = surface
         .iter()
         .enumerate()
@@ -91,11 +99,11 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
         .ok_or("the model has no surface")?;
     let (lo, hi) = model.mesh.bounding_box();
     let size = (hi - lo).norm();
-    let g = fem_core::Vec3::from(model.gravity);
+    let g = Vec3::from(model.gravity);
     let up = if g.norm() > 0.0 {
         -g.normalize()
     } else {
-        fem_core::Vec3::y()
+        Vec3::y()
     };
     // A spring that holds the body's weight when stretched by the drag's 0.2 L (a soft, heavy
     // body hangs from it instead of falling away), and at least 10⁻³ E·L.
@@ -107,7 +115,7 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
     let mut frame = vec![0.0f32; 3 * surface.len()];
     let (mut step_s, mut read_s) = (Vec::new(), Vec::new());
     let position = |frame: &[f32]| {
-        fem_core::Vec3::new(
+        Vec3::new(
             frame[3 * at] as f64,
             frame[3 * at + 1] as f64,
             frame[3 * at + 2] as f64,

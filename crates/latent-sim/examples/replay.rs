@@ -28,7 +28,18 @@ use latent_sim::{FullRuntime, Handle, Interactive, ReducedModel};
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
-fn main() -> Result<()> {
+/// Prints an error as its message, not Rust's debug form of it.
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let paths: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
     let [model, script] = paths[..] else {
@@ -36,7 +47,8 @@ fn main() -> Result<()> {
         std::process::exit(2);
     };
     let model = ReducedModel::load(model.as_ref())?;
-    let script = std::fs::read_to_string(script)?;
+    let script = std::fs::read_to_string(script)
+        .map_err(|e| format!("cannot read the script {script}: {e}"))?;
     if args.iter().any(|a| a == "--full") {
         replay(&mut FullRuntime::from_model(&model)?, &script)
     } else {

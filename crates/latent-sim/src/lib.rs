@@ -113,6 +113,7 @@ pub use config::{
 
 /// The forces a program adds to a runtime ([`Interactive::add_force`]), so that one crate
 /// is all it needs.
+pub use fem_core::Vec3;
 pub use fem_core::forces::{ExternalForce, ForceKind};
 pub use model::{ModelFileError, ModelFormatError, ReducedModel};
 pub use neural::NeuralSubspace;
@@ -148,10 +149,10 @@ pub enum ReducedError {
     /// A reduced matrix with entries that are not finite: e.g. an element it evaluates is
     /// inverted at this state, where the material (classic Neo-Hookean) has no energy.
     #[error(
-        "the reduced {what} matrix has entries that are not finite at this state: an element \
-         it evaluates may be inverted, where classic Neo-Hookean has no energy (a state given \
-         from outside, such as a full-space state projected on the basis, can be), or a spring \
-         so stiff that its terms overflow"
+        "the reduced {what} matrix has entries that are not finite at this state: a spring so \
+         stiff that its terms overflow, or, with classic Neo-Hookean only, an element it \
+         evaluates inverted, where that material has no energy (a state given from outside, \
+         such as a full-space state projected on the basis, can invert one)"
     )]
     NotFinite { what: &'static str },
     /// The parts of a reduced space do not fit together or the mesh.
