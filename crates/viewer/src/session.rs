@@ -735,8 +735,15 @@ fn bounded(what: &str, value: f64, max: f64) -> Result<f64, String> {
     if value.is_finite() && value > 0.0 && value <= max {
         Ok(value)
     } else {
+        // A number a client sent, written as sent but in exponent form when it is huge or tiny
+        // (1e300 in full is 301 digits).
+        let got = if value != 0.0 && !(1e-4..1e7).contains(&value.abs()) {
+            format!("{value:e}")
+        } else {
+            value.to_string()
+        };
         Err(format!(
-            "the {what} must be positive and at most {}, got {value}",
+            "the {what} must be positive and at most {}, got {got}",
             four_digits(max)
         ))
     }
