@@ -179,3 +179,30 @@ fn contradicting_or_impossible_flags_name_the_flag() {
         assert_eq!(cached, 0, "a stage ran: {text}");
     }
 }
+
+/// `bench` builds a pipeline per variant over one cache: each stage artifact is said once,
+/// when first computed or loaded, not again by every variant that shares it.
+#[test]
+fn bench_says_each_stage_once() {
+    let dir = scratch_dir("xtask-bench-stages");
+    let out = dir.join("out");
+    let args: Vec<&OsStr> = vec![
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--repeats".as_ref(),
+        "1".as_ref(),
+    ];
+    let (ok, text) = xtask(&dir, TINY, "bench", &args);
+    assert!(ok, "{text}");
+    let artifacts: Vec<&str> = text
+        .lines()
+        .filter_map(|l| l.split_once(" → ").map(|(_, path)| path))
+        .chain(text.lines().filter_map(|l| {
+            let (_, rest) = l.split_once("unchanged, skipped (")?;
+            rest.strip_suffix(')')
+        }))
+        .collect();
+    assert!(artifacts.len() > 5, "{text}");
+    let unique: std::collections::HashSet<_> = artifacts.iter().collect();
+    assert_eq!(unique.len(), artifacts.len(), "{text}");
+}

@@ -266,6 +266,14 @@ pub fn bench(
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<BenchRow>> {
     check_options(opts, None)?;
+    // Every variant builds its own pipeline over the shared cache: a stage they share is said
+    // once, when first computed or loaded, not again by each variant.
+    let mut said = std::collections::HashSet::new();
+    let on_stage = &mut |o: &crate::pipeline::StageOutcome| {
+        if said.insert(o.path.clone()) {
+            on_stage(o);
+        }
+    };
     let (chosen_k, basis_k) = {
         let mut p = Pipeline::new(scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
