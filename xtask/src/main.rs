@@ -30,7 +30,9 @@ struct Common {
     /// Scene file (TOML); the built-in cantilever when absent.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Artifact cache folder (default: out/SCENE/cache, SCENE the scene's name).
+    /// Artifact cache folder, shared by every command on the scene (default: out/SCENE/cache
+    /// in the project's folder, SCENE the scene's name, whatever --out says or where the
+    /// command runs from).
     #[arg(long)]
     cache: Option<PathBuf>,
 }
@@ -75,7 +77,8 @@ enum Command {
 struct RunArgs {
     #[command(flatten)]
     common: Common,
-    /// Output folder (default: out/SCENE).
+    /// Output folder (default: out/SCENE in the project's folder; the stage cache stays in
+    /// out/SCENE/cache unless --cache moves it).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Write every K-th frame of each method (0: none).
