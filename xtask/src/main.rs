@@ -398,11 +398,30 @@ fn bar(len: u64, what: &str) -> ProgressBar {
 }
 
 /// A bar for methods stepping through frames: `(method, done, total)`.
+/// The bar of the methods' runs, and a line when each run ends (in a log, where no bar is
+/// drawn, the time between two stage lines is then accounted for).
 fn method_progress(bar: &ProgressBar) -> impl FnMut(&str, usize, usize) + '_ {
-    |m, done, total| {
+    let mut started = std::time::Instant::now();
+    move |m, done, total| {
+        if done <= 1 && bar.message() != m {
+            started = std::time::Instant::now();
+        }
         bar.set_message(m.to_string());
         bar.set_length(total as u64);
         bar.set_position(done as u64);
+        if done == total {
+            let line = format!(
+                "{m:>10}: {total} {} in {:.1} s",
+                if total == 1 { "run" } else { "steps" },
+                started.elapsed().as_secs_f64()
+            );
+            if bar.is_hidden() {
+                println!("{line}");
+            } else {
+                bar.println(line);
+            }
+            bar.set_message("");
+        }
     }
 }
 

@@ -79,6 +79,8 @@ fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
     let (ok, text) = run(&dir, TINY, &["--trajectory", "2"]);
     assert!(ok, "{text}");
     assert_eq!(pca_errors(&out.join("report.json")), third);
+    // Each method's run says when it ends, in a log too, where no bar is drawn.
+    assert!(text.contains("       pca: 12 steps in "), "{text}");
 
     let (ok, text) = run(
         &dir,
