@@ -15,15 +15,26 @@ pub const UNTRUSTED_ERROR: f64 = 0.2;
 /// the subspace is (AutoDef's bar: 3.7 % subspace error, `pca` 1.5 %).
 pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 
+/// A method's error for the judgements below: the larger of its mean relative error and its
+/// space–time error. The mean weighs every frame alike, so a trajectory that is close for most
+/// of the test and far where the body moves most (a plate that starts to buckle under its own
+/// weight near the test's end: `pca` 2.6 % on average, 5.8 % space–time, 7.3 % at the worst
+/// frame, while `pca-cubature` was 0.7 %) reads better on it than it is.
+fn judged_error(r: &MethodReport) -> f64 {
+    r.mean_rel_error.max(r.trajectory_error)
+}
+
 /// Whether a reduced method drifts from the full trajectory: more than
-/// [`UNCOVERED_SUBSPACE_ERROR`] off while its subspace holds the test four times better. Then
-/// `run` starts the full simulation from the method's own state part way through
-/// ([`crate::run::restart`]), and [`assess`] says how much of the drift that explains.
+/// [`UNCOVERED_SUBSPACE_ERROR`] off (on average or space–time) while its subspace holds the
+/// test four times better. Then `run` starts the full simulation from the method's own state
+/// part way through ([`crate::run::restart`]), and [`assess`] says how much of the drift that
+/// explains.
 pub fn drifting(r: &MethodReport) -> bool {
+    let error = judged_error(r);
     !r.method.is_full()
         && r.failure.is_none()
-        && r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR
-        && r.subspace_error <= r.mean_rel_error / 4.0
+        && error > UNCOVERED_SUBSPACE_ERROR
+        && r.subspace_error <= error / 4.0
 }
 
 /// A full simulation started from a drifting method's state that goes on to make at least
@@ -273,12 +284,14 @@ pub struct Assessment {
     /// Figures not to be trusted: a full-space test that gives way ([`COLLAPSED_SHARE`]), a
     /// method that stopped, a subspace that misses the test, a trajectory over
     /// [`UNTRUSTED_ERROR`] off, one that left the training poses and ended over
-    /// [`UNCOVERED_SUBSPACE_ERROR`] off, and what the full simulation started from a drifting
-    /// method's state says of its drift.
+    /// [`UNCOVERED_SUBSPACE_ERROR`] off (on average or space–time), and what the full
+    /// simulation started from a drifting method's state says of its drift where the method is
+    /// that far off on average.
     pub untrusted: Vec<String>,
     /// What the figures do not say by themselves: a trajectory that left the training poses
     /// and still ended within [`UNCOVERED_SUBSPACE_ERROR`] of the full one (it held on this
-    /// test, may not on others), or reduction that does not pay on this mesh.
+    /// test, may not on others), reduction that does not pay on this mesh, and the restart of
+    /// a method within that error on average that drifts where the body moves most.
     pub caveats: Vec<String>,
 }
 
@@ -313,6 +326,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
     out.extend(rows.iter().filter_map(stretch_warning));
     // Methods whose trajectory left the training poses and still held, with the advice.
     let mut held_outside: Vec<(&MethodReport, String)> = Vec::new();
+    let mut restarts_within = Vec::new();
     for r in rows.iter().filter(|r| !r.method.is_full()) {
         let pct = |x: f64| 100.0 * x;
         if let Some(f) = &r.failure {
@@ -352,7 +366,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             // Where the run has measured the trajectory close to the full one, it is a caveat:
             // the extrapolation held on this test, which is not the same as holding on the
             // next (said once for the methods that share the advice, below).
-            let held = r.mean_rel_error <= UNCOVERED_SUBSPACE_ERROR;
+            let held = judged_error(r) <= UNCOVERED_SUBSPACE_ERROR;
             if !held {
                 out.push(format!(
                     "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
@@ -393,10 +407,17 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                 pct(r.mean_rel_error)
             ));
         }
-        out.extend(restart_warning(r));
+        // A method within UNCOVERED_SUBSPACE_ERROR on average that drifts where the body moves
+        // most: what its restart says is worth knowing, not a reason to distrust it.
+        if r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR {
+            out.extend(restart_warning(r));
+        } else {
+            restarts_within.extend(restart_warning(r));
+        }
         out.extend(cubature_warning(r, rows));
     }
     let mut caveats: Vec<String> = slower_than_full(rows).into_iter().collect();
+    caveats.extend(restarts_within);
     while let Some((_, what)) = held_outside.first() {
         let what = what.clone();
         let (group, rest): (Vec<_>, Vec<_>) =
@@ -565,6 +586,50 @@ mod tests {
             "{}",
             pulled[0]
         );
+    }
+
+    /// A method close on average and far where the body moves most (a plate that starts to
+    /// buckle near the test's end) drifts by its space–time error: its restart is measured and
+    /// said among what is worth knowing, and a trajectory outside the training poses has not
+    /// held.
+    #[test]
+    fn a_method_far_off_where_the_body_moves_most_drifts() {
+        let plate = MethodReport {
+            trajectory_error: 0.058,
+            step_error: 0.0016,
+            ..row(Method::Pca, 0.026, 0.0026)
+        };
+        assert!(drifting(&plate));
+        assert!(!drifting(&MethodReport {
+            trajectory_error: 0.02,
+            ..plate.clone()
+        }));
+        let a = assess(&[with_restart(plate.clone(), 0.004, 0.03)]);
+        assert!(a.untrusted.is_empty(), "{a:#?}");
+        assert_eq!(a.caveats.len(), 1, "{a:#?}");
+        assert!(
+            a.caveats[0].starts_with("pca: the drift is mostly the reduced steps' own"),
+            "{a:#?}"
+        );
+        // Outside the training poses as well: not "held", whatever the mean says.
+        let outside = MethodReport {
+            training_distance: 0.23,
+            training_distance_time: 0.9,
+            ..plate
+        };
+        let a = assess(&[outside.clone()]);
+        assert!(
+            a.untrusted
+                .iter()
+                .any(|w| w.contains("beyond the training poses")),
+            "{a:#?}"
+        );
+        assert!(a.caveats.iter().all(|w| !w.contains("held here")), "{a:#?}");
+        let a = assess(&[MethodReport {
+            trajectory_error: 0.03,
+            ..outside
+        }]);
+        assert!(a.caveats.iter().any(|w| w.contains("held here")), "{a:#?}");
     }
 
     /// A drifting method's restart becomes its warning: whether the full dynamics make most of
