@@ -31,6 +31,7 @@ pub mod optim;
 pub mod snapshots;
 pub mod sparse;
 pub mod sparse_cholesky;
+pub mod stability;
 pub mod step_norm;
 
 /// The seeded generator of the training schedules, re-exported so `fem_core::rng::SplitMix64`

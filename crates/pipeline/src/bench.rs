@@ -485,6 +485,7 @@ mod tests {
                 machine_gfma: None,
                 restart: None,
                 compression: None,
+                buckling: None,
             },
             offline_seconds: 0.0,
             pareto: false,

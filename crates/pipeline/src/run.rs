@@ -132,6 +132,55 @@ pub struct MethodReport {
     /// warning does not depend on the methods asked for.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub compression: Option<Compression>,
+    /// On the row that carries the compression: the linearised buckling load of the scene's
+    /// gravity ([`Buckling`]), which says whether the body can stand as it is pinned.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub buckling: Option<Buckling>,
+}
+
+/// Whether the body can stand under its own weight as it is pinned: the linearised buckling
+/// load of gravity at rest ([`fem_core::stability`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Buckling {
+    /// Gravity times this buckles the body; None when no load along gravity does (it hangs).
+    pub load_factor: Option<f64>,
+    /// The largest displacement of the linear response to gravity at rest (m).
+    pub sag: f64,
+    /// The body's bounding-box diagonal (m).
+    pub size: f64,
+    /// The Young's modulus at which the load factor would be 1 (it scales with E).
+    pub standing_modulus: Option<f64>,
+    /// Whether the eigenvalue iteration converged.
+    pub converged: bool,
+}
+
+impl Buckling {
+    /// The sag at the buckling load (load factor × sag) past which the estimate is not told:
+    /// linearised at rest, it holds while the body buckles from about its rest shape. A soft
+    /// bar held horizontal, which its weight bends far before any sideways mode (the built-in
+    /// cantilever: load factor 0.33 with a linear sag three times its size), has no buckling of
+    /// this kind to speak of; a 27 cm plate standing on its edge (0.51 with a 2 mm sag) has.
+    pub const VALID_SAG: f64 = 0.1;
+
+    /// The analysis of `model` (None without gravity or pins, for the linear material, and
+    /// when K₀ cannot be factorised, which the solves would have said already).
+    pub fn of(model: &FullSpaceModel, youngs_modulus: f64) -> Option<Self> {
+        let b = fem_core::stability::gravity_buckling(model).ok()??;
+        let (lo, hi) = model.mesh.bounding_box();
+        Some(Self {
+            load_factor: b.load_factor,
+            sag: b.sag,
+            size: (hi - lo).norm(),
+            standing_modulus: b.load_factor.map(|l| youngs_modulus / l),
+            converged: b.converged,
+        })
+    }
+
+    /// The load factor below 1 when the estimate holds: the body buckles under its own weight.
+    pub fn buckles(&self) -> Option<f64> {
+        let l = self.load_factor?;
+        (self.converged && l < 1.0 && l * self.sag < Self::VALID_SAG * self.size).then_some(l)
+    }
 }
 
 /// How far a trajectory compresses its elements.
@@ -548,6 +597,9 @@ pub fn run(
         first.compression =
             Compression::of(&pipeline.model, &reference.frames, pipeline.scene.time.step);
     }
+    if let Some(row) = rows.iter_mut().find(|r| r.compression.is_some()) {
+        row.buckling = Buckling::of(&pipeline.model, pipeline.scene.material.youngs_modulus);
+    }
     for i in 0..rows.len() {
         if !crate::trust::drifting(&rows[i]) {
             continue;
@@ -919,6 +971,7 @@ pub fn measure(
             machine_gfma: None,
             restart: None,
             compression: Compression::of(&model, &reference.frames, pipeline.scene.time.step),
+            buckling: None,
         });
     }
     let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
@@ -1065,6 +1118,7 @@ pub fn measure(
         machine_gfma,
         restart: None,
         compression: None,
+        buckling: None,
     })
 }
 

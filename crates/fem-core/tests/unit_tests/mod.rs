@@ -6,6 +6,7 @@ mod integrator;
 mod large_strain;
 mod materials;
 mod readers;
+mod stability;
 
 use std::io::Write;
 use std::path::PathBuf;

@@ -231,7 +231,7 @@ fn interaction_errors_are_typed() {
     point.kind = latent_sim::ForceKind::Point;
     point.stiffness = 5.0;
     match full.add_force(point.clone()) {
-        Err(e @ RuntimeError::PointStiffness(k)) if k == 5.0 => {
+        Err(e @ RuntimeError::PointStiffness(5.0)) => {
             assert!(e.to_string().contains("give it 0"), "{e}")
         }
         other => panic!("{other:?}"),
