@@ -81,6 +81,8 @@ fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
     assert_eq!(pca_errors(&out.join("report.json")), third);
     // Each method's run says when it ends, in a log too, where no bar is drawn.
     assert!(text.contains("       pca: 12 steps in "), "{text}");
+    // With `--every 0` no frame is written, and no empty folder per method is left.
+    assert!(!out.join("pca").exists() && !out.join("full").exists());
 
     let (ok, text) = run(
         &dir,

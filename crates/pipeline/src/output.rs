@@ -36,7 +36,8 @@ pub struct FrameWriter {
 
 impl FrameWriter {
     /// Prepares `out`, removing the frames and the series file an earlier run left there;
-    /// `out/frames/` is made by the first frame written (none when no frame is).
+    /// `out` and `out/frames/` are made by the first frame written (none when no frame is, so
+    /// `run --every 0` leaves no empty folder per method).
     pub fn new(out: &Path) -> Result<Self> {
         let frames = out.join("frames");
         if frames.is_dir() {
@@ -55,7 +56,6 @@ impl FrameWriter {
             std::fs::remove_file(&series)
                 .with_context(|| format!("cannot remove old {}", series.display()))?;
         }
-        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
         Ok(Self {
             dir: out.to_path_buf(),
             entries: Vec::new(),
