@@ -494,6 +494,9 @@ pub struct Pipeline<'a> {
     /// The body's vertex counts (fewer than the mesh's when some vertex no tet uses), for
     /// [`Pipeline::body_summary`] and the cache keys.
     body: BodyCounts,
+    /// The buckling analysis of the scene's gravity, once a run has needed it (it depends on
+    /// the model alone, not on the test trajectory).
+    pub(crate) buckling: std::cell::OnceCell<Option<crate::run::Buckling>>,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -566,6 +569,7 @@ impl<'a> Pipeline<'a> {
             recorded_seconds: 0.0,
             training_poses: None,
             body,
+            buckling: std::cell::OnceCell::new(),
         })
     }
 

@@ -171,12 +171,19 @@ pub fn run_more(
 }
 
 /// The warnings and caveats of [`crate::trust::assess`] for trajectories `from`.. of `runs`,
-/// each headed by its trajectory (empty where a run has none).
+/// each headed by its trajectory (empty where a run has none). The buckling of the scene's
+/// gravity, the same for every trajectory, is said with trajectory 0's only.
 pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
     runs.iter()
         .enumerate()
         .skip(from)
-        .map(|(i, rows)| crate::trust::assess(rows).text(&format!("trajectory {i}, ")))
+        .map(|(i, rows)| {
+            let mut rows = rows.clone();
+            if i > 0 {
+                rows.iter_mut().for_each(|r| r.buckling = None);
+            }
+            crate::trust::assess(&rows).text(&format!("trajectory {i}, "))
+        })
         .collect()
 }
 
