@@ -118,17 +118,18 @@ pub use latent_sim::ReducedSolverConfig;
 impl Scene {
     /// Reads and checks a scene file.
     pub fn from_file(path: &Path) -> Result<Self> {
-        const MESH_FILES: [&str; 11] = [
-            "mesh", "msh", "vtk", "vtu", "node", "ele", "face", "obj", "stl", "ply", "off",
-        ];
-        if let Some(ext) = path.extension().and_then(|e| e.to_str())
-            && MESH_FILES.contains(&ext.to_ascii_lowercase().as_str())
-        {
+        if fem_core::io::names_a_mesh(path) {
             let name = path.file_name().unwrap_or_default().to_string_lossy();
             bail!(
-                "{} is a mesh file, not a scene: write a scene file (.toml) that names it, \
-                 `[mesh] path = \"{name}\"` (the README's \"Your own mesh\" has the smallest one)",
-                path.display()
+                "{} is a mesh file, not a scene: {}",
+                path.display(),
+                match fem_core::io::check_format(path) {
+                    Ok(()) => format!(
+                        "write a scene file (.toml) that names it, `[mesh] path = \"{name}\"` \
+                         (the README's \"Your own mesh\" has the smallest one)"
+                    ),
+                    Err(e) => e.to_string(),
+                }
             );
         }
         let text = std::fs::read_to_string(path)
@@ -911,6 +912,15 @@ mod tests {
                 "{err}"
             );
         }
+        // A format no reader takes gets its own advice, not a `[mesh] path` that would fail.
+        let err = Scene::from_file(Path::new("part.stl"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("is a mesh file, not a scene") && err.contains("tetgen"),
+            "{err}"
+        );
+        assert!(!err.contains("[mesh] path = \"part.stl\""), "{err}");
     }
 
     /// The name becomes the folder `out/<name>`: a path in it would write elsewhere.

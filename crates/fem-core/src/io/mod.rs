@@ -120,11 +120,30 @@ pub fn is_mesh_file(path: &Path) -> bool {
     format_of(path).is_ok() && !node
 }
 
+/// Surface mesh formats, which no reader takes (the simulation needs tetrahedra).
+const SURFACE_FORMATS: [&str; 6] = ["obj", "stl", "off", "ply", "poly", "smesh"];
+
+/// Volume mesh formats no reader takes, each with its conversion in [`unsupported_hint`].
+const UNREAD_VOLUME_FORMATS: [&str; 2] = ["vtu", "meshb"];
+
+/// Whether `path`'s extension names a mesh format, read or not: to tell a mesh file given
+/// where something else goes (a scene) from that other file.
+pub fn names_a_mesh(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    format_of(path).is_ok()
+        || ext.is_some_and(|e| {
+            SURFACE_FORMATS.contains(&e.as_str()) || UNREAD_VOLUME_FORMATS.contains(&e.as_str())
+        })
+}
+
 /// What to do with a file of extension `ext` that no reader takes.
 fn unsupported_hint(ext: Option<&str>) -> String {
     const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, legacy VTK .vtk and TetGen .node/.ele";
     match ext {
-        Some("obj" | "stl" | "off" | "ply" | "poly" | "smesh") => format!(
+        Some(e) if SURFACE_FORMATS.contains(&e) => format!(
             "a surface mesh: the simulation needs a tetrahedral (volume) mesh. Tetrahedralize it \
              first, e.g. `tetgen -pqg FILE` (writes FILE.1.mesh beside it; TetGen reads .off, \
              .ply, .stl, .poly and .smesh) or fTetWild (`FloatTetwild_bin -i FILE -o \
