@@ -127,17 +127,6 @@ pub enum DimensionRule {
     MaxVertexError(f64),
 }
 
-/// The rule as a scene writes it: `` `[pca] explained_energy` = 0.9999999 ``.
-impl std::fmt::Display for DimensionRule {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            DimensionRule::Count(k) => write!(f, "`[pca] dimension` = {k}"),
-            DimensionRule::ExplainedEnergy(e) => write!(f, "`[pca] explained_energy` = {e}"),
-            DimensionRule::MaxVertexError(t) => write!(f, "`[pca] max_vertex_error` = {t} m"),
-        }
-    }
-}
-
 impl PcaConfig {
     /// Keep exactly `k` columns.
     pub fn by_dimension(k: usize) -> Self {

@@ -10,12 +10,13 @@ use pca::PcaFit;
 use crate::pipeline::{FittedCubature, TrainedModel};
 use crate::plot;
 
-/// The leading singular values, the chosen k with its rule, and the energy it explains.
+/// The leading singular values, the chosen k and the energy it explains (the stage's own line
+/// says by which rule).
 pub fn describe_pca(fit: &PcaFit) -> String {
     let s = fit.basis.singular_values();
     let shown: Vec<String> = s.iter().take(12).map(|v| format!("{v:.3e}")).collect();
     format!(
-        "singular values: {} …\nk = {}{}{} (by {}, {}), explained energy {:.6}\n",
+        "singular values: {} …\nk = {}{}{}, explained energy {:.6}\n",
         shown.join(" "),
         fit.chosen_k(),
         match fit.appended {
@@ -25,12 +26,6 @@ pub fn describe_pca(fit: &PcaFit) -> String {
         match fit.responses {
             0 => String::new(),
             r => format!(" + {r} static responses to patch loads"),
-        },
-        fit.rule,
-        if fit.tolerance_met {
-            "met"
-        } else {
-            "not met within `[pca] max_dimension`"
         },
         fit.basis.explained_energy(fit.chosen_k())
     )
