@@ -133,7 +133,7 @@ struct SuiteArgs {
     #[arg(long, allow_negative_numbers = true)]
     max_vertices: Option<usize>,
     /// Young's modulus of every scene, Pa.
-    #[arg(long, allow_negative_numbers = true, default_value_t = 1.0e5)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1.0e5, value_parser = positive_pascals)]
     youngs_modulus: f64,
     /// Output folder (default: out/suite).
     #[arg(long)]
@@ -175,17 +175,17 @@ struct BenchArgs {
     #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
     repeats: u64,
     /// PCA dimensions (default: the latent dimensions, half and all of the scene's basis).
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
+    #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
     pca_dims: Vec<usize>,
     /// Latent dimensions (default: half, once and twice the scene's).
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
+    #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
     latent_dims: Vec<usize>,
     /// Cubature tolerances (default: 0.1, 0.05, 0.02).
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
+    #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
     tolerances: Vec<f64>,
     /// Complement-direction counts for the neural methods at the scene's latent dimension
     /// (default: none beyond the scene's own; see `[reduced] complement_directions`).
-    #[arg(long, allow_negative_numbers = true, value_delimiter = ',')]
+    #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
     complement_dims: Vec<usize>,
     /// Held-out test trajectory to simulate.
     #[arg(long, allow_negative_numbers = true, default_value_t = 0)]
@@ -384,6 +384,17 @@ impl Context {
     }
 }
 
+/// A Young's modulus from the command line: a positive, finite number of pascals.
+fn positive_pascals(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(_) => Err(format!(
+            "a Young's modulus is a positive number of pascals, got {text}"
+        )),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
 fn bar(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(
@@ -397,10 +408,10 @@ fn bar(len: u64, what: &str) -> ProgressBar {
     bar
 }
 
-/// A bar for methods stepping through frames: `(method, done, total)`.
-/// The bar of the methods' runs, and a line when each run ends (in a log, where no bar is
-/// drawn, the time between two stage lines is then accounted for).
-fn method_progress(bar: &ProgressBar) -> impl FnMut(&str, usize, usize) + '_ {
+/// A bar for methods stepping through frames, `(method, done, total)`, and with `say_ends` a
+/// line when each run ends (in a log, where no bar is drawn, the time between two stage lines
+/// is then accounted for; `bench`, whose variants repeat their runs, says its variants instead).
+fn method_progress(bar: &ProgressBar, say_ends: bool) -> impl FnMut(&str, usize, usize) + '_ {
     let mut started = std::time::Instant::now();
     move |m, done, total| {
         if done <= 1 && bar.message() != m {
@@ -409,7 +420,7 @@ fn method_progress(bar: &ProgressBar) -> impl FnMut(&str, usize, usize) + '_ {
         bar.set_message(m.to_string());
         bar.set_length(total as u64);
         bar.set_position(done as u64);
-        if done == total {
+        if say_ends && done == total {
             let line = format!(
                 "{m:>10}: {total} {} in {:.1} s",
                 if total == 1 { "run" } else { "steps" },
@@ -490,7 +501,7 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
                 n,
                 &progress,
                 &mut |i| method_bar.println(format!("test trajectory {i} ({} of {n})", i + 1)),
-                &mut method_progress(&method_bar),
+                &mut method_progress(&method_bar, true),
             )?;
             let table = pipeline::trajectories::spreads(&runs);
             method_bar.finish_and_clear();
@@ -506,7 +517,12 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
             );
             runs.swap_remove(0)
         }
-        None => pipeline::run::run(&mut p, &opts, &progress, &mut method_progress(&method_bar))?,
+        None => pipeline::run::run(
+            &mut p,
+            &opts,
+            &progress,
+            &mut method_progress(&method_bar, true),
+        )?,
     };
     method_bar.finish_and_clear();
     if opts
@@ -639,7 +655,7 @@ fn bench(cx: &Context, args: BenchArgs) -> Result<()> {
         &mut print_stage,
         &mut |label| method_bar.println(format!("     bench: {label}")),
         &progress,
-        &mut method_progress(&method_bar),
+        &mut method_progress(&method_bar, false),
     )?;
     method_bar.finish_and_clear();
     print!("{}", pipeline::bench::summary(scene, opts, &rows));

@@ -63,7 +63,7 @@ struct Variant {
 }
 
 /// Refuses a sweep that would time nothing or leave out what it was asked for: before the
-/// stages, the repeats and tolerances; once the PCA basis is known (`sizes`: the rule's k and
+/// stages, the repeats, tolerances and complement counts; once the PCA basis is known (`sizes`: the rule's k and
 /// the basis's columns), dimensions it cannot have.
 fn check_options(opts: &BenchOptions, sizes: Option<(usize, usize)>) -> Result<()> {
     if opts.repeats == 0 {
@@ -73,6 +73,16 @@ fn check_options(opts: &BenchOptions, sizes: Option<(usize, usize)>) -> Result<(
         anyhow::bail!(
             "cubature tolerance {t} (`--tolerances`): each must lie between 0 and 1, a relative \
              force error such as 0.05"
+        );
+    }
+    if let Some(&c) = opts
+        .complement_dims
+        .iter()
+        .find(|&&c| c > latent_sim::MAX_COMPLEMENT_DIRECTIONS)
+    {
+        anyhow::bail!(
+            "complement direction count {c} (`--complement-dims`): at most {}",
+            latent_sim::MAX_COMPLEMENT_DIRECTIONS
         );
     }
     let Some((chosen_k, basis_k)) = sizes else {
@@ -539,6 +549,13 @@ mod tests {
                     ..options()
                 },
                 "1 to 12",
+            ),
+            (
+                BenchOptions {
+                    complement_dims: vec![8, 1000],
+                    ..options()
+                },
+                "count 1000",
             ),
         ] {
             let err = check_options(&opts, sizes).unwrap_err().to_string();
