@@ -111,9 +111,10 @@ pub use config::{
     REDUCED_MIN_ITERATIONS, ReducedSolverConfig,
 };
 
-/// The forces a program adds to a runtime ([`Interactive::add_force`]), so that one crate
-/// is all it needs.
+/// A point, as the runtime's positions are read ([`Interactive::rest_positions`]), so that one
+/// crate is all a program needs.
 pub use fem_core::Vec3;
+/// The forces a program adds to a runtime ([`Interactive::add_force`]).
 pub use fem_core::forces::{ExternalForce, ForceKind};
 pub use model::{ModelFileError, ModelFormatError, ReducedModel};
 pub use neural::NeuralSubspace;

@@ -571,7 +571,7 @@ pub fn run(
     progress: &mut dyn FnMut(&str, usize, usize),
 ) -> Result<Vec<MethodReport>> {
     if opts.methods.is_empty() {
-        anyhow::bail!("the methods name none; name at least one (`Method::NeuralCubature`, …)");
+        anyhow::bail!("the methods name none; name at least one (neural-cubature, …)");
     }
     if let Some(m) = Method::repeated(&opts.methods) {
         anyhow::bail!("the methods name {m} twice; name each method once");

@@ -122,7 +122,11 @@ fn every_malformed_message_gets_an_error_and_the_session_steps_on() {
         ),
         (
             r#"{"type":"grab","point":[0,0,0],"stiffness":1e308}"#.into(),
-            "got 1e308",
+            "stiffness must be positive and at most",
+        ),
+        (
+            r#"{"type":"grab","point":[0,0,0],"stiffness":1e300}"#.into(),
+            "got 1e300",
         ),
         (r#"{"type":"grab"}"#.into(), "either a point or a list"),
         (r#"{"type":"method","name":"magic"}"#.into(), "no method"),
