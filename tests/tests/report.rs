@@ -512,3 +512,69 @@ fn compression_is_reported_without_a_full_row() {
     assert_eq!(lbfgs_first[0].compression, Some(full));
     assert_eq!(lbfgs_first[1].compression, None);
 }
+
+/// A plate standing on its edge, pinned along its foot: soft, it buckles under its own weight
+/// and the run says so on the full row, with the modulus that would keep it standing; at
+/// twice that modulus it stands and nothing is said.
+#[test]
+fn a_plate_that_buckles_under_its_weight_is_said() {
+    let plate = |modulus: f64| {
+        scene(&format!(
+            r#"
+name = "plate"
+[mesh]
+generate = {{ kind = "box", size = [0.27, 0.27, 0.025], cells = [8, 8, 2] }}
+[material]
+model = "stable-neo-hookean"
+youngs_modulus = {modulus:e}
+poisson_ratio = 0.45
+[[pin]]
+plane = {{ axis = "y", side = "min", tolerance = 1.0e-3 }}
+[gravity]
+acceleration = [0.0, -9.81, 0.0]
+[time]
+step = 0.01
+[test]
+frames_per_schedule = 4
+"#
+        ))
+    };
+    let out = scratch_dir("report-buckling");
+    let soft = plate(2.0e4);
+    let mut p = Pipeline::new(&soft, &out.join("cache")).unwrap();
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: vec![Method::Full],
+        trajectory: 0,
+    };
+    let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let b = rows[0].buckling.expect("the full row carries the analysis");
+    let load = b.buckles().expect("a soft plate on its edge buckles");
+    let standing = b.standing_modulus.unwrap();
+    assert!((standing - 2.0e4 / load).abs() < 1e-6 * standing, "{b:?}");
+    let warnings = pipeline::trust::assess(&rows).untrusted;
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("buckles under its own weight")),
+        "{warnings:?}"
+    );
+    let stiff = plate(2.0 * standing);
+    let out = scratch_dir("report-standing");
+    let mut p = Pipeline::new(&stiff, &out.join("cache")).unwrap();
+    let rows = run(
+        &mut p,
+        &RunOptions {
+            out: out.clone(),
+            ..opts
+        },
+        &no_progress,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    let b = rows[0].buckling.unwrap();
+    assert!((b.load_factor.unwrap() - 2.0).abs() < 1e-3, "{b:?}");
+    assert_eq!(b.buckles(), None);
+    assert!(pipeline::trust::assess(&rows).untrusted.is_empty());
+}
