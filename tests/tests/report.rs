@@ -560,6 +560,12 @@ frames_per_schedule = 4
             .any(|w| w.contains("buckles under its own weight")),
         "{warnings:?}"
     );
+    // report.md has the warnings under its table, as `run` prints them.
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        report.contains("not to be trusted:\n- full: the body buckles"),
+        "{report}"
+    );
     let stiff = plate(2.0 * standing);
     let out = scratch_dir("report-standing");
     let mut p = Pipeline::new(&stiff, &out.join("cache")).unwrap();

@@ -646,7 +646,10 @@ pub fn run(
         }
         model.save(&crate::export::model_path(&opts.out, method))?;
     }
-    crate::output::write_file(&opts.out.join("report.md"), markdown(&rows).as_bytes())?;
+    crate::output::write_file(
+        &opts.out.join("report.md"),
+        report_markdown(&rows).as_bytes(),
+    )?;
     crate::output::write_file(
         &opts.out.join("report.svg"),
         error_plot(&pipeline.scene.name, &rows).as_bytes(),
@@ -663,16 +666,11 @@ pub fn run(
     Ok(rows)
 }
 
-/// What `cargo xtask run` shows after the stages: the table, where a reduced step's time goes,
-/// the warnings of [`crate::trust`], and where the report, the frames and the model are.
-pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> String {
-    let mut s = format!(
-        "\n{} — held-out test trajectory {}, {} frames\n\n",
-        scene.name,
-        opts.trajectory,
-        scene.test().frames_per_schedule
-    );
-    s.push_str(&markdown(rows));
+/// `report.md`, and the middle of what `run` prints: the table, where a reduced step's time
+/// goes, where `neural-cubature` stands against `pca-cubature`, steps started again, and the
+/// warnings of [`crate::trust`].
+pub fn report_markdown(rows: &[MethodReport]) -> String {
+    let mut s = markdown(rows);
     s.push_str(&time_split_markdown(rows));
     s.push_str(&standing_line(rows));
     for r in rows.iter().filter(|r| r.step_restarts > 0) {
@@ -683,6 +681,19 @@ pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> Strin
         ));
     }
     s.push_str(&crate::trust::assess(rows).text(""));
+    s
+}
+
+/// What `cargo xtask run` shows after the stages: the table, where a reduced step's time goes,
+/// the warnings of [`crate::trust`], and where the report, the frames and the model are.
+pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> String {
+    let mut s = format!(
+        "\n{} — held-out test trajectory {}, {} frames\n\n",
+        scene.name,
+        opts.trajectory,
+        scene.test().frames_per_schedule
+    );
+    s.push_str(&report_markdown(rows));
     s.push_str(&format!(
         "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg)",
         opts.out.join("report.json").display()
