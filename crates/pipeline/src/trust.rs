@@ -318,13 +318,11 @@ pub struct Assessment {
     /// stopped, a subspace that misses the test, a trajectory over
     /// [`UNTRUSTED_ERROR`] off, one that left the training poses and ended over
     /// [`UNCOVERED_SUBSPACE_ERROR`] off (on average or space–time), and what the full
-    /// simulation started from a drifting method's state says of its drift where the method is
-    /// that far off on average.
+    /// simulation started from a drifting method's state says of its drift.
     pub untrusted: Vec<String>,
     /// What the figures do not say by themselves: a trajectory that left the training poses
     /// and still ended within [`UNCOVERED_SUBSPACE_ERROR`] of the full one (it held on this
-    /// test, may not on others), reduction that does not pay on this mesh, and the restart of
-    /// a method within that error on average that drifts where the body moves most.
+    /// test, may not on others), or reduction that does not pay on this mesh.
     pub caveats: Vec<String>,
 }
 
@@ -361,7 +359,6 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
     out.extend(rows.iter().filter_map(buckling_warning));
     // Methods whose trajectory left the training poses and still held, with the advice.
     let mut held_outside: Vec<(&MethodReport, String)> = Vec::new();
-    let mut restarts_within = Vec::new();
     for r in rows.iter().filter(|r| !r.method.is_full()) {
         let pct = |x: f64| 100.0 * x;
         if let Some(f) = &r.failure {
@@ -442,17 +439,10 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                 pct(r.mean_rel_error)
             ));
         }
-        // A method within UNCOVERED_SUBSPACE_ERROR on average that drifts where the body moves
-        // most: what its restart says is worth knowing, not a reason to distrust it.
-        if r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR {
-            out.extend(restart_warning(r));
-        } else {
-            restarts_within.extend(restart_warning(r));
-        }
+        out.extend(restart_warning(r));
         out.extend(cubature_warning(r, rows));
     }
     let mut caveats: Vec<String> = slower_than_full(rows).into_iter().collect();
-    caveats.extend(restarts_within);
     while let Some((_, what)) = held_outside.first() {
         let what = what.clone();
         let (group, rest): (Vec<_>, Vec<_>) =
@@ -663,8 +653,7 @@ mod tests {
 
     /// A method close on average and far where the body moves most (a plate that starts to
     /// buckle near the test's end) drifts by its space–time error: its restart is measured and
-    /// said among what is worth knowing, and a trajectory outside the training poses has not
-    /// held.
+    /// said, and a trajectory outside the training poses has not held.
     #[test]
     fn a_method_far_off_where_the_body_moves_most_drifts() {
         let plate = MethodReport {
@@ -678,10 +667,10 @@ mod tests {
             ..plate.clone()
         }));
         let a = assess(&[with_restart(plate.clone(), 0.004, 0.03)]);
-        assert!(a.untrusted.is_empty(), "{a:#?}");
-        assert_eq!(a.caveats.len(), 1, "{a:#?}");
+        assert!(a.caveats.is_empty(), "{a:#?}");
+        assert_eq!(a.untrusted.len(), 1, "{a:#?}");
         assert!(
-            a.caveats[0].starts_with("pca: the drift is mostly the reduced steps' own"),
+            a.untrusted[0].starts_with("pca: the drift is mostly the reduced steps' own"),
             "{a:#?}"
         );
         // Outside the training poses as well: not "held", whatever the mean says.
