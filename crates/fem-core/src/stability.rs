@@ -32,7 +32,8 @@ pub struct GravityBuckling {
     /// along gravity does (no positive μ: the body hangs in tension), or when the search did
     /// not converge to one.
     pub load_factor: Option<f64>,
-    /// Whether the power iteration met [`TOLERANCE`] within [`MAX_ITERATIONS`].
+    /// Whether the power iteration reached its residual tolerance (10⁻³ of the eigenvalue)
+    /// within its 300 iterations.
     pub converged: bool,
     /// The largest vertex displacement of the linear response to gravity, u_g = K₀⁻¹f_g (m).
     pub sag: f64,
