@@ -13,7 +13,7 @@
 //! The linear material has no geometric stiffness (its strain is linear in the displacement), so
 //! nothing of this applies to it.
 
-use crate::integrator::FullSpaceModel;
+use crate::integrator::{FullSpaceModel, NewtonParts};
 use crate::material::{AnyMaterial, Material};
 use crate::step_norm::rest_stiffness;
 use crate::{FemError, Mat3, with_material};
@@ -51,16 +51,13 @@ pub fn gravity_buckling(model: &FullSpaceModel) -> Result<Option<GravityBuckling
     {
         return Ok(None);
     }
-    let mut parts = rest_stiffness(model)?;
-    let stiffness = parts.values.clone();
-    parts.factor()?;
-    let n = model.dofs.num_free();
-    let mut u = vec![0.0; n];
-    model.dofs.gather(&model.gravity_load, &mut u);
-    parts.chol.solve_in_place(&mut u);
-    let mut full = vec![0.0; model.num_full()];
-    model.dofs.scatter(&u, &mut full);
-    let stress = with_material!(&model.material, |m| linear_stresses(m, model, &full));
+    let Prestress {
+        parts,
+        stiffness,
+        u,
+        full,
+        stress,
+    } = Prestress::of(model)?;
     let geometric = Geometric {
         model,
         stress: &stress,
@@ -85,6 +82,40 @@ pub fn gravity_buckling(model: &FullSpaceModel) -> Result<Option<GravityBuckling
         converged,
         sag,
     }))
+}
+
+/// The body held by its pins against its weight, linearised at rest.
+struct Prestress {
+    /// K₀ on the free DOFs, factorised.
+    parts: NewtonParts,
+    /// K₀'s values, for its products (the factor keeps its own copy).
+    stiffness: Vec<f64>,
+    /// u_g = K₀⁻¹f_g on the free DOFs, and on every DOF.
+    u: Vec<f64>,
+    full: Vec<f64>,
+    /// The stress of u_g in each element.
+    stress: Vec<Mat3>,
+}
+
+impl Prestress {
+    fn of(model: &FullSpaceModel) -> Result<Self, FemError> {
+        let mut parts = rest_stiffness(model)?;
+        let stiffness = parts.values.clone();
+        parts.factor()?;
+        let mut u = vec![0.0; model.dofs.num_free()];
+        model.dofs.gather(&model.gravity_load, &mut u);
+        parts.chol.solve_in_place(&mut u);
+        let mut full = vec![0.0; model.num_full()];
+        model.dofs.scatter(&u, &mut full);
+        let stress = with_material!(&model.material, |m| linear_stresses(m, model, &full));
+        Ok(Self {
+            parts,
+            stiffness,
+            u,
+            full,
+            stress,
+        })
+    }
 }
 
 /// The largest |value| of `u` (1 where all are zero).
@@ -262,19 +293,12 @@ mod tests {
     /// The largest positive eigenvalue of −K₀⁻¹K_σ from dense matrices: K₀ = LLᵀ, and the
     /// eigenvalues of the symmetric L⁻¹(−K_σ)L⁻ᵀ.
     fn dense_largest(model: &FullSpaceModel) -> f64 {
-        let mut parts = rest_stiffness(model).unwrap();
-        let stiffness = parts.values.clone();
-        parts.factor().unwrap();
+        let p = Prestress::of(model).unwrap();
+        let (parts, stiffness) = (&p.parts, &p.stiffness);
         let n = model.dofs.num_free();
-        let mut u = vec![0.0; n];
-        model.dofs.gather(&model.gravity_load, &mut u);
-        parts.chol.solve_in_place(&mut u);
-        let mut full = vec![0.0; model.num_full()];
-        model.dofs.scatter(&u, &mut full);
-        let stress = with_material!(&model.material, |m| linear_stresses(m, model, &full));
         let geometric = Geometric {
             model,
-            stress: &stress,
+            stress: &p.stress,
         };
         let (mut k, mut ks) = (
             nalgebra::DMatrix::zeros(n, n),
@@ -285,7 +309,7 @@ mod tests {
         for j in 0..n {
             e.fill(0.0);
             e[j] = 1.0;
-            parts.pattern.mul_vec(&stiffness, &e, &mut col);
+            parts.pattern.mul_vec(stiffness, &e, &mut col);
             k.set_column(j, &nalgebra::DVector::from_column_slice(&col));
             geometric.apply(&e, &mut col, &mut f1, &mut f2);
             ks.set_column(j, &nalgebra::DVector::from_column_slice(&col));
