@@ -709,3 +709,34 @@ fn a_run_without_frames_leaves_no_frames_behind() {
         assert_eq!(method.join("frames").is_dir(), every > 0, "every {every}");
     }
 }
+
+/// A reduced simulation's summary gives each step's largest vertex displacement, as full space's
+/// does, so the two compare without reading the frames: one per step, the last that of the
+/// final state.
+#[test]
+fn a_reduced_simulation_reports_its_largest_displacement_per_step() {
+    let s = scene(TINY);
+    let out = scratch_dir("pipeline-reduced-displacement");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let opts = pipeline::simulate::SimulateOptions {
+        method: Method::Pca,
+        trajectory: pipeline::simulate::Trajectory::Test(0),
+        out: out.join("sim"),
+        frames: Some(6),
+        every: 0,
+        solver: None,
+    };
+    let r = pipeline::simulate::simulate(&mut p, &opts, &|_, _| {}, &mut |_, _| {}).unwrap();
+    let largest = &r.summary.reduced_max_displacement;
+    assert_eq!(largest.len(), r.summary.reduced_steps.len());
+    assert_eq!(largest.len(), 6);
+    let last = r
+        .final_displacement
+        .chunks_exact(3)
+        .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+        .fold(0.0, f64::max);
+    assert_eq!(*largest.last().unwrap(), last);
+    assert!(largest.iter().all(|d| *d > 0.0), "{largest:?}");
+    let json = std::fs::read_to_string(out.join("sim/summary.json")).unwrap();
+    assert!(json.contains("\"reduced_max_displacement\""), "{json}");
+}

@@ -137,6 +137,10 @@ pub struct Summary {
     /// Per-step numbers of a reduced run.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub reduced_steps: Vec<ReducedStepReport>,
+    /// Per step of a reduced run, the largest vertex displacement (m) of its decoded state: what
+    /// `steps[].max_displacement` is for full space, so that the two compare without the frames.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reduced_max_displacement: Vec<f64>,
 }
 
 impl Summary {
@@ -475,6 +479,7 @@ pub fn simulate(
     let start = Instant::now();
     let mut steps = Vec::new();
     let mut reduced_steps = Vec::new();
+    let mut reduced_max_displacement = Vec::new();
     let mut times = Vec::new();
     let mut failure = None;
     let mut done = 0;
@@ -492,6 +497,14 @@ pub fn simulate(
                 reduced_steps.push(r);
             }),
         };
+        if step.is_ok() && matches!(runner, Runner::Reduced(_)) {
+            let u = runner.displacement();
+            let largest = u
+                .chunks_exact(3)
+                .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+                .fold(0.0, f64::max);
+            reduced_max_displacement.push(largest);
+        }
         if let Err(e) = step {
             // The last good state goes to disk (unless it already did); the failed one never.
             if opts.every > 0 && done % opts.every != 0 && done > 0 {
@@ -535,6 +548,7 @@ pub fn simulate(
         median_step_ms: median(&times) * 1e3,
         steps,
         reduced_steps,
+        reduced_max_displacement,
     };
     write_json(&opts.out.join("summary.json"), &summary)?;
     if let Some(e) = failure {
