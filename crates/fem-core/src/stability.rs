@@ -73,10 +73,7 @@ pub fn gravity_buckling(model: &FullSpaceModel) -> Result<Option<GravityBuckling
         .map(|(i, &v)| v + scale * hash_unit(i))
         .collect();
     let (mu, converged) = largest_positive(&geometric, &solve, &k0, &start);
-    let sag = full
-        .chunks_exact(3)
-        .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
-        .fold(0.0, f64::max);
+    let sag = crate::integrator::max_displacement(&full);
     Ok(Some(GravityBuckling {
         load_factor: (mu > 0.0).then(|| 1.0 / mu),
         converged,

@@ -498,12 +498,9 @@ pub fn simulate(
             }),
         };
         if step.is_ok() && matches!(runner, Runner::Reduced(_)) {
-            let u = runner.displacement();
-            let largest = u
-                .chunks_exact(3)
-                .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
-                .fold(0.0, f64::max);
-            reduced_max_displacement.push(largest);
+            reduced_max_displacement.push(fem_core::integrator::max_displacement(
+                &runner.displacement(),
+            ));
         }
         if let Err(e) = step {
             // The last good state goes to disk (unless it already did); the failed one never.

@@ -284,10 +284,7 @@ fn run_one(
             return Ok((outcome, trace));
         }
         let u = runner.displacement();
-        let largest = u
-            .chunks_exact(3)
-            .map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
-            .fold(0.0, f64::max);
+        let largest = fem_core::integrator::max_displacement(&u);
         if !largest.is_finite() || largest > UNBOUNDED_DIAGONALS * diagonal {
             let reason = format!(
                 "displacement {largest:.3e} exceeds {UNBOUNDED_DIAGONALS} bounding-box diagonals"

@@ -31,3 +31,11 @@ pub use model::FullSpaceModel;
 pub use simulator::{PRECOND_MAX_AGE, RETRY_BUDGET, Simulator, State, StepReport};
 pub use system_matrix::FactoredPreconditioner;
 pub(crate) use system_matrix::NewtonParts;
+
+/// The largest vertex displacement (m) of `u`, 3 values per vertex: a step's
+/// [`StepReport::max_displacement`].
+pub fn max_displacement(u: &[f64]) -> f64 {
+    u.chunks_exact(3)
+        .map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
+        .fold(0.0, f64::max)
+}

@@ -583,10 +583,7 @@ impl Simulator {
             .mass
             .half_norm_squared(&self.state.v, &mut scratch);
         let external = self.model.external_energy(u, self.state.time);
-        let max_displacement = u
-            .chunks_exact(3)
-            .map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
-            .fold(0.0, f64::max);
+        let max_displacement = super::max_displacement(u);
         StepReport {
             step: self.state.step,
             time: self.state.time,
