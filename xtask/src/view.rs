@@ -46,16 +46,12 @@ const DEFAULT_PORT: u16 = 8080;
 fn full_runtime(model: &ReducedModel, chosen: Option<Method>) -> Result<FullRuntime> {
     use fem_core::optim::{SolverConfig, SolverMethod};
     let mut solver = SolverConfig::from(&model.full_solver);
-    let why = match chosen {
-        Some(Method::FullNewton) => {
-            solver.method = SolverMethod::Newton;
-            "as --method full-newton asks"
+    let why = match chosen.and_then(|m| Some((m, m.forced_full_solver()?))) {
+        Some((m, forced)) => {
+            solver.method = forced;
+            format!("as --method {m} asks")
         }
-        Some(Method::FullLbfgs) => {
-            solver.method = SolverMethod::Lbfgs;
-            "as --method full-lbfgs asks"
-        }
-        _ => "the scene's solver",
+        None => "the scene's solver".to_string(),
     };
     let name = match solver.method {
         SolverMethod::Newton => "Newton",

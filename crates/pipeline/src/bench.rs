@@ -116,7 +116,7 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
     };
     v.push(base(
         Method::Full,
-        format!("full ({:?})", scene.solver.method).to_lowercase(),
+        format!("full ({})", scene.solver.method.name()),
     ));
     // The other full-space solver beside the scene's.
     v.push(match scene.solver.method {

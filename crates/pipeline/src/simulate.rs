@@ -410,21 +410,13 @@ pub fn setup(
             anyhow::bail!(
                 "`--solver {}` contradicts `--method {}`, which names its solver: use `--method \
                  full --solver {0}` or `--method full-{0}`",
-                solver_name(m),
+                m.name(),
                 opts.method.name(),
             );
         }
         solver.method = m;
     }
     Ok((model, time, solver))
-}
-
-/// A solver's name as the command line and the scene file write it.
-fn solver_name(m: SolverMethod) -> &'static str {
-    match m {
-        SolverMethod::Newton => "newton",
-        SolverMethod::Lbfgs => "lbfgs",
-    }
 }
 
 /// The solver settings of `method` on `scene`: `[solver]` for the full-space methods,

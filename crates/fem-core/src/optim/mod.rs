@@ -165,6 +165,16 @@ pub enum SolverMethod {
     Lbfgs,
 }
 
+impl SolverMethod {
+    /// The name a scene's `method` and the command line's `--solver` write.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverMethod::Newton => "newton",
+            SolverMethod::Lbfgs => "lbfgs",
+        }
+    }
+}
+
 /// The matrix whose factor preconditions full-space L-BFGS.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
