@@ -242,11 +242,7 @@ fn slower_than_full(rows: &[MethodReport]) -> Option<String> {
         return None;
     }
     let slowest = speedups.iter().copied().fold(f64::INFINITY, f64::min);
-    let range = if format!("{slowest:.1}") == format!("{fastest:.1}") {
-        format!("{fastest:.1}")
-    } else {
-        format!("{slowest:.1}–{fastest:.1}")
-    };
+    let range = span(slowest, fastest, 1);
     let free = rows.iter().find(|r| r.method.is_full()).map(|r| r.dim)?;
     let kept = rows
         .iter()
@@ -273,6 +269,12 @@ fn fitted_parts(method: crate::simulate::Method) -> &'static str {
     }
 }
 
+/// `lo–hi` with `digits` decimals, or one figure where the two print the same.
+fn span(lo: f64, hi: f64, digits: usize) -> String {
+    let (lo, hi) = (format!("{lo:.digits$}"), format!("{hi:.digits$}"));
+    if lo == hi { lo } else { format!("{lo}–{hi}") }
+}
+
 /// One caveat for the methods whose trajectories left the training poses and still held, all
 /// given the same advice `what`: one method as "its pose", several as "their poses" with the
 /// ranges of their times, distances and errors.
@@ -284,8 +286,7 @@ fn held_outside_caveat(rows: &[&MethodReport], what: &str) -> String {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
                 (lo.min(x), hi.max(x))
             });
-        let (lo, hi) = (format!("{lo:.digits$}"), format!("{hi:.digits$}"));
-        if lo == hi { lo } else { format!("{lo}–{hi}") }
+        span(lo, hi, digits)
     };
     let names: Vec<String> = rows.iter().map(|r| r.method.to_string()).collect();
     let (goes, its, stays) = if rows.len() == 1 {
