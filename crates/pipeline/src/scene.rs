@@ -328,7 +328,7 @@ impl Scene {
             });
         }
         let weight = self.gravity.is_on() && !self.time.quasi_static;
-        let remedy = self.wider_pin(mesh, piece, pinned);
+        let remedy = || self.wider_pin(mesh, piece, pinned);
         for line in loosely_held(mesh, pinned, piece, count, weight, &remedy) {
             crate::pipeline::warn_once(&format!("{}: {line}", self.source));
         }
@@ -535,14 +535,14 @@ pub struct BuiltModel {
 /// the one lowest vertex of a curved body hangs it like a pendulum). Allowed, since a hinge may
 /// be meant, and said. `piece` and `count` are [`TetMesh::vertex_components`].
 /// `weight`: whether gravity loads the body, so that one vertex would carry it all; `remedy`
-/// what holds it instead.
+/// what holds it instead (asked for only when a piece is so held: it selects the pins again).
 fn loosely_held(
     mesh: &TetMesh,
     pinned: &[usize],
     piece: &[usize],
     count: usize,
     weight: bool,
-    remedy: &str,
+    remedy: &dyn Fn() -> String,
 ) -> Vec<String> {
     let mut lines = Vec::new();
     for c in 0..count {
@@ -574,7 +574,8 @@ fn loosely_held(
             ""
         };
         lines.push(format!(
-            "the pins hold {what} {how}, so it can turn about {about}{carried}; {remedy}"
+            "the pins hold {what} {how}, so it can turn about {about}{carried}; {}",
+            remedy()
         ));
     }
     lines
@@ -811,8 +812,9 @@ mod tests {
             .filter(|&v| mesh.vertices[v].x == 0.0)
             .collect();
         assert_eq!(at_x0.len(), 4);
-        let held =
-            |pinned: &[usize], weight| loosely_held(&mesh, pinned, &piece, count, weight, "R");
+        let held = |pinned: &[usize], weight| {
+            loosely_held(&mesh, pinned, &piece, count, weight, &|| "R".into())
+        };
         assert!(held(&at_x0, true).is_empty());
         let one = held(&at_x0[..1], true);
         assert_eq!(one.len(), 1);
