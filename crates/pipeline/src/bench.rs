@@ -314,6 +314,7 @@ pub fn bench(
             out: opts.out.join("frames"),
             every: 0,
             repeats: opts.repeats,
+            time_budget: None,
             time_full: true,
             solver: v.solver,
         };
@@ -471,6 +472,7 @@ mod tests {
                 ms_min: ms,
                 ms_median: ms,
                 ms_max: ms,
+                timed_runs: 1,
                 hz: 1e3 / ms,
                 speedup: None,
                 mean_rel_error: err,

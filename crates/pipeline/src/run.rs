@@ -18,6 +18,13 @@ use crate::simulate::{Method, Runner, SimulateOptions, StepParts, Trajectory, me
 /// How long the machine's multiply–add rate is probed before a method is timed.
 const PROBE_TIME: std::time::Duration = std::time::Duration::from_millis(100);
 
+/// `run` times a method's trajectory up to this many times, while its runs so far took less
+/// than [`RUN_TIMING_BUDGET`], and reports the median of the runs' mean steps. A reduced
+/// trajectory takes tens of milliseconds, which one burst of another process on a shared
+/// machine can double; a full-space one, seconds, and runs once.
+pub const RUN_REPEATS: usize = 5;
+pub const RUN_TIMING_BUDGET: std::time::Duration = std::time::Duration::from_secs(1);
+
 /// What `run` does.
 #[derive(Debug, Clone)]
 pub struct RunOptions {
@@ -46,6 +53,8 @@ pub struct MethodReport {
     /// Smallest and largest per-run mean over repeated runs (equal to `ms_per_step` after one).
     pub ms_min: f64,
     pub ms_max: f64,
+    /// How many timed runs of the trajectory the times come from (see [`RUN_REPEATS`]).
+    pub timed_runs: usize,
     /// Median wall time per step (median over repeated runs): the typical step, without the
     /// occasional expensive one.
     pub ms_median: f64,
@@ -591,7 +600,8 @@ pub fn run(
             trajectory: opts.trajectory,
             out: opts.out.join(method.name()),
             every: opts.every,
-            repeats: 1,
+            repeats: RUN_REPEATS,
+            time_budget: Some(RUN_TIMING_BUDGET),
             time_full: false,
             solver: None,
         };
@@ -888,6 +898,10 @@ pub struct Measure {
     /// Timed runs of the whole trajectory; errors come from the first, the reported time is
     /// the median over runs of each run's mean step, the spread their minimum and maximum.
     pub repeats: usize,
+    /// With a budget, runs after the first are made (up to `repeats`) only while the runs so
+    /// far took less than it, and show no progress: `run`'s cheap repeats of a short trajectory.
+    /// Without, every one of `repeats` runs (`bench`).
+    pub time_budget: Option<std::time::Duration>,
     /// Time the scene's full-space solver in this process as any method (`bench`, after its
     /// warm-up). Without it, `full` takes the reference's recorded step times when this process
     /// computed the reference, and runs the trajectory again for its time when it was loaded.
@@ -969,6 +983,7 @@ pub fn measure(
             ms_min: full_ms,
             ms_median: median(&step_seconds) * 1e3,
             ms_max: full_ms,
+            timed_runs: 1,
             hz: 1e3 / full_ms,
             speedup: None,
             mean_rel_error: 0.0,
@@ -1010,9 +1025,14 @@ pub fn measure(
     let mut last_runner = None;
     // The reduced pose of each frame of the first run, for its distance to the training data.
     let mut poses: Vec<Vec<f64>> = Vec::new();
+    let mut timed = 0.0;
     for repeat in 0..m.repeats.max(1) {
+        if repeat > 0 && m.time_budget.is_some_and(|b| timed >= b.as_secs_f64()) {
+            break;
+        }
         let mut runner = Runner::from_options(pipeline, &sim_opts, stage_progress)?;
         let first = repeat == 0;
+        let show = first || m.time_budget.is_none();
         if first && let Some(w) = writer.as_mut() {
             w.write(&runner.model().mesh, 0, 0.0, &runner.displacement())?;
         }
@@ -1039,7 +1059,9 @@ pub fn measure(
                 }
             };
             times.push(info.seconds);
-            progress(method.name(), k + 1, frames);
+            if show {
+                progress(method.name(), k + 1, frames);
+            }
             if !first {
                 continue;
             }
@@ -1061,6 +1083,7 @@ pub fn measure(
                 w.write(&runner.model().mesh, k + 1, runner.time(), &u)?;
             }
         }
+        timed += times.iter().sum::<f64>();
         medians.push(median(&times) * 1e3);
         means.push(mean(&times) * 1e3);
         cubature_elements = runner.elements();
@@ -1116,6 +1139,7 @@ pub fn measure(
         ms_min: means.iter().copied().fold(f64::INFINITY, f64::min),
         ms_median: median(&medians),
         ms_max: means.iter().copied().fold(0.0, f64::max),
+        timed_runs: means.len(),
         hz: 1e3 / ms,
         speedup: None,
         mean_rel_error: mean(&errors.rel),

@@ -156,6 +156,27 @@ fn run_writes_the_default_methods_model_beside_its_report() {
         })
         .unwrap();
     assert_eq!(held_out.value, row.mean_rel_error);
+    // A reduced trajectory is timed again while its runs stay within the budget; a full-space
+    // one once.
+    let frames = row.frame_errors.len() as f64;
+    let budget = pipeline::run::RUN_TIMING_BUDGET.as_secs_f64();
+    for r in &rows {
+        let runs = r.timed_runs;
+        assert!((1..=pipeline::run::RUN_REPEATS).contains(&runs), "{runs}");
+        assert!(r.ms_min <= r.ms_per_step && r.ms_per_step <= r.ms_max);
+        if r.method == Method::Full {
+            assert_eq!(runs, 1);
+        } else {
+            // Each further run started while the runs before it took less than the budget.
+            assert!(
+                (runs - 1) as f64 * r.ms_min * frames * 1e-3 < budget,
+                "{runs}"
+            );
+            if pipeline::run::RUN_REPEATS as f64 * r.ms_max * frames * 1e-3 < budget {
+                assert_eq!(runs, pipeline::run::RUN_REPEATS, "{}", r.method.name());
+            }
+        }
+    }
     let stages: Vec<&str> = model
         .provenance
         .stage_keys

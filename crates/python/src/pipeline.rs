@@ -127,6 +127,8 @@ pub struct MethodRow {
     ms_min: f64,
     ms_max: f64,
     ms_median: f64,
+    /// How many timed runs of the trajectory the times come from.
+    timed_runs: usize,
     /// Steps per second.
     hz: f64,
     /// The faster full-space solver's ms/step (mean) over this method's; None when no
@@ -169,6 +171,7 @@ impl From<&MethodReport> for MethodRow {
             ms_per_step: r.ms_per_step,
             ms_min: r.ms_min,
             ms_max: r.ms_max,
+            timed_runs: r.timed_runs,
             ms_median: r.ms_median,
             hz: r.hz,
             speedup: r.speedup,

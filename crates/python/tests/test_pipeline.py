@@ -27,6 +27,7 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     for row, raw in zip(report.rows, written):
         assert row.dimension == raw["dim"] and row.elements == raw["cubature_elements"]
         assert row.ms_per_step == raw["ms_per_step"] and row.ms_per_step > 0
+        assert row.timed_runs == raw["timed_runs"] >= 1
         assert row.mean_rel_error == raw["mean_rel_error"]
         assert row.trajectory_error == raw["trajectory_error"] >= 0.0
         assert row.frame_errors == raw["frame_errors"]
@@ -40,6 +41,8 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     # Six PCA columns and the three positions of the beam's fall under gravity they miss.
     assert cubature.dimension == 6 + 3 and 0 < cubature.elements < full.elements
     assert 0 < cubature.mean_rel_error < 1 and math.isfinite(cubature.iterations)
+    # The tiny beam's cheap trajectory is timed again, full space once.
+    assert cubature.timed_runs > 1 and full.timed_runs == 1
     assert report.row("neural-cubature").dimension >= 2
     assert isinstance(report.warnings, list)
     assert isinstance(report.caveats, list)

@@ -27,6 +27,7 @@ pub fn measure(p: &mut Pipeline<'_>, method: Method, out: &Path) -> MethodReport
         out: out.to_path_buf(),
         every: 0,
         repeats: 1,
+        time_budget: None,
         time_full: false,
         solver: None,
     };
