@@ -290,10 +290,39 @@ impl Simulator {
                 self.solve_newton(x, t, inv_h2, predicted, load, params)
             }
         };
-        retry.map(|mut s| {
-            s.iterations += spent;
-            s
-        })
+        // A retry that fails too is said as both solvers' failure, with every iteration spent:
+        // "L-BFGS did not converge" alone reads as the scene's solver failing on its own.
+        let both = match self.solver.method {
+            SolverMethod::Newton => "Newton, then L-BFGS from where it stopped,",
+            SolverMethod::Lbfgs => "L-BFGS, then Newton from where it stopped,",
+        };
+        match retry {
+            Ok(mut s) => {
+                s.iterations += spent;
+                Ok(s)
+            }
+            Err(FemError::NotConverged {
+                step,
+                iterations,
+                residual,
+                tolerance,
+                ..
+            }) => Err(FemError::NotConverged {
+                solver: both,
+                step,
+                iterations: iterations + spent,
+                residual,
+                tolerance,
+            }),
+            Err(FemError::LineSearchFailed {
+                step, iteration, ..
+            }) => Err(FemError::LineSearchFailed {
+                solver: both,
+                step,
+                iteration: iteration + spent,
+            }),
+            Err(e) => Err(e),
+        }
     }
 
     /// One minimisation by Newton with projected Hessians.

@@ -704,6 +704,46 @@ fn a_step_lbfgs_cannot_finish_is_finished_by_newton_from_where_it_stopped() {
     }
 }
 
+/// A step that neither solver finishes, the retry included, is said as both solvers' failure,
+/// with every iteration the step spent: "L-BFGS did not converge" alone read as the scene's
+/// Newton failing by itself.
+#[test]
+fn a_step_neither_solver_finishes_names_both() {
+    let m = model(
+        beam([10, 2, 2]),
+        MaterialModel::StableNeoHookean,
+        1e5,
+        [0.0, -5000.0, 0.0],
+        vec![],
+    );
+    for (method, said) in [
+        (
+            SolverMethod::Newton,
+            "Newton, then L-BFGS from where it stopped, did not converge at step 1",
+        ),
+        (
+            SolverMethod::Lbfgs,
+            "L-BFGS, then Newton from where it stopped, did not converge at step 1",
+        ),
+    ] {
+        let capped = SolverConfig {
+            method,
+            tolerance: 1e-12,
+            max_iterations: 1,
+            ..Default::default()
+        };
+        let mut sim = Simulator::new(m.clone(), dynamic(2), capped).unwrap();
+        let e = sim.step().unwrap_err();
+        let text = e.to_string();
+        assert!(text.starts_with(said), "{text}");
+        // One of the first solver's and the retry's four.
+        assert!(
+            matches!(e, FemError::NotConverged { iterations: 5, .. }),
+            "{text}"
+        );
+    }
+}
+
 /// ‖u − x‖ and ‖x‖ over the free DOFs (`free` their full indices, `x` on them).
 fn off_free(u: &[f64], free: &[usize], x: &[f64]) -> (f64, f64) {
     let diff = free
