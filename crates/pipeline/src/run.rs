@@ -159,6 +159,9 @@ pub struct Buckling {
     pub size: f64,
     /// The Young's modulus at which the load factor would be 1 (it scales with E).
     pub standing_modulus: Option<f64>,
+    /// The Young's modulus at which the sag would be [`Buckling::VALID_SAG`] of the size (it
+    /// scales with 1/E).
+    pub firm_modulus: f64,
     /// Whether the eigenvalue iteration converged.
     pub converged: bool,
 }
@@ -190,6 +193,7 @@ impl Buckling {
             sag: b.sag,
             size: (hi - lo).norm(),
             standing_modulus: b.load_factor.map(|l| model.youngs_modulus / l),
+            firm_modulus: model.youngs_modulus * b.sag / (Self::VALID_SAG * (hi - lo).norm()),
             converged: b.converged,
         })
     }
@@ -219,6 +223,9 @@ pub struct Compression {
     /// Whether the material is stable Neo-Hookean, which already resists inversion: then only
     /// a stiffer body helps.
     pub inversion_safe: bool,
+    /// The largest vertex displacement over the frames (m), and the time (s) of its frame.
+    pub travel: f64,
+    pub travel_time: f64,
     /// The largest principal stretch of any element over the frames, when one passes
     /// [`Compression::STRETCHED`], and the time (s) of its frame: a body hung from one vertex,
     /// or pulled past what a solid takes, stretches the elements at the grip without limit.
@@ -261,8 +268,14 @@ impl Compression {
                     model.material,
                     fem_core::material::AnyMaterial::StableNeoHookean(_)
                 ),
+                travel: 0.0,
+                travel_time: time,
                 stretched: None,
             });
+            let travel = fem_core::integrator::max_displacement(&u);
+            if travel > o.travel {
+                (o.travel, o.travel_time) = (travel, time);
+            }
             // The largest singular value of F is at most its Frobenius norm, so only the elements
             // whose norm passes the limit need it.
             for e in 0..model.elements.len() {

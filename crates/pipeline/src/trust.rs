@@ -192,6 +192,89 @@ fn buckling_warning(r: &MethodReport) -> Option<String> {
     ))
 }
 
+/// A test trajectory that carries the body this share of its bounding-box diagonal or more
+/// moves far beyond what its drag asks (target offsets of 2–10 % of the diagonal by default).
+/// AutoDef's dinosaur on its feet, E = 10⁵ Pa, moves 44 cm over its 34 cm diagonal under
+/// gravity alone.
+pub const FAR_TRAVEL: f64 = 0.25;
+
+/// The warning on a test that the body's own weight carries far: the linear sag at rest is
+/// [`Buckling::VALID_SAG`](crate::run::Buckling::VALID_SAG) of its size or more and the test
+/// moves it [`FAR_TRAVEL`] of its size or more, and either the full simulation inverts elements
+/// on the way (the body gives way: a 50 cm L-bracket of stable Neo-Hookean at E = 10⁵ Pa folds
+/// over and inverts elements in 21 frames, too few of them for [`COLLAPSED_SHARE`]) or at least
+/// one drifting method's restart makes most of its drift ([`AMPLIFIED_SHARE`]; AutoDef's
+/// dinosaur, which sinks 41 cm on its feet). The restart's own advice (a gentler pull) does not
+/// reach the cause there: it is the body's weight, not the drag. A fall that is meant and
+/// stays a solid (the built-in cantilever drops until it hangs) amplifies nothing and is not
+/// said.
+fn fall_warning(rows: &[MethodReport]) -> Option<String> {
+    let carrier = rows
+        .iter()
+        .find(|r| r.compression.is_some() && r.buckling.is_some())?;
+    let (c, b) = (carrier.compression?, carrier.buckling?);
+    if b.size <= 0.0
+        || b.sag < crate::run::Buckling::VALID_SAG * b.size
+        || c.travel < FAR_TRAVEL * b.size
+    {
+        return None;
+    }
+    let amplified: Vec<String> = rows
+        .iter()
+        .filter(|r| r.restart.is_some_and(|s| s.share() >= AMPLIFIED_SHARE))
+        .map(|r| r.method.to_string())
+        .collect();
+    // Said by the collapse warning already where it squeezes enough of the body.
+    let gives_way = c.inverted_frames > 0 && c.squeezed_share < COLLAPSED_SHARE;
+    if amplified.is_empty() && !gives_way {
+        return None;
+    }
+    let pct = |x: f64| 100.0 * x;
+    let inverted = if gives_way {
+        format!(
+            "; it inverts elements in {} of the test's frames (det F down to {:.2} at t = \
+             {:.2} s), past what the material models as a solid",
+            c.inverted_frames, c.volume_ratio, c.time
+        )
+    } else {
+        String::new()
+    };
+    let drift = match amplified.as_slice() {
+        [] => String::new(),
+        [one] => format!(
+            "; the full dynamics of a body that falls or gives way turn small differences into \
+             large ones, which is how {one} drifts (above)"
+        ),
+        many => format!(
+            "; the full dynamics of a body that falls or gives way turn small differences into \
+             large ones, which is how {} drift (above)",
+            many.join(", ")
+        ),
+    };
+    let meant = if gives_way {
+        ""
+    } else {
+        "; if the fall is meant, the one-step errors say more of each method than its \
+         trajectory error"
+    };
+    Some(format!(
+        "{who} moves the body up to {:.3} m at t = {:.2} s, {:.0} % of its {:.3} m \
+         bounding-box diagonal, far beyond what the drag asks: its own weight carries it (the \
+         linear response to gravity at rest already moves it {:.0} % of its size){inverted}\
+         {drift}. If the body should stand as pinned, a stiffer material (`[material] \
+         youngs_modulus` of {:.1e} Pa brings that sag to {:.0} % of its size) or pins that hold \
+         more of it keep it up{meant}",
+        c.travel,
+        c.travel_time,
+        pct(c.travel / b.size),
+        b.size,
+        pct(b.sag / b.size),
+        b.firm_modulus,
+        pct(crate::run::Buckling::VALID_SAG),
+        who = reference_subject(carrier),
+    ))
+}
+
 /// What the full simulation started from a drifting method's state says of its drift.
 fn restart_warning(r: &MethodReport) -> Option<String> {
     let s = r.restart?;
@@ -443,6 +526,8 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         out.extend(restart_warning(r));
         out.extend(cubature_warning(r, rows));
     }
+    // Said after the methods' restarts, whose amplification it explains.
+    out.extend(fall_warning(rows));
     let mut caveats: Vec<String> = slower_than_full(rows).into_iter().collect();
     while let Some((_, what)) = held_outside.first() {
         let what = what.clone();
@@ -503,6 +588,8 @@ mod tests {
                 squeezed_share: share,
                 squeezed_time: 0.5,
                 inversion_safe: false,
+                travel: 0.0,
+                travel_time: 0.0,
                 stretched: None,
             }),
             ..row(Method::Full, 0.0, 0.0)
@@ -592,6 +679,8 @@ mod tests {
                 squeezed_share: 1e-4,
                 squeezed_time: 0.5,
                 inversion_safe: true,
+                travel: 0.0,
+                travel_time: 0.0,
                 stretched,
             }),
             ..row(Method::Full, 0.0, 0.0)
@@ -614,6 +703,97 @@ mod tests {
         );
     }
 
+    /// A body whose weight carries it far over the test, where the full dynamics amplify a
+    /// method's early error, is said once, with the modulus that firms it up; a fall that
+    /// amplifies nothing, a body that moves little, or one its weight hardly sags, is not.
+    #[test]
+    fn a_body_that_falls_under_its_weight_and_amplifies_errors_is_named() {
+        let full = |travel: f64, sag: f64| MethodReport {
+            compression: Some(crate::run::Compression {
+                volume_ratio: 0.8,
+                time: 0.75,
+                inverted_frames: 0,
+                squeezed_share: 0.0,
+                squeezed_time: 0.5,
+                inversion_safe: false,
+                travel,
+                travel_time: 0.8,
+                stretched: None,
+            }),
+            buckling: Some(crate::run::Buckling {
+                load_factor: Some(0.52),
+                sag,
+                size: 0.34,
+                standing_modulus: Some(1e5 / 0.52),
+                firm_modulus: 1e5 * sag / (0.05 * 0.34),
+                converged: true,
+            }),
+            ..row(Method::Full, 0.0, 0.0)
+        };
+        let amplified = with_restart(row(Method::NeuralCubature, 0.34, 0.002), 0.45, 0.5);
+        let own = with_restart(row(Method::Pca, 0.26, 0.001), 0.02, 0.5);
+        let said = |rows: &[MethodReport]| {
+            assess(rows)
+                .untrusted
+                .into_iter()
+                .filter(|w| w.contains("its own weight carries it"))
+                .collect::<Vec<_>>()
+        };
+        let w = said(&[full(0.44, 0.17), own.clone(), amplified.clone()]);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].starts_with(
+                "full: the full-space simulation of the test moves the body up to 0.440 m at \
+                 t = 0.80 s, 129 % of its 0.340 m bounding-box diagonal"
+            ),
+            "{}",
+            w[0]
+        );
+        assert!(w[0].contains("moves it 50 % of its size"), "{}", w[0]);
+        assert!(
+            w[0].contains("which is how neural-cubature drifts (above)"),
+            "{}",
+            w[0]
+        );
+        assert!(
+            w[0].contains("of 1.0e6 Pa brings that sag to 5 %"),
+            "{}",
+            w[0]
+        );
+        assert!(!w[0].contains("  "), "{}", w[0]);
+        // Not where the drift is the method's own, the body moves little, or its weight
+        // hardly sags it.
+        assert!(said(&[full(0.44, 0.17), own]).is_empty());
+        assert!(said(&[full(0.05, 0.17), amplified.clone()]).is_empty());
+        assert!(said(&[full(0.44, 0.01), amplified.clone()]).is_empty());
+        // A body that inverts elements as it falls gives way: said without any drift, with no
+        // fall that might be meant.
+        let inverting = |share: f64| MethodReport {
+            compression: Some(crate::run::Compression {
+                inverted_frames: 21,
+                volume_ratio: -0.42,
+                squeezed_share: share,
+                ..full(0.9, 0.17).compression.unwrap()
+            }),
+            ..full(0.9, 0.17)
+        };
+        let w = said(&[inverting(0.005)]);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains(
+                "; it inverts elements in 21 of the test's frames (det F down to -0.42 at t = \
+                 0.75 s), past what the material models as a solid. If the body should stand"
+            ),
+            "{}",
+            w[0]
+        );
+        assert!(!w[0].contains("if the fall is meant"), "{}", w[0]);
+        assert!(!w[0].contains("drift"), "{}", w[0]);
+        // Where the collapse warning says it, only the drift is.
+        assert!(said(&[inverting(0.02)]).is_empty());
+        assert_eq!(said(&[inverting(0.02), amplified]).len(), 1);
+    }
+
     /// A body that buckles under its own weight is said on the row that carries the analysis,
     /// with the modulus that would keep it standing; one that only sags far before its load
     /// factor (the estimate does not hold there), or hangs, or stands, is not.
@@ -625,6 +805,7 @@ mod tests {
                 sag,
                 size: 0.4,
                 standing_modulus: load_factor.map(|l| 1e5 / l),
+                firm_modulus: 1e5 * sag / (0.05 * 0.4),
                 converged: true,
             }),
             ..row(Method::Full, 0.0, 0.0)
