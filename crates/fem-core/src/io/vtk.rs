@@ -565,19 +565,24 @@ impl<'a> Parser<'a> {
         }
         let summary = ignored
             .iter()
-            .map(|(t, k)| format!("{k} of type {t}"))
+            .map(|(&t, k)| match cell_name(t) {
+                Some(name) => format!("{k} of type {t}, {name}"),
+                None => format!("{k} of type {t}"),
+            })
             .collect::<Vec<_>>()
-            .join(", ");
+            .join("; ");
         if tets.is_empty() {
+            let types: Vec<u64> = ignored.keys().copied().collect();
             return Err(self.error(
                 line,
                 format!(
-                    "no tetrahedra (VTK cell type 10) among the {n} cells{}",
+                    "no tetrahedra (VTK cell type 10) among the {n} cells{}{}",
                     if summary.is_empty() {
                         String::new()
                     } else {
                         format!(" ({summary})")
-                    }
+                    },
+                    missing_tets_remedy(&types)
                 ),
             ));
         }
@@ -588,6 +593,37 @@ impl<'a> Parser<'a> {
             );
         }
         Ok(tets)
+    }
+}
+
+/// The name of a VTK cell type that a file without tetrahedra most often holds instead.
+fn cell_name(t: u64) -> Option<&'static str> {
+    Some(match t {
+        1 => "vertex",
+        3 => "line",
+        5 => "triangle",
+        7 => "polygon",
+        9 => "quad",
+        12 => "hexahedron",
+        13 => "wedge",
+        14 => "pyramid",
+        22 => "quadratic triangle",
+        24 => "quadratic tetrahedron",
+        _ => return None,
+    })
+}
+
+/// What to do about a file whose cells hold no linear tetrahedron, by what it holds.
+fn missing_tets_remedy(types: &[u64]) -> &'static str {
+    const LOWER_DIMENSIONS: [u64; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
+    if types.contains(&24) {
+        "; quadratic tetrahedra are not read: export first-order (4-point) tetrahedra, e.g. \
+         mesh with `-order 1` in gmsh"
+    } else if !types.is_empty() && types.iter().all(|t| LOWER_DIMENSIONS.contains(t)) {
+        "; that is a surface mesh, and a tetrahedral volume mesh is needed (TetGen `tetgen -pq \
+         part.stl`, `gmsh -3`, or fTetWild)"
+    } else {
+        "; a tetrahedral volume mesh is needed"
     }
 }
 
@@ -628,6 +664,25 @@ mod tests {
         assert_eq!(mesh.vertices.len(), 5);
         assert_eq!(mesh.vertices[3], Vec3::new(0.0, 0.0, 1.0));
         assert_eq!(mesh.tets, vec![[0, 1, 2, 3]]);
+    }
+
+    /// A file without linear tetrahedra names what it holds and what to do: a quadratic
+    /// tetrahedron asks for first order, triangles alone for a volume mesh.
+    #[test]
+    fn a_file_without_tetrahedra_says_what_it_holds_and_what_to_do() {
+        let quadratic = LEGACY.replace("CELL_TYPES 2\n10\n5", "CELL_TYPES 2\n24\n5");
+        let (_, reason) = parse_error(&quadratic);
+        assert!(
+            reason.contains("(1 of type 5, triangle; 1 of type 24, quadratic tetrahedron)"),
+            "{reason}"
+        );
+        assert!(
+            reason.contains("quadratic tetrahedra are not read"),
+            "{reason}"
+        );
+        let surface = LEGACY.replace("CELL_TYPES 2\n10\n5", "CELL_TYPES 2\n9\n5");
+        let (_, reason) = parse_error(&surface);
+        assert!(reason.contains("that is a surface mesh"), "{reason}");
     }
 
     #[test]

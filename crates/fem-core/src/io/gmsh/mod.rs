@@ -182,6 +182,43 @@ fn mesh_format(bytes: &[u8], path: &Path) -> Result<MeshFormat, MeshError> {
     })
 }
 
+/// The name of a Gmsh element type that a file without tetrahedra most often holds instead.
+fn element_name(t: i64) -> Option<&'static str> {
+    Some(match t {
+        1 => "2-node line",
+        2 => "3-node triangle",
+        3 => "4-node quadrangle",
+        5 => "8-node hexahedron",
+        6 => "6-node prism",
+        7 => "5-node pyramid",
+        8 => "3-node line",
+        9 => "6-node triangle",
+        11 => "10-node tetrahedron",
+        15 => "point",
+        29 => "20-node tetrahedron",
+        _ => return None,
+    })
+}
+
+/// What to do about a file whose elements hold no 4-node tetrahedron, by what it holds: higher
+/// order tetrahedra (mesh at order 1), only surfaces, lines and points (the volume was not
+/// meshed, or not saved: gmsh saves only the elements of physical groups when there are any).
+fn missing_tets_remedy(types: &[i64]) -> &'static str {
+    const LOWER_DIMENSIONS: [i64; 8] = [1, 2, 3, 8, 9, 10, 15, 16];
+    if types.iter().any(|t| matches!(t, 11 | 29 | 30 | 31)) {
+        "; higher-order tetrahedra are not read: mesh with first-order elements (`-order 1` \
+         on gmsh's command line, `Mesh.ElementOrder = 1` in a .geo file)"
+    } else if !types.is_empty() && types.iter().all(|t| LOWER_DIMENSIONS.contains(t)) {
+        "; that is a surface mesh, and a volume mesh is needed: mesh the volume (`gmsh -3 \
+         part.geo`, or Mesh > 3D), and where the .geo file defines physical groups give the \
+         volume one (`Physical Volume`) or set `Mesh.SaveAll = 1`, since gmsh then saves only \
+         the elements of physical groups"
+    } else {
+        "; a tetrahedral volume mesh is needed (in gmsh, no `Recombine` and \
+         `Mesh.SubdivisionAlgorithm = 0`)"
+    }
+}
+
 /// Builds the mesh, refusing a file without any 4-node tetrahedron with a message naming what
 /// it holds instead.
 fn finish(
@@ -195,7 +232,10 @@ fn finish(
     kinds.sort_unstable();
     let summary = kinds
         .iter()
-        .map(|(t, n)| format!("{n} of type {t}"))
+        .map(|&(t, n)| match element_name(t) {
+            Some(name) => format!("{n} of type {t} ({name})"),
+            None => format!("{n} of type {t}"),
+        })
         .collect::<Vec<_>>()
         .join(", ");
     if tets.is_empty() {
@@ -204,11 +244,13 @@ fn finish(
         } else {
             summary
         };
+        let types: Vec<i64> = kinds.iter().map(|&(t, _)| t).collect();
         return Err(parse_error(
             path,
             line,
             format!(
-                "no 4-node tetrahedra (Gmsh element type 4) in the file; it holds {held} (type 11 is the 10-node tetrahedron, which is not supported)"
+                "no 4-node tetrahedra (Gmsh element type 4) in the file; it holds {held}{}",
+                missing_tets_remedy(&types)
             ),
         ));
     }
@@ -486,7 +528,30 @@ mod tests {
             "3 11 2 1 1 10 20 30 40 10 10 10 10 10 10",
         );
         let (_, reason) = parse_error(text.as_bytes());
-        assert!(reason.contains("1 of type 11"), "{reason}");
+        assert!(
+            reason.contains("1 of type 11 (10-node tetrahedron)"),
+            "{reason}"
+        );
+        assert!(
+            reason.contains("higher-order tetrahedra are not read"),
+            "{reason}"
+        );
+        assert!(reason.contains("`-order 1`"), "{reason}");
+        // Only a triangle: a surface mesh, with the physical-group trap named.
+        let text = V22.replace("3 4 2 1 1 10 20 30 40", "3 2 2 1 1 10 20 30");
+        let (_, reason) = parse_error(text.as_bytes());
+        assert!(
+            reason.contains("(3-node triangle), 1 of type 15 (point); that is a surface mesh"),
+            "{reason}"
+        );
+        assert!(reason.contains("`Mesh.SaveAll = 1`"), "{reason}");
+        // A hexahedron: not tetrahedral.
+        let text = V22.replace("3 4 2 1 1 10 20 30 40", "3 5 2 1 1 10 20 30 40 10 20 30 40");
+        let (_, reason) = parse_error(text.as_bytes());
+        assert!(
+            reason.contains("(8-node hexahedron), 1 of type 15 (point); a tetrahedral volume mesh"),
+            "{reason}"
+        );
     }
 
     mod fuzz {
