@@ -26,14 +26,23 @@
   const frameTimes = [];
   let meshDirty = false;
 
-  // ---- camera: orbit about a target ----
+  // ---- camera: orbit about a target, about the scene's up (hello's `up`, against gravity) ----
   const camera = { target: [0, 0, 0], yaw: 0.6, pitch: 0.35, distance: 1, fov: Math.PI / 4, radius: 1 };
+  // The world frame the orbit turns in: `up`, and e1, e2 across it (x and z for y up).
+  let world = { up: [0, 1, 0], e1: [1, 0, 0], e2: [0, 0, 1] };
+  function setUp(up) {
+    const u = unit(up);
+    const a = Math.abs(u[0]) > 0.9 ? [0, 0, 1] : [1, 0, 0];
+    const e1 = unit(sub(a, scale(u, dot(a, u))));
+    world = { up: u, e1, e2: cross(e1, u) };
+  }
   function basis() {
     const c = Math.cos(camera.pitch);
-    const offset = [c * Math.sin(camera.yaw), Math.sin(camera.pitch), c * Math.cos(camera.yaw)];
+    const offset = add(add(scale(world.e1, c * Math.sin(camera.yaw)), scale(world.up, Math.sin(camera.pitch))),
+      scale(world.e2, c * Math.cos(camera.yaw)));
     const eye = add(camera.target, scale(offset, camera.distance));
     const forward = unit(sub(camera.target, eye));
-    const right = unit(cross(forward, [0, 1, 0]));
+    const right = unit(cross(forward, world.up));
     const up = cross(right, forward);
     return { eye, forward, right, up };
   }
@@ -173,13 +182,13 @@
     `#version 300 es
       precision highp float;
       in vec3 vNormal; in vec3 vPosition;
-      uniform vec3 eye;
+      uniform vec3 eye; uniform vec3 lightBias;
       out vec4 color;
       void main() {
         vec3 n = normalize(vNormal);
         vec3 v = normalize(eye - vPosition);
         if (dot(n, v) < 0.0) n = -n;
-        vec3 l = normalize(v + vec3(0.35, 0.8, 0.25));
+        vec3 l = normalize(v + lightBias);
         float diffuse = max(dot(n, l), 0.0);
         float specular = pow(max(dot(n, normalize(l + v)), 0.0), 48.0);
         vec3 base = vec3(0.36, 0.62, 0.86);
@@ -236,6 +245,9 @@
     gl.useProgram(surfaceProgram);
     gl.uniformMatrix4fv(gl.getUniformLocation(surfaceProgram, 'viewProjection'), false, vp);
     gl.uniform3fv(gl.getUniformLocation(surfaceProgram, 'eye'), basis().eye);
+    // A light from above the viewer, above as the scene has it.
+    gl.uniform3fv(gl.getUniformLocation(surfaceProgram, 'lightBias'),
+      add(add(scale(world.e1, 0.35), scale(world.up, 0.8)), scale(world.e2, 0.25)));
     gl.bindBuffer(gl.ARRAY_BUFFER, buffers.position);
     gl.enableVertexAttribArray(0);
     gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
@@ -324,6 +336,7 @@
     switch (e.type) {
       case 'hello': {
         hello = e;
+        setUp(Array.isArray(e.up) && e.up.length === 3 ? e.up : [0, 1, 0]);
         $('scene').textContent = `${e.scene} · h = ${e.time_step * 1000} ms`;
         const select = $('method');
         select.replaceChildren(...e.methods.map((name) => new Option(name, name)));
@@ -511,6 +524,7 @@
     cameraDistance: () => camera.distance,
     following: () => framed !== null,
     vertexCount: () => (mesh ? mesh.n : 0),
+    pinned: () => (mesh ? Array.from(mesh.pinned) : []),
     // How many vertices are drawn outside the canvas.
     outsideView: () => {
       let n = 0;

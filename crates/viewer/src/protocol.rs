@@ -107,6 +107,8 @@ pub enum Event {
         surface_triangles: usize,
         /// The mesh indices of the surface vertices, in frame order.
         vertex_ids: Vec<usize>,
+        /// The direction to draw up (a unit vector, against the scene's gravity; +y without).
+        up: [f64; 3],
     },
     /// The simulation's state and speed, a few times a second and after every change.
     State(State),

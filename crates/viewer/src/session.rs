@@ -141,6 +141,14 @@ impl Session {
                 return Err(ViewerError::Setting { what, value });
             }
         }
+        let up = fem_core::Vec3::from(settings.up).norm();
+        let unit = (up - 1.0).abs() <= 1e-6;
+        if !unit {
+            return Err(ViewerError::Setting {
+                what: "up (the length of a unit vector)",
+                value: up,
+            });
+        }
         // The step and the frame interval as durations (a year at most).
         for (what, seconds) in [
             ("time step", settings.time_step),
@@ -460,6 +468,7 @@ impl Session {
                     surface_vertices: self.vertex_ids.len(),
                     surface_triangles: self.triangles,
                     vertex_ids: self.vertex_ids.clone(),
+                    up: self.settings.up,
                 });
                 drop(
                     outbox

@@ -45,6 +45,21 @@ pub struct Settings {
     pub max_reach: f64,
     /// The most position frames sent per second.
     pub max_fps: f64,
+    /// The direction the page draws up (a unit vector): against the scene's gravity, or +y
+    /// without gravity, so that a mesh made with z up stands on the page as it stands in the
+    /// scene.
+    pub up: [f64; 3],
+}
+
+/// The unit vector against `gravity`, or +y when there is none (or it is not finite).
+fn up_from_gravity(gravity: [f64; 3]) -> [f64; 3] {
+    let g = fem_core::Vec3::from(gravity);
+    let n = g.norm();
+    if n.is_finite() && n > 0.0 {
+        (-g / n).into()
+    } else {
+        [0.0, 1.0, 0.0]
+    }
 }
 
 impl Settings {
@@ -69,6 +84,7 @@ impl Settings {
             max_stiffness: 100.0 * stiffness,
             max_reach: 10.0 * size,
             max_fps: 120.0,
+            up: up_from_gravity(model.gravity),
         }
     }
 }

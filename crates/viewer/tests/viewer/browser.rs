@@ -440,6 +440,46 @@ fn a_falling_body_stays_in_view() {
     }
 }
 
+/// The page draws the scene's up (against gravity) up: of the pinned vertices, which stay where
+/// they are, the one highest along up is drawn above the lowest, for a scene with gravity
+/// along −y and one along −z (a mesh made with z up, which a y-up camera laid on its side).
+#[test]
+fn the_scenes_up_is_drawn_up() {
+    let Some(binary) = chromium() else {
+        tests::skip("the viewer's up test: no chromium on the PATH (apt-get install chromium)");
+        return;
+    };
+    for (m, axis, name) in [
+        (falling_model(), 1, "y"),
+        (crate::common::z_up_model(), 2, "z"),
+    ] {
+        let methods = vec![Method::new("pca", m.simulator().expect("a runtime"))];
+        let session = Session::new(Settings::for_model(m), methods).expect("a session");
+        let server = Server::bind("127.0.0.1:0", session).expect("a port");
+        let dir = tests::scratch_dir(&format!("viewer-browser-up-{name}"));
+        let result = (|| -> Result<Value> {
+            let mut browser = Browser::start(&binary, &dir.join("profile"))?;
+            let mut page = open_page(&mut browser, &server.url(), Input::Mouse)?;
+            // Screen y grows downwards: the highest pinned vertex's minus the lowest's.
+            page.eval(&format!(
+                "(() => {{ const p = viewerDebug.pinned(); \
+                 const along = (i) => viewerDebug.position(i)[{axis}]; \
+                 const hi = p.reduce((a, b) => (along(b) > along(a) ? b : a)); \
+                 const lo = p.reduce((a, b) => (along(b) < along(a) ? b : a)); \
+                 return viewerDebug.screenOf(hi).y - viewerDebug.screenOf(lo).y; }})()"
+            ))
+        })();
+        server.shutdown();
+        let above = result.unwrap_or_else(|e| panic!("{name} up: {e}"));
+        let pixels = above.as_f64().unwrap_or(f64::NAN);
+        assert!(
+            pixels < -20.0,
+            "gravity along -{name}: the pinned vertex highest along {name} is drawn {pixels} px \
+             below the lowest"
+        );
+    }
+}
+
 fn watch_the_fall(binary: &Path, dir: &Path, url: &str) -> Result<()> {
     let mut browser = Browser::start(binary, &dir.join("profile"))?;
     let mut page = open_page(&mut browser, url, Input::Mouse)?;

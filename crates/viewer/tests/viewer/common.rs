@@ -31,6 +31,18 @@ pub fn falling_model() -> &'static ReducedModel {
     MODEL.get_or_init(|| pca_model(tests::TINY, "viewer-falling-model"))
 }
 
+/// The tiny beam under gravity along −z, as a mesh made with z up has it: the page draws z up.
+pub fn z_up_model() -> &'static ReducedModel {
+    static MODEL: OnceLock<ReducedModel> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let text = format!(
+            "{}\n[gravity]\nacceleration = [0.0, 0.0, -9.81]\n",
+            tests::TINY
+        );
+        pca_model(&text, "viewer-z-up-model")
+    })
+}
+
 /// The `pca` model of scene `text`, its stages cached in the scratch folder `cache`.
 fn pca_model(text: &str, cache: &str) -> ReducedModel {
     let scene = tests::scene(text);

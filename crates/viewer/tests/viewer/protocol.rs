@@ -491,6 +491,28 @@ fn the_grab_spring_holds_the_body_weight() {
     );
 }
 
+/// `hello` says which way is up: against the scene's gravity, +y without any.
+#[test]
+fn hello_says_up_against_gravity() {
+    use crate::common::z_up_model;
+    assert_eq!(
+        Settings::for_model(model()).up,
+        [0.0, 1.0, 0.0],
+        "no gravity"
+    );
+    assert_eq!(Settings::for_model(falling_model()).up, [0.0, 1.0, 0.0]);
+    let m = z_up_model();
+    assert_eq!(Settings::for_model(m).up, [0.0, 0.0, 1.0]);
+    let methods = vec![Method::new("pca", m.simulator().expect("a runtime"))];
+    let server = serve(Session::new(Settings::for_model(m), methods).expect("a session"));
+    let hello = Client::connect(&server).hello;
+    assert!(
+        matches!(hello, Event::Hello { up, .. } if up == [0.0, 0.0, 1.0]),
+        "{hello:?}"
+    );
+    server.shutdown();
+}
+
 #[test]
 fn a_session_refuses_what_it_cannot_run() {
     let m = model();
@@ -539,6 +561,20 @@ fn a_session_refuses_what_it_cannot_run() {
                 ..ok.clone()
             },
             "pinned vertex",
+        ),
+        (
+            Settings {
+                up: [0.0, 2.0, 0.0],
+                ..ok.clone()
+            },
+            "up",
+        ),
+        (
+            Settings {
+                up: [f64::NAN, 1.0, 0.0],
+                ..ok.clone()
+            },
+            "up",
         ),
     ] {
         let e = err(settings, vec![reduced()]);
