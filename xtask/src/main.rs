@@ -337,8 +337,10 @@ impl Context {
         }
     }
 
-    /// A long stage's progress, `(done, total)`, on the stage bar.
+    /// A long stage's progress, `(done, total)`, on the stage bar; in a log, where no bar is
+    /// drawn, a line every [`LOG_EVERY`].
     fn stage_progress(&self, done: usize, total: usize) {
+        log_progress(done, total);
         let b = &self.stage_bar;
         if b.is_hidden() {
             b.set_draw_target(ProgressDrawTarget::stderr());
@@ -380,6 +382,7 @@ impl Context {
         let mut p = Pipeline::new(scene, &self.cache(scene, common))?;
         println!("{}", p.body_summary());
         p.on_stage = Box::new(print_stage);
+        p.on_stage_start = Box::new(stage_started);
         Ok(p)
     }
 }
@@ -437,7 +440,64 @@ fn method_progress(bar: &ProgressBar, say_ends: bool) -> impl FnMut(&str, usize,
 }
 
 fn print_stage(o: &StageOutcome) {
+    if !o.cached {
+        let mut computing = LOG_STAGES.lock().unwrap_or_else(|e| e.into_inner());
+        if computing.last().is_some_and(|s| s.stage == o.stage) {
+            computing.pop();
+        }
+    }
     println!("{o}");
+}
+
+/// How often a log, where no progress bar is drawn, gets a line on the stage being computed.
+const LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// A stage being computed, for the lines a log gets instead of the bar.
+struct Computing {
+    stage: pipeline::stage::Stage,
+    started: std::time::Instant,
+    said: std::time::Instant,
+}
+
+/// The stages being computed, innermost last (a stage computes the earlier ones it needs).
+static LOG_STAGES: std::sync::Mutex<Vec<Computing>> = std::sync::Mutex::new(Vec::new());
+
+/// Whether progress goes to a log rather than a terminal (no bar is drawn there).
+fn logging() -> bool {
+    !std::io::IsTerminal::is_terminal(&std::io::stderr())
+}
+
+/// A stage starts to compute: in a log, a line saying so, since its own line comes only when
+/// it ends (a 30k-tet mesh's snapshots take minutes).
+fn stage_started(stage: pipeline::stage::Stage) {
+    let now = std::time::Instant::now();
+    let mut computing = LOG_STAGES.lock().unwrap_or_else(|e| e.into_inner());
+    computing.push(Computing {
+        stage,
+        started: now,
+        said: now,
+    });
+    if logging() {
+        println!("{stage:>10}: computing");
+    }
+}
+
+/// In a log, the innermost stage's progress every [`LOG_EVERY`].
+fn log_progress(done: usize, total: usize) {
+    if done >= total || !logging() {
+        return;
+    }
+    let mut computing = LOG_STAGES.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(c) = computing.last_mut()
+        && c.said.elapsed() >= LOG_EVERY
+    {
+        c.said = std::time::Instant::now();
+        println!(
+            "{:>10}: {done} of {total} after {:.0} s",
+            c.stage,
+            c.started.elapsed().as_secs_f64()
+        );
+    }
 }
 
 fn dispatch(cli: Cli) -> Result<()> {

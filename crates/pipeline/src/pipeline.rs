@@ -484,6 +484,9 @@ pub struct Pipeline<'a> {
     pub outcomes: Vec<StageOutcome>,
     /// Called after each stage (to print a line).
     pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
+    /// Called when a stage starts to compute (not when it is loaded from the cache): a log,
+    /// where no progress bar is drawn, can say what the minutes until its line are spent on.
+    pub on_stage_start: Box<dyn FnMut(Stage) + 'a>,
     /// Artifacts already loaded or computed in this run, by path: a stage that several later
     /// stages need is read (and announced) once, and every user shares the one copy.
     memo: std::collections::HashMap<PathBuf, Arc<dyn std::any::Any + Send + Sync>>,
@@ -565,6 +568,7 @@ impl<'a> Pipeline<'a> {
             cache: cache.to_path_buf(),
             outcomes: Vec::new(),
             on_stage: Box::new(|_| {}),
+            on_stage_start: Box::new(|_| {}),
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,
@@ -739,6 +743,7 @@ impl<'a> Pipeline<'a> {
                 Err(e) => tracing::warn!("{}; computing the stage again", e.problem()),
             }
         }
+        (self.on_stage_start)(stage);
         let value = compute(self)?;
         artifact::save(&path, stage, key, self.mesh_hash, &value)
             .with_context(|| format!("cannot write {}", path.display()))?;

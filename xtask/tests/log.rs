@@ -1,0 +1,38 @@
+//! In a log, where no progress bar is drawn, a stage that computes says so when it starts: its
+//! own line comes only when it ends, minutes later on a large mesh.
+
+use std::process::Command;
+
+use tests::{TINY, scratch_dir};
+
+#[test]
+fn a_log_says_which_stage_is_computing() {
+    let dir = scratch_dir("xtask-log");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, TINY).unwrap();
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_xtask"))
+            .args(["pipeline", "--until", "pca", "--scene"])
+            .arg(&scene)
+            .arg("--cache")
+            .arg(dir.join("cache"))
+            .output()
+            .unwrap()
+    };
+    let out = run();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    for stage in ["snapshots", "pca"] {
+        let started = text.find(&format!("{stage:>10}: computing\n"));
+        let ended = text.find(&format!("{stage:>10}: computed in"));
+        assert!(
+            started.is_some() && started < ended,
+            "{stage} does not say it started before it ended:\n{text}"
+        );
+    }
+    // Loaded from the cache, nothing computes.
+    let again = run();
+    let text = String::from_utf8_lossy(&again.stdout);
+    assert!(again.status.success(), "{text}");
+    assert!(!text.contains("computing"), "{text}");
+}
