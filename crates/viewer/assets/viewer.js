@@ -300,7 +300,7 @@
     $('status').className = 'failed';
     // Nothing steps any more: no figures of a simulation that is gone, no controls that would
     // do nothing.
-    for (const id of ['sps', 'its', 'rtf']) $(id).textContent = '–';
+    for (const id of ['sps', 'cost', 'its', 'rtf']) $(id).textContent = '–';
     for (const control of document.querySelectorAll('#hud button, #hud input, #hud select')) {
       control.disabled = true;
     }
@@ -372,6 +372,9 @@
     state = s;
     $('method').value = s.method;
     $('sps').textContent = fixed(s.steps_per_second, 0);
+    // What a step costs: in real time steps/s stays at 1/h whatever that is, so this is what
+    // tells the methods apart.
+    $('cost').textContent = Number.isFinite(s.step_ms) && s.step_ms > 0 ? s.step_ms.toPrecision(3) : '–';
     $('its').textContent = fixed(s.iterations_per_step, 1);
     $('rtf').textContent = `${fixed(s.real_time_factor, 2)}×`;
     $('step').textContent = `${s.step}, ${fixed(s.time, 2)} s`;
@@ -401,6 +404,12 @@
     const out = {};
     if (Number.isFinite(r) && r > 0) out.radius = r;
     if (Number.isFinite(k) && k > 0) out.stiffness = k;
+    const ignored = [['grab radius', 'radius', r], ['stiffness', 'stiffness', k]]
+      .filter(([, key, v]) => !(key in out) && $(key).value.trim() !== '')
+      .map(([name]) => name);
+    if (ignored.length) {
+      showMessage(`${ignored.join(' and ')} must be a positive number; the session's default is used`);
+    }
     return out;
   }
   canvas.addEventListener('contextmenu', (e) => e.preventDefault());

@@ -575,6 +575,11 @@ fn drive(
         .as_str()
         .and_then(|s| s.trim().parse().ok())
         .ok_or("the HUD shows no steps/s figure")?;
+    let cost: f64 = page
+        .eval("document.getElementById('cost').textContent")?
+        .as_str()
+        .and_then(|s| s.trim().parse().ok())
+        .ok_or("the HUD shows no ms a step")?;
     let hud = page.eval("viewerDebug.hud()")?;
     page.let_go(input, x, y - pixels)?;
     page.wait_for(
@@ -594,12 +599,16 @@ fn drive(
     if !(sps > 0.0 && hud.as_str().is_some_and(|h| h.contains("steps/s"))) {
         return Err(format!("the HUD shows no steps/s figure: {hud}"));
     }
+    if !(cost > 0.0 && cost.is_finite()) {
+        return Err(format!("the HUD shows no cost of a step: {hud}"));
+    }
     // With the server gone the page says so, shows no figures and offers no controls.
     if let Some(stop) = stop_server {
         stop();
         page.wait_for(
             "document.getElementById('status').textContent.startsWith('disconnected') \
              && document.getElementById('sps').textContent === '–' \
+             && document.getElementById('cost').textContent === '–' \
              && document.getElementById('pause').disabled \
              && document.getElementById('radius').disabled",
             "the page greyed out once the server stopped",
