@@ -65,8 +65,10 @@ fn name_problem(name: &str) -> Option<String> {
     })
 }
 
-/// The built-in default scene, also shipped as `data/cantilever.toml`.
-pub const DEFAULT_SCENE: &str = include_str!("../../../data/cantilever.toml");
+/// The built-in default scene, `crates/pipeline/scenes/cantilever.toml` (inside the crate, so
+/// that a source package of the crate or of the Python module builds), linked as
+/// `data/cantilever.toml` beside the other scenes.
+pub const DEFAULT_SCENE: &str = include_str!("../scenes/cantilever.toml");
 
 /// A scene: the mesh, its material and supports, the loads and how to integrate.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

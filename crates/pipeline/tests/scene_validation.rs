@@ -630,6 +630,12 @@ fn every_shipped_scene_reads_and_builds() {
         .collect();
     scenes.sort();
     assert!(scenes.len() >= 2, "data/ holds scenes: {scenes:?}");
+    // The built-in scene lives in the crate (a source package builds without data/), linked
+    // from data/.
+    assert_eq!(
+        std::fs::read_to_string(dir.join("cantilever.toml")).expect("data/cantilever.toml"),
+        pipeline::scene::DEFAULT_SCENE
+    );
     let shared = root.join("../shared");
     let mut built = 0;
     for path in &scenes {
