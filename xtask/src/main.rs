@@ -545,7 +545,11 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &[])))?;
     let mut p = cx.pipeline(&scene, &common)?;
     let progress = |d, t| cx.stage_progress(d, t);
-    p.pca(&progress)?;
+    // The basis first, so that the stage lines come in order before the methods run; full space
+    // alone needs neither it nor the snapshots.
+    if methods.iter().any(|m| !m.is_full()) {
+        p.pca(&progress)?;
+    }
     let opts = RunOptions {
         out,
         every,

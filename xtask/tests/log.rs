@@ -36,3 +36,26 @@ fn a_log_says_which_stage_is_computing() {
     assert!(again.status.success(), "{text}");
     assert!(!text.contains("computing"), "{text}");
 }
+
+/// `run --methods full` computes the reference and nothing the reduced methods need.
+#[test]
+fn full_space_alone_computes_no_training_data() {
+    let dir = scratch_dir("xtask-full-alone");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, TINY).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["run", "--methods", "full", "--every", "0", "--scene"])
+        .arg(&scene)
+        .arg("--cache")
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains(" reference: computed"), "{text}");
+    for stage in ["snapshots", "pca"] {
+        assert!(!text.contains(&format!("{stage:>10}: comput")), "{text}");
+    }
+}
