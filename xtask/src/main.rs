@@ -135,6 +135,10 @@ struct SuiteArgs {
     /// Young's modulus of every scene, Pa.
     #[arg(long, allow_negative_numbers = true, default_value_t = 1.0e5, value_parser = positive_pascals)]
     youngs_modulus: f64,
+    /// The axis the folder's meshes stand on: each is pinned at its lowest 2 % along it, with
+    /// gravity along minus it (the generated meshes stand on y).
+    #[arg(long, default_value = "y", value_parser = ["x", "y", "z"])]
+    up: String,
     /// Output folder (default: out/suite).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -641,6 +645,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         meshes,
         max_vertices,
         youngs_modulus,
+        up,
         out,
         generated,
         trajectories,
@@ -668,9 +673,15 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
     }
     let out = output_folder(out.unwrap_or_else(|| cx.root.join("out").join("suite")))?;
     let progress = |d, t| cx.stage_progress(d, t);
+    let up = match up.as_str() {
+        "x" => fem_core::constraints::Axis::X,
+        "z" => fem_core::constraints::Axis::Z,
+        _ => fem_core::constraints::Axis::Y,
+    };
     let rows = pipeline::suite::run_suite(
         &files,
         youngs_modulus,
+        up,
         trajectories as usize,
         &out,
         &progress,

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use fem_core::TetMesh;
+use fem_core::constraints::Axis;
 use fem_core::material::MaterialModel;
 use fem_core::mesh::generate::{BoxSpec, GeneratedShape, box_mesh};
 
@@ -141,11 +142,16 @@ pub fn generated() -> Vec<SuiteMesh> {
 }
 
 /// The minimal scene of a mesh file: its material, Young's modulus `youngs_modulus`, the bottom
-/// [`PIN_FRACTION`] of its height pinned, gravity along −y, h = 0.01 s; every other section at
-/// its default.
-pub fn minimal_scene(mesh: &Path, material: MaterialModel, youngs_modulus: f64) -> Result<Scene> {
+/// [`PIN_FRACTION`] of its height along `up` pinned, gravity along −`up`, h = 0.01 s; every
+/// other section at its default.
+pub fn minimal_scene(
+    mesh: &Path,
+    material: MaterialModel,
+    youngs_modulus: f64,
+    up: Axis,
+) -> Result<Scene> {
     let mesh = SuiteMesh::File(mesh.to_path_buf());
-    minimal_scene_of(&mesh.read()?, &mesh, material, youngs_modulus)
+    minimal_scene_of(&mesh.read()?, &mesh, material, youngs_modulus, up)
 }
 
 fn read(mesh: &Path) -> Result<(TetMesh, fem_core::mesh::ValidationReport)> {
@@ -158,20 +164,28 @@ fn minimal_scene_of(
     mesh: &SuiteMesh,
     material: MaterialModel,
     youngs_modulus: f64,
+    up: Axis,
 ) -> Result<Scene> {
     let (lo, hi) = m.bounding_box();
     let model = serde_json::to_value(material)?;
     let model = model.as_str().unwrap_or("stable-neo-hookean");
+    let a = up.index();
+    let mut gravity = [0.0; 3];
+    gravity[a] = -9.81;
     let text = format!(
         "name = {name:?}\n\
          [mesh]\n{section}\n\
          [material]\nmodel = {model:?}\nyoungs_modulus = {youngs_modulus:e}\npoisson_ratio = 0.45\n\
-         [[pin]]\nplane = {{ axis = \"y\", side = \"min\", tolerance = {tol:e} }}\n\
-         [gravity]\nacceleration = [0.0, -9.81, 0.0]\n\
+         [[pin]]\nplane = {{ axis = \"{axis}\", side = \"min\", tolerance = {tol:e} }}\n\
+         [gravity]\nacceleration = [{:?}, {:?}, {:?}]\n\
          [time]\nstep = 0.01\n",
+        gravity[0],
+        gravity[1],
+        gravity[2],
         name = format!("{}-{model}", mesh.name()),
         section = mesh.section(),
-        tol = PIN_FRACTION * (hi[1] - lo[1]),
+        axis = ["x", "y", "z"][a],
+        tol = PIN_FRACTION * (hi[a] - lo[a]),
     );
     Scene::from_str(
         &text,
@@ -247,13 +261,15 @@ pub struct SuiteRow {
     pub failure: Option<String>,
 }
 
-/// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`) from an empty cache under
-/// `out/<scene>/`, returning one row a mesh; a scene whose pipeline fails gets a row saying why.
+/// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`; a mesh file standing on
+/// `up`, the generated shapes on y) from an empty cache under `out/<scene>/`, returning one row
+/// a mesh; a scene whose pipeline fails gets a row saying why.
 /// With `trajectories` above 1 every method also runs on test trajectories 1..`trajectories`
 /// (after the pipeline's time is taken), and the row holds their spread.
 pub fn run_suite(
     meshes: &[SuiteMesh],
     youngs_modulus: f64,
+    up: Axis,
     trajectories: usize,
     out: &Path,
     progress: Progress<'_>,
@@ -281,7 +297,12 @@ pub fn run_suite(
                 continue;
             }
         };
-        let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus)?;
+        // The shapes generated in code stand on y whatever the folder's files do.
+        let up = match mesh {
+            SuiteMesh::File(_) => up,
+            _ => Axis::Y,
+        };
+        let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus, up)?;
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
         let cache = dir.join("cache");
@@ -646,7 +667,8 @@ mod tests {
             .collect();
         assert_eq!(sizes, [(3321, 15360), (11475, 58800), (6532, 30078)]);
         let bar = &generated()[1];
-        let scene = minimal_scene_of(&bar.read().unwrap(), bar, MATERIALS[1], 1e5).unwrap();
+        let scene =
+            minimal_scene_of(&bar.read().unwrap(), bar, MATERIALS[1], 1e5, Axis::Y).unwrap();
         assert_eq!(scene.name, "bar-60k-neo-hookean");
         let model = scene.build_model().unwrap().model;
         assert_eq!(model.mesh.num_tets(), 58800);
@@ -654,10 +676,30 @@ mod tests {
         assert_eq!(model.pinned.len(), 51 * 15);
         // The figure stands on the bottom layer of its trunk's disc.
         let figure = &generated()[2];
-        let scene = minimal_scene_of(&figure.read().unwrap(), figure, MATERIALS[3], 1e5).unwrap();
+        let scene =
+            minimal_scene_of(&figure.read().unwrap(), figure, MATERIALS[3], 1e5, Axis::Y).unwrap();
         assert_eq!(scene.name, "figure-30k-stvk");
         let model = scene.build_model().unwrap().model;
         let base = model.mesh.vertices.iter().filter(|v| v.y == 0.0).count();
+        assert_eq!(model.pinned.len(), base);
+    }
+
+    /// A mesh made with z up (`suite --up z`) is pinned at its lowest 2 % along z, with gravity
+    /// along −z.
+    #[test]
+    fn a_folder_of_z_up_meshes_stands_on_z() {
+        let bar = SuiteMesh::Box {
+            name: "post".into(),
+            kind: GeneratedShape::Box,
+            size: [0.1, 0.1, 0.5],
+            cells: [2, 2, 10],
+        };
+        let scene =
+            minimal_scene_of(&bar.read().unwrap(), &bar, MATERIALS[0], 1e5, Axis::Z).unwrap();
+        assert_eq!(scene.gravity.acceleration, [0.0, 0.0, -9.81]);
+        let model = scene.build_model().unwrap().model;
+        let base = model.mesh.vertices.iter().filter(|v| v.z == 0.0).count();
+        assert_eq!(base, 9);
         assert_eq!(model.pinned.len(), base);
     }
 }
