@@ -230,8 +230,11 @@ impl Session {
         &self.settings
     }
 
+    /// Stepping: not paused, not failed, and watched. With no client connected the body holds
+    /// still, so that the first page to open sees it from rest (a body that falls under its
+    /// weight had fallen long before anyone looked) and nobody's cores are spent on it.
     fn running(&self) -> bool {
-        !self.paused && self.failure.is_none()
+        !self.paused && self.failure.is_none() && !self.clients.is_empty()
     }
 
     fn time_step(&self) -> Duration {
@@ -475,6 +478,10 @@ impl Session {
                         .events
                         .send(Outgoing::Binary(self.mesh_message.clone())),
                 );
+                if self.clients.is_empty() {
+                    // The clock stood still while nobody watched.
+                    self.restart_clock();
+                }
                 self.clients.push((client, outbox));
                 self.send_frame();
                 self.send_state();

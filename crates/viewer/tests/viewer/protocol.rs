@@ -209,6 +209,35 @@ fn a_message_too_large_to_buffer_closes_only_its_connection() {
     server.shutdown();
 }
 
+/// Nobody watching, the body holds still: the first client sees it from rest, and one that
+/// comes back finds it where the last one left it.
+#[test]
+fn the_session_steps_only_while_watched() {
+    let server = serve(session());
+    // At h = 0.02 s, half a second unwatched would have been 25 steps.
+    std::thread::sleep(Duration::from_millis(500));
+    let mut first = Client::connect(&server);
+    first.wait_until(|c| c.state.is_some(), "a state");
+    let at_connect = first.state.as_ref().map_or(0, |s| s.step);
+    assert!(at_connect <= 3, "{at_connect} steps before anyone watched");
+    first.wait_until(|c| c.step() >= 10, "ten steps while watched");
+    let seen = first.step();
+    drop(first);
+    // Half a second unwatched would be 25 more steps.
+    std::thread::sleep(Duration::from_millis(500));
+    let mut again = Client::connect(&server);
+    again.wait_until(|c| c.state.is_some(), "a state");
+    let left = again.state.as_ref().map_or(0, |s| s.step);
+    assert!(
+        left <= seen + 5,
+        "{left} steps after {seen} seen: it stepped unwatched"
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    again.read_for(Duration::from_millis(50));
+    assert!(again.step() > left, "it steps again once watched");
+    server.shutdown();
+}
+
 #[test]
 fn a_client_that_disconnects_mid_drag_releases_its_handles() {
     let server = serve(session());
