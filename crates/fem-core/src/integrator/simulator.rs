@@ -293,8 +293,8 @@ impl Simulator {
         // A retry that fails too is said as both solvers' failure, with every iteration spent:
         // "L-BFGS did not converge" alone reads as the scene's solver failing on its own.
         let both = match self.solver.method {
-            SolverMethod::Newton => "Newton, then L-BFGS from where it stopped,",
-            SolverMethod::Lbfgs => "L-BFGS, then Newton from where it stopped,",
+            SolverMethod::Newton => "Newton, then L-BFGS from where it stopped",
+            SolverMethod::Lbfgs => "L-BFGS, then Newton from where it stopped",
         };
         match retry {
             Ok(mut s) => {

@@ -609,6 +609,7 @@ fn cell_name(t: u64) -> Option<&'static str> {
         14 => "pyramid",
         22 => "quadratic triangle",
         24 => "quadratic tetrahedron",
+        71 => "Lagrange tetrahedron",
         _ => return None,
     })
 }
@@ -616,8 +617,8 @@ fn cell_name(t: u64) -> Option<&'static str> {
 /// What to do about a file whose cells hold no linear tetrahedron, by what it holds.
 fn missing_tets_remedy(types: &[u64]) -> &'static str {
     const LOWER_DIMENSIONS: [u64; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
-    if types.contains(&24) {
-        "; quadratic tetrahedra are not read: export first-order (4-point) tetrahedra, e.g. \
+    if types.contains(&24) || types.contains(&71) {
+        "; quadratic and Lagrange tetrahedra are not read: export first-order (4-point) tetrahedra, e.g. \
          mesh with `-order 1` in gmsh"
     } else if !types.is_empty() && types.iter().all(|t| LOWER_DIMENSIONS.contains(t)) {
         "; that is a surface mesh, and a tetrahedral volume mesh is needed (TetGen `tetgen -pq \
@@ -677,7 +678,7 @@ mod tests {
             "{reason}"
         );
         assert!(
-            reason.contains("quadratic tetrahedra are not read"),
+            reason.contains("quadratic and Lagrange tetrahedra are not read"),
             "{reason}"
         );
         let surface = LEGACY.replace("CELL_TYPES 2\n10\n5", "CELL_TYPES 2\n9\n5");

@@ -719,11 +719,11 @@ fn a_step_neither_solver_finishes_names_both() {
     for (method, said) in [
         (
             SolverMethod::Newton,
-            "Newton, then L-BFGS from where it stopped, did not converge at step 1",
+            "Newton, then L-BFGS from where it stopped did not converge at step 1",
         ),
         (
             SolverMethod::Lbfgs,
-            "L-BFGS, then Newton from where it stopped, did not converge at step 1",
+            "L-BFGS, then Newton from where it stopped did not converge at step 1",
         ),
     ] {
         let capped = SolverConfig {

@@ -193,8 +193,10 @@ fn element_name(t: i64) -> Option<&'static str> {
         7 => "5-node pyramid",
         8 => "3-node line",
         9 => "6-node triangle",
+        10 => "9-node quadrangle",
         11 => "10-node tetrahedron",
         15 => "point",
+        16 => "8-node quadrangle",
         29 => "20-node tetrahedron",
         _ => return None,
     })
@@ -204,12 +206,15 @@ fn element_name(t: i64) -> Option<&'static str> {
 /// order tetrahedra (mesh at order 1), only surfaces, lines and points (the volume was not
 /// meshed, or not saved: gmsh saves only the elements of physical groups when there are any).
 fn missing_tets_remedy(types: &[i64]) -> &'static str {
-    const LOWER_DIMENSIONS: [i64; 8] = [1, 2, 3, 8, 9, 10, 15, 16];
+    // Lines, triangles, quadrangles and points of every order Gmsh writes.
+    const LOWER_DIMENSIONS: [i64; 17] = [
+        1, 2, 3, 8, 9, 10, 15, 16, 20, 21, 22, 23, 24, 25, 26, 27, 28,
+    ];
     if types.iter().any(|t| matches!(t, 11 | 29 | 30 | 31)) {
         "; higher-order tetrahedra are not read: mesh with first-order elements (`-order 1` \
          on gmsh's command line, `Mesh.ElementOrder = 1` in a .geo file)"
     } else if !types.is_empty() && types.iter().all(|t| LOWER_DIMENSIONS.contains(t)) {
-        "; that is a surface mesh, and a volume mesh is needed: mesh the volume (`gmsh -3 \
+        "; that is a surface (or line) mesh, and a volume mesh is needed: mesh the volume (`gmsh -3 \
          part.geo`, or Mesh > 3D), and where the .geo file defines physical groups give the \
          volume one (`Physical Volume`) or set `Mesh.SaveAll = 1`, since gmsh then saves only \
          the elements of physical groups"
@@ -541,7 +546,9 @@ mod tests {
         let text = V22.replace("3 4 2 1 1 10 20 30 40", "3 2 2 1 1 10 20 30");
         let (_, reason) = parse_error(text.as_bytes());
         assert!(
-            reason.contains("(3-node triangle), 1 of type 15 (point); that is a surface mesh"),
+            reason.contains(
+                "(3-node triangle), 1 of type 15 (point); that is a surface (or line) mesh"
+            ),
             "{reason}"
         );
         assert!(reason.contains("`Mesh.SaveAll = 1`"), "{reason}");
