@@ -160,7 +160,7 @@ pub struct Buckling {
     /// The Young's modulus at which the load factor would be 1 (it scales with E).
     pub standing_modulus: Option<f64>,
     /// The Young's modulus at which the sag would be [`Buckling::VALID_SAG`] of the size (it
-    /// scales with 1/E).
+    /// scales with 1/E), or the standing modulus where that is larger ([`Buckling::firm`]).
     pub firm_modulus: f64,
     /// Whether the eigenvalue iteration converged.
     pub converged: bool,
@@ -188,14 +188,25 @@ impl Buckling {
             }
         };
         let (lo, hi) = model.mesh.bounding_box();
+        let size = (hi - lo).norm();
+        let standing_modulus = b.load_factor.map(|l| model.youngs_modulus / l);
         Some(Self {
             load_factor: b.load_factor,
             sag: b.sag,
-            size: (hi - lo).norm(),
-            standing_modulus: b.load_factor.map(|l| model.youngs_modulus / l),
-            firm_modulus: model.youngs_modulus * b.sag / (Self::VALID_SAG * (hi - lo).norm()),
+            size,
+            standing_modulus,
+            firm_modulus: Self::firm(model.youngs_modulus, b.sag, size, standing_modulus),
             converged: b.converged,
         })
+    }
+
+    /// The Young's modulus that brings a linear sag `sag` at modulus `e` to
+    /// [`Buckling::VALID_SAG`] of `size` (the sag scales with 1/E), and at least the one that
+    /// keeps the body from buckling (`standing`), so that a slender column is not sent to a
+    /// modulus at which it would still buckle.
+    pub fn firm(e: f64, sag: f64, size: f64, standing: Option<f64>) -> f64 {
+        let firm = e * sag / (Self::VALID_SAG * size);
+        standing.map_or(firm, |s| firm.max(s))
     }
 
     /// The load factor below 1 when the estimate holds: the body buckles under its own weight.
@@ -212,8 +223,9 @@ pub struct Compression {
     pub volume_ratio: f64,
     /// The time (s) of its frame.
     pub time: f64,
-    /// Frames with at least one element inverted or flat (det F ≤ 0).
+    /// Frames with at least one element inverted or flat (det F ≤ 0), of `frames`.
     pub inverted_frames: usize,
+    pub frames: usize,
     /// The largest share, over the frames, of the body's rest volume in elements squeezed
     /// below [`Compression::SQUEEZED`] of their volume (inverted ones included): one sliver
     /// crushed under a spring is a tiny share, a body giving way a large one.
@@ -262,6 +274,7 @@ impl Compression {
                 volume_ratio: f64::INFINITY,
                 time,
                 inverted_frames: 0,
+                frames: frames.len(),
                 squeezed_share: 0.0,
                 squeezed_time: time,
                 inversion_safe: matches!(
@@ -613,7 +626,9 @@ pub fn run(
             trajectory: opts.trajectory,
             out: opts.out.join(method.name()),
             every: opts.every,
-            repeats: RUN_REPEATS,
+            // A full-space trajectory is timed once, as `full`'s is, so that the faster
+            // full-space solver, the speed-ups' base, is picked from like figures.
+            repeats: if method.is_full() { 1 } else { RUN_REPEATS },
             time_budget: Some(RUN_TIMING_BUDGET),
             time_full: false,
             solver: None,
@@ -1053,6 +1068,12 @@ pub fn measure(
         for k in 0..frames {
             let info = match runner.step() {
                 Ok(info) => info,
+                Err(_) if !first => {
+                    // A repeat for the time only (runs reproduce bit for bit, so it fails where
+                    // the first did, which reported it): its partial times are not a run's.
+                    times.clear();
+                    break;
+                }
                 Err(e) => {
                     // Keep the last good state on disk (never the failed one) and report the
                     // failure in the row instead of aborting the other methods.
@@ -1095,6 +1116,9 @@ pub fn measure(
             {
                 w.write(&runner.model().mesh, k + 1, runner.time(), &u)?;
             }
+        }
+        if times.is_empty() && !first {
+            break;
         }
         timed += times.iter().sum::<f64>();
         medians.push(median(&times) * 1e3);
