@@ -36,10 +36,11 @@
     const e1 = unit(sub(a, scale(u, dot(a, u))));
     world = { up: u, e1, e2: cross(e1, u) };
   }
+  // a·e1 + b·up + c·e2.
+  const inWorld = (a, b, c) => add(add(scale(world.e1, a), scale(world.up, b)), scale(world.e2, c));
   function basis() {
     const c = Math.cos(camera.pitch);
-    const offset = add(add(scale(world.e1, c * Math.sin(camera.yaw)), scale(world.up, Math.sin(camera.pitch))),
-      scale(world.e2, c * Math.cos(camera.yaw)));
+    const offset = inWorld(c * Math.sin(camera.yaw), Math.sin(camera.pitch), c * Math.cos(camera.yaw));
     const eye = add(camera.target, scale(offset, camera.distance));
     const forward = unit(sub(camera.target, eye));
     const right = unit(cross(forward, world.up));
@@ -246,8 +247,7 @@
     gl.uniformMatrix4fv(gl.getUniformLocation(surfaceProgram, 'viewProjection'), false, vp);
     gl.uniform3fv(gl.getUniformLocation(surfaceProgram, 'eye'), basis().eye);
     // A light from above the viewer, above as the scene has it.
-    gl.uniform3fv(gl.getUniformLocation(surfaceProgram, 'lightBias'),
-      add(add(scale(world.e1, 0.35), scale(world.up, 0.8)), scale(world.e2, 0.25)));
+    gl.uniform3fv(gl.getUniformLocation(surfaceProgram, 'lightBias'), inWorld(0.35, 0.8, 0.25));
     gl.bindBuffer(gl.ARRAY_BUFFER, buffers.position);
     gl.enableVertexAttribArray(0);
     gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
@@ -374,7 +374,8 @@
     $('sps').textContent = fixed(s.steps_per_second, 0);
     // What a step costs: in real time steps/s stays at 1/h whatever that is, so this is what
     // tells the methods apart.
-    $('cost').textContent = Number.isFinite(s.step_ms) && s.step_ms > 0 ? s.step_ms.toPrecision(3) : '–';
+    $('cost').textContent = !(Number.isFinite(s.step_ms) && s.step_ms > 0) ? '–'
+      : s.step_ms >= 100 ? s.step_ms.toFixed(0) : s.step_ms.toPrecision(3);
     $('its').textContent = fixed(s.iterations_per_step, 1);
     $('rtf').textContent = `${fixed(s.real_time_factor, 2)}×`;
     $('step').textContent = `${s.step}, ${fixed(s.time, 2)} s`;
@@ -404,11 +405,15 @@
     const out = {};
     if (Number.isFinite(r) && r > 0) out.radius = r;
     if (Number.isFinite(k) && k > 0) out.stiffness = k;
-    const ignored = [['grab radius', 'radius', r], ['stiffness', 'stiffness', k]]
-      .filter(([, key, v]) => !(key in out) && $(key).value.trim() !== '')
+    // A field left empty takes the session's default; one that holds anything else but a
+    // positive number (a browser gives '' for text that is not a number) is said.
+    const ignored = [['grab radius', 'radius'], ['stiffness', 'stiffness']]
+      .filter(([, key]) => !(key in out) && ($(key).value.trim() !== '' || $(key).validity.badInput))
       .map(([name]) => name);
-    if (ignored.length) {
-      showMessage(`${ignored.join(' and ')} must be a positive number; the session's default is used`);
+    if (ignored.length === 1) {
+      showMessage(`the ${ignored[0]} must be a positive number; the session's default is used`);
+    } else if (ignored.length === 2) {
+      showMessage("the grab radius and stiffness must be positive numbers; the session's defaults are used");
     }
     return out;
   }

@@ -55,6 +55,9 @@ pub enum ViewerError {
     /// A setting that must be positive and finite (and, for a time, at most a year).
     #[error("the viewer's {what} must be positive and finite (a year at most), got {value}")]
     Setting { what: &'static str, value: f64 },
+    /// The direction drawn up is not a unit vector.
+    #[error("the viewer's up must be a unit vector, got one of length {length}")]
+    Up { length: f64 },
     /// The address cannot be listened on.
     #[error("cannot listen on {addr}: {source}")]
     Bind {

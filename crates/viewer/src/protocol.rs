@@ -28,6 +28,11 @@ pub const FRAME_KIND: u32 = 2;
 /// Bytes before the positions of a frame: kind, vertex count (`u32` each), step, time (`f64`).
 pub const FRAME_HEADER_BYTES: usize = 24;
 
+/// +y: the direction drawn up when the scene has no gravity.
+fn y_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
 /// A client's message.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
@@ -107,7 +112,9 @@ pub enum Event {
         surface_triangles: usize,
         /// The mesh indices of the surface vertices, in frame order.
         vertex_ids: Vec<usize>,
-        /// The direction to draw up (a unit vector, against the scene's gravity; +y without).
+        /// The direction to draw up (a unit vector, against the scene's gravity; +y without, and
+        /// from a server that does not send it).
+        #[serde(default = "y_up")]
         up: [f64; 3],
     },
     /// The simulation's state and speed, a few times a second and after every change.

@@ -141,13 +141,10 @@ impl Session {
                 return Err(ViewerError::Setting { what, value });
             }
         }
-        let up = fem_core::Vec3::from(settings.up).norm();
-        let unit = (up - 1.0).abs() <= 1e-6;
+        let length = fem_core::Vec3::from(settings.up).norm();
+        let unit = (length - 1.0).abs() <= 1e-6;
         if !unit {
-            return Err(ViewerError::Setting {
-                what: "up (the length of a unit vector)",
-                value: up,
-            });
+            return Err(ViewerError::Up { length });
         }
         // The step and the frame interval as durations (a year at most).
         for (what, seconds) in [

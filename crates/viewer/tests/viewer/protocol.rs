@@ -223,13 +223,14 @@ fn the_session_steps_only_while_watched() {
     first.wait_until(|c| c.step() >= 10, "ten steps while watched");
     let seen = first.step();
     drop(first);
-    // Half a second unwatched would be 25 more steps.
-    std::thread::sleep(Duration::from_millis(500));
+    // Two seconds unwatched would be 100 more steps; a loaded machine may let the session
+    // catch up a backlog of up to 0.25 s (12 steps) after the last frame seen.
+    std::thread::sleep(Duration::from_secs(2));
     let mut again = Client::connect(&server);
     again.wait_until(|c| c.state.is_some(), "a state");
     let left = again.state.as_ref().map_or(0, |s| s.step);
     assert!(
-        left <= seen + 5,
+        left <= seen + 25,
         "{left} steps after {seen} seen: it stepped unwatched"
     );
     std::thread::sleep(Duration::from_millis(500));
@@ -596,14 +597,14 @@ fn a_session_refuses_what_it_cannot_run() {
                 up: [0.0, 2.0, 0.0],
                 ..ok.clone()
             },
-            "up",
+            "up must be a unit vector, got one of length 2",
         ),
         (
             Settings {
                 up: [f64::NAN, 1.0, 0.0],
                 ..ok.clone()
             },
-            "up",
+            "up must be a unit vector",
         ),
     ] {
         let e = err(settings, vec![reduced()]);
