@@ -445,9 +445,10 @@ fn method_progress(bar: &ProgressBar, say_ends: bool) -> impl FnMut(&str, usize,
 
 fn print_stage(o: &StageOutcome) {
     if !o.cached {
+        // Down to this stage: one that failed inside it (its error caught) ends with it.
         let mut computing = LOG_STAGES.lock().unwrap_or_else(|e| e.into_inner());
-        if computing.last().is_some_and(|s| s.stage == o.stage) {
-            computing.pop();
+        if let Some(i) = computing.iter().rposition(|s| s.stage == o.stage) {
+            computing.truncate(i);
         }
     }
     println!("{o}");
@@ -466,9 +467,10 @@ struct Computing {
 /// The stages being computed, innermost last (a stage computes the earlier ones it needs).
 static LOG_STAGES: std::sync::Mutex<Vec<Computing>> = std::sync::Mutex::new(Vec::new());
 
-/// Whether progress goes to a log rather than a terminal (no bar is drawn there).
+/// Whether the stage lines go to a log rather than a terminal: the bar, drawn on stderr, is not
+/// in the log.
 fn logging() -> bool {
-    !std::io::IsTerminal::is_terminal(&std::io::stderr())
+    !std::io::IsTerminal::is_terminal(&std::io::stdout())
 }
 
 /// A stage starts to compute: in a log, a line saying so, since its own line comes only when
