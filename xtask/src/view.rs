@@ -92,6 +92,7 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 model.provenance.scene,
                 model.mesh.num_vertices()
             );
+            println!("{}", model_accuracy(&model));
             let methods = vec![
                 viewer::Method::new(name.clone(), model.simulator()?),
                 viewer::Method::new(FULL, full_runtime(&model, chosen)?),
@@ -127,6 +128,10 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             let (Some(settings), Some(default_start)) = (settings, default_start) else {
                 bail!("--methods names no reduced method; the viewer needs one to build on");
             };
+            println!(
+                "{}",
+                run_accuracy(&cx.out(&scene, &["report.json"]), &scene)
+            );
             (settings, methods, default_start)
         }
     };
@@ -193,9 +198,96 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
     Ok(())
 }
 
+/// What a model file says of its accuracy: the held-out error `run` measured, or that none was.
+fn model_accuracy(model: &ReducedModel) -> String {
+    match model.provenance.errors.iter().find(|e| e.held_out) {
+        Some(e) => format!(
+            "measured when it was trained: {:.2} % ({}); `run`'s report.md lists what not to trust",
+            100.0 * e.value,
+            e.name
+        ),
+        None => "no held-out error is recorded in the model: `cargo xtask run` measures each \
+                 method against full space and says what not to trust"
+            .to_string(),
+    }
+}
+
+/// What the last `run` of the scene measured, from its `report.json` (written beside the
+/// stages' default cache), or how to measure it: a person drags a model without the table
+/// otherwise.
+fn run_accuracy(report: &std::path::Path, scene: &pipeline::scene::Scene) -> String {
+    let rows: Option<Vec<serde_json::Value>> = std::fs::read_to_string(report)
+        .ok()
+        .and_then(|text| serde_json::from_str(&text).ok());
+    let measured: Vec<String> = rows
+        .iter()
+        .flatten()
+        .filter(|r| {
+            r["method"]
+                .as_str()
+                .is_some_and(|m| m != FULL && !m.starts_with("full-"))
+        })
+        .filter_map(|r| {
+            Some(format!(
+                "{} {:.2} %",
+                r["method"].as_str()?,
+                100.0 * r["mean_rel_error"].as_f64()?
+            ))
+        })
+        .collect();
+    if measured.is_empty() {
+        format!(
+            "how far each method is from full space: `cargo xtask run{}` (its report.md lists \
+             what not to trust)",
+            match &scene.source {
+                s if s.ends_with(".toml") => format!(" --scene {s}"),
+                _ => String::new(),
+            }
+        )
+    } else {
+        format!(
+            "the last `run` of this scene measured, off its held-out test: {} ({}: a scene \
+             changed since is not measured by it; its report.md lists what not to trust)",
+            measured.join(", "),
+            report.display()
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Before the viewer starts it says what `run` measured for the scene, or how to measure it.
+    #[test]
+    fn the_viewer_says_what_run_measured_or_how_to_measure_it() {
+        let scene = pipeline::scene::Scene::builtin();
+        let dir = std::env::temp_dir().join(format!("view-accuracy-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = dir.join("report.json");
+        let none = run_accuracy(&report, &scene);
+        assert!(
+            none.starts_with("how far each method is from full space: `cargo xtask run`"),
+            "{none}"
+        );
+        std::fs::write(
+            &report,
+            r#"[{"method":"full","mean_rel_error":0.0},{"method":"full-newton","mean_rel_error":1e-9},
+                {"method":"pca","mean_rel_error":0.0479},{"method":"neural-cubature","mean_rel_error":0.0709}]"#,
+        )
+        .unwrap();
+        let some = run_accuracy(&report, &scene);
+        assert!(
+            some.starts_with(
+                "the last `run` of this scene measured, off its held-out test: pca 4.79 %, \
+                 neural-cubature 7.09 % ("
+            ),
+            "{some}"
+        );
+        std::fs::write(&report, "not json").unwrap();
+        assert_eq!(run_accuracy(&report, &scene), none);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     /// `--host localhost` is the loopback address; anything else not an IP address says what
     /// to give.
