@@ -5,7 +5,7 @@
 use fem_core::constraints::Axis;
 use fem_core::mesh::generate::GeneratedShape;
 use pipeline::simulate::Method;
-use pipeline::suite::{MATERIALS, METHODS, SuiteMesh, markdown, meshes, run_suite};
+use pipeline::suite::{MATERIALS, METHODS, StageHooks, SuiteMesh, markdown, meshes, run_suite};
 use pipeline::trust::COLLAPSED_SHARE;
 use tests::{no_progress, scratch_dir, shared_dir};
 
@@ -26,7 +26,17 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
     );
     let out = scratch_dir("suite");
     let meshes: Vec<SuiteMesh> = meshes.into_iter().map(SuiteMesh::File).collect();
-    let rows = run_suite(&meshes, 1e5, Axis::Y, 1, &out, &no_progress, &mut |_| {}).unwrap();
+    let rows = run_suite(
+        &meshes,
+        1e5,
+        Axis::Y,
+        1,
+        &out,
+        &no_progress,
+        &mut |_| {},
+        StageHooks::none(),
+    )
+    .unwrap();
     assert_eq!(rows.len(), meshes.len());
     every_method_completed(&rows);
 }
@@ -42,7 +52,17 @@ fn minimal_scene_on_a_generated_figure_completes_every_method() {
         cells: [14, 14, 5],
     };
     let out = scratch_dir("suite-figure");
-    let rows = run_suite(&[figure], 1e5, Axis::Y, 2, &out, &no_progress, &mut |_| {}).unwrap();
+    let rows = run_suite(
+        &[figure],
+        1e5,
+        Axis::Y,
+        2,
+        &out,
+        &no_progress,
+        &mut |_| {},
+        StageHooks::none(),
+    )
+    .unwrap();
     assert_eq!(rows.len(), 1);
     assert_eq!((rows[0].vertices, rows[0].tets), (422, 1284));
     every_method_completed(&rows);

@@ -444,6 +444,13 @@ fn method_progress(bar: &ProgressBar, say_ends: bool) -> impl FnMut(&str, usize,
 }
 
 fn print_stage(o: &StageOutcome) {
+    stage_ended(o);
+    println!("{o}");
+}
+
+/// A stage ended: it and any stage that failed inside it (its error caught) are no longer
+/// being computed.
+fn stage_ended(o: &StageOutcome) {
     if !o.cached {
         // Down to this stage: one that failed inside it (its error caught) ends with it.
         let mut computing = LOG_STAGES.lock().unwrap_or_else(|e| e.into_inner());
@@ -451,7 +458,6 @@ fn print_stage(o: &StageOutcome) {
             computing.truncate(i);
         }
     }
-    println!("{o}");
 }
 
 /// How often a log, where no progress bar is drawn, gets a line on the stage being computed.
@@ -688,6 +694,10 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         &out,
         &progress,
         &mut |name| println!("{name}"),
+        pipeline::suite::StageHooks {
+            start: &stage_started,
+            end: &stage_ended,
+        },
     )?;
     pipeline::suite::write(&out, &rows)?;
     print!("\n{}", pipeline::suite::markdown(&rows));

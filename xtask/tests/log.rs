@@ -59,3 +59,25 @@ fn full_space_alone_computes_no_training_data() {
         assert!(!text.contains(&format!("{stage:>10}: comput")), "{text}");
     }
 }
+
+/// The suite's pipelines say in a log which stage they compute, as `run`'s do.
+#[test]
+fn the_suite_says_which_stage_is_computing() {
+    let dir = scratch_dir("xtask-suite-log");
+    let meshes = dir.join("meshes");
+    std::fs::create_dir_all(&meshes).unwrap();
+    // A unit cube of five tets.
+    let cube = "MeshVersionFormatted 1\nDimension 3\nVertices\n8\n\
+                0 0 0 0\n1 0 0 0\n0 1 0 0\n1 1 0 0\n0 0 1 0\n1 0 1 0\n0 1 1 0\n1 1 1 0\n\
+                Tetrahedra\n5\n1 2 3 5 0\n2 4 3 8 0\n2 5 6 8 0\n3 5 7 8 0\n2 3 5 8 0\nEnd\n";
+    std::fs::write(meshes.join("cube.mesh"), cube).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["suite", "--meshes"])
+        .arg(&meshes)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains(" snapshots: computing\n"), "{text}");
+}

@@ -261,6 +261,29 @@ pub struct SuiteRow {
     pub failure: Option<String>,
 }
 
+/// What the suite's pipelines call when a stage starts to compute and when one ends (a log
+/// shows which stage a mesh's minutes go to); `StageHooks::none()` calls nothing.
+#[derive(Clone, Copy)]
+pub struct StageHooks<'h> {
+    pub start: &'h dyn Fn(crate::stage::Stage),
+    pub end: &'h dyn Fn(&crate::pipeline::StageOutcome),
+}
+
+impl std::fmt::Debug for StageHooks<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StageHooks").finish_non_exhaustive()
+    }
+}
+
+impl StageHooks<'static> {
+    pub fn none() -> Self {
+        Self {
+            start: &|_| {},
+            end: &|_| {},
+        }
+    }
+}
+
 /// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`; a mesh file standing on
 /// `up`, the generated shapes on y) from an empty cache under `out/<scene>/`, returning one row
 /// a mesh; a scene whose pipeline fails gets a row saying why.
@@ -274,6 +297,7 @@ pub fn run_suite(
     out: &Path,
     progress: Progress<'_>,
     on_mesh: &mut dyn FnMut(&str),
+    stages: StageHooks<'_>,
 ) -> Result<Vec<SuiteRow>> {
     let mut rows = Vec::new();
     for (i, mesh) in meshes.iter().enumerate() {
@@ -319,7 +343,11 @@ pub fn run_suite(
         };
         let mut pipeline = Pipeline::new(&scene, &cache);
         let outcome = match &mut pipeline {
-            Ok(p) => run(p, &opts, progress, &mut |_, _, _| {}),
+            Ok(p) => {
+                p.on_stage_start = Box::new(stages.start);
+                p.on_stage = Box::new(stages.end);
+                run(p, &opts, progress, &mut |_, _, _| {})
+            }
             Err(e) => Err(anyhow::anyhow!("{e:#}")),
         };
         let pipeline_seconds = start.elapsed().as_secs_f64();
