@@ -589,11 +589,18 @@ impl<'a> Pipeline<'a> {
             held,
             each_pin,
         } = &self.body;
+        // The share says at once whether a tolerance caught a face or half the body.
+        let share = 100.0 * *held as f64 / (*vertices).max(1) as f64;
+        let share = if share < 1.0 {
+            format!("{share:.1} %")
+        } else {
+            format!("{share:.0} %")
+        };
         let pins = match each_pin.as_slice() {
             [] => "no pins".to_string(),
-            [_] => format!("the pin holds {held} of them"),
+            [_] => format!("the pin holds {held} of them ({share})"),
             each => format!(
-                "the pins hold {held} of them ({})",
+                "the pins hold {held} of them, {share} ({})",
                 each.iter()
                     .enumerate()
                     .map(|(i, n)| format!("pin[{i}] {n}"))

@@ -554,8 +554,8 @@ fn the_body_line_counts_the_vertices_each_pin_holds() {
     assert_eq!(
         p.body_summary(),
         format!(
-            "{}: 20 vertices and {} tets, 1.000 × 0.200 × 0.200 m; the pins hold 5 of them \
-             (pin[0] 4, pin[1] 2)",
+            "{}: 20 vertices and {} tets, 1.000 × 0.200 × 0.200 m; the pins hold 5 of them, \
+             25 % (pin[0] 4, pin[1] 2)",
             scene.source,
             mesh.num_tets()
         )
