@@ -2,12 +2,32 @@
 //! a user would write (mesh, material, bottom pinned, gravity, time step) runs from an empty
 //! cache through every stage and every method, each mesh with another material.
 
+use std::path::Path;
+
 use fem_core::constraints::Axis;
 use fem_core::mesh::generate::GeneratedShape;
 use pipeline::simulate::Method;
-use pipeline::suite::{MATERIALS, METHODS, StageHooks, SuiteMesh, markdown, meshes, run_suite};
+use pipeline::suite::{
+    MATERIALS, METHODS, StageHooks, SuiteMesh, SuiteRow, markdown, meshes, run_suite,
+};
 use pipeline::trust::COLLAPSED_SHARE;
 use tests::{no_progress, scratch_dir, shared_dir};
+
+/// The suite's minimal scenes (E = 10⁵ Pa, standing on y) on `meshes`, with `trajectories` test
+/// trajectories each, quietly.
+fn minimal_scenes(meshes: &[SuiteMesh], trajectories: usize, out: &Path) -> Vec<SuiteRow> {
+    run_suite(
+        meshes,
+        1e5,
+        Axis::Y,
+        trajectories,
+        out,
+        &no_progress,
+        &mut |_| {},
+        StageHooks::none(),
+    )
+    .unwrap()
+}
 
 /// Meshes up to this size run in CI (a minute or two each on 2 cores); `cargo xtask suite`
 /// runs them all.
@@ -26,17 +46,7 @@ fn minimal_scenes_on_the_small_real_meshes_complete_every_method() {
     );
     let out = scratch_dir("suite");
     let meshes: Vec<SuiteMesh> = meshes.into_iter().map(SuiteMesh::File).collect();
-    let rows = run_suite(
-        &meshes,
-        1e5,
-        Axis::Y,
-        1,
-        &out,
-        &no_progress,
-        &mut |_| {},
-        StageHooks::none(),
-    )
-    .unwrap();
+    let rows = minimal_scenes(&meshes, 1, &out);
     assert_eq!(rows.len(), meshes.len());
     every_method_completed(&rows);
 }
@@ -52,17 +62,7 @@ fn minimal_scene_on_a_generated_figure_completes_every_method() {
         cells: [14, 14, 5],
     };
     let out = scratch_dir("suite-figure");
-    let rows = run_suite(
-        &[figure],
-        1e5,
-        Axis::Y,
-        2,
-        &out,
-        &no_progress,
-        &mut |_| {},
-        StageHooks::none(),
-    )
-    .unwrap();
+    let rows = minimal_scenes(&[figure], 2, &out);
     assert_eq!(rows.len(), 1);
     assert_eq!((rows[0].vertices, rows[0].tets), (422, 1284));
     every_method_completed(&rows);
