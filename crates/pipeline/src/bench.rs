@@ -498,6 +498,7 @@ mod tests {
                 restart: None,
                 compression: None,
                 buckling: None,
+                scene_warnings: Vec::new(),
             },
             offline_seconds: 0.0,
             pareto: false,

@@ -484,6 +484,10 @@ pub struct Pipeline<'a> {
     pub outcomes: Vec<StageOutcome>,
     /// Called after each stage (to print a line).
     pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
+    /// What building the scene's model warned of (a mesh of an unusual size, a body its own
+    /// weight would crush), also logged: `run` lists them first among the figures not to be
+    /// trusted.
+    pub warnings: Vec<String>,
     /// Called when a stage starts to compute (not when it is loaded from the cache): a log,
     /// where no progress bar is drawn, can say what the minutes until its line are spent on.
     pub on_stage_start: Box<dyn FnMut(Stage) + 'a>,
@@ -534,10 +538,11 @@ impl<'a> Pipeline<'a> {
             each_pin: built.pin_vertices,
         };
         let (lo, hi) = model.mesh.bounding_box();
-        if let Some(w) = fem_core::mesh::size_warning((hi - lo).norm()) {
-            warn_once(&format!("{}: {w}", scene.source));
-        }
-        if let Some(w) = crate::scene::weight_warning(scene, (hi - lo).into()) {
+        let warnings: Vec<String> = fem_core::mesh::size_warning((hi - lo).norm())
+            .into_iter()
+            .chain(crate::scene::weight_warning(scene, (hi - lo).into()))
+            .collect();
+        for w in &warnings {
             warn_once(&format!("{}: {w}", scene.source));
         }
         let mut bytes =
@@ -569,6 +574,7 @@ impl<'a> Pipeline<'a> {
             outcomes: Vec::new(),
             on_stage: Box::new(|_| {}),
             on_stage_start: Box::new(|_| {}),
+            warnings,
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,

@@ -145,6 +145,10 @@ pub struct MethodReport {
     /// gravity ([`Buckling`]), which says whether the body can stand as it is pinned.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub buckling: Option<Buckling>,
+    /// On the row that carries the compression: what building the scene's model warned of
+    /// ([`crate::pipeline::Pipeline::warnings`]), which the warnings list first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub scene_warnings: Vec<String>,
 }
 
 /// Whether the body can stand under its own weight as it is pinned: the linearised buckling
@@ -648,6 +652,7 @@ pub fn run(
         row.buckling = *pipeline
             .buckling
             .get_or_init(|| Buckling::of(&pipeline.model));
+        row.scene_warnings = pipeline.warnings.clone();
     }
     for i in 0..rows.len() {
         if !crate::trust::drifting(&rows[i]) {
@@ -1037,6 +1042,7 @@ pub fn measure(
             restart: None,
             compression: Compression::of(&model, &reference.frames, pipeline.scene.time.step),
             buckling: None,
+            scene_warnings: Vec::new(),
         });
     }
     let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
@@ -1202,6 +1208,7 @@ pub fn measure(
         restart: None,
         compression: None,
         buckling: None,
+        scene_warnings: Vec::new(),
     })
 }
 

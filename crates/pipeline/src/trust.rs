@@ -456,7 +456,12 @@ impl Assessment {
 /// its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`], its trajectory within
 /// [`OUTSIDE_TRAINING`] of the training poses, and no method drifts ([`drifting`]).
 pub fn assess(rows: &[MethodReport]) -> Assessment {
-    let mut out: Vec<String> = rows.iter().filter_map(collapse_warning).collect();
+    // What building the model warned of, on the row that carries the reference's analyses.
+    let mut out: Vec<String> = rows
+        .iter()
+        .flat_map(|r| r.scene_warnings.iter().map(|w| format!("the scene: {w}")))
+        .collect();
+    out.extend(rows.iter().filter_map(collapse_warning));
     out.extend(rows.iter().filter_map(stretch_warning));
     out.extend(rows.iter().filter_map(buckling_warning));
     // Methods whose trajectory left the training poses and still held, with the advice.

@@ -676,3 +676,27 @@ fn every_shipped_scene_reads_and_builds() {
     }
     assert!(built >= 1, "no shipped scene built its model: {scenes:?}");
 }
+
+/// What building the model warns of is kept for `run`'s list, first among the figures not to be
+/// trusted: a body 3 m tall of E = 10⁵ Pa, which its own weight would crush.
+#[test]
+fn the_models_warnings_are_kept_for_the_report() {
+    let dir = scratch("model-warnings");
+    let scene = |text: &str| Scene::from_str(text, Path::new("."), "tall.toml").unwrap();
+    let base = scene(BASE);
+    let quiet = pipeline::pipeline::Pipeline::new(&base, &dir.join("a")).unwrap();
+    assert!(quiet.warnings.is_empty(), "{:?}", quiet.warnings);
+    let tall = scene(&edit("size = [1.0, 0.2, 0.2]", "size = [1.0, 3.0, 0.2]"));
+    let p = pipeline::pipeline::Pipeline::new(&tall, &dir.join("b")).unwrap();
+    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+    assert!(p.warnings[0].contains("ρgH/E = 0.29"), "{}", p.warnings[0]);
+    let row = pipeline::run::MethodReport {
+        scene_warnings: p.warnings.clone(),
+        ..Default::default()
+    };
+    let listed = pipeline::trust::assess(&[row]).untrusted;
+    assert_eq!(
+        listed.first(),
+        Some(&format!("the scene: {}", p.warnings[0]))
+    );
+}
