@@ -739,6 +739,7 @@ fn bench(cx: &Context, args: BenchArgs) -> Result<()> {
     let rows = pipeline::bench::bench(
         scene,
         opts,
+        &stage_started,
         &mut print_stage,
         &mut |label| method_bar.println(format!("     bench: {label}")),
         &progress,

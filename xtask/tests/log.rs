@@ -81,3 +81,23 @@ fn the_suite_says_which_stage_is_computing() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains(" snapshots: computing\n"), "{text}");
 }
+
+/// `bench`'s pipelines say in a log which stage they compute too.
+#[test]
+fn bench_says_which_stage_is_computing() {
+    let dir = scratch_dir("xtask-bench-log");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, TINY).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["bench", "--repeats", "1", "--scene"])
+        .arg(&scene)
+        .arg("--cache")
+        .arg(dir.join("cache"))
+        .arg("--out")
+        .arg(dir.join("bench"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains(" snapshots: computing\n"), "{text}");
+}

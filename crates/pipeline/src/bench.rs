@@ -266,10 +266,12 @@ fn mark_pareto(rows: &mut [BenchRow]) {
     }
 }
 
-/// Runs the sweep. `on_variant(label)` is called before each variant.
+/// Runs the sweep. `on_variant(label)` is called before each variant, `on_stage_start` when a
+/// stage starts to compute and `on_stage` when one ends (each shared stage once).
 pub fn bench(
     scene: &Scene,
     opts: &BenchOptions,
+    on_stage_start: &dyn Fn(crate::stage::Stage),
     on_stage: &mut dyn FnMut(&crate::pipeline::StageOutcome),
     on_variant: &mut dyn FnMut(&str),
     stage_progress: Progress<'_>,
@@ -287,6 +289,7 @@ pub fn bench(
     let (chosen_k, basis_k) = {
         let mut p = Pipeline::new(scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
+        p.on_stage_start = Box::new(on_stage_start);
         p.reference(opts.trajectory, stage_progress)?;
         // The rule's k: a variant `dimension = k` then has the scene's own basis, with the same
         // gravity directions appended.
@@ -299,6 +302,7 @@ pub fn bench(
         on_variant(&v.label);
         let mut p = Pipeline::new(&v.scene, &opts.cache)?;
         p.on_stage = Box::new(&mut *on_stage);
+        p.on_stage_start = Box::new(on_stage_start);
         let offline_seconds = match v.method {
             Method::PcaCubature => p.cubature(stage_progress)?.fit_seconds,
             Method::Neural => p.train(stage_progress)?.train_seconds,
