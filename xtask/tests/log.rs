@@ -1,27 +1,37 @@
 //! In a log, where no progress bar is drawn, a stage that computes says so when it starts: its
 //! own line comes only when it ends, minutes later on a large mesh.
 
+use std::path::Path;
 use std::process::Command;
 
 use tests::{TINY, scratch_dir};
 
+/// `xtask ARGS… --scene S --cache DIR/cache` with the tiny beam written into `dir` as S: its
+/// stdout, after checking that it succeeded.
+fn xtask(dir: &Path, args: &[&str]) -> String {
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, TINY).unwrap();
+    let mut command = Command::new(env!("CARGO_BIN_EXE_xtask"));
+    command
+        .args(args)
+        .arg("--scene")
+        .arg(&scene)
+        .arg("--cache")
+        .arg(dir.join("cache"));
+    let out = command.output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
 #[test]
 fn a_log_says_which_stage_is_computing() {
     let dir = scratch_dir("xtask-log");
-    let scene = dir.join("scene.toml");
-    std::fs::write(&scene, TINY).unwrap();
-    let run = || {
-        Command::new(env!("CARGO_BIN_EXE_xtask"))
-            .args(["pipeline", "--until", "pca", "--scene"])
-            .arg(&scene)
-            .arg("--cache")
-            .arg(dir.join("cache"))
-            .output()
-            .unwrap()
-    };
-    let out = run();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}");
+    let text = xtask(&dir, &["pipeline", "--until", "pca"]);
     for stage in ["snapshots", "pca"] {
         let started = text.find(&format!("{stage:>10}: computing\n"));
         let ended = text.find(&format!("{stage:>10}: computed in"));
@@ -31,29 +41,17 @@ fn a_log_says_which_stage_is_computing() {
         );
     }
     // Loaded from the cache, nothing computes.
-    let again = run();
-    let text = String::from_utf8_lossy(&again.stdout);
-    assert!(again.status.success(), "{text}");
-    assert!(!text.contains("computing"), "{text}");
+    let again = xtask(&dir, &["pipeline", "--until", "pca"]);
+    assert!(!again.contains("computing"), "{again}");
 }
 
 /// `run --methods full` computes the reference and nothing the reduced methods need.
 #[test]
 fn full_space_alone_computes_no_training_data() {
     let dir = scratch_dir("xtask-full-alone");
-    let scene = dir.join("scene.toml");
-    std::fs::write(&scene, TINY).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
-        .args(["run", "--methods", "full", "--every", "0", "--scene"])
-        .arg(&scene)
-        .arg("--cache")
-        .arg(dir.join("cache"))
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}");
+    let out = dir.join("out");
+    let args = ["run", "--methods", "full", "--every", "0", "--out"];
+    let text = xtask(&dir, &[&args[..], &[out.to_str().unwrap()]].concat());
     assert!(text.contains(" reference: computed"), "{text}");
     for stage in ["snapshots", "pca"] {
         assert!(!text.contains(&format!("{stage:>10}: comput")), "{text}");
@@ -86,18 +84,8 @@ fn the_suite_says_which_stage_is_computing() {
 #[test]
 fn bench_says_which_stage_is_computing() {
     let dir = scratch_dir("xtask-bench-log");
-    let scene = dir.join("scene.toml");
-    std::fs::write(&scene, TINY).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_xtask"))
-        .args(["bench", "--repeats", "1", "--scene"])
-        .arg(&scene)
-        .arg("--cache")
-        .arg(dir.join("cache"))
-        .arg("--out")
-        .arg(dir.join("bench"))
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}");
+    let out = dir.join("bench");
+    let args = ["bench", "--repeats", "1", "--out"];
+    let text = xtask(&dir, &[&args[..], &[out.to_str().unwrap()]].concat());
     assert!(text.contains(" snapshots: computing\n"), "{text}");
 }
