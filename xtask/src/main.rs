@@ -137,8 +137,8 @@ struct SuiteArgs {
     youngs_modulus: f64,
     /// The axis the folder's meshes stand on: each is pinned at its lowest 2 % along it, with
     /// gravity along minus it (the generated meshes stand on y).
-    #[arg(long, default_value = "y", value_parser = ["x", "y", "z"])]
-    up: String,
+    #[arg(long, value_enum, default_value_t = AxisArg::Y)]
+    up: AxisArg,
     /// Output folder (default: out/suite).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -283,6 +283,24 @@ impl From<ReducedMethodArg> for Method {
             ReducedMethodArg::PcaCubature => Method::PcaCubature,
             ReducedMethodArg::Neural => Method::Neural,
             ReducedMethodArg::NeuralCubature => Method::NeuralCubature,
+        }
+    }
+}
+
+/// The axis a folder of meshes stands on (`suite --up`).
+#[derive(Clone, Copy, ValueEnum)]
+enum AxisArg {
+    X,
+    Y,
+    Z,
+}
+
+impl From<AxisArg> for fem_core::constraints::Axis {
+    fn from(a: AxisArg) -> Self {
+        match a {
+            AxisArg::X => Self::X,
+            AxisArg::Y => Self::Y,
+            AxisArg::Z => Self::Z,
         }
     }
 }
@@ -681,15 +699,10 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
     }
     let out = output_folder(out.unwrap_or_else(|| cx.root.join("out").join("suite")))?;
     let progress = |d, t| cx.stage_progress(d, t);
-    let up = match up.as_str() {
-        "x" => fem_core::constraints::Axis::X,
-        "z" => fem_core::constraints::Axis::Z,
-        _ => fem_core::constraints::Axis::Y,
-    };
     let rows = pipeline::suite::run_suite(
         &files,
         youngs_modulus,
-        up,
+        up.into(),
         trajectories as usize,
         &out,
         &progress,
