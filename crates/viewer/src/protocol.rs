@@ -29,8 +29,10 @@ pub const FRAME_KIND: u32 = 2;
 pub const FRAME_HEADER_BYTES: usize = 24;
 
 /// +y: the direction drawn up when the scene has no gravity.
+pub(crate) const Y_UP: [f64; 3] = [0.0, 1.0, 0.0];
+
 fn y_up() -> [f64; 3] {
-    [0.0, 1.0, 0.0]
+    Y_UP
 }
 
 /// A client's message.

@@ -58,7 +58,7 @@ fn up_from_gravity(gravity: [f64; 3]) -> [f64; 3] {
     if n.is_finite() && n > 0.0 {
         (-g / n).into()
     } else {
-        [0.0, 1.0, 0.0]
+        crate::protocol::Y_UP
     }
 }
 
