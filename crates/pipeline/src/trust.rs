@@ -414,8 +414,9 @@ fn held_outside_caveat(rows: &[&MethodReport], what: &str) -> String {
 /// What a run's figures say of its reduced methods, in row order.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Assessment {
-    /// Figures not to be trusted: a full-space test that gives way ([`COLLAPSED_SHARE`]) or
-    /// pulls the body apart, a body that buckles under its own weight as pinned, a method that
+    /// Figures not to be trusted: what building the model warned of, a full-space test that
+    /// gives way ([`COLLAPSED_SHARE`]) or pulls the body apart, a body that buckles under its
+    /// own weight as pinned or that its weight carries far ([`FAR_TRAVEL`]), a method that
     /// stopped, a subspace that misses the test, a trajectory over
     /// [`UNTRUSTED_ERROR`] off, one that left the training poses and ended over
     /// [`UNCOVERED_SUBSPACE_ERROR`] off (on average or space–time), and what the full
@@ -447,9 +448,9 @@ impl Assessment {
     }
 }
 
-/// Warnings and caveats for the reduced methods of a run, after the warnings on the reference
-/// (from the row that carries its compression and buckling: the `full` row, or the first row
-/// without one): a test trajectory that squeezes [`COLLAPSED_SHARE`] of the body under half
+/// Warnings and caveats for the reduced methods of a run, after what building the model warned
+/// of and the warnings on the reference (from the row that carries its compression and
+/// buckling: the `full` row, or the first row without one): a test trajectory that squeezes [`COLLAPSED_SHARE`] of the body under half
 /// its volume or pulls it apart, a body that buckles under its own weight as pinned, and
 /// one that its own weight carries far while it gives way or amplifies a method's drift. Both
 /// lists are empty when none of those holds and every method is within [`UNTRUSTED_ERROR`],
