@@ -90,8 +90,10 @@ impl TetMesh {
 
     /// Boundary triangles: faces that belong to exactly one tet, oriented outward.
     pub fn surface_triangles(&self) -> Vec<[usize; 3]> {
-        // Faces opposite vertex i of a positively oriented tet, ordered so the normal points outward.
-        const FACES: [[usize; 3]; 4] = [[1, 3, 2], [0, 2, 3], [0, 3, 1], [0, 1, 2]];
+        // Faces opposite vertex i of a positively oriented tet ((x1−x0)×(x2−x0)·(x3−x0) > 0),
+        // counter-clockwise seen from outside: (b−a)×(c−a) points away from the fourth vertex.
+        // (Before 2026-12-02 they were the reverse, inward.)
+        const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
         let mut faces: Vec<([usize; 3], [usize; 3])> = Vec::with_capacity(self.tets.len() * 4);
         for t in &self.tets {
             for f in FACES {
@@ -158,6 +160,18 @@ impl TetMesh {
         (label, count)
     }
 
+    /// The volume the closed triangles enclose, Σ a·(b×c)/6 over their rest positions: the
+    /// body's volume for [`Self::surface_triangles`], its negative for triangles wound inward.
+    pub fn enclosed_volume(&self, triangles: &[[usize; 3]]) -> f64 {
+        triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| self.vertices[v]);
+                a.dot(&b.cross(&c)) / 6.0
+            })
+            .sum()
+    }
+
     /// Vertices on the boundary surface, sorted and unique.
     pub fn surface_vertices(&self) -> Vec<usize> {
         let mut v: Vec<usize> = self.surface_triangles().into_iter().flatten().collect();
@@ -205,6 +219,46 @@ mod tests {
         for (t, r) in m.tets.iter().zip(&ratios) {
             let top = t.iter().any(|&v| m.vertices[v].y > 0.75);
             assert_eq!(*r <= 0.0, top, "{t:?}: {r}");
+        }
+    }
+
+    /// The surface is wound counter-clockwise seen from outside, as OBJ and OpenGL expect: each
+    /// triangle's normal points away from its tet's fourth vertex, and the triangles enclose
+    /// the body's volume with a positive sign (they were wound inward until 2026-12-02).
+    #[test]
+    fn surface_triangles_face_outward() {
+        for kind in [
+            super::generate::GeneratedShape::Box,
+            super::generate::GeneratedShape::Figure,
+        ] {
+            let m = box_mesh(&BoxSpec {
+                kind,
+                size: [0.3, 0.3, 0.1],
+                cells: [13, 13, 3],
+                ..Default::default()
+            })
+            .unwrap();
+            let tris = m.surface_triangles();
+            let volume: f64 = (0..m.num_tets()).map(|t| m.signed_volume(t)).sum();
+            let enclosed = m.enclosed_volume(&tris);
+            assert!(
+                (enclosed - volume).abs() < 1e-12 * volume.max(1.0),
+                "{kind:?}: {enclosed} against {volume}"
+            );
+            for tri in &tris {
+                let tet = m
+                    .tets
+                    .iter()
+                    .find(|t| tri.iter().all(|v| t.contains(v)))
+                    .unwrap();
+                let fourth = tet.iter().find(|v| !tri.contains(v)).unwrap();
+                let [a, b, c] = tri.map(|v| m.vertices[v]);
+                let normal = (b - a).cross(&(c - a));
+                assert!(
+                    normal.dot(&(m.vertices[*fourth] - a)) < 0.0,
+                    "{kind:?}: {tri:?}"
+                );
+            }
         }
     }
 

@@ -200,7 +200,7 @@ impl ReducedModel {
     /// # Errors
     /// [`ModelFormatError::Decode`] or [`ModelFormatError::Invalid`].
     pub fn from_payload(payload: &[u8]) -> Result<Self, ModelFormatError> {
-        let model = match postcard::take_from_bytes::<Self>(payload) {
+        let mut model = match postcard::take_from_bytes::<Self>(payload) {
             Ok((model, [])) => model,
             Ok((_, rest)) => {
                 return Err(ModelFormatError::Decode {
@@ -216,6 +216,10 @@ impl ReducedModel {
         model
             .check()
             .map_err(|reason| ModelFormatError::Invalid { reason })?;
+        // Files written before 2026-12-02 wound the surface inward: turn it outward.
+        if model.mesh.enclosed_volume(&model.surface) < 0.0 {
+            model.surface.iter_mut().for_each(|t| t.swap(1, 2));
+        }
         Ok(model)
     }
 

@@ -122,6 +122,30 @@ fn a_model_keeps_the_rows_in_use_and_the_neural_subspace_whole() {
     assert_eq!(used.latent_dim(), 5);
 }
 
+/// The surface is wound outward, and a file written before 2026-12-02, whose surface was wound
+/// inward, loads with it turned outward.
+#[test]
+fn a_model_file_surface_faces_outward() {
+    let m = bar([3, 1, 1], -9.81);
+    let mut model = build(Kind::PcaCubature, &m, &snapshot_basis(&m, 4), Rows::Used);
+    let volume: f64 = (0..m.mesh.num_tets())
+        .map(|t| m.mesh.signed_volume(t))
+        .sum();
+    assert!((model.mesh.enclosed_volume(&model.surface) - volume).abs() < 1e-12);
+    let outward = model.surface.clone();
+    model.surface.iter_mut().for_each(|t| t.swap(0, 1));
+    assert!(model.mesh.enclosed_volume(&model.surface) < 0.0);
+    let loaded = ReducedModel::from_bytes(&model.to_bytes()).unwrap();
+    assert!((loaded.mesh.enclosed_volume(&loaded.surface) - volume).abs() < 1e-12);
+    assert!(
+        loaded
+            .surface
+            .iter()
+            .zip(&outward)
+            .all(|(a, b)| (0..3).any(|r| [a[r], a[(r + 1) % 3], a[(r + 2) % 3]] == *b))
+    );
+}
+
 /// A model file of the bar (PCA with cubature: small).
 fn file_bytes() -> Vec<u8> {
     let m = bar([3, 1, 1], -9.81);
