@@ -641,10 +641,15 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
     let method = Method::from(method);
     let scene = cx.scene(&common)?;
     let path = out.unwrap_or_else(|| pipeline::export::model_path(&cx.out(&scene, &[]), method));
-    // Said before any stage runs, not after them.
-    if path.is_dir() {
+    // Said before any stage runs, not after them: a folder, or a path written as one (`dir/`)
+    // that does not exist yet, which the write would refuse only after every stage.
+    let as_folder = path
+        .as_os_str()
+        .to_string_lossy()
+        .ends_with(std::path::is_separator);
+    if path.is_dir() || as_folder {
         bail!(
-            "`--out` {} is a folder: give the model file's path, e.g. {}",
+            "`--out` {} names a folder: give the model file's path, e.g. {}",
             path.display(),
             pipeline::export::model_path(&path, method).display()
         );

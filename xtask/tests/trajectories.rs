@@ -140,7 +140,22 @@ fn export_to_a_folder_is_refused_at_once() {
     let (ok, text) = xtask(&dir, TINY, "export", &args);
     assert!(!ok, "{text}");
     assert!(
-        text.contains("is a folder: give the model file's path"),
+        text.contains("names a folder: give the model file's path"),
+        "{text}"
+    );
+    assert!(!dir.join("cache").exists(), "a stage ran: {text}");
+    // A folder not made yet, written as one, the same (it failed after every stage).
+    let new = dir.join("models").into_os_string().into_string().unwrap() + "/";
+    let args: Vec<&OsStr> = vec![
+        "--method".as_ref(),
+        "pca".as_ref(),
+        "--out".as_ref(),
+        new.as_ref(),
+    ];
+    let (ok, text) = xtask(&dir, TINY, "export", &args);
+    assert!(!ok, "{text}");
+    assert!(
+        text.contains("names a folder: give the model file's path"),
         "{text}"
     );
     assert!(!dir.join("cache").exists(), "a stage ran: {text}");

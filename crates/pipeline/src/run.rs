@@ -15,6 +15,11 @@ use crate::plot::{Plot, Scale, Series};
 use crate::scene::Scene;
 use crate::simulate::{Method, Runner, SimulateOptions, StepParts, Trajectory, median, write_json};
 
+/// The start of the name under which `run` records a method's trajectory error in its model
+/// file ([`MeasuredError::name`]), the test trajectory's number after it.
+pub const TRAJECTORY_ERROR: &str =
+    "mean relative displacement error ‖u − u_full‖_M / ‖u_full‖_M on held-out test trajectory";
+
 /// How long the machine's multiply–add rate is probed before a method is timed.
 const PROBE_TIME: std::time::Duration = std::time::Duration::from_millis(100);
 
@@ -678,11 +683,7 @@ pub fn run(
             .find(|r| r.method == method && r.failure.is_none())
         {
             model.provenance.errors.push(MeasuredError {
-                name: format!(
-                    "mean relative displacement error ‖u − u_full‖_M / ‖u_full‖_M on held-out \
-                     test trajectory {}",
-                    opts.trajectory
-                ),
+                name: format!("{TRAJECTORY_ERROR} {}", opts.trajectory),
                 held_out: true,
                 value: row.mean_rel_error,
             });
