@@ -162,6 +162,29 @@ fn stretch_warning(r: &MethodReport) -> Option<String> {
     ))
 }
 
+/// The warning of the row that carries the reference's compression when a linear material's
+/// test turns or stretches the body past small strains ([`Compression::LINEAR_STRAIN`]): the
+/// reduced methods may follow the reference closely, and the reference is not the body's
+/// motion (linear elasticity grows a body that rotates).
+///
+/// [`Compression::LINEAR_STRAIN`]: crate::run::Compression::LINEAR_STRAIN
+fn linear_warning(r: &MethodReport) -> Option<String> {
+    let (strain, time) = r
+        .compression
+        .as_ref()?
+        .linear_strain
+        .filter(|(s, _)| *s >= crate::run::Compression::LINEAR_STRAIN)?;
+    let who = reference_subject(r);
+    Some(format!(
+        "{who} turns or stretches the body past small strains under the linear material: \
+         the strain it leaves out (½HᵀH of the Green strain, H = F − I) averages {strain:.2} \
+         over the body at t = {time:.2} s, where linear elasticity lengthens a body that only \
+         turns, so the reference is not the body's motion, however close the reduced methods \
+         come to it; a nonlinear material (`[material] model = \"stable-neo-hookean\"`, or \
+         \"corotated\" for the same stiffness at small strains) models it"
+    ))
+}
+
 /// The warning of the row that carries the buckling analysis when the body buckles under its
 /// own weight as it is pinned ([`crate::run::Buckling::buckles`]): a plate standing on its
 /// edge, a column too slender for its height. Under gravity its shape runs away from rest
@@ -464,6 +487,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         .collect();
     out.extend(rows.iter().filter_map(collapse_warning));
     out.extend(rows.iter().filter_map(stretch_warning));
+    out.extend(rows.iter().filter_map(linear_warning));
     out.extend(rows.iter().filter_map(buckling_warning));
     // Methods whose trajectory left the training poses and still held, with the advice.
     let mut held_outside: Vec<(&MethodReport, String)> = Vec::new();
@@ -601,6 +625,53 @@ mod tests {
         }
     }
 
+    /// A linear material's test that turns the body past small strains is named on the
+    /// full-space row with a nonlinear model to use; small strains, or no measure (another
+    /// material), say nothing.
+    #[test]
+    fn a_linear_material_turned_far_is_named() {
+        let full = |linear_strain: Option<(f64, f64)>| MethodReport {
+            compression: Some(crate::run::Compression {
+                volume_ratio: 0.9,
+                time: 0.5,
+                inverted_frames: 0,
+                frames: 100,
+                squeezed_share: 0.0,
+                squeezed_time: 0.5,
+                inversion_safe: false,
+                travel: 0.1,
+                travel_time: 0.5,
+                stretched: None,
+                linear_strain,
+            }),
+            ..row(Method::Full, 0.0, 0.0)
+        };
+        let method = row(Method::Pca, 0.002, 0.001);
+        for quiet in [None, Some((0.049, 0.3))] {
+            assert_eq!(
+                assess(&[full(quiet), method.clone()]),
+                Assessment::default()
+            );
+        }
+        let said = assess(&[full(Some((0.12, 0.64))), method]).untrusted;
+        assert_eq!(said.len(), 1, "{said:?}");
+        assert!(
+            said[0].starts_with("full: the full-space simulation of the test turns"),
+            "{}",
+            said[0]
+        );
+        assert!(
+            said[0].contains("averages 0.12 over the body at t = 0.64 s"),
+            "{}",
+            said[0]
+        );
+        assert!(
+            said[0].contains("model = \"stable-neo-hookean\""),
+            "{}",
+            said[0]
+        );
+    }
+
     /// The full-space row warns where its trajectory squeezes a share of the body under half
     /// its volume, and says when elements invert; one crushed sliver gets no warning.
     #[test]
@@ -617,6 +688,7 @@ mod tests {
                 travel: 0.0,
                 travel_time: 0.0,
                 stretched: None,
+                linear_strain: None,
             }),
             ..row(Method::Full, 0.0, 0.0)
         };
@@ -709,6 +781,7 @@ mod tests {
                 travel: 0.0,
                 travel_time: 0.0,
                 stretched,
+                linear_strain: None,
             }),
             ..row(Method::Full, 0.0, 0.0)
         };
@@ -747,6 +820,7 @@ mod tests {
                 travel,
                 travel_time: 0.8,
                 stretched: None,
+                linear_strain: None,
             }),
             buckling: Some(crate::run::Buckling {
                 load_factor: Some(0.52),
