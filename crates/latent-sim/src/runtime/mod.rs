@@ -173,7 +173,9 @@ pub trait Interactive {
     fn release(&mut self, handle: Handle) -> Result<(), RuntimeError>;
     /// Adds a force given as data (a spring or point load with its schedule, as a scene's
     /// `[[force]]` resolves to); it can be released like a handle, and a spring's target moved
-    /// (from its vertices' rest centroid).
+    /// (from its vertices' rest centroid). Its keyframe times and active span are on the
+    /// simulation's clock ([`Interactive::time`]), not counted from the call: a ramp over
+    /// 0–0.5 s added at t = 1 s acts at full strength at once.
     ///
     /// # Errors
     /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`],

@@ -173,7 +173,9 @@ class Simulator:
         end: float = ...,
     ) -> Handle:
         """A spring ("spring", toward the rest centroid plus the keyframed offset) or a point
-        load ("point", the keyframed total force) on mesh vertices, as a scene's [[force]]."""
+        load ("point", the keyframed total force) on mesh vertices, as a scene's [[force]].
+        Keyframe times, start and end are on the simulation's clock (`time`), not counted
+        from the call."""
     def move_handle(self, handle: Handle, target: _Point) -> None: ...
     def release(self, handle: Handle) -> None: ...
     def set_gravity(self, enabled: bool) -> None: ...
