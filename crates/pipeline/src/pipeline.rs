@@ -538,8 +538,13 @@ impl<'a> Pipeline<'a> {
             each_pin: built.pin_vertices,
         };
         let (lo, hi) = model.mesh.bounding_box();
-        let warnings: Vec<String> = fem_core::mesh::size_warning((hi - lo).norm())
-            .into_iter()
+        // The pins' warnings were printed while the scene was checked; they join the rest so
+        // that `run` lists them among what not to trust.
+        let warnings: Vec<String> = built
+            .warnings
+            .iter()
+            .cloned()
+            .chain(fem_core::mesh::size_warning((hi - lo).norm()))
             .chain(crate::scene::weight_warning(scene, (hi - lo).into()))
             .collect();
         for w in &warnings {

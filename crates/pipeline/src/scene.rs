@@ -288,6 +288,7 @@ impl Scene {
         (piece, count): &(Vec<usize>, usize),
         pinned: &[usize],
         errors: &mut Vec<FemError>,
+        warnings: &mut Vec<String>,
     ) {
         let (piece, count) = (piece.as_slice(), *count);
         if pinned.is_empty() {
@@ -333,6 +334,7 @@ impl Scene {
         let remedy = || self.wider_pin(mesh, piece, pinned);
         for line in loosely_held(mesh, pinned, piece, count, weight, &remedy) {
             crate::pipeline::warn_once(&format!("{}: {line}", self.source));
+            warnings.push(line);
         }
     }
 
@@ -457,8 +459,9 @@ impl Scene {
         if errors.is_empty() {
             Self::check_pinned_not_all(body, held, &selected, &mut errors);
         }
+        let mut warnings = Vec::new();
         if errors.is_empty() {
-            self.check_pieces(&mesh, &pieces, &pinned, &mut errors);
+            self.check_pieces(&mesh, &pieces, &pinned, &mut errors, &mut warnings);
         }
         let mut forces = Vec::new();
         for (i, f) in self.force.iter().enumerate() {
@@ -507,6 +510,7 @@ impl Scene {
             validation: report,
             held_vertices: held,
             pin_vertices: selected,
+            warnings,
         })
     }
 }
@@ -530,6 +534,9 @@ pub struct BuiltModel {
     /// How many of the body's vertices each `[[pin]]` selects, in the scene's order (two pins
     /// may select the same vertex).
     pub pin_vertices: Vec<usize>,
+    /// What the scene allows and a run should still say (pins that hold a piece at a point or
+    /// along a line), each a sentence, already printed once.
+    pub warnings: Vec<String>,
 }
 
 /// The pieces of a body that needs support which the pins hold at one point or along one line,

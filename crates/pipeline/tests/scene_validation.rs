@@ -699,4 +699,17 @@ fn the_models_warnings_are_kept_for_the_report() {
         listed.first(),
         Some(&format!("the scene: {}", p.warnings[0]))
     );
+    // Pins that hold the body along one line (a hinge) are kept too: the run said nothing of
+    // them once the stages had printed over the first warning.
+    let hinge = scene(&edit(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "box = { min = [-0.01, -0.01, -0.01], max = [0.01, 0.21, 0.01] }",
+    ));
+    let p = pipeline::pipeline::Pipeline::new(&hinge, &dir.join("c")).unwrap();
+    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+    assert!(
+        p.warnings[0].starts_with("the pins hold the body by 2 vertices on one line"),
+        "{}",
+        p.warnings[0]
+    );
 }
