@@ -619,6 +619,13 @@ impl Simulator {
         self.with(py, |s| each!(&mut s.runtime, r => r.reset()))
     }
 
+    /// Does now the work the first grab would do in its step (a reduced model factorises the
+    /// full step's operator at rest once: about 0.1 s on the default bar), so that a loop's
+    /// first grab does not stall a frame. Nothing in full space, or when done already.
+    fn prepare_grab(&self, py: Python<'_>) -> PyResult<()> {
+        self.with(py, |s| each!(&mut s.runtime, r => r.prepare_grab()))
+    }
+
     /// Simulated time (s).
     #[getter]
     fn time(&self, py: Python<'_>) -> PyResult<f64> {

@@ -154,6 +154,23 @@ def test_grab_near_and_several_handles(sim: ld.Simulator) -> None:
     sim.step()
 
 
+def test_prepare_grab_leaves_the_steps_as_they_were(model: ld.Model) -> None:
+    # The first grab's factorisation done ahead: the same drag, the same positions.
+    def drag(prepare: bool) -> np.ndarray:
+        s = ld.Simulator(model)
+        if prepare:
+            s.prepare_grab()
+        v = tip(s)
+        h = s.grab(v, 1000.0)
+        s.move_handle(h, s.rest_positions[v] + [0.0, 0.05, 0.0])
+        for _ in range(10):
+            s.step()
+        return s.positions()
+
+    np.testing.assert_array_equal(drag(True), drag(False))
+    ld.Simulator(model, full_space=True).prepare_grab()
+
+
 def test_full_space_simulator_offers_the_same_api(model: ld.Model) -> None:
     full = ld.Simulator(model, full_space=True)
     reduced = ld.Simulator(model)

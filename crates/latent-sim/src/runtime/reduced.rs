@@ -332,6 +332,10 @@ impl Interactive for ReducedRuntime {
         each!(&mut self.sim, s => s.reset());
     }
 
+    fn prepare_grab(&mut self) {
+        each!(&mut self.sim, s => s.prepare_spring_compliance());
+    }
+
     fn positions_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
         self.displacement_into(out)?;
         for (x, rest) in out.chunks_exact_mut(3).zip(self.rest()) {

@@ -96,6 +96,33 @@ fn a_handle_pulls_toward_its_target_and_the_body_returns_toward_rest_after_relea
     drag_and_release(&mut full, &tip, "full");
 }
 
+/// Preparing the first grab ahead changes nothing of what follows: the same drag steps to the
+/// same displacements bit for bit, with the patch compliance on (the model's default), and
+/// preparing twice, or in full space, is harmless.
+#[test]
+fn preparing_the_first_grab_ahead_changes_no_step() {
+    let (model, mut full) = simulators(-9.81);
+    let tip = tip(&model.full_space_model().unwrap());
+    let run = |prepare: bool| {
+        let mut sim = model.simulator().unwrap();
+        if prepare {
+            sim.prepare_grab();
+            sim.prepare_grab();
+        }
+        let start = centroid(&mut sim, &tip);
+        let h = sim.grab(&tip, 400.0).unwrap();
+        drag(&mut sim, &[(h, start, start + Vec3::new(0.0, 0.1, 0.0))]);
+        let mut x = vec![0.0; 3 * sim.rest_positions().len()];
+        sim.positions_into(&mut x).unwrap();
+        x
+    };
+    let prepared = run(true);
+    assert_eq!(prepared, run(false));
+    assert!(prepared.iter().all(|x| x.is_finite()));
+    full.prepare_grab();
+    full.step().unwrap();
+}
+
 /// Two handles, the tip sideways and the middle down (stiffer: a beam is stiffer there);
 /// releasing one leaves the other pulling.
 fn two_handles<S: Interactive>(sim: &mut S, tip: &[usize], middle: [f64; 3], what: &str) {

@@ -183,6 +183,10 @@ class Simulator:
     def gravity(self) -> bool: ...
     def reset(self) -> None:
         """Back to rest at time 0; handles and gravity stay."""
+    def prepare_grab(self) -> None:
+        """Does now the work the first grab would do in its step (a reduced model factorises
+        the full step's operator at rest once, about 0.1 s on the default bar), so that a
+        loop's first grab does not stall a frame."""
     @property
     def time(self) -> float: ...
     @property
