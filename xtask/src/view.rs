@@ -213,9 +213,9 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
             e.name
         ),
         (None, Some(e)) => format!(
-            "no trajectory error is recorded in the model (`cargo xtask run` writes models that \
-             carry it; `export` does not): {} {:.2} %, a force error, not how far the motion \
-             goes off",
+            "no trajectory error is recorded in the model (`cargo xtask run` records it where the \
+             method's run reached its last frame; `export` records none): {} {:.2} %, a force \
+             error, not how far the motion goes off",
             e.name,
             100.0 * e.value
         ),

@@ -1534,15 +1534,22 @@ mod tests {
     /// a pinned box's free displacements.
     #[test]
     fn compression_finds_the_most_squeezed_frame() {
-        let scene = crate::scene::Scene::from_str(
-            "name = \"box\"\n[mesh]\ngenerate = { size = [1.0, 1.0, 1.0], cells = [2, 2, 2] }\n\
-             [material]\nmodel = \"linear\"\nyoungs_modulus = 1e5\npoisson_ratio = 0.3\n\
-             [[pin]]\nplane = { axis = \"y\", side = \"min\", tolerance = 1e-6 }\n",
-            std::path::Path::new("."),
-            "box.toml",
-        )
-        .unwrap();
-        let model = scene.build_model().unwrap().model;
+        let build = |material: &str| {
+            crate::scene::Scene::from_str(
+                &format!(
+                    "name = \"box\"\n[mesh]\ngenerate = {{ size = [1.0, 1.0, 1.0], cells = [2, 2, 2] }}\n\
+                     [material]\nmodel = \"{material}\"\nyoungs_modulus = 1e5\npoisson_ratio = 0.3\n\
+                     [[pin]]\nplane = {{ axis = \"y\", side = \"min\", tolerance = 1e-6 }}\n"
+                ),
+                std::path::Path::new("."),
+                "box.toml",
+            )
+            .unwrap()
+            .build_model()
+            .unwrap()
+            .model
+        };
+        let model = build("linear");
         // Each free vertex moved down by `s` times its height: det F = 1 − s everywhere.
         let frame = |s: f64| {
             let mut u = vec![0.0; model.num_full()];
@@ -1574,6 +1581,9 @@ mod tests {
             (mild.linear_strain.unwrap().0 - 0.005).abs() < 1e-12,
             "{mild:?}"
         );
+        // Another material has no such measure.
+        let c = super::Compression::of(&build("stable-neo-hookean"), &frames, 0.01).unwrap();
+        assert_eq!(c.linear_strain, None, "{c:?}");
         assert!((mild.volume_ratio - 0.9).abs() < 1e-12, "{mild:?}");
         assert!(super::Compression::of(&model, &[], 0.01).is_none());
         // No frame above stretched anything past the limit; one pulled up to 5 times its height

@@ -172,7 +172,8 @@ pub fn run_more(
 
 /// The warnings and caveats of [`crate::trust::assess`] for trajectories `from`.. of `runs`,
 /// each headed by its trajectory (empty where a run has none). The buckling of the scene's
-/// gravity, the same for every trajectory, is said with trajectory 0's only.
+/// gravity and what building the model warned of, the same for every trajectory, are said with
+/// trajectory 0's only.
 pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
     runs.iter()
         .enumerate()
@@ -180,7 +181,10 @@ pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
         .map(|(i, rows)| {
             let mut rows = rows.clone();
             if i > 0 {
-                rows.iter_mut().for_each(|r| r.buckling = None);
+                rows.iter_mut().for_each(|r| {
+                    r.buckling = None;
+                    r.scene_warnings.clear();
+                });
             }
             crate::trust::assess(&rows).text(&format!("trajectory {i}, "))
         })
@@ -291,6 +295,14 @@ mod tests {
             "{all}"
         );
         assert_eq!(warnings(&runs, 2), "");
+        // What the scene warns of, the same for every trajectory, is said with trajectory 0's.
+        let said = MethodReport {
+            scene_warnings: vec!["the pins hold the body at a single vertex".into()],
+            ..row(Method::Pca, 0.01, 4.0)
+        };
+        let all = warnings(&[vec![said.clone()], vec![said]], 0);
+        assert_eq!(all.matches("single vertex").count(), 1, "{all}");
+        assert!(all.contains("trajectory 0, not to be trusted:"), "{all}");
     }
 
     #[test]

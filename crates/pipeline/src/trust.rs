@@ -73,8 +73,13 @@ fn rule_made_step_error<'a>(
         Method::NeuralCubature => Method::Neural,
         _ => return None,
     };
-    rows.iter()
-        .find(|x| x.method == every && x.failure.is_none() && 2.0 * x.step_error <= r.step_error)
+    // A step error of 0 is none measured (no step could be taken from the reference).
+    rows.iter().find(|x| {
+        x.method == every
+            && x.failure.is_none()
+            && x.step_error > 0.0
+            && 2.0 * x.step_error <= r.step_error
+    })
 }
 
 /// The advice for a cubature method whose rule, not its subspace, makes much of its error:
@@ -210,9 +215,18 @@ fn linear_warning(r: &MethodReport) -> Option<String> {
 fn buckling_warning(r: &MethodReport) -> Option<String> {
     let b = r.buckling?;
     let load = b.buckles()?;
+    // Twice the modulus at which it would just stand: near its buckling load a body still
+    // sways far ([`crate::run::Buckling::MARGIN`]).
     let stiffer = b
         .standing_modulus
-        .map(|e| format!(" (`[material] youngs_modulus` above {e:.2e} Pa)"))
+        .map(|e| {
+            format!(
+                " (`[material] youngs_modulus` of {:.2e} Pa or more, {} times the {e:.2e} Pa at \
+                 which it would just stand)",
+                crate::run::Buckling::MARGIN * e,
+                crate::run::Buckling::MARGIN
+            )
+        })
         .unwrap_or_default();
     Some(format!(
         "{}: the body buckles under its own weight as it is pinned: {:.2} times its weight \
@@ -361,9 +375,15 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
         let lowers = match rule_made_step_error(r, rows) {
             Some(every) => format!(
                 "most of it the cubature rule's: {} over every element steps {:.2} % off from \
-                 the same states (below)",
+                 the same states{}",
                 every.method,
-                pct(every.step_error)
+                pct(every.step_error),
+                if cubature_warning(r, rows).is_some() {
+                    " (below)"
+                } else {
+                    "; a larger rule (`[cubature] max_elements`, or a smaller `tolerance` where \
+                     the budget did not stop it) narrows that"
+                }
             ),
             None => "which a larger subspace lowers (`[pca]`, and for the neural methods \
                      `[autoencoder] latent_dim`)"
@@ -503,7 +523,7 @@ impl Assessment {
 /// Warnings and caveats for the reduced methods of a run, after what building the model warned
 /// of and the warnings on the reference (from the row that carries its compression and
 /// buckling: the `full` row, or the first row without one): a test trajectory that squeezes [`COLLAPSED_SHARE`] of the body under half
-/// its volume or pulls it apart, a body that buckles under its own weight as pinned, and
+/// its volume or pulls it apart, a linear material turned past small strains, a body that buckles under its own weight as pinned, and
 /// one that its own weight carries far while it gives way or amplifies a method's drift. Both
 /// lists are empty when none of those holds and every method is within [`UNTRUSTED_ERROR`],
 /// its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`], its trajectory within
@@ -984,7 +1004,15 @@ mod tests {
             w[0]
         );
         assert!(w[0].contains("0.50 times its weight"), "{}", w[0]);
-        assert!(w[0].contains("above 2.00e5 Pa"), "{}", w[0]);
+        assert!(
+            w[0].contains("youngs_modulus` of 4.00e5 Pa or more, 2 times the 2.00e5 Pa"),
+            "{}",
+            w[0]
+        );
+        // The modulus that firms a body up keeps the margin over its buckling modulus where
+        // the sag alone asks for less.
+        assert_eq!(crate::run::Buckling::firm(1e5, 0.002, 0.4, Some(2e5)), 4e5);
+        assert!((crate::run::Buckling::firm(1e5, 0.2, 0.4, Some(2e5)) - 1e6).abs() < 1e-6);
         assert!(!w[0].contains("  "), "{}", w[0]);
         for quiet in [
             with(Some(0.33), 1.2),
@@ -1109,6 +1137,28 @@ mod tests {
         let w = ruled(0.012);
         let own = w.iter().find(|w| w.contains("reduced steps' own")).unwrap();
         assert!(own.contains("which a larger subspace lowers"), "{own}");
+        // No step error measured for the subspace over every element: nothing to compare.
+        let w = ruled(0.0);
+        let own = w.iter().find(|w| w.contains("reduced steps' own")).unwrap();
+        assert!(own.contains("which a larger subspace lowers"), "{own}");
+        // Drifting by its space–time error with a mean under 5 %, so no rule warning follows:
+        // the remedy is said in place of "(below)".
+        let nc = with_restart(
+            MethodReport {
+                step_error: 0.0216,
+                trajectory_error: 0.08,
+                ..row(Method::NeuralCubature, 0.045, 0.002)
+            },
+            0.005,
+            0.06,
+        );
+        let every = MethodReport {
+            step_error: 0.002,
+            ..row(Method::Neural, 0.004, 0.002)
+        };
+        let w = assess(&[every, nc]).untrusted;
+        assert_eq!(w.len(), 1, "{w:#?}");
+        assert!(w[0].ends_with("from the same states; a larger rule (`[cubature] max_elements`, or a smaller `tolerance` where the budget did not stop it) narrows that"), "{}", w[0]);
         // The boundary: the full simulation making half the method's later error amplifies.
         let w = assess(&[restarted(AMPLIFIED_SHARE * 0.2)]).untrusted;
         assert!(w[0].contains("the test amplifies"), "{}", w[0]);

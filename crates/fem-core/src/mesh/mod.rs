@@ -162,11 +162,17 @@ impl TetMesh {
 
     /// The volume the closed triangles enclose, Σ a·(b×c)/6 over their rest positions: the
     /// body's volume for [`Self::surface_triangles`], its negative for triangles wound inward.
+    ///
+    /// Measured from a vertex of the surface, not the origin, so that a body far from the
+    /// origin keeps its digits (from the origin, a 10 cm cube 10⁵ m away came out negative).
     pub fn enclosed_volume(&self, triangles: &[[usize; 3]]) -> f64 {
+        let Some(o) = triangles.first().map(|t| self.vertices[t[0]]) else {
+            return 0.0;
+        };
         triangles
             .iter()
             .map(|t| {
-                let [a, b, c] = t.map(|v| self.vertices[v]);
+                let [a, b, c] = t.map(|v| self.vertices[v] - o);
                 a.dot(&b.cross(&c)) / 6.0
             })
             .sum()
@@ -241,6 +247,16 @@ mod tests {
             let tris = m.surface_triangles();
             let volume: f64 = (0..m.num_tets()).map(|t| m.signed_volume(t)).sum();
             let enclosed = m.enclosed_volume(&tris);
+            // Far from the origin too.
+            let mut far = m.clone();
+            far.vertices
+                .iter_mut()
+                .for_each(|v| *v += nalgebra::Vector3::new(1e5, -2e5, 3e5));
+            let far = far.enclosed_volume(&tris);
+            assert!(
+                (far - volume).abs() < 1e-6 * volume,
+                "{kind:?}: {far} against {volume}"
+            );
             assert!(
                 (enclosed - volume).abs() < 1e-12 * volume.max(1.0),
                 "{kind:?}: {enclosed} against {volume}"
