@@ -364,6 +364,8 @@ struct Flaky {
     inner: Box<dyn Interactive + Send>,
     fail: Arc<AtomicBool>,
     panic: Arc<AtomicBool>,
+    /// How often the session prepared its first grab.
+    prepared: Arc<std::sync::atomic::AtomicUsize>,
 }
 
 impl Interactive for Flaky {
@@ -417,6 +419,10 @@ impl Interactive for Flaky {
     fn reset(&mut self) {
         self.inner.reset();
     }
+    fn prepare_grab(&mut self) {
+        self.prepared.fetch_add(1, Ordering::Relaxed);
+        self.inner.prepare_grab();
+    }
     fn positions_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
         self.inner.positions_into(out)
     }
@@ -440,10 +446,12 @@ fn a_solver_failure_is_shown_and_a_reset_goes_on() {
         Arc::new(AtomicBool::new(false)),
         Arc::new(AtomicBool::new(false)),
     );
+    let prepared = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let flaky = Flaky {
         inner: Box::new(model().simulator().expect("a runtime")),
         fail: Arc::clone(&fail),
         panic: Arc::clone(&panic),
+        prepared: Arc::clone(&prepared),
     };
     let session = Session::new(
         Settings::for_model(model()),
@@ -456,6 +464,8 @@ fn a_solver_failure_is_shown_and_a_reset_goes_on() {
     let server = serve(session);
     let mut c = Client::connect(&server);
     c.steps_on(3);
+    // The first client's arrival prepared the method's first grab, before any drag.
+    assert_eq!(prepared.load(Ordering::Relaxed), 1);
     fail.store(true, Ordering::Relaxed);
     c.wait_until(
         |c| c.state.as_ref().is_some_and(|s| s.failure.is_some()),
