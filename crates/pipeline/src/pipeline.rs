@@ -485,8 +485,8 @@ pub struct Pipeline<'a> {
     /// Called after each stage (to print a line).
     pub on_stage: Box<dyn FnMut(&StageOutcome) + 'a>,
     /// What building the scene's model warned of (a mesh of an unusual size, a body its own
-    /// weight would crush, pins that hold a piece at a vertex or along a line), also logged: `run` lists them first among the figures not to be
-    /// trusted.
+    /// weight would crush, pins that hold a piece at a vertex or along a line), also logged:
+    /// `run` lists them first among the figures not to be trusted.
     pub warnings: Vec<String>,
     /// Called when a stage starts to compute (not when it is loaded from the cache): a log,
     /// where no progress bar is drawn, can say what the minutes until its line are spent on.

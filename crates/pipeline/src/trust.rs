@@ -61,18 +61,23 @@ pub const COLLAPSED_SHARE: f64 = 0.01;
 /// drags 17 → 11 %, at 1.8 times the cost of a step.
 pub const CUBATURE_EXCESS: f64 = 1.25;
 
+/// The method of the same subspace over every element, for a cubature method.
+fn over_every_element(method: crate::simulate::Method) -> Option<crate::simulate::Method> {
+    use crate::simulate::Method;
+    match method {
+        Method::PcaCubature => Some(Method::Pca),
+        Method::NeuralCubature => Some(Method::Neural),
+        _ => None,
+    }
+}
+
 /// The same subspace over every element for a cubature method's row, when it ran and its steps
 /// are at most half as far off: then the rule, not the subspace, makes the steps' error.
 fn rule_made_step_error<'a>(
     r: &MethodReport,
     rows: &'a [MethodReport],
 ) -> Option<&'a MethodReport> {
-    use crate::simulate::Method;
-    let every = match r.method {
-        Method::PcaCubature => Method::Pca,
-        Method::NeuralCubature => Method::Neural,
-        _ => return None,
-    };
+    let every = over_every_element(r.method)?;
     // A step error of 0 is none measured (no step could be taken from the reference).
     rows.iter().find(|x| {
         x.method == every
@@ -85,12 +90,7 @@ fn rule_made_step_error<'a>(
 /// The advice for a cubature method whose rule, not its subspace, makes much of its error:
 /// its error against the same subspace's over every element, when both ran.
 fn cubature_warning(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
-    use crate::simulate::Method;
-    let every = match r.method {
-        Method::PcaCubature => Method::Pca,
-        Method::NeuralCubature => Method::Neural,
-        _ => return None,
-    };
+    let every = over_every_element(r.method)?;
     let e = rows
         .iter()
         .find(|x| x.method == every && x.failure.is_none())?;
@@ -522,8 +522,9 @@ impl Assessment {
 
 /// Warnings and caveats for the reduced methods of a run, after what building the model warned
 /// of and the warnings on the reference (from the row that carries its compression and
-/// buckling: the `full` row, or the first row without one): a test trajectory that squeezes [`COLLAPSED_SHARE`] of the body under half
-/// its volume or pulls it apart, a linear material turned past small strains, a body that buckles under its own weight as pinned, and
+/// buckling: the `full` row, or the first row without one): a test trajectory that squeezes
+/// [`COLLAPSED_SHARE`] of the body under half its volume or pulls it apart, a linear material
+/// turned past small strains, a body that buckles under its own weight as pinned, and
 /// one that its own weight carries far while it gives way or amplifies a method's drift. Both
 /// lists are empty when none of those holds and every method is within [`UNTRUSTED_ERROR`],
 /// its subspace or its error within [`UNCOVERED_SUBSPACE_ERROR`], its trajectory within
