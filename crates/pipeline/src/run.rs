@@ -291,6 +291,8 @@ impl Compression {
             .map(|t| mesh.signed_volume(t))
             .collect();
         let total: f64 = rest.iter().sum();
+        // Only the linear material leaves out the strain that `linear_strain` measures.
+        let linear = matches!(model.material, fem_core::material::AnyMaterial::Linear(_));
         let (mut u, mut ratios) = (vec![0.0; model.num_full()], Vec::new());
         let mut out: Option<Self> = None;
         for (k, f) in frames.iter().enumerate() {
@@ -317,7 +319,6 @@ impl Compression {
             if travel > o.travel {
                 (o.travel, o.travel_time) = (travel, time);
             }
-            let linear = matches!(model.material, fem_core::material::AnyMaterial::Linear(_));
             let mut nonlinear_strain = 0.0;
             // The largest singular value of F is at most its Frobenius norm, so only the elements
             // whose norm passes the limit need it.
