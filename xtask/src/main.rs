@@ -18,7 +18,11 @@ use pipeline::trajectories::MAX_TRAJECTORIES;
 mod view;
 
 #[derive(Parser)]
-#[command(name = "cargo xtask", about = "Latent-space dynamics pipeline")]
+#[command(
+    name = "cargo xtask",
+    bin_name = "cargo xtask",
+    about = "Latent-space dynamics pipeline"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

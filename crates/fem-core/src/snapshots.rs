@@ -601,7 +601,8 @@ fn record_schedule(
 type Recorded = (Vec<Vec<f64>>, Option<FemError>);
 
 /// Simulates the schedules `shard.0, shard.0 + shard.1, …` of `config` in parallel.
-/// `progress(done)` is called (from any thread) after each finished schedule.
+/// `progress(done)` is called (from any thread) after each finished schedule, and with the count
+/// so far before each one starts, so that a caller may stop the work between schedules.
 pub fn generate(
     model: &FullSpaceModel,
     config: &ScheduleConfig,
@@ -652,6 +653,9 @@ pub fn generate_from(
     let probe = StiffnessProbe::new(model, config.frames_per_schedule as f64 * time.step)?;
     let solver = &config.solver(solver);
     let run = |s: usize, start: Option<&MovingStart>| -> Result<Recorded, FemError> {
+        // The count so far, before the schedule: a caller that stops the work from its
+        // progress report (by unwinding) stops it here, between schedules.
+        progress(*done.lock().unwrap_or_else(|e| e.into_inner()));
         let forces = config.schedule(model, &probe, s, time.step);
         let mut frames = Vec::with_capacity(config.frames_per_schedule);
         let r = record_schedule(

@@ -1248,7 +1248,11 @@ impl<'a> Pipeline<'a> {
         let mut next = 1;
         let mut held_seconds = 0.0;
         let mut held_failed = None;
+        // The bar counts elements against the budget; a rule that meets its tolerance first
+        // ends it short, and the bar is then filled.
+        let budget = cfg.max_elements.max(1);
         let rule = cubature::fit_with_progress(&train, cfg, &mut |p| {
+            progress(p.elements.min(budget - 1), budget);
             if p.elements >= next {
                 let t = Instant::now();
                 match held.relative_error(p.selected, p.weights) {
@@ -1260,6 +1264,7 @@ impl<'a> Pipeline<'a> {
             }
         })
         .map_err(err)?;
+        progress(budget, budget);
         if let Some(e) = held_failed {
             return Err(err(e));
         }

@@ -14,6 +14,7 @@
 //! re-exports it with type stubs. Its tests are pytest's (`tests/`).
 
 mod errors;
+mod interrupt;
 mod model;
 mod pipeline;
 mod simulator;

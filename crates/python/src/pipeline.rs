@@ -13,6 +13,7 @@ use pipeline::trajectories::MAX_TRAJECTORIES;
 use pyo3::prelude::*;
 
 use crate::errors::{self, Class};
+use crate::interrupt::Interrupt;
 use crate::model::Model;
 
 /// Every method, in `cargo xtask run`'s order (its default list).
@@ -271,11 +272,12 @@ impl Report {
 }
 
 /// Calls the Python `on_stage` callback (if any) after each stage, from the thread running the
-/// pipeline; the callback's first exception is kept, to be raised when the call returns (a stage
-/// cannot be interrupted).
+/// pipeline; the callback's first exception is kept, to be raised when the call returns, except
+/// a `KeyboardInterrupt`, which stops the call as Ctrl-C does ([`Interrupt`]).
 struct StageCallback<'c> {
     callback: Option<&'c Py<PyAny>>,
     failed: &'c std::sync::Mutex<Option<PyErr>>,
+    interrupt: &'c Interrupt,
 }
 
 impl<'c> StageCallback<'c> {
@@ -283,28 +285,40 @@ impl<'c> StageCallback<'c> {
         py: Python<'_>,
         callback: Option<&'c Py<PyAny>>,
         failed: &'c std::sync::Mutex<Option<PyErr>>,
+        interrupt: &'c Interrupt,
     ) -> PyResult<Self> {
         if let Some(c) = callback
             && !c.bind(py).is_callable()
         {
             return Err(Class::InvalidArgument.err("on_stage must be callable"));
         }
-        Ok(Self { callback, failed })
+        Ok(Self {
+            callback,
+            failed,
+            interrupt,
+        })
     }
 
     fn install(&'c self, p: &mut Pipeline<'c>) {
-        if let Some(callback) = self.callback {
-            let failed = self.failed;
-            p.on_stage = Box::new(move |o: &StageOutcome| {
-                Python::attach(|py| {
-                    if let Err(e) = callback.call1(py, (Stage::from(o),))
-                        && let Ok(mut slot) = failed.lock()
-                    {
+        let (callback, failed, interrupt) = (self.callback, self.failed, self.interrupt);
+        p.on_stage = Box::new(move |o: &StageOutcome| {
+            if let Some(callback) = callback {
+                let raised = Python::attach(|py| {
+                    let e = callback.call1(py, (Stage::from(o),)).err()?;
+                    if e.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py) {
+                        return Some(e);
+                    }
+                    if let Ok(mut slot) = failed.lock() {
                         slot.get_or_insert(e);
                     }
-                })
-            });
-        }
+                    None
+                });
+                if let Some(e) = raised {
+                    interrupt.stop(e);
+                }
+            }
+            interrupt.check();
+        });
     }
 
     /// The callback's exception, if it raised one.
@@ -359,18 +373,19 @@ fn in_run_pipeline<T: Send>(
     out_dir: Option<PathBuf>,
     cache_dir: Option<PathBuf>,
     on_stage: Option<Py<PyAny>>,
-    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf) -> Result<T, Failure> + Send,
+    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf, &Interrupt) -> Result<T, Failure> + Send,
 ) -> PyResult<T> {
     let failed = std::sync::Mutex::new(None);
-    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
-    let value = py.detach(|| -> Result<T, Failure> {
+    let interrupt = Interrupt::new();
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed, &interrupt)?;
+    let value = interrupt.run(py, || -> Result<T, Failure> {
         let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
         let (out, cache) = folders(&scene, out_dir, cache_dir);
         let mut p = pipeline_of(&scene, &cache)?;
         callback.install(&mut p);
-        p.pca(&|_, _| {}).map_err(Failure::Run)?;
-        body(&scene, &mut p, out)
-    });
+        p.pca(&|_, _| interrupt.check()).map_err(Failure::Run)?;
+        body(&scene, &mut p, out, &interrupt)
+    })?;
     let value = value.map_err(Failure::into_py)?;
     callback.raised()?;
     Ok(value)
@@ -388,7 +403,8 @@ fn in_run_pipeline<T: Send>(
 /// ``trajectory``: the held-out test trajectory (any index: trajectory i depends only on the
 /// test's seed and i). ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
-/// raised when the run returns). Runs without the GIL.
+/// raised when the run returns). Runs without the GIL, on a thread of its own: Ctrl-C
+/// (``KeyboardInterrupt``) stops it at its next progress report.
 ///
 /// Raises ``SceneError`` for a scene that cannot be read or has a bad field or mesh,
 /// ``SolverError`` when a stage's solve fails, ``InvalidArgumentError`` for an unknown method
@@ -410,17 +426,25 @@ pub fn run_pipeline(
         non_negative("trajectory", trajectory)?,
         non_negative("every", every)?,
     );
-    in_run_pipeline(py, scene, out_dir, cache_dir, on_stage, |scene, p, out| {
-        let opts = RunOptions {
-            out: out.clone(),
-            every,
-            methods: methods.clone(),
-            trajectory,
-        };
-        let rows =
-            pipeline::run::run(p, &opts, &|_, _| {}, &mut |_, _, _| {}).map_err(Failure::Run)?;
-        Ok(Report::of(&scene.name, &rows, &p.outcomes, out, &methods))
-    })
+    in_run_pipeline(
+        py,
+        scene,
+        out_dir,
+        cache_dir,
+        on_stage,
+        |scene, p, out, stop| {
+            let opts = RunOptions {
+                out: out.clone(),
+                every,
+                methods: methods.clone(),
+                trajectory,
+            };
+            let rows =
+                pipeline::run::run(p, &opts, &|_, _| stop.check(), &mut |_, _, _| stop.check())
+                    .map_err(Failure::Run)?;
+            Ok(Report::of(&scene.name, &rows, &p.outcomes, out, &methods))
+        },
+    )
 }
 
 /// Runs the pipeline on a scene and every requested method on held-out test trajectories
@@ -455,38 +479,45 @@ pub fn run_trajectories(
             ))
         })?;
     let methods = self::methods(methods)?;
-    in_run_pipeline(py, scene, out_dir, cache_dir, on_stage, |scene, p, out| {
-        let quiet = |_: usize, _: usize| {};
-        let opts = RunOptions {
-            out: out.clone(),
-            every,
-            methods: methods.clone(),
-            trajectory: 0,
-        };
-        let (mut runs, mut reports) = (Vec::new(), Vec::new());
-        for i in 0..count {
-            let before = if i == 0 { 0 } else { p.outcomes.len() };
-            pipeline::trajectories::run_more(
-                p,
-                &opts,
-                &mut runs,
-                i + 1,
-                &quiet,
-                &mut |_| {},
-                &mut |_, _, _| {},
-            )
-            .map_err(Failure::Run)?;
-            reports.push(Report::of(
-                &scene.name,
-                &runs[i],
-                &p.outcomes[before..],
-                pipeline::trajectories::trajectory_dir(&out, i),
-                &methods,
-            ));
-        }
-        pipeline::trajectories::write(&out, &runs).map_err(Failure::Run)?;
-        Ok(reports)
-    })
+    in_run_pipeline(
+        py,
+        scene,
+        out_dir,
+        cache_dir,
+        on_stage,
+        |scene, p, out, stop| {
+            let quiet = |_: usize, _: usize| stop.check();
+            let opts = RunOptions {
+                out: out.clone(),
+                every,
+                methods: methods.clone(),
+                trajectory: 0,
+            };
+            let (mut runs, mut reports) = (Vec::new(), Vec::new());
+            for i in 0..count {
+                let before = if i == 0 { 0 } else { p.outcomes.len() };
+                pipeline::trajectories::run_more(
+                    p,
+                    &opts,
+                    &mut runs,
+                    i + 1,
+                    &quiet,
+                    &mut |_| stop.check(),
+                    &mut |_, _, _| stop.check(),
+                )
+                .map_err(Failure::Run)?;
+                reports.push(Report::of(
+                    &scene.name,
+                    &runs[i],
+                    &p.outcomes[before..],
+                    pipeline::trajectories::trajectory_dir(&out, i),
+                    &methods,
+                ));
+            }
+            pipeline::trajectories::write(&out, &runs).map_err(Failure::Run)?;
+            Ok(reports)
+        },
+    )
 }
 
 /// Exports a reduced method's trained model as one file, as ``cargo xtask export`` does (the
@@ -522,22 +553,23 @@ pub fn export_model(
     }
     let rows = if all_rows { Rows::All } else { Rows::Used };
     let failed = std::sync::Mutex::new(None);
-    let callback = StageCallback::new(py, on_stage.as_ref(), &failed)?;
-    let (model, path) = py
-        .detach(|| -> Result<_, Failure> {
+    let interrupt = Interrupt::new();
+    let callback = StageCallback::new(py, on_stage.as_ref(), &failed, &interrupt)?;
+    let (model, path) = interrupt
+        .run(py, || -> Result<_, Failure> {
             let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
             let (out, cache) = folders(&scene, None, cache_dir);
             let mut p = pipeline_of(&scene, &cache)?;
             callback.install(&mut p);
-            let quiet = |_: usize, _: usize| {};
-            let model = pipeline::export::scene_model(&mut p, method, rows, &quiet)
+            let progress = |_: usize, _: usize| interrupt.check();
+            let model = pipeline::export::scene_model(&mut p, method, rows, &progress)
                 .map_err(Failure::Run)?;
             let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));
             model
                 .save(&path)
                 .map_err(|e| Failure::Run(anyhow::Error::new(e)))?;
             Ok((model, path))
-        })
+        })?
         .map_err(Failure::into_py)?;
     callback.raised()?;
     Ok(Model::new(model, Some(path)))

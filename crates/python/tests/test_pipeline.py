@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import pathlib
+import signal
+import threading
 
 import latent_dynamics as ld
 import pytest
@@ -94,6 +97,24 @@ def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.
         assert "callable" in str(e)
     else:
         raise AssertionError("a callback that is not callable was accepted")
+
+
+def test_ctrl_c_stops_a_run_at_its_next_progress_report(tmp_path: pathlib.Path) -> None:
+    """Ctrl-C while the pipeline runs without the GIL raises KeyboardInterrupt within a progress
+    report or two, not when the pipeline ends, and leaves no artifact of the stage it stopped."""
+    stages: list[ld.Stage] = []
+    cache = tmp_path / "cache"
+    # Half a second in, the default scene is in its snapshots (tens of seconds, a report a
+    # frame); without the interrupt every stage would end before the exception is raised.
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ld.run_pipeline(out_dir=tmp_path, cache_dir=cache, on_stage=stages.append)
+    finally:
+        timer.cancel()
+    assert stages == []
+    assert cache.is_dir() and list(cache.iterdir()) == []
 
 
 def test_run_trajectories_reports_each_drag(tmp_path: pathlib.Path) -> None:
