@@ -415,6 +415,7 @@ pub fn plot(scene: &str, rows: &[BenchRow]) -> String {
                 points: vec![point],
                 line: false,
                 reference: r.report.method.is_full(),
+                color: Some(r.report.method.color()),
                 ..Default::default()
             }),
         }

@@ -40,8 +40,8 @@ pub struct Plot {
     pub y_scale: Scale,
 }
 
-const COLORS: [&str; 6] = [
-    "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b",
+const COLORS: [&str; 7] = [
+    "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2",
 ];
 /// The colour of guides drawn over the series (a Pareto front): [`Series::color`] past the
 /// palette's end.
@@ -353,6 +353,25 @@ fn escape(t: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every method has a colour of its own in the palette, whichever plot draws it.
+    #[test]
+    fn each_method_has_its_own_colour() {
+        use crate::simulate::Method::*;
+        let all = [
+            Full,
+            FullLbfgs,
+            FullNewton,
+            Pca,
+            PcaCubature,
+            Neural,
+            NeuralCubature,
+        ];
+        let colors: std::collections::BTreeSet<&str> =
+            all.iter().map(|m| color(m.color())).collect();
+        assert_eq!(colors.len(), all.len());
+        assert!(!colors.contains(GUIDE_COLOR));
+    }
 
     #[test]
     fn log_plots_skip_unshowable_points_and_are_well_formed() {

@@ -1340,6 +1340,7 @@ pub fn error_plot(scene: &str, rows: &[MethodReport]) -> String {
             points: vec![(r.ms_per_step, r.mean_rel_error)],
             line: false,
             reference: r.method.is_full(),
+            color: Some(r.method.color()),
             ..Default::default()
         })
         .collect();
@@ -1400,7 +1401,8 @@ pub fn frame_error_plot(scene: &str, rows: &[MethodReport], h: f64) -> String {
             .collect()
     };
     let mut series = Vec::new();
-    for (i, r) in reduced_rows(rows).enumerate() {
+    for r in reduced_rows(rows) {
+        let i = r.method.color();
         series.push(Series {
             name: r.method.to_string(),
             points: over_time(&r.frame_errors),

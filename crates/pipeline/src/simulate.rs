@@ -51,6 +51,20 @@ impl Method {
         }
     }
 
+    /// The method's colour in every plot (an index into [`crate::plot`]'s palette), the same in
+    /// `report.svg`, `errors.svg` and `bench.svg` whichever methods a run measured.
+    pub fn color(self) -> usize {
+        match self {
+            Method::FullNewton => 0,
+            Method::Pca => 1,
+            Method::PcaCubature => 2,
+            Method::Neural => 3,
+            Method::NeuralCubature => 4,
+            Method::Full => 5,
+            Method::FullLbfgs => 6,
+        }
+    }
+
     /// Whether the method simulates in full space.
     pub fn is_full(self) -> bool {
         matches!(self, Method::Full | Method::FullLbfgs | Method::FullNewton)

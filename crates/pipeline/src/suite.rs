@@ -77,7 +77,14 @@ impl SuiteMesh {
     /// The scene's `[mesh]` keys.
     fn section(&self) -> String {
         match self {
-            SuiteMesh::File(path) => format!("path = {:?}", path.display().to_string()),
+            // Absolute, so that the scene file the suite writes beside its results reads it.
+            SuiteMesh::File(path) => format!(
+                "path = {:?}",
+                std::path::absolute(path)
+                    .unwrap_or_else(|_| path.clone())
+                    .display()
+                    .to_string()
+            ),
             SuiteMesh::Box {
                 kind, size, cells, ..
             } => format!(
@@ -166,6 +173,26 @@ fn minimal_scene_of(
     youngs_modulus: f64,
     up: Axis,
 ) -> Result<Scene> {
+    let text = minimal_scene_text(m, mesh, material, youngs_modulus, up)?;
+    parse_minimal_scene(&text, mesh)
+}
+
+fn parse_minimal_scene(text: &str, mesh: &SuiteMesh) -> Result<Scene> {
+    Scene::from_str(
+        text,
+        Path::new("."),
+        &format!("minimal scene of {}", mesh.name()),
+    )
+}
+
+/// The TOML of [`minimal_scene_of`], as the suite writes it beside each mesh's results.
+fn minimal_scene_text(
+    m: &TetMesh,
+    mesh: &SuiteMesh,
+    material: MaterialModel,
+    youngs_modulus: f64,
+    up: Axis,
+) -> Result<String> {
     let (lo, hi) = m.bounding_box();
     let model = serde_json::to_value(material)?;
     let model = model.as_str().unwrap_or("stable-neo-hookean");
@@ -187,19 +214,16 @@ fn minimal_scene_of(
         axis = ["x", "y", "z"][a],
         tol = PIN_FRACTION * (hi[a] - lo[a]),
     );
-    Scene::from_str(
-        &text,
-        Path::new("."),
-        &format!("minimal scene of {}", mesh.name()),
-    )
+    Ok(text)
 }
 
 /// The mesh files of folder `dir` that the readers take (`.mesh`, `.msh`, `.vtk`, and a TetGen
-/// pair by its `.ele` file), sorted, leaving out those with more vertices than `max_vertices`.
+/// pair by its `.ele` file), sorted, leaving out (and saying so) those with more vertices than
+/// `max_vertices`. A file that cannot be read is kept: its row says why, and the other meshes
+/// run.
 ///
 /// # Errors
-/// When the folder cannot be read, a mesh cannot be read to count its vertices, or no mesh is
-/// left.
+/// When the folder cannot be read, or no mesh is left.
 pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| anyhow::anyhow!("cannot read mesh folder {}: {e}", dir.display()))?
@@ -210,9 +234,13 @@ pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
     if let Some(max) = max_vertices {
         let mut kept = Vec::new();
         for f in files {
-            let (m, _) = fem_core::io::read_mesh(&f)?;
-            if m.num_vertices() <= max {
-                kept.push(f);
+            match fem_core::io::read_mesh(&f) {
+                Ok((m, _)) if m.num_vertices() > max => tracing::warn!(
+                    "suite: leaving out {}: {} vertices, above --max-vertices {max}",
+                    f.display(),
+                    m.num_vertices()
+                ),
+                _ => kept.push(f),
             }
         }
         files = kept;
@@ -326,9 +354,14 @@ pub fn run_suite(
             SuiteMesh::File(_) => up,
             _ => Axis::Y,
         };
-        let scene = minimal_scene_of(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus, up)?;
+        let text =
+            minimal_scene_text(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus, up)?;
+        let scene = parse_minimal_scene(&text, mesh)?;
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
+        // The scene as run, to run again (`cargo xtask run --scene <dir>/scene.toml`).
+        crate::output::create_folder(&dir, "the mesh's output folder", "for its results")?;
+        crate::output::write_file(&dir.join("scene.toml"), text.as_bytes())?;
         let cache = dir.join("cache");
         if cache.exists() {
             std::fs::remove_dir_all(&cache)
@@ -674,11 +707,27 @@ mod tests {
             .map(|p| SuiteMesh::File(p.clone()).name())
             .collect();
         assert_eq!(names, ["beam", "beam-msh", "part.1-ele"]);
-        // Counting vertices reads them: the TetGen pair reads whole.
-        let unreadable = meshes(&dir, Some(4)).unwrap_err().to_string();
-        assert!(unreadable.contains("beam.msh"), "{unreadable}");
+        // Counting vertices reads them (the TetGen pair whole): a file that cannot be read is
+        // kept for its row to say why, the others left out above the limit.
+        assert_eq!(meshes(&dir, Some(4)).unwrap(), found);
+        assert_eq!(meshes(&dir, Some(3)).unwrap(), [dir.join("beam.msh")]);
         std::fs::remove_file(dir.join("beam.msh")).unwrap();
         assert_eq!(meshes(&dir, Some(4)).unwrap().len(), 2);
+        assert!(meshes(&dir, Some(3)).is_err());
+        // The scene the suite writes names the mesh by its absolute path (to read it from the
+        // results' folder), and parses.
+        let mesh = SuiteMesh::File(PathBuf::from("beam.mesh"));
+        let (m, _) = fem_core::io::read_mesh(&dir.join("beam.mesh")).unwrap();
+        let text = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y).unwrap();
+        let absolute = std::path::absolute("beam.mesh").unwrap();
+        assert!(
+            text.contains(&format!("path = {:?}", absolute.display().to_string())),
+            "{text}"
+        );
+        let mesh = SuiteMesh::File(dir.join("beam.mesh"));
+        let text = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y).unwrap();
+        let scene = parse_minimal_scene(&text, &mesh).unwrap();
+        assert_eq!(scene.name, "beam-stable-neo-hookean");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
