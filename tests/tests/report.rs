@@ -566,6 +566,12 @@ frames_per_schedule = 4
         report.contains("not to be trusted:\n- full: the body buckles"),
         "{report}"
     );
+    // Its title says what it measured.
+    let title = report.lines().next().unwrap_or_default();
+    assert!(
+        title.starts_with("# ") && title.contains(" — held-out test trajectory 0, "),
+        "{title}"
+    );
     let stiff = plate(2.0 * standing);
     let out = scratch_dir("report-standing");
     let mut p = Pipeline::new(&stiff, &out.join("cache")).unwrap();

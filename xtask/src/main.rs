@@ -41,6 +41,16 @@ struct Common {
     cache: Option<PathBuf>,
 }
 
+/// A stage command's arguments: the scene and cache, and where its curves go.
+#[derive(clap::Args)]
+struct StageArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Folder of the stage's curves (default: out/SCENE/STAGE in the project's folder).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// The main job: every stage (cached), then each method on the held-out test trajectory,
@@ -54,13 +64,15 @@ enum Command {
     Suite(SuiteArgs),
     /// Stage `snapshots`: simulate the training schedules.
     Snapshots(SnapshotsArgs),
-    /// Stage `pca`: the mass-orthonormal basis (runs `snapshots` first if needed).
-    Pca(Common),
-    /// Stage `cubature`: optimized cubature for the PCA subspace (runs earlier stages if needed).
-    Cubature(Common),
+    /// Stage `pca`: the mass-orthonormal basis (runs `snapshots` first if needed); writes its
+    /// spectrum and error curve to out/SCENE/pca/.
+    Pca(StageArgs),
+    /// Stage `cubature`: optimized cubature for the PCA subspace (runs earlier stages if needed);
+    /// writes its error curve to out/SCENE/cubature/.
+    Cubature(StageArgs),
     /// Stage `train`: the autoencoder on the PCA coefficients (runs earlier stages if needed);
     /// writes the loss curve to out/SCENE/train/.
-    Train(Common),
+    Train(StageArgs),
     /// Time every method at several sizes on the held-out trajectory (warm-up, repeated runs)
     /// and write bench.json, bench.md and bench.svg (error against ms/step, Pareto front).
     Bench(BenchArgs),
@@ -180,7 +192,7 @@ struct BenchArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Timed runs of the trajectory per variant (after one warm-up run).
-    #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=1000))]
     repeats: u64,
     /// PCA dimensions (default: the latent dimensions, half and all of the scene's basis).
     #[arg(long, allow_hyphen_values = true, value_delimiter = ',')]
@@ -450,10 +462,15 @@ fn method_progress(bar: &ProgressBar, say_ends: bool) -> impl FnMut(&str, usize,
         bar.set_length(total as u64);
         bar.set_position(done as u64);
         if say_ends && done == total {
+            let seconds = started.elapsed().as_secs_f64();
+            let took = if seconds < 0.1 {
+                format!("{:.1} ms", seconds * 1e3)
+            } else {
+                format!("{seconds:.1} s")
+            };
             let line = format!(
-                "{m:>10}: {total} {} in {:.1} s",
+                "{m:>10}: {total} {} in {took}",
                 if total == 1 { "run" } else { "steps" },
-                started.elapsed().as_secs_f64()
             );
             if bar.is_hidden() {
                 println!("{line}");
@@ -545,9 +562,9 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Stress(args) => stress(&cx, args),
         Command::Simulate(args) => simulate(&cx, args),
         Command::Snapshots(args) => snapshots(&cx, args),
-        Command::Pca(common) => pca(&cx, &common),
-        Command::Cubature(common) => cubature(&cx, &common),
-        Command::Train(common) => train(&cx, &common),
+        Command::Pca(args) => pca(&cx, &args),
+        Command::Cubature(args) => cubature(&cx, &args),
+        Command::Train(args) => train(&cx, &args),
         Command::Pipeline(args) => pipeline_until(&cx, args),
     }
 }
@@ -903,36 +920,41 @@ fn snapshots(cx: &Context, args: SnapshotsArgs) -> Result<()> {
     Ok(())
 }
 
+/// A stage command's folder for its curves: `--out`, or out/SCENE/STAGE.
+fn stage_out(cx: &Context, scene: &Scene, args: &StageArgs, stage: &str) -> Result<PathBuf> {
+    output_folder(args.out.clone().unwrap_or_else(|| cx.out(scene, &[stage])))
+}
+
 /// `pca`: the basis, its spectrum and error curve.
-fn pca(cx: &Context, common: &Common) -> Result<()> {
-    let scene = cx.scene(common)?;
-    let mut p = cx.pipeline(&scene, common)?;
+fn pca(cx: &Context, args: &StageArgs) -> Result<()> {
+    let scene = cx.scene(&args.common)?;
+    let mut p = cx.pipeline(&scene, &args.common)?;
     let fit = p.pca(&|d, t| cx.stage_progress(d, t))?;
     print!("{}", pipeline::stage_report::describe_pca(&fit));
-    let dir = cx.out(&scene, &["pca"]);
+    let dir = stage_out(cx, &scene, args, "pca")?;
     pipeline::stage_report::write_pca_curves(&dir, &fit)?;
     println!("spectrum and error curve: {}", dir.display());
     Ok(())
 }
 
 /// `cubature`: the PCA subspace's rule and its error curve.
-fn cubature(cx: &Context, common: &Common) -> Result<()> {
-    let scene = cx.scene(common)?;
-    let mut p = cx.pipeline(&scene, common)?;
+fn cubature(cx: &Context, args: &StageArgs) -> Result<()> {
+    let scene = cx.scene(&args.common)?;
+    let mut p = cx.pipeline(&scene, &args.common)?;
     let c = p.cubature(&|d, t| cx.stage_progress(d, t))?;
     print!("{}", c.describe(p.model.elements.len()));
-    let dir = cx.out(&scene, &["cubature"]);
+    let dir = stage_out(cx, &scene, args, "cubature")?;
     c.write_error_curve(&dir)?;
     println!("error curve: {}", dir.join("error.svg").display());
     Ok(())
 }
 
 /// `train`: the autoencoder and its loss curve.
-fn train(cx: &Context, common: &Common) -> Result<()> {
-    let scene = cx.scene(common)?;
-    let mut p = cx.pipeline(&scene, common)?;
+fn train(cx: &Context, args: &StageArgs) -> Result<()> {
+    let scene = cx.scene(&args.common)?;
+    let mut p = cx.pipeline(&scene, &args.common)?;
     let trained = p.train(&|d, t| cx.stage_progress(d, t))?;
-    let dir = cx.out(&scene, &["train"]);
+    let dir = stage_out(cx, &scene, args, "train")?;
     trained.write_loss_curve(&dir)?;
     print!("{}", trained.describe());
     println!("loss curve: {}", dir.join("loss.svg").display());

@@ -91,8 +91,18 @@ fn check_options(opts: &BenchOptions, sizes: Option<(usize, usize)>) -> Result<(
     let past = |dims: &[usize], max: usize| dims.iter().copied().find(|&k| k == 0 || k > max);
     if let Some(k) = past(&opts.pca_dims, chosen_k) {
         anyhow::bail!(
-            "PCA dimension {k} (`--pca-dims`): the scene's PCA rule keeps k = {chosen_k}, so a \
-             variant can have 1 to {chosen_k} (a larger basis needs `[pca]` to keep more)"
+            "PCA dimension {k} (`--pca-dims`): the scene's PCA rule keeps k = {chosen_k} \
+             directions of the snapshots, so a variant can have 1 to {chosen_k} (a larger basis \
+             needs `[pca]` to keep more){}",
+            if basis_k > chosen_k {
+                format!(
+                    "; the basis's {basis_k} columns also count the {} gravity and patch \
+                     directions appended to them, which every variant keeps",
+                    basis_k - chosen_k
+                )
+            } else {
+                String::new()
+            }
         );
     }
     if let Some(d) = past(&opts.latent_dims, basis_k) {
@@ -135,7 +145,8 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
             .latent_dim
             .or(scene.autoencoder.latent_dims.map(|r| r[0]))
             .unwrap_or_else(|| crate::pipeline::default_latent_dim(basis_k));
-        latent_dims = vec![d.div_ceil(2), d, 2 * d];
+        // Twice d at most the autoencoder's input: the largest variant there is.
+        latent_dims = vec![d.div_ceil(2), d, (2 * d).min(basis_k)];
     }
     latent_dims.sort_unstable();
     latent_dims.dedup();

@@ -719,13 +719,24 @@ pub fn run(
         }
         model.save(&crate::export::model_path(&opts.out, method))?;
     }
+    // What was run, above the table: report.md alone says which scene and test it measured.
+    let title = heading(pipeline.scene, opts.trajectory);
     crate::output::write_file(
         &opts.out.join("report.md"),
-        report_markdown(&rows).as_bytes(),
+        format!(
+            "# {title}\n\nscene: {}\n\n{}",
+            pipeline.scene.source,
+            report_markdown(&rows)
+        )
+        .as_bytes(),
     )?;
+    let plotted = format!(
+        "{}, test trajectory {}",
+        pipeline.scene.name, opts.trajectory
+    );
     crate::output::write_file(
         &opts.out.join("report.svg"),
-        error_plot(&pipeline.scene.name, &rows).as_bytes(),
+        error_plot(&plotted, &rows).as_bytes(),
     )?;
     let h = pipeline.scene.time.step;
     crate::output::write_file(
@@ -734,7 +745,7 @@ pub fn run(
     )?;
     crate::output::write_file(
         &opts.out.join("errors.svg"),
-        frame_error_plot(&pipeline.scene.name, &rows, h).as_bytes(),
+        frame_error_plot(&plotted, &rows, h).as_bytes(),
     )?;
     Ok(rows)
 }
@@ -757,15 +768,19 @@ pub fn report_markdown(rows: &[MethodReport]) -> String {
     s
 }
 
+/// The scene and the test a run measured: the line above `run`'s table and `report.md`'s title.
+fn heading(scene: &Scene, trajectory: usize) -> String {
+    format!(
+        "{} — held-out test trajectory {trajectory}, {} frames",
+        scene.name,
+        scene.test().frames_per_schedule
+    )
+}
+
 /// What `cargo xtask run` shows after the stages: the table, where a reduced step's time goes,
 /// the warnings of [`crate::trust`], and where the report, the frames and the model are.
 pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> String {
-    let mut s = format!(
-        "\n{} — held-out test trajectory {}, {} frames\n\n",
-        scene.name,
-        opts.trajectory,
-        scene.test().frames_per_schedule
-    );
+    let mut s = format!("\n{}\n\n", heading(scene, opts.trajectory));
     s.push_str(&report_markdown(rows));
     s.push_str(&format!(
         "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg)",
@@ -1442,8 +1457,16 @@ pub fn markdown(rows: &[MethodReport]) -> String {
         "| method | dim | elements | ms/step (mean) | median ms/step | Hz | speed-up | mean rel. error | space-time error | max rel. error | max vertex error | subspace error | one-step error | from training | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
+        // A full-space method has no subspace and no training data to be measured against.
+        let reduced = |cell: String| {
+            if r.method.is_full() {
+                "—".into()
+            } else {
+                cell
+            }
+        };
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2} | {:.1} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {} | {} | {} | {:.1} | {} |\n",
             match &r.failure {
                 Some(_) => format!("{} (failed)", r.method),
                 None => r.method.to_string(),
@@ -1458,9 +1481,9 @@ pub fn markdown(rows: &[MethodReport]) -> String {
             r.trajectory_error,
             r.max_rel_error,
             r.max_vertex_error,
-            r.subspace_error,
-            r.step_error,
-            r.training_distance,
+            reduced(format!("{:.2e}", r.subspace_error)),
+            reduced(format!("{:.2e}", r.step_error)),
+            reduced(format!("{:.2}", r.training_distance)),
             r.iterations,
             gfma_cell(r.machine_gfma),
         ));

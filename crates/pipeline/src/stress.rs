@@ -1,8 +1,9 @@
 //! `cargo xtask stress`: where each method breaks. Every method runs the held-out trajectory
 //! under conditions far from the scene's (tiny and huge time steps, soft and stiff materials,
 //! nearly incompressible material, forces beyond the training range, a long free run) and each
-//! pair ends in `ok` (with its error against full space under the same condition), `error` (a
-//! typed failure, reported) or `diverged` (non-finite or unbounded state, or energy that rose
+//! pair ends in `stable` (`Ok` in `stress.json`; with its error against full space under the
+//! same condition, which is reported, not judged), `error` (a typed failure, reported) or
+//! `diverged` (non-finite or unbounded state, or energy that rose
 //! during the free run).
 //!
 //! The subspaces, autoencoder and cubature rules are the scene's own (trained once, at the
@@ -111,8 +112,8 @@ impl Outcome {
             Outcome::Ok {
                 mean_rel_error: Some(e),
                 ..
-            } => format!("ok ({e:.1e})"),
-            Outcome::Ok { .. } => "ok".into(),
+            } => format!("stable ({e:.1e})"),
+            Outcome::Ok { .. } => "stable".into(),
             Outcome::Error { step, .. } => format!("error @{step}"),
             Outcome::Diverged { step, .. } => format!("diverged @{step}"),
         }

@@ -62,7 +62,8 @@ pub fn write_pvd(path: &Path, entries: &[(f64, String)]) -> Result<(), MeshError
             .filter(|_| Path::new(file).is_absolute())
             .map_or_else(|| file.clone(), |p| p.to_string_lossy().into_owned());
         xml.push_str("    <DataSet timestep=\"");
-        push_f64(&mut xml, *time);
+        // To 12 significant digits: a time k·h is 0.35, not 0.35000000000000003.
+        push_f64(&mut xml, format!("{time:.11e}").parse().unwrap_or(*time));
         // Writing to a String cannot fail.
         let _ = writeln!(
             xml,
@@ -408,7 +409,11 @@ mod tests {
             .into_owned();
         write_pvd(
             &pvd,
-            &[(0.0, "frames/frame_0.vtu".into()), (0.01, absolute)],
+            &[
+                (0.0, "frames/frame_0.vtu".into()),
+                (0.01, absolute),
+                (35.0 * 0.01, "frames/frame_35.vtu".into()),
+            ],
         )
         .unwrap();
         let text = std::fs::read_to_string(&pvd).unwrap();
@@ -418,6 +423,8 @@ mod tests {
         assert!(
             text.contains("timestep=\"0.01\" group=\"\" part=\"0\" file=\"frames/frame_1.vtu\"")
         );
+        // 35 × 0.01 is 0.35000000000000003 in f64; the time is written to 12 digits.
+        assert!(text.contains("timestep=\"0.35\" group"), "{text}");
         let err = write_pvd(&pvd, &[(f64::NAN, "a.vtu".into())]).unwrap_err();
         assert!(matches!(err, MeshError::Invalid { .. }));
         std::fs::remove_dir_all(&dir).unwrap();
