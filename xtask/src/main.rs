@@ -77,7 +77,7 @@ enum Command {
     /// and write bench.json, bench.md and bench.svg (error against ms/step, Pareto front).
     Bench(BenchArgs),
     /// Every method under extreme conditions (time steps, stiffness, Poisson ratio, forces beyond
-    /// training, a long free run): a table of ok / error / diverged with the error measured.
+    /// training, a long free run): a table of stable / error / diverged with the error measured.
     Stress(StressArgs),
     /// Write one reduced method's trained model as a self-contained file (running the stages it
     /// needs, cached as always), for latent-sim's runtime: `ReducedModel::load(path)?.simulator()`.
@@ -714,12 +714,14 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
     };
     if generated {
         for g in pipeline::suite::generated() {
-            let within = match max_vertices {
-                Some(max) => g.read()?.num_vertices() <= max,
-                None => true,
-            };
-            if within {
-                files.push(g);
+            match max_vertices {
+                Some(max) if g.read()?.num_vertices() > max => eprintln!(
+                    "warning: suite: leaving out the generated {}: {} vertices, above \
+                     --max-vertices {max}",
+                    g.name(),
+                    g.read()?.num_vertices()
+                ),
+                _ => files.push(g),
             }
         }
     }
@@ -929,9 +931,10 @@ fn stage_out(cx: &Context, scene: &Scene, args: &StageArgs, stage: &str) -> Resu
 fn pca(cx: &Context, args: &StageArgs) -> Result<()> {
     let scene = cx.scene(&args.common)?;
     let mut p = cx.pipeline(&scene, &args.common)?;
+    // Made (or refused) before the stage runs, not after.
+    let dir = stage_out(cx, &scene, args, "pca")?;
     let fit = p.pca(&|d, t| cx.stage_progress(d, t))?;
     print!("{}", pipeline::stage_report::describe_pca(&fit));
-    let dir = stage_out(cx, &scene, args, "pca")?;
     pipeline::stage_report::write_pca_curves(&dir, &fit)?;
     println!("spectrum and error curve: {}", dir.display());
     Ok(())
@@ -941,9 +944,9 @@ fn pca(cx: &Context, args: &StageArgs) -> Result<()> {
 fn cubature(cx: &Context, args: &StageArgs) -> Result<()> {
     let scene = cx.scene(&args.common)?;
     let mut p = cx.pipeline(&scene, &args.common)?;
+    let dir = stage_out(cx, &scene, args, "cubature")?;
     let c = p.cubature(&|d, t| cx.stage_progress(d, t))?;
     print!("{}", c.describe(p.model.elements.len()));
-    let dir = stage_out(cx, &scene, args, "cubature")?;
     c.write_error_curve(&dir)?;
     println!("error curve: {}", dir.join("error.svg").display());
     Ok(())
@@ -953,8 +956,8 @@ fn cubature(cx: &Context, args: &StageArgs) -> Result<()> {
 fn train(cx: &Context, args: &StageArgs) -> Result<()> {
     let scene = cx.scene(&args.common)?;
     let mut p = cx.pipeline(&scene, &args.common)?;
-    let trained = p.train(&|d, t| cx.stage_progress(d, t))?;
     let dir = stage_out(cx, &scene, args, "train")?;
+    let trained = p.train(&|d, t| cx.stage_progress(d, t))?;
     trained.write_loss_curve(&dir)?;
     print!("{}", trained.describe());
     println!("loss curve: {}", dir.join("loss.svg").display());

@@ -384,7 +384,7 @@ pub fn markdown(rows: &[BenchRow]) -> String {
     for r in rows {
         let m = &r.report;
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {:.1} | {:.1} | {} | {} |\n",
+            "| {} | {} | {} | {:.3} | {:.3}–{:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {} | {} | {:.1} | {:.1} | {} | {} |\n",
             match &m.failure {
                 Some(f) => format!("{} (failed at {f})", r.variant),
                 None => r.variant.clone(),
@@ -400,8 +400,8 @@ pub fn markdown(rows: &[BenchRow]) -> String {
             m.mean_rel_error,
             m.trajectory_error,
             m.max_rel_error,
-            m.subspace_error,
-            m.step_error,
+            crate::run::reduced_cell(m.method, format!("{:.2e}", m.subspace_error)),
+            crate::run::reduced_cell(m.method, format!("{:.2e}", m.step_error)),
             m.iterations,
             r.offline_seconds,
             crate::run::gfma_cell(m.machine_gfma),

@@ -704,9 +704,17 @@ pub fn run(
         }
         progress(&label, 1, 1);
     }
+    // The model first: building it may compute stages, and a run stopped there (Ctrl-C in
+    // Python) leaves the folder's files of the run before whole, none of them rewritten.
+    let model = match crate::export::run_method(&opts.methods) {
+        Some(method) => Some((
+            method,
+            crate::export::scene_model(pipeline, method, Rows::Used, stage_progress)?,
+        )),
+        None => None,
+    };
     write_json(&opts.out.join("report.json"), &rows)?;
-    if let Some(method) = crate::export::run_method(&opts.methods) {
-        let mut model = crate::export::scene_model(pipeline, method, Rows::Used, stage_progress)?;
+    if let Some((method, mut model)) = model {
         if let Some(row) = rows
             .iter()
             .find(|r| r.method == method && r.failure.is_none())
@@ -1451,20 +1459,20 @@ pub(crate) fn gfma_cell(rate: Option<f64>) -> String {
     rate.map_or_else(|| "—".into(), |g| format!("{g:.1}"))
 }
 
+/// A table's cell of what only a reduced method has (its subspace error, one-step error,
+/// distance from the training data): `cell`, or "—" for a full-space method, which has no
+/// subspace and no training data to be measured against.
+pub(crate) fn reduced_cell(method: Method, cell: String) -> String {
+    if method.is_full() { "—".into() } else { cell }
+}
+
 /// The report as a markdown table.
 pub fn markdown(rows: &[MethodReport]) -> String {
     let mut s = String::from(
         "| method | dim | elements | ms/step (mean) | median ms/step | Hz | speed-up | mean rel. error | space-time error | max rel. error | max vertex error | subspace error | one-step error | from training | iterations | machine G FMA/s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
-        // A full-space method has no subspace and no training data to be measured against.
-        let reduced = |cell: String| {
-            if r.method.is_full() {
-                "—".into()
-            } else {
-                cell
-            }
-        };
+        let reduced = |cell| reduced_cell(r.method, cell);
         s.push_str(&format!(
             "| {} | {} | {} | {:.3} | {:.3} | {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {:.2e} | {} | {} | {} | {:.1} | {} |\n",
             match &r.failure {

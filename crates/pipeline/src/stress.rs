@@ -1,7 +1,7 @@
 //! `cargo xtask stress`: where each method breaks. Every method runs the held-out trajectory
 //! under conditions far from the scene's (tiny and huge time steps, soft and stiff materials,
 //! nearly incompressible material, forces beyond the training range, a long free run) and each
-//! pair ends in `stable` (`Ok` in `stress.json`; with its error against full space under the
+//! pair ends in `stable` (`"status": "ok"` in `stress.json`; with its error against full space under the
 //! same condition, which is reported, not judged), `error` (a typed failure, reported) or
 //! `diverged` (non-finite or unbounded state, or energy that rose
 //! during the free run).

@@ -56,7 +56,9 @@ pub enum SuiteMesh {
 }
 
 impl SuiteMesh {
-    fn name(&self) -> String {
+    /// The mesh's name in the suite's table and folders: the file's stem (its format added where
+    /// another format's file could share it), or the generated shape's name.
+    pub fn name(&self) -> String {
         match self {
             // MEDIT files by their stem, as before; other formats with their extension, so
             // that `beam.mesh` and `beam.msh` in one folder run apart.
@@ -464,10 +466,15 @@ pub fn markdown(rows: &[SuiteRow]) -> String {
     s += &"---:|---:|".repeat(reduced.len());
     s += "---|\n";
     for r in rows {
-        s += &format!(
-            "| {} | {} | {} | {:.0} |",
-            r.scene, r.vertices, r.tets, r.pipeline_seconds
-        );
+        if r.vertices == 0 {
+            // A mesh that could not be read: no sizes and no pipeline (its line says why).
+            s += &format!("| {} | — | — | — |", r.scene);
+        } else {
+            s += &format!(
+                "| {} | {} | {} | {:.0} |",
+                r.scene, r.vertices, r.tets, r.pipeline_seconds
+            );
+        }
         for m in reduced {
             match r.methods.iter().find(|x| x.method == m) {
                 Some(x) => {

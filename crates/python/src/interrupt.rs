@@ -95,17 +95,17 @@ impl Interrupt {
             }
             PyResult::Ok(worker.join())
         })?;
+        // A signal handled after the work's last check is raised all the same, as Python
+        // raises one caught during any call when it returns (the handler used the signal up).
+        let raised = self.raised.lock().unwrap_or_else(|e| e.into_inner()).take();
         match outcome {
-            Ok(Ok(value)) => Ok(value),
-            Ok(Err(payload)) | Err(payload) if payload.is::<Interrupted>() => Err(self
-                .raised
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .take()
-                .unwrap_or_else(|| {
-                    pyo3::exceptions::PyKeyboardInterrupt::new_err("the pipeline was interrupted")
-                })),
-            Ok(Err(payload)) | Err(payload) => resume_unwind(payload),
+            Ok(Err(payload)) | Err(payload) if !payload.is::<Interrupted>() => {
+                resume_unwind(payload)
+            }
+            Ok(Ok(value)) if raised.is_none() => Ok(value),
+            _ => Err(raised.unwrap_or_else(|| {
+                pyo3::exceptions::PyKeyboardInterrupt::new_err("the pipeline was interrupted")
+            })),
         }
     }
 }

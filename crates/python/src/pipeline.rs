@@ -403,8 +403,9 @@ fn in_run_pipeline<T: Send>(
 /// ``trajectory``: the held-out test trajectory (any index: trajectory i depends only on the
 /// test's seed and i). ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
-/// raised when the run returns). Runs without the GIL, on a thread of its own: Ctrl-C
-/// (``KeyboardInterrupt``) stops it at its next progress report.
+/// raised when the run returns, except ``KeyboardInterrupt``, which stops it). Runs without the
+/// GIL, on a thread of its own: Ctrl-C (``KeyboardInterrupt``) in a call from the main thread
+/// stops it at its next progress report.
 ///
 /// Raises ``SceneError`` for a scene that cannot be read or has a bad field or mesh,
 /// ``SolverError`` when a stage's solve fails, ``InvalidArgumentError`` for an unknown method
@@ -528,7 +529,7 @@ pub fn run_trajectories(
 /// ``out/<scene name>/<method>.ldm``; ``cache_dir``: default ``out/<scene name>/cache``.
 /// ``all_rows``: keep every vertex's basis rows (so ``Simulator.positions`` can read the whole
 /// mesh) rather than only those in use. ``on_stage`` as for ``run_pipeline``. Runs without the
-/// GIL.
+/// GIL; Ctrl-C stops it as it stops ``run_pipeline``.
 ///
 /// Raises as ``run_pipeline``, ``InvalidArgumentError`` for a full-space method, and
 /// ``ModelFileError`` when the file cannot be written.

@@ -9,6 +9,7 @@ import os
 import pathlib
 import signal
 import threading
+import time
 
 import latent_dynamics as ld
 import pytest
@@ -100,19 +101,35 @@ def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.
 
 
 def test_ctrl_c_stops_a_run_at_its_next_progress_report(tmp_path: pathlib.Path) -> None:
-    """Ctrl-C while the pipeline runs without the GIL raises KeyboardInterrupt within a progress
-    report or two, not when the pipeline ends, and leaves no artifact of the stage it stopped."""
+    """Ctrl-C while the pipeline runs without the GIL raises KeyboardInterrupt at the pipeline's
+    next progress report (here the next of many short training schedules), not when the stage
+    or the pipeline ends, and leaves no artifact of the stage it stopped."""
+    text = TINY.read_text()
+    scene = tmp_path / "many-schedules.toml"
+    # Schedules of a few tens of ms each, so many that the stage would take a minute or more.
+    for old, new in [("cells = [6, 1, 1]", "cells = [24, 4, 4]"),
+                     ("schedules = 4\nframes_per_schedule = 8", "schedules = 4000\nframes_per_schedule = 20")]:
+        assert old in text
+        text = text.replace(old, new)
+    scene.write_text(text)
     stages: list[ld.Stage] = []
     cache = tmp_path / "cache"
-    # Half a second in, the default scene is in its snapshots (tens of seconds, a report a
-    # frame); without the interrupt every stage would end before the exception is raised.
-    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    sent: list[float] = []
+
+    def interrupt() -> None:
+        sent.append(time.monotonic())
+        os.kill(os.getpid(), signal.SIGINT)
+
+    timer = threading.Timer(0.5, interrupt)
     timer.start()
     try:
         with pytest.raises(KeyboardInterrupt):
-            ld.run_pipeline(out_dir=tmp_path, cache_dir=cache, on_stage=stages.append)
+            ld.run_pipeline(scene, out_dir=tmp_path, cache_dir=cache, on_stage=stages.append)
     finally:
         timer.cancel()
+    # Well within the stage (the bound is loose for a busy machine; a stop at the stage's end
+    # would take the whole minute).
+    assert sent and time.monotonic() - sent[0] < 20.0
     assert stages == []
     assert cache.is_dir() and list(cache.iterdir()) == []
 
