@@ -1,7 +1,7 @@
 //! The cached pipeline: skipping unchanged stages, recomputing only what changed, shards, and an
 //! end-to-end run of a tiny scene.
 
-use pipeline::pipeline::Pipeline;
+use pipeline::pipeline::{Pipeline, StageSummary};
 use pipeline::run::{RunOptions, run};
 use pipeline::simulate::Method;
 use pipeline::stage::Stage;
@@ -95,6 +95,42 @@ fn the_neural_tolerance_refits_the_neural_rule_only() {
     );
     assert!(tight.rule.training_error < loose.rule.training_error);
     assert!(tight.rule.len() > loose.rule.len());
+}
+
+/// The neural methods' rule is the one fitted in the decoder's tangent unless the PCA
+/// subspace's follows training schedules clearly closer; the stage keeps how both did.
+#[test]
+fn the_neural_rule_is_kept_by_how_it_follows_training_schedules() {
+    let cache = scratch_dir("pipeline-neural-rule-validation");
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, &cache).unwrap();
+    let pca = p.cubature(&no_progress).unwrap();
+    let kept = p.cubature_neural(&no_progress).unwrap();
+    let v = kept
+        .validation
+        .clone()
+        .expect("the two rules ran on training schedules");
+    // The tiny family's four schedules, each from rest and whole.
+    assert_eq!(v.schedules, [0, 1, 2, 3]);
+    assert_eq!((v.tangent_errors.len(), v.pca_errors.len()), (4, 4));
+    assert!(
+        v.tangent_errors
+            .iter()
+            .chain(&v.pca_errors)
+            .all(|e| e.is_finite() && *e > 0.0 && *e < 1.0),
+        "{v:?}"
+    );
+    assert_eq!(
+        v.pca_kept,
+        pipeline::pipeline::pca_rule_clearly_closer(&v.tangent_errors, &v.pca_errors)
+    );
+    assert_eq!(v.pca_kept, kept.rule == pca.rule, "{v:?}");
+    assert_eq!(v.pca_elements, pca.rule.len());
+    assert!(
+        kept.summary().contains("training schedules"),
+        "{}",
+        kept.summary()
+    );
 }
 
 #[test]

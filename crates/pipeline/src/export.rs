@@ -12,7 +12,9 @@ use fem_core::optim::SolverConfig;
 use latent_sim::ReducedModel;
 use latent_sim::model::{MeasuredError, ModelSource, Provenance, Rows, StageKey, SubspaceSource};
 
-use crate::pipeline::{Pipeline, Progress};
+use std::sync::Arc;
+
+use crate::pipeline::{FittedCubature, Pipeline, Progress};
 use crate::simulate::{Method, solver_for};
 use crate::stage::Stage;
 
@@ -50,6 +52,28 @@ pub fn reduced_model(
     solver: SolverConfig,
     rows: Rows,
     progress: Progress<'_>,
+) -> Result<ReducedModel> {
+    reduced_model_with(
+        pipeline, method, model, material, time, solver, rows, progress, None,
+    )
+}
+
+/// [`reduced_model`] with the cubature rule `rule` in place of the method's stage's, when given
+/// (the `cubature-neural` stage trying its candidate rules on training schedules).
+///
+/// # Errors
+/// As [`reduced_model`].
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn reduced_model_with(
+    pipeline: &mut Pipeline<'_>,
+    method: Method,
+    model: &FullSpaceModel,
+    material: &MaterialConfig,
+    time: &TimeConfig,
+    solver: SolverConfig,
+    rows: Rows,
+    progress: Progress<'_>,
+    rule: Option<Arc<FittedCubature>>,
 ) -> Result<ReducedModel> {
     if method.is_full() {
         bail!(
@@ -100,6 +124,7 @@ pub fn reduced_model(
         None
     };
     let cubature = match method {
+        Method::PcaCubature | Method::NeuralCubature if rule.is_some() => rule,
         Method::PcaCubature => {
             stage_keys.push(key(Stage::Cubature, pipeline.cubature_key()));
             Some(pipeline.cubature(progress)?)
