@@ -97,14 +97,18 @@ impl Stage {
             //    (`cubature::HeldOutForces`), not the memory limit's subsample.
             // 5: on a mesh past the memory limit, every pose and a subsample of the elements as
             //    candidates (other rules); the poses and candidates stored (new fields).
-            Stage::Cubature => 5,
+            // 6: the neural stage's choice stored beside the rule (`FittedCubature::validation`,
+            //    a field the old artifacts lack).
+            Stage::Cubature => 6,
             // 3: the decoder's Jacobian from SIMD kernels (round-off).
             // 4: forces fitted in the step's compliance norm, with the complement directions
             //    beside the decoder's Jacobian (other rules).
             // 5: poses completed by the complement directions (other rules).
             // 6: the held-out error as for `cubature` 4.
             // 7: candidates and stored fields as for `cubature` 5.
-            Stage::CubatureNeural => 7,
+            // 8: the rule fitted in the decoder's tangent or the PCA subspace's, whichever
+            //    follows training schedules clearly closer (`FittedCubature::validation`).
+            Stage::CubatureNeural => 8,
             // 2: the default explained energy 1 − 10⁻⁷ instead of 1 − 10⁻⁶ (scenes naming no rule).
             // 3: the positions of the fall under gravity appended (`PcaFit::appended`, a new
             //    field the old artifacts lack).
@@ -178,8 +182,8 @@ mod tests {
                 ("snapshots", 12),
                 ("snapshots-shard", 12),
                 ("pca", 4),
-                ("cubature", 5),
-                ("cubature-neural", 7),
+                ("cubature", 6),
+                ("cubature-neural", 8),
                 ("train", 6),
                 ("complement", 3),
                 ("reference", 11),

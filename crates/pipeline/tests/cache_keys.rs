@@ -114,7 +114,7 @@ macro_rules! add {
 
 /// Every field of every section, with the stages that recompute when it changes. No stage
 /// reads the name, the scene's own trajectory (`[time] frames`, `[[force]]`), the reduced solver
-/// (run time only), nor how pins and meshes are given as long as they select the same vertices
+/// but in `cubature-neural` (which steps `neural-cubature` on training schedules), nor how pins and meshes are given as long as they select the same vertices
 /// and hold the same mesh. Four fields are keyed although the stage does not read them here
 /// (marked below): those edits recompute for nothing, which is safe.
 fn variants() -> Vec<Variant> {
@@ -228,30 +228,31 @@ fn variants() -> Vec<Variant> {
             "",
             ALL,
         ),
-        // [reduced]: read when a reduced method runs, by no stage.
+        // [reduced]: read when a reduced method runs, and by stage `cubature-neural`, which runs
+        // `neural-cubature` on training schedules to choose its rule.
         v(
             "reduced.method",
             "[training]",
             "[reduced]\nmethod = \"newton\"\n\n[training]",
-            NONE,
+            &[NEURAL],
         ),
         v(
             "reduced.tolerance",
             "[training]",
             "[reduced]\ntolerance = 1.0e-5\n\n[training]",
-            NONE,
+            &[NEURAL],
         ),
         v(
             "reduced.preconditioner",
             "[training]",
             "[reduced]\npreconditioner = \"rest\"\n\n[training]",
-            NONE,
+            &[NEURAL],
         ),
         v(
             "reduced.onset_directions",
             "[training]",
             "[reduced]\nonset_directions = 2\n\n[training]",
-            NONE,
+            &[NEURAL],
         ),
         v(
             "reduced.complement_directions",
@@ -263,7 +264,7 @@ fn variants() -> Vec<Variant> {
             "reduced.spring_compliance",
             "[training]",
             "[reduced]\nspring_compliance = false\n\n[training]",
-            NONE,
+            &[NEURAL],
         ),
         // [[force]]: the scene's own loads; stages use the generated schedules instead.
         v(
@@ -550,7 +551,11 @@ struct Artifacts {
     train: nn::Autoencoder,
     complement: (Vec<f64>, Vec<f64>),
     cubature: (cubature::CubatureRule, f64),
-    neural: (cubature::CubatureRule, f64),
+    neural: (
+        cubature::CubatureRule,
+        f64,
+        Option<pipeline::pipeline::RuleValidation>,
+    ),
     reference: Vec<Vec<f64>>,
 }
 
@@ -579,7 +584,7 @@ fn run_stages(scene: &Scene, cache: &Path) -> (Vec<(Stage, PathBuf, bool)>, Arti
         },
         neural: {
             let c = ok!(p.cubature_neural(&no_progress));
-            (c.rule, c.held_out_error)
+            (c.rule, c.held_out_error, c.validation)
         },
         reference: ok!(p.reference(0, &no_progress)).frames,
     };
