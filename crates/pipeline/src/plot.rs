@@ -357,16 +357,7 @@ mod tests {
     /// Every method has a colour of its own in the palette, whichever plot draws it.
     #[test]
     fn each_method_has_its_own_colour() {
-        use crate::simulate::Method::*;
-        let all = [
-            Full,
-            FullLbfgs,
-            FullNewton,
-            Pca,
-            PcaCubature,
-            Neural,
-            NeuralCubature,
-        ];
+        let all = crate::simulate::Method::ALL;
         let colors: std::collections::BTreeSet<&str> =
             all.iter().map(|m| color(m.color())).collect();
         assert_eq!(colors.len(), all.len());

@@ -33,11 +33,24 @@ pub enum Method {
     PcaCubature,
     /// The autoencoder's latent space (decoder into the PCA basis), every element evaluated.
     Neural,
-    /// The autoencoder's latent space with its own cubature rule: the paper's method.
+    /// The autoencoder's latent space with a cubature rule: the paper's method. The rule is its
+    /// own (fitted in the decoder's tangent) unless the PCA subspace's follows training
+    /// schedules clearly closer (stage `cubature-neural`).
     NeuralCubature,
 }
 
 impl Method {
+    /// Every method, in `cargo xtask run`'s order (its default list).
+    pub const ALL: [Method; 7] = [
+        Method::Full,
+        Method::FullNewton,
+        Method::FullLbfgs,
+        Method::Pca,
+        Method::PcaCubature,
+        Method::Neural,
+        Method::NeuralCubature,
+    ];
+
     /// The method's name on the command line, in reports and in file names (its serde name).
     pub fn name(self) -> &'static str {
         match self {

@@ -17,15 +17,7 @@ use crate::interrupt::Interrupt;
 use crate::model::Model;
 
 /// Every method, in `cargo xtask run`'s order (its default list).
-const METHODS: [Method; 7] = [
-    Method::Full,
-    Method::FullNewton,
-    Method::FullLbfgs,
-    Method::Pca,
-    Method::PcaCubature,
-    Method::Neural,
-    Method::NeuralCubature,
-];
+const METHODS: [Method; 7] = Method::ALL;
 
 fn method(name: &str) -> PyResult<Method> {
     METHODS
