@@ -253,9 +253,20 @@ impl StageSummary for FittedCubature {
             } else {
                 (tangent_mean, pca_mean)
             };
+            // Where the PCA rule was closer on average and still not kept, why.
+            let why = if !v.pca_kept && pca_mean < tangent_mean {
+                if pca_mean < (1.0 - RULE_MARGIN) * tangent_mean {
+                    " (closer on average, but within the spread of the schedules' differences: \
+                     not clearly)"
+                } else {
+                    " (closer on average by less than a tenth: not clearly)"
+                }
+            } else {
+                ""
+            };
             format!(
                 "; kept {kept}: on {} training schedules neural-cubature stays {} on average \
-                 from the full trajectories (their PCA coefficients) with it, {} with {other}",
+                 from the full trajectories (their PCA coefficients) with it, {} with {other}{why}",
                 v.schedules.len(),
                 pct(mine),
                 pct(theirs)
