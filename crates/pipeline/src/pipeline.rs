@@ -1245,9 +1245,9 @@ impl<'a> Pipeline<'a> {
         })
     }
 
-    /// The neural methods' rule: `tangent` (fitted in the decoder's tangent) or the PCA
-    /// subspace's, whichever keeps `neural-cubature` closer to the full trajectories of a few
-    /// training schedules ([`RuleValidation`]). The two disagree on which is better from mesh to
+    /// The neural methods' rule: `tangent` (fitted in the decoder's tangent), or the PCA
+    /// subspace's where that keeps `neural-cubature` clearly closer to the full trajectories of
+    /// a few training schedules ([`RuleValidation`], [`pca_rule_clearly_closer`]). The two disagree on which is better from mesh to
     /// mesh: the PCA rule fits every coordinate's force at every pose, so it holds wherever the
     /// decoder's tangent turns; the tangent's fits fewer forces, and is the closer where the
     /// tangent stays near the training poses'. (A nearly incompressible finger: 0.7 % with the
