@@ -355,11 +355,11 @@ fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (Path
     (out, cache)
 }
 
-/// Runs `body` without the GIL on the pipeline of `scene` as `cargo xtask run` starts it: the
-/// scene read, its folders, `on_stage` installed and the basis computed or loaded first, so that
-/// its stage is the first reported. `body` gets the scene, the pipeline and the output folder;
-/// the callback's exception, if it raised one, is raised when `body` is done.
-fn in_run_pipeline<T: Send>(
+/// Runs `body` without the GIL, stopped by Ctrl-C ([`Interrupt`]), on the pipeline of `scene`:
+/// the scene read, its folders and `on_stage` installed. `body` gets the scene, the pipeline,
+/// the output folder and the interrupt its progress reports check; the callback's exception, if
+/// it raised one, is raised when `body` is done.
+fn with_pipeline<T: Send>(
     py: Python<'_>,
     scene: Option<PathBuf>,
     out_dir: Option<PathBuf>,
@@ -375,12 +375,34 @@ fn in_run_pipeline<T: Send>(
         let (out, cache) = folders(&scene, out_dir, cache_dir);
         let mut p = pipeline_of(&scene, &cache)?;
         callback.install(&mut p);
-        p.pca(&|_, _| interrupt.check()).map_err(Failure::Run)?;
         body(&scene, &mut p, out, &interrupt)
     })?;
     let value = value.map_err(Failure::into_py)?;
     callback.raised()?;
     Ok(value)
+}
+
+/// [`with_pipeline`] as `cargo xtask run` starts it: the basis computed or loaded first, so that
+/// its stage is the first reported.
+fn in_run_pipeline<T: Send>(
+    py: Python<'_>,
+    scene: Option<PathBuf>,
+    out_dir: Option<PathBuf>,
+    cache_dir: Option<PathBuf>,
+    on_stage: Option<Py<PyAny>>,
+    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf, &Interrupt) -> Result<T, Failure> + Send,
+) -> PyResult<T> {
+    with_pipeline(
+        py,
+        scene,
+        out_dir,
+        cache_dir,
+        on_stage,
+        |scene, p, out, stop| {
+            p.pca(&|_, _| stop.check()).map_err(Failure::Run)?;
+            body(scene, p, out, stop)
+        },
+    )
 }
 
 /// Runs the pipeline on a scene and every requested method on one held-out test trajectory, as
@@ -545,25 +567,15 @@ pub fn export_model(
         )));
     }
     let rows = if all_rows { Rows::All } else { Rows::Used };
-    let failed = std::sync::Mutex::new(None);
-    let interrupt = Interrupt::new();
-    let callback = StageCallback::new(py, on_stage.as_ref(), &failed, &interrupt)?;
-    let (model, path) = interrupt
-        .run(py, || -> Result<_, Failure> {
-            let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
-            let (out, cache) = folders(&scene, None, cache_dir);
-            let mut p = pipeline_of(&scene, &cache)?;
-            callback.install(&mut p);
-            let progress = |_: usize, _: usize| interrupt.check();
-            let model = pipeline::export::scene_model(&mut p, method, rows, &progress)
-                .map_err(Failure::Run)?;
-            let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));
-            model
-                .save(&path)
-                .map_err(|e| Failure::Run(anyhow::Error::new(e)))?;
-            Ok((model, path))
-        })?
-        .map_err(Failure::into_py)?;
-    callback.raised()?;
+    let (model, path) = with_pipeline(py, scene, None, cache_dir, on_stage, |_, p, out, stop| {
+        let progress = |_: usize, _: usize| stop.check();
+        let model =
+            pipeline::export::scene_model(p, method, rows, &progress).map_err(Failure::Run)?;
+        let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));
+        model
+            .save(&path)
+            .map_err(|e| Failure::Run(anyhow::Error::new(e)))?;
+        Ok((model, path))
+    })?;
     Ok(Model::new(model, Some(path)))
 }
