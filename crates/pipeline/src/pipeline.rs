@@ -227,31 +227,28 @@ impl StageSummary for FittedCubature {
                     "a failed step".into()
                 }
             };
-            let (kept, other) = if v.pca_kept {
-                (
-                    format!(
-                        "the PCA subspace's rule (stage `cubature`, {} elements)",
-                        v.pca_elements
-                    ),
-                    format!(
-                        "the rule fitted in the decoder's tangent ({} elements)",
-                        v.tangent_elements
-                    ),
-                )
-            } else {
-                (
-                    format!(
-                        "the rule fitted in the decoder's tangent ({} elements)",
-                        v.tangent_elements
-                    ),
-                    format!("the PCA subspace's rule ({} elements)", v.pca_elements),
-                )
-            };
             let (tangent_mean, pca_mean) = v.means();
-            let (mine, theirs) = if v.pca_kept {
-                (pca_mean, tangent_mean)
+            // Each rule's name and mean error, the kept one first (the PCA rule named by its
+            // stage where it is kept).
+            let tangent = (
+                format!(
+                    "the rule fitted in the decoder's tangent ({} elements)",
+                    v.tangent_elements
+                ),
+                tangent_mean,
+            );
+            let stage = if v.pca_kept { "stage `cubature`, " } else { "" };
+            let pca = (
+                format!(
+                    "the PCA subspace's rule ({stage}{} elements)",
+                    v.pca_elements
+                ),
+                pca_mean,
+            );
+            let ((kept, mine), (other, theirs)) = if v.pca_kept {
+                (pca, tangent)
             } else {
-                (tangent_mean, pca_mean)
+                (tangent, pca)
             };
             // Where the PCA rule was closer on average and still not kept, why.
             let why = if !v.pca_kept && pca_mean < tangent_mean {

@@ -61,6 +61,10 @@ pub const COLLAPSED_SHARE: f64 = 0.01;
 /// drags 17 → 11 %, at 1.8 times the cost of a step.
 pub const CUBATURE_EXCESS: f64 = 1.25;
 
+/// The remedy for a cubature rule that makes a method's error, in every warning that names it.
+const LARGER_RULE: &str = "a larger rule (`[cubature] max_elements`, or a smaller `tolerance` \
+                           where the budget did not stop it) narrows that";
+
 /// The method of the same subspace over every element, for a cubature method.
 fn over_every_element(method: crate::simulate::Method) -> Option<crate::simulate::Method> {
     use crate::simulate::Method;
@@ -101,9 +105,8 @@ fn cubature_warning(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
         .then(|| {
             format!(
                 "{}: its cubature rule adds {:.0} percentage points: {:.1} % from the full \
-                 trajectory against {:.1} % for {every} over every element; a larger rule \
-                 (`[cubature] max_elements`, or a smaller `tolerance` where the budget did not \
-                 stop it) narrows that, at a cost per step about in proportion to its elements",
+                 trajectory against {:.1} % for {every} over every element; {LARGER_RULE}, at a \
+                 cost per step about in proportion to its elements",
                 r.method,
                 100.0 * excess,
                 100.0 * r.mean_rel_error,
@@ -379,10 +382,9 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
                 every.method,
                 pct(every.step_error),
                 if cubature_warning(r, rows).is_some() {
-                    " (below)"
+                    " (below)".to_string()
                 } else {
-                    "; a larger rule (`[cubature] max_elements`, or a smaller `tolerance` where \
-                     the budget did not stop it) narrows that"
+                    format!("; {LARGER_RULE}")
                 }
             ),
             None => "which a larger subspace lowers (`[pca]`, and for the neural methods \
