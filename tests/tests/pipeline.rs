@@ -275,6 +275,18 @@ fn a_tiny_scene_runs_end_to_end() {
     assert_eq!(svg.matches("<polyline").count(), 8, "{svg}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    // What was run rides with the rows: a script comparing runs needs no other file.
+    assert_eq!(report["format"], pipeline::run::REPORT_FORMAT);
+    assert_eq!(report["version"], pipeline::run::REPORT_VERSION);
+    assert_eq!(report["trajectory"], 0);
+    assert!(report["written"].as_str().is_some_and(|w| w.ends_with('Z')));
+    let stages = report["stages"].as_array().unwrap();
+    assert!(
+        stages
+            .iter()
+            .any(|s| s["stage"] == "pca" && s["summary"].as_str().is_some_and(|t| !t.is_empty())),
+        "{stages:?}"
+    );
     for key in [
         "method",
         "dim",
@@ -289,7 +301,10 @@ fn a_tiny_scene_runs_end_to_end() {
         "step_error",
         "step_frame_errors",
     ] {
-        assert!(report[1].get(key).is_some(), "report.json lacks {key}");
+        assert!(
+            report["methods"][1].get(key).is_some(),
+            "report.json lacks {key}"
+        );
     }
     assert!(out.join("report.md").is_file());
     for m in ["full", "pca", "pca-cubature", "neural", "neural-cubature"] {

@@ -286,7 +286,7 @@ fn speedups_and_rates_follow_from_the_reported_times() {
         );
         let hz = 1e3 / r.ms_per_step;
         assert!(close(r.hz, hz), "{}: {} Hz against {hz}", r.method, r.hz);
-        let row = &json[i];
+        let row = &json["methods"][i];
         assert_eq!(row["method"], r.method.name());
         for (key, value) in [
             ("ms_per_step", r.ms_per_step),
@@ -429,7 +429,7 @@ fn several_trajectories_report_each_and_their_spread() {
             serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap())
                 .unwrap();
         for (j, r) in rows.iter().enumerate() {
-            assert_eq!(report[j]["method"], r.method.name());
+            assert_eq!(report["methods"][j]["method"], r.method.name());
             assert_eq!(table[j].errors[i], Some(r.mean_rel_error));
             let w = written[j]["errors"][i].as_f64().unwrap();
             assert!(

@@ -229,9 +229,17 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
 /// stages' default cache), or how to measure it: a person drags a model without the table
 /// otherwise.
 fn run_accuracy(report: &std::path::Path, scene: &pipeline::scene::Scene) -> String {
+    // The rows are `methods` since report version 1; a bare list before.
     let rows: Option<Vec<serde_json::Value>> = std::fs::read_to_string(report)
         .ok()
-        .and_then(|text| serde_json::from_str(&text).ok());
+        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+        .and_then(|v| match v {
+            serde_json::Value::Array(rows) => Some(rows),
+            mut v => match v["methods"].take() {
+                serde_json::Value::Array(rows) => Some(rows),
+                _ => None,
+            },
+        });
     let measured: Vec<String> = rows
         .iter()
         .flatten()
@@ -283,20 +291,23 @@ mod tests {
             none.starts_with("how far each method is from full space: `cargo xtask run`"),
             "{none}"
         );
-        std::fs::write(
-            &report,
-            r#"[{"method":"full","mean_rel_error":0.0},{"method":"full-newton","mean_rel_error":1e-9},
-                {"method":"pca","mean_rel_error":0.0479},{"method":"neural-cubature","mean_rel_error":0.0709}]"#,
-        )
-        .unwrap();
-        let some = run_accuracy(&report, &scene);
-        assert!(
-            some.starts_with(
-                "the last `run` of this scene measured, off its held-out test: pca 4.79 %, \
-                 neural-cubature 7.09 % ("
-            ),
-            "{some}"
-        );
+        let rows = r#"[{"method":"full","mean_rel_error":0.0},{"method":"full-newton","mean_rel_error":1e-9},
+                {"method":"pca","mean_rel_error":0.0479},{"method":"neural-cubature","mean_rel_error":0.0709}]"#;
+        // The report as `run` writes it, and the bare list of rows it was before version 1.
+        for text in [
+            format!(r#"{{"version":1,"methods":{rows}}}"#),
+            rows.to_string(),
+        ] {
+            std::fs::write(&report, text).unwrap();
+            let some = run_accuracy(&report, &scene);
+            assert!(
+                some.starts_with(
+                    "the last `run` of this scene measured, off its held-out test: pca 4.79 %, \
+                     neural-cubature 7.09 % ("
+                ),
+                "{some}"
+            );
+        }
         std::fs::write(&report, "not json").unwrap();
         assert_eq!(run_accuracy(&report, &scene), none);
         let _ = std::fs::remove_dir_all(&dir);

@@ -46,7 +46,7 @@ fn run(dir: &Path, scene: &str, args: &[&str]) -> (bool, String) {
 fn pca_errors(report: &Path) -> Vec<f64> {
     let rows: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
-    let pca = rows
+    let pca = rows["methods"]
         .as_array()
         .unwrap()
         .iter()

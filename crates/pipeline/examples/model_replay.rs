@@ -159,7 +159,8 @@ fn main() -> Result<()> {
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .and_then(|v| {
-            v.as_array()?
+            v["methods"]
+                .as_array()?
                 .iter()
                 .find(|r| r["method"] == method.name())
                 .and_then(|r| r["ms_per_step"].as_f64())

@@ -27,6 +27,35 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Now, UTC, as ISO 8601 to the second (`2026-12-02T16:05:09Z`): when a report was written.
+pub fn utc_now() -> String {
+    let seconds = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    utc_timestamp(seconds)
+}
+
+/// `seconds` after 1970-01-01 UTC as ISO 8601 (the civil calendar from a day count, H. Hinnant's
+/// `civil_from_days`).
+fn utc_timestamp(seconds: u64) -> String {
+    let (days, rest) = ((seconds / 86_400) as i64, seconds % 86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        rest / 3_600,
+        rest / 60 % 60,
+        rest % 60
+    )
+}
+
 /// Writes the frames of one simulation and, at the end, the series file.
 #[derive(Debug)]
 pub struct FrameWriter {
@@ -94,6 +123,16 @@ impl FrameWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Dates against ones known: the epoch, a leap day, the turn of 2000, and today's kind.
+    #[test]
+    fn utc_timestamps_are_the_civil_calendar() {
+        assert_eq!(utc_timestamp(0), "1970-01-01T00:00:00Z");
+        assert_eq!(utc_timestamp(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(utc_timestamp(946_684_799), "1999-12-31T23:59:59Z");
+        assert_eq!(utc_timestamp(1_796_227_509), "2026-12-02T16:05:09Z");
+        assert!(utc_now().starts_with("20") && utc_now().ends_with('Z'));
+    }
 
     /// A file that cannot be written is named in the error, not only the system's reason.
     #[test]

@@ -41,6 +41,50 @@ pub struct RunOptions {
     pub trajectory: usize,
 }
 
+/// `report.json`'s `format`: what the file is, for a program that finds it among others.
+pub const REPORT_FORMAT: &str = "latent-dynamics run report";
+
+/// `report.json`'s `version`: raised when a field changes meaning or goes (the file was a bare
+/// list of rows before version 1).
+pub const REPORT_VERSION: u32 = 1;
+
+/// `report.json`: what a run measured and of what, so that a script comparing runs needs no
+/// other file: the scene and its test, when it was run, what each stage chose, the warnings,
+/// and a row per method.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RunReport<'a> {
+    pub format: &'static str,
+    pub version: u32,
+    /// The project version that wrote it.
+    pub project_version: &'static str,
+    /// When it was written, UTC (ISO 8601, to the second).
+    pub written: String,
+    pub scene: &'a str,
+    /// The scene file (`<built-in cantilever>` for the default scene).
+    pub scene_file: &'a str,
+    /// The held-out test trajectory measured, its frames, and the time step (s).
+    pub trajectory: usize,
+    pub frames: usize,
+    pub time_step: f64,
+    /// The stages the run loaded or computed, in order, with what each chose.
+    pub stages: Vec<StageLine>,
+    /// [`crate::trust::assess`]'s figures not to be trusted, and what the figures do not say
+    /// by themselves.
+    pub untrusted: Vec<String>,
+    pub caveats: Vec<String>,
+    pub methods: &'a [MethodReport],
+}
+
+/// One stage of [`RunReport::stages`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct StageLine {
+    pub stage: String,
+    /// Loaded from the cache instead of computed.
+    pub cached: bool,
+    pub seconds: f64,
+    pub summary: String,
+}
+
 /// One row of the report.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct MethodReport {
@@ -713,7 +757,32 @@ pub fn run(
         )),
         None => None,
     };
-    write_json(&opts.out.join("report.json"), &rows)?;
+    let assessment = crate::trust::assess(&rows);
+    let report = RunReport {
+        format: REPORT_FORMAT,
+        version: REPORT_VERSION,
+        project_version: env!("CARGO_PKG_VERSION"),
+        written: crate::output::utc_now(),
+        scene: &pipeline.scene.name,
+        scene_file: &pipeline.scene.source,
+        trajectory: opts.trajectory,
+        frames: pipeline.scene.test().frames_per_schedule,
+        time_step: pipeline.scene.time.step,
+        stages: pipeline
+            .outcomes
+            .iter()
+            .map(|o| StageLine {
+                stage: o.stage.to_string(),
+                cached: o.cached,
+                seconds: o.seconds,
+                summary: o.summary.clone(),
+            })
+            .collect(),
+        untrusted: assessment.untrusted,
+        caveats: assessment.caveats,
+        methods: &rows,
+    };
+    write_json(&opts.out.join("report.json"), &report)?;
     if let Some((method, mut model)) = model {
         if let Some(row) = rows
             .iter()

@@ -27,8 +27,11 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     for s in report.stages:
         assert s.path.exists() and s.summary and s.seconds >= 0
     written = json.loads((out / "report.json").read_text())
-    assert [r["method"] for r in written] == methods
-    for row, raw in zip(report.rows, written):
+    assert written["format"] == "latent-dynamics run report" and written["version"] == 1
+    assert written["scene"] == "tiny" and written["trajectory"] == 0
+    assert [s["stage"] for s in written["stages"]] == [s.name for s in report.stages]
+    assert [r["method"] for r in written["methods"]] == methods
+    for row, raw in zip(report.rows, written["methods"]):
         assert row.dimension == raw["dim"] and row.elements == raw["cubature_elements"]
         assert row.ms_per_step == raw["ms_per_step"] and row.ms_per_step > 0
         assert row.timed_runs == raw["timed_runs"] >= 1
