@@ -527,7 +527,8 @@ fn spread_markdown(rows: &[SuiteRow]) -> String {
     ];
     let mut s = format!(
         "\nOn test trajectories 0..{count} (0 is the table's): the mean error, then the worst \
-         and its trajectory.\n\n| scene | trajectories s |"
+         and its trajectory. The warnings below are trajectory 0's; trajectory i's own are in \
+         `<scene>/trajectory-<i>/report.md`.\n\n| scene | trajectories s |"
     );
     for m in reduced {
         s += &format!(" {m} |");
@@ -668,6 +669,10 @@ mod tests {
         );
         let table = spread_markdown(&[whole.clone(), cut]);
         assert!(table.contains("On test trajectories 0..2"), "{table}");
+        assert!(
+            table.contains("`<scene>/trajectory-<i>/report.md`"),
+            "{table}"
+        );
         assert!(
             table.contains("| a | 2 | 3.0 % (4.0 % on 1) | — | — | 6.0 % (9.0 % on 1) |"),
             "{table}"
