@@ -11,7 +11,7 @@ use fem_core::assembly::{self, AssemblyBuffers, ElementSet};
 use fem_core::constraints::FIXED;
 use fem_core::forces::{ExternalForce, ForceKind};
 use fem_core::integrator::FullSpaceModel;
-use fem_core::material::Material;
+use fem_core::material::{Material, MaterialConfig};
 use fem_core::{Mat3, Vec3, with_material};
 use pca::PcaBasis;
 use pulp::{Arch, Simd, WithSimd};
@@ -234,8 +234,11 @@ pub struct ReducedSpace {
     pub mass: Vec<f64>,
     /// UᵀK₀U, k×k column-major, K₀ the stiffness at rest.
     pub rest_stiffness: Vec<f64>,
-    /// Uᵀ f_g.
+    /// Uᵀ f_g: [`Self::gravity_axes`] at the model's gravity ([`Self::set_gravity`]).
     pub gravity: Vec<f64>,
+    /// Uᵀ f_g per unit acceleration along x, y and z (3 columns of k): f_g is linear in the
+    /// acceleration, so a program may turn gravity any way without the basis's every row.
+    gravity_axes: Vec<f64>,
     /// Elements evaluated and their weights (all elements, weight 1, without cubature).
     pub elements: Vec<usize>,
     pub weights: Vec<f64>,
@@ -320,8 +323,16 @@ impl ReducedSpace {
             for i in 0..k {
                 space.mass[j * k + i] = dot(&cols[i], &mcol);
             }
-            space.gravity[j] = dot(&cols[j], &model.gravity_load);
         }
+        // Column c of the axes: Σ_v m_v U_{v,c}, the load of a unit acceleration along c.
+        let lumped = &model.mass.lumped;
+        for (j, col) in cols.iter().enumerate() {
+            for c in 0..3 {
+                space.gravity_axes[c * k + j] =
+                    (0..lumped.len()).map(|v| lumped[v] * col[3 * v + c]).sum();
+            }
+        }
+        space.set_gravity(model.gravity);
         // UᵀK₀U over every element (the preconditioner uses the true rest stiffness).
         let all: Vec<usize> = (0..model.elements.len()).collect();
         let ones = vec![1.0; all.len()];
@@ -354,7 +365,8 @@ impl ReducedSpace {
             rows,
             mass,
             rest_stiffness,
-            gravity,
+            gravity_axes,
+            material: _,
         } = parts;
         let (k, nv) = (*k, model.mesh.num_vertices());
         if k == 0 {
@@ -363,7 +375,7 @@ impl ReducedSpace {
         for (what, v, len) in [
             ("reduced mass", mass, k * k),
             ("reduced rest stiffness", rest_stiffness, k * k),
-            ("reduced gravity", gravity, k),
+            ("reduced gravity", gravity_axes, 3 * k),
         ] {
             if v.len() != len {
                 return bad(format!(
@@ -409,13 +421,23 @@ impl ReducedSpace {
         )?;
         space.mass.copy_from_slice(mass);
         space.rest_stiffness.copy_from_slice(rest_stiffness);
-        space.gravity.copy_from_slice(gravity);
+        space.gravity_axes.copy_from_slice(gravity_axes);
+        space.set_gravity(model.gravity);
         Ok(space)
     }
 
+    /// Sets the reduced gravity load to that of acceleration `g` (m/s²).
+    pub fn set_gravity(&mut self, g: Vec3) {
+        let k = self.k;
+        for j in 0..k {
+            self.gravity[j] = (0..3).map(|c| g[c] * self.gravity_axes[c * k + j]).sum();
+        }
+    }
+
     /// What [`ReducedSpace::from_parts`] needs, with the rows of `vertices` (sorted, unique; the
-    /// vertices of the element set are always added, since stepping reads them).
-    pub fn parts(&self, vertices: &[usize]) -> SpaceParts {
+    /// vertices of the element set are always added, since stepping reads them) and the
+    /// `material` the space was built with.
+    pub fn parts(&self, vertices: &[usize], material: &MaterialConfig) -> SpaceParts {
         let mut keep: Vec<usize> = vertices
             .iter()
             .chain(&self.touched)
@@ -434,7 +456,8 @@ impl ReducedSpace {
             rows,
             mass: self.mass.clone(),
             rest_stiffness: self.rest_stiffness.clone(),
-            gravity: self.gravity.clone(),
+            gravity_axes: self.gravity_axes.clone(),
+            material: material.clone(),
         }
     }
 
@@ -495,6 +518,7 @@ impl ReducedSpace {
             mass: vec![0.0; k * k],
             rest_stiffness: vec![0.0; k * k],
             gravity: vec![0.0; k],
+            gravity_axes: vec![0.0; 3 * k],
             elements,
             weights,
             touched,
@@ -1055,8 +1079,12 @@ pub struct SpaceParts {
     /// UᵀMU and UᵀK₀U (k×k, column-major), K₀ the stiffness at rest over every element.
     pub mass: Vec<f64>,
     pub rest_stiffness: Vec<f64>,
-    /// Uᵀf_g, the reduced gravity load.
-    pub gravity: Vec<f64>,
+    /// Uᵀf_g per unit acceleration along x, y and z (3 columns of k, column-major; the
+    /// lumped masses' load): the reduced gravity load of any acceleration.
+    pub gravity_axes: Vec<f64>,
+    /// The material the reduced matrices were computed with (the mass, the rest stiffness and
+    /// the gravity load depend on it), and the basis, decoder and rule made for.
+    pub material: MaterialConfig,
 }
 
 /// A rule's elements exist (`count` of them) and its weights are as many, finite and not

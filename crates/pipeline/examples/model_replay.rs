@@ -80,7 +80,9 @@ fn main() -> Result<()> {
         model.space.vertices.len(),
         model.mesh.num_vertices(),
         model.space.k,
-        ((model.space.mass.len() + model.space.rest_stiffness.len() + model.space.gravity.len())
+        ((model.space.mass.len()
+            + model.space.rest_stiffness.len()
+            + model.space.gravity_axes.len())
             * 8) as f64
             / 1e6,
         (part(&model.mesh) + part(&model.surface)) as f64 / 1e6,

@@ -155,6 +155,7 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         | RuntimeError::NotInBody { .. }
         | RuntimeError::ActiveSpan { .. }
         | RuntimeError::NotPositive { .. }
+        | RuntimeError::TooStiff { .. }
         | RuntimeError::PointStiffness(_)
         | RuntimeError::NotFinite { .. }
         | RuntimeError::BufferLength { .. }

@@ -138,6 +138,16 @@ def test_gravity_off_keeps_the_body_at_rest_and_reset_returns_to_rest(pca_path) 
     sim.reset()
     assert sim.steps == 0 and sim.time == 0.0
     np.testing.assert_allclose(sim.surface_positions(), rest, atol=1e-12)
+    # Gravity turned upside down: the body rises about as far as it sagged.
+    g = sim.gravity_acceleration
+    sim.set_gravity_acceleration([-c for c in g])
+    assert sim.gravity_acceleration == tuple(-c for c in g)
+    for _ in range(5):
+        sim.step()
+    rise, sag = (sim.surface_positions() - rest)[:, 1].max(), (sagged - rest)[:, 1].min()
+    assert 0.7 < rise / -sag < 1.3, (rise, sag)
+    with pytest.raises(ld.InvalidArgumentError, match="g must be 3 numbers"):
+        sim.set_gravity_acceleration([0.0, 1.0])
 
 
 def test_grab_near_and_several_handles(sim: ld.Simulator) -> None:
@@ -214,7 +224,7 @@ def test_add_force_applies_springs_and_point_loads_as_data(model: ld.Model) -> N
         end_face = np.flatnonzero(rest[:, 0] > rest[:, 0].max() - 1e-9)
         # A point load of 20 N down spread over the free end, ramped in over 0.1 s (down: the
         # tiny model's subspace holds the sag its gravity-loaded training made, not much else).
-        load = sim.add_force("point", end_face, [(0.0, 0, 0, 0), (0.1, 0, -20.0, 0)])
+        load = sim.add_force("point", end_face, [(0.0, 0, 0, 0), (0.1, 0, -20.0, 0)], end=None)
         for _ in range(10):
             sim.step()
         pushed = (sim.positions() - rest)[end_face].mean(axis=0)

@@ -51,12 +51,6 @@ impl FullSpaceModel {
             material.mass,
         );
         let dofs = DofMap::new(&mesh, &pinned);
-        let mut gravity_load = vec![0.0; 3 * mesh.num_vertices()];
-        for (v, &m) in mass.lumped.iter().enumerate() {
-            for c in 0..3 {
-                gravity_load[3 * v + c] = m * gravity[c];
-            }
-        }
         let energy_scale = material.youngs_modulus * elements.volume.iter().sum::<f64>();
         Ok(Self {
             energy_scale,
@@ -66,15 +60,29 @@ impl FullSpaceModel {
             mass,
             dofs,
             pinned,
-            gravity,
-            gravity_load,
+            gravity: Vec3::zeros(),
+            gravity_load: vec![0.0; 3 * mesh.num_vertices()],
             forces,
             mesh,
+        })
+        .map(|mut model| {
+            model.set_gravity(gravity);
+            model
         })
     }
 
     pub fn num_full(&self) -> usize {
         3 * self.mesh.num_vertices()
+    }
+
+    /// Sets gravity's acceleration and the nodal load it makes (the lumped masses times it).
+    pub fn set_gravity(&mut self, gravity: Vec3) {
+        for (v, &m) in self.mass.lumped.iter().enumerate() {
+            for c in 0..3 {
+                self.gravity_load[3 * v + c] = m * gravity[c];
+            }
+        }
+        self.gravity = gravity;
     }
 
     /// Scales gravity, its acceleration and the nodal load it makes, by `factor` (a schedule

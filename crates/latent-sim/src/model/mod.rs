@@ -35,8 +35,15 @@ pub struct ReducedModel {
     pub surface: Vec<[usize; 3]>,
     /// Pinned vertices, increasing.
     pub pinned: Vec<usize>,
+    /// The material, the one the reduced matrices were computed with and the basis, decoder
+    /// and rule made for ([`SpaceParts::material`]): [`ReducedModel::simulator`] refuses a model
+    /// whose material was changed since (export the model again from a scene with the new
+    /// one); [`crate::FullRuntime::from_model`] steps the full space with it as it is.
     pub material: MaterialConfig,
-    /// Gravitational acceleration (m/s²) of the reduced gravity load.
+    /// Gravitational acceleration (m/s²): the reduced gravity load follows it (a program may
+    /// also turn it at run time, [`crate::Interactive::set_gravity_acceleration`]). A direction
+    /// the training schedules did not fall along moves the body where the subspace may not
+    /// reach.
     pub gravity: [f64; 3],
     /// Time step h (s) and whether each step is a static solve.
     pub time_step: f64,
@@ -254,7 +261,7 @@ impl ReducedModel {
             preconditioning,
             spring_compliance,
             full_solver: SolverSettings::from(&full_solver),
-            space: space.parts(&keep),
+            space: space.parts(&keep, material),
             cubature: cubature.cloned(),
             subspace,
         })

@@ -17,8 +17,8 @@ pub struct FullRuntime {
     sim: Simulator,
     surface: Surface,
     surface_u: Vec<f64>,
-    /// The model's gravity load M g (the simulator's is zero while gravity is off).
-    gravity_load: Vec<f64>,
+    /// Gravity's acceleration (the simulator's load is zero while gravity is off).
+    gravity: [f64; 3],
     gravity_enabled: bool,
     handles: Handles,
 }
@@ -34,12 +34,12 @@ impl FullRuntime {
         solver: SolverConfig,
     ) -> Result<Self, RuntimeError> {
         let surface = Surface::new(&model.mesh.surface_triangles(), model.mesh.num_vertices());
-        let gravity_load = model.gravity_load.clone();
+        let gravity = model.gravity.into();
         Ok(Self {
             sim: Simulator::new(model, time, solver)?,
             surface_u: vec![0.0; 3 * surface.vertices().len()],
             surface,
-            gravity_load,
+            gravity,
             gravity_enabled: true,
             handles: Handles::default(),
         })
@@ -81,6 +81,10 @@ impl Backend for FullRuntime {
 
     fn tets(&self) -> &[[usize; 4]] {
         &self.sim.model.mesh.tets
+    }
+
+    fn youngs_modulus(&self) -> f64 {
+        self.sim.model.youngs_modulus
     }
 
     fn surface(&self) -> &Surface {
@@ -161,7 +165,10 @@ impl Interactive for FullRuntime {
             step: r.step,
             time: r.time,
             iterations: r.iterations,
+            relative_gradient: r.relative_gradient,
             seconds: r.wall_seconds,
+            preconditioner_rebuilt: false,
+            newton_fallback: false,
         })
     }
 
@@ -192,16 +199,23 @@ impl Interactive for FullRuntime {
 
     fn set_gravity(&mut self, enabled: bool) {
         self.gravity_enabled = enabled;
-        let load = &mut self.sim.model.gravity_load;
-        if enabled {
-            load.copy_from_slice(&self.gravity_load);
-        } else {
-            load.fill(0.0);
-        }
+        let g = if enabled { self.gravity } else { [0.0; 3] };
+        self.sim.model.set_gravity(g.into());
     }
 
     fn gravity(&self) -> bool {
         self.gravity_enabled
+    }
+
+    fn set_gravity_acceleration(&mut self, g: [f64; 3]) -> Result<(), RuntimeError> {
+        super::finite("gravity acceleration", g)?;
+        self.gravity = g;
+        self.set_gravity(self.gravity_enabled);
+        Ok(())
+    }
+
+    fn gravity_acceleration(&self) -> [f64; 3] {
+        self.gravity
     }
 
     fn reset(&mut self) {

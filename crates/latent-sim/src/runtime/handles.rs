@@ -109,6 +109,9 @@ pub(crate) trait Backend {
     fn rest(&self) -> &[Vec3];
     /// The mesh's tetrahedra: a vertex none of them uses is no part of the body.
     fn tets(&self) -> &[[usize; 4]];
+    /// The material's Young's modulus (Pa): with the body's size, the scale of a spring's
+    /// stiffness.
+    fn youngs_modulus(&self) -> f64;
     fn surface(&self) -> &Surface;
     /// The current displacement of vertex `v` (which exists).
     fn displacement(&self, v: usize) -> Result<Vec3, RuntimeError>;
@@ -119,6 +122,33 @@ pub(crate) trait Backend {
     fn remove_force(&mut self, index: usize) -> Result<(), RuntimeError>;
     fn set_keyframes(&mut self, index: usize, keyframes: &[[f64; 4]]) -> Result<(), RuntimeError>;
     fn handles(&mut self) -> &mut Handles;
+}
+
+/// The stiffest spring, against the body's own stiffness at its size (E times its bounding-box
+/// diagonal, N/m). A spring that much stiffer holds its vertices where it pulls them as firmly
+/// as any stiffer one would, while its terms swamp the body's in every solve: at 1e12 times the
+/// default bar's a dragged step took 100 L-BFGS iterations and a Newton fallback (0.4 s), at
+/// 1e300 the energy overflowed and every step failed.
+pub const MAX_SPRING_STIFFNESS: f64 = 1e6;
+
+/// `stiffness` is positive and at most [`MAX_SPRING_STIFFNESS`] times the body's own.
+fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeError> {
+    positive("stiffness", stiffness)?;
+    let rest = b.rest();
+    let (lo, hi) = rest.iter().fold(
+        (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)),
+        |(lo, hi), x| (lo.inf(x), hi.sup(x)),
+    );
+    let body = b.youngs_modulus() * (hi - lo).norm();
+    let limit = MAX_SPRING_STIFFNESS * body;
+    if stiffness > limit {
+        return Err(RuntimeError::TooStiff {
+            stiffness,
+            body,
+            limit,
+        });
+    }
+    Ok(())
 }
 
 /// A spring on `vertices` (sorted, unique) with offset `offset` now and `base` (see [`Entry`]).
@@ -171,7 +201,7 @@ pub(crate) fn grab<B: Backend>(
     vertices: &[usize],
     stiffness: f64,
 ) -> Result<Handle, RuntimeError> {
-    positive("stiffness", stiffness)?;
+    spring_stiffness(b, stiffness)?;
     let set = vertex_set(b, vertices)?;
     let (mut mean_u, mut mean_x) = (Vec3::zeros(), Vec3::zeros());
     for &v in &set {
@@ -192,7 +222,7 @@ pub(crate) fn grab_near<B: Backend>(
 ) -> Result<Handle, RuntimeError> {
     finite("point", point)?;
     positive("radius", radius)?;
-    positive("stiffness", stiffness)?;
+    spring_stiffness(b, stiffness)?;
     let p = Vec3::from(point);
     // Not a per-frame path: a copy keeps the borrows simple.
     let u = b.surface_displacements().to_vec();
@@ -250,7 +280,7 @@ pub(crate) fn add_force<B: Backend>(
     }
     let base = match force.kind {
         ForceKind::Spring => {
-            positive("stiffness", force.stiffness)?;
+            spring_stiffness(b, force.stiffness)?;
             let centroid = force
                 .vertices
                 .iter()

@@ -64,8 +64,8 @@ pub struct ReducedRuntime {
     /// The surface vertices' rows of U, packed: reading the surface decodes only these.
     surface_rows: PackedRows,
     surface_u: Vec<f64>,
-    /// The model's reduced gravity load (the space's is zero while gravity is off).
-    gravity_load: Vec<f64>,
+    /// Gravity's acceleration (the space's load is zero while gravity is off).
+    gravity: [f64; 3],
     gravity_enabled: bool,
     handles: Handles,
 }
@@ -84,6 +84,18 @@ impl ReducedModel {
 impl ReducedRuntime {
     /// See [`ReducedModel::simulator`].
     pub fn new(model: &ReducedModel) -> Result<Self, RuntimeError> {
+        if model.material != model.space.material {
+            return Err(ReducedError::InvalidModel {
+                reason: format!(
+                    "its material ({:?}) is not the one its reduced matrices were computed with \
+                     and its subspace trained for ({:?}): export the model again from a scene \
+                     with the new material (`cargo xtask export`), or step the full space with \
+                     it (`FullRuntime::from_model`)",
+                    model.material, model.space.material
+                ),
+            }
+            .into());
+        }
         let full = model.full_space_model()?;
         let space = ReducedSpace::from_parts(&full, &model.space, model.cubature.as_ref())?;
         let surface = Surface::new(&model.surface, full.mesh.num_vertices());
@@ -91,7 +103,6 @@ impl ReducedRuntime {
             return Err(ReducedError::NoBasisRows { vertex }.into());
         }
         let surface_rows = PackedRows::new(&space, surface.vertices());
-        let gravity_load = space.gravity.clone();
         let (time, solver) = (model.time(), SolverConfig::from(&model.solver));
         let k = space.k;
         let mut sim = match &model.subspace {
@@ -120,7 +131,7 @@ impl ReducedRuntime {
             surface_u: vec![0.0; 3 * surface.vertices().len()],
             surface,
             surface_rows,
-            gravity_load,
+            gravity: model.gravity,
             gravity_enabled: true,
             handles: Handles::default(),
         })
@@ -200,6 +211,10 @@ impl Backend for ReducedRuntime {
 
     fn tets(&self) -> &[[usize; 4]] {
         &self.sim.model().mesh.tets
+    }
+
+    fn youngs_modulus(&self) -> f64 {
+        self.sim.model().youngs_modulus
     }
 
     fn surface(&self) -> &Surface {
@@ -285,7 +300,10 @@ impl Interactive for ReducedRuntime {
             step: r.step,
             time: r.time,
             iterations: r.iterations,
+            relative_gradient: r.relative_gradient,
             seconds: r.wall_seconds,
+            preconditioner_rebuilt: r.preconditioner_rebuilt,
+            newton_fallback: r.newton_fallback,
         })
     }
 
@@ -316,16 +334,23 @@ impl Interactive for ReducedRuntime {
 
     fn set_gravity(&mut self, enabled: bool) {
         self.gravity_enabled = enabled;
-        let load = &self.gravity_load;
-        each!(&mut self.sim, s => if enabled {
-            s.space.gravity.copy_from_slice(load);
-        } else {
-            s.space.gravity.fill(0.0);
-        });
+        let g = if enabled { self.gravity } else { [0.0; 3] };
+        each!(&mut self.sim, s => s.space.set_gravity(g.into()));
     }
 
     fn gravity(&self) -> bool {
         self.gravity_enabled
+    }
+
+    fn set_gravity_acceleration(&mut self, g: [f64; 3]) -> Result<(), RuntimeError> {
+        super::finite("gravity acceleration", g)?;
+        self.gravity = g;
+        self.set_gravity(self.gravity_enabled);
+        Ok(())
+    }
+
+    fn gravity_acceleration(&self) -> [f64; 3] {
+        self.gravity
     }
 
     fn reset(&mut self) {

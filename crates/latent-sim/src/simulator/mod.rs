@@ -59,6 +59,9 @@ pub struct ReducedStepReport {
     pub evaluations: usize,
     /// Whether the L-BFGS preconditioner was rebuilt at the start of this step.
     pub preconditioner_rebuilt: bool,
+    /// Whether L-BFGS crawled or its line search failed and the step was solved again with
+    /// reduced Newton from z_n (`iterations` then counts L-BFGS's cap too).
+    pub newton_fallback: bool,
     /// Whether the step started again from z_n, the last step's answer, because it could not
     /// be solved from its extrapolated start: the energy was not finite there (an element
     /// inverted under the classic Neo-Hookean model) or the preconditioner's matrix could not
@@ -573,6 +576,8 @@ impl<S: Subspace> ReducedSimulator<S> {
             vjp_seconds: self.work.timers.vjp,
             evaluations: self.work.timers.evaluations,
             preconditioner_rebuilt: rebuilt,
+            newton_fallback: self.solver.method == SolverMethod::Lbfgs
+                && stats.iterations > self.solver.max_iterations,
             restarted,
         })
     }

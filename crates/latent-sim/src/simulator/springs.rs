@@ -44,6 +44,10 @@ pub(super) struct SpringCompliance {
     probe: Option<Arc<StiffnessProbe>>,
     /// Per force, the dent of a softened spring's patch (None for other forces).
     dents: Vec<Option<Dent>>,
+    /// The dents of springs removed since the last step: part of the state that step computed,
+    /// shown until the next one, so that letting go moves nothing before the body does (the
+    /// default bar's grabbed patch jumped 5 cm back at `release` before 2026-12-02).
+    released: Vec<Dent>,
     /// The operator could not be factorised (a quasi-static body held by nothing): springs
     /// are left as they are.
     failed: bool,
@@ -55,6 +59,7 @@ impl Default for SpringCompliance {
             on: true,
             probe: None,
             dents: Vec::new(),
+            released: Vec::new(),
             failed: false,
         }
     }
@@ -129,10 +134,14 @@ impl<S: Subspace> ReducedSimulator<S> {
         dents[index] = missing.map(|m| m.1);
     }
 
-    /// Forgets force `index`'s dent (the later ones move down by one).
+    /// Forgets force `index`'s dent (the later ones move down by one); one the state shows is
+    /// shown until the next step.
     pub(super) fn remove_dent(&mut self, index: usize) {
-        if index < self.compliance.dents.len() {
-            self.compliance.dents.remove(index);
+        if index < self.compliance.dents.len()
+            && let Some(dent) = self.compliance.dents.remove(index)
+            && dent.pull.is_some()
+        {
+            self.compliance.released.push(dent);
         }
     }
 
@@ -156,7 +165,13 @@ impl<S: Subspace> ReducedSimulator<S> {
         let k = self.space.k;
         let mut shifted = self.state.q.clone();
         let mut active = Vec::new();
-        for dent in self.compliance.dents.iter().flatten() {
+        let compliance = &self.compliance;
+        for dent in compliance
+            .dents
+            .iter()
+            .flatten()
+            .chain(&compliance.released)
+        {
             let Some(pull) = dent.pull else { continue };
             for c in 0..3 {
                 axpy(-pull[c], &dent.basis[c * k..(c + 1) * k], &mut shifted);
@@ -174,6 +189,7 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// computed (or [`Self::set_state`] gave), so moving a handle, adding a spring or a failed
     /// step changes no reported position.
     pub(super) fn settle_dents(&mut self) {
+        self.compliance.released.clear();
         let (q, t) = (&self.state.q, self.state.time);
         for (index, dent) in self.compliance.dents.iter_mut().enumerate() {
             let (Some(dent), Some(f)) = (dent, self.model.forces.get(index)) else {
@@ -190,6 +206,7 @@ impl<S: Subspace> ReducedSimulator<S> {
 
     /// Forgets every dent's pull (a state at rest, as after [`Self::reset`]).
     pub(super) fn clear_dents(&mut self) {
+        self.compliance.released.clear();
         for dent in self.compliance.dents.iter_mut().flatten() {
             dent.pull = None;
         }

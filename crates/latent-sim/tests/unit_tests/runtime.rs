@@ -265,6 +265,35 @@ fn interaction_errors_are_typed() {
     }
     point.stiffness = 0.0;
     full.add_force(point).unwrap();
+    // A spring a million times stiffer than the body at its size, and more, is refused by every
+    // way of adding one (1e300 overflowed the energy at the next step); the limit itself is
+    // taken.
+    let mut reduced = model.simulator().unwrap();
+    let body = model.material.youngs_modulus * bar_diagonal();
+    let limit = latent_sim::MAX_SPRING_STIFFNESS * body;
+    for stiffness in [1.01 * limit, 1e300, f64::MAX] {
+        let mut spring = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], 0.5);
+        spring.stiffness = stiffness;
+        for result in [
+            reduced.grab(&[60], stiffness),
+            reduced.grab_near([1.0, 0.1, 0.1], 0.05, stiffness),
+            full.add_force(spring),
+        ] {
+            match result {
+                Err(e @ RuntimeError::TooStiff { .. }) => {
+                    assert!(e.to_string().contains("give at most 1"), "{e}")
+                }
+                other => panic!("{stiffness}: {other:?}"),
+            }
+        }
+    }
+    let h = reduced.grab(&[60], 0.999 * limit).unwrap();
+    reduced.release(h).unwrap();
+}
+
+/// The bar's bounding-box diagonal (1 × 0.2 × 0.2 m).
+fn bar_diagonal() -> f64 {
+    (1.0f64 + 0.04 + 0.04).sqrt()
 }
 
 /// A vertex the mesh lists and no tet uses is no part of the body: grabbing it is refused (a
@@ -399,4 +428,125 @@ fn a_model_with_the_rows_in_use_reads_its_surface_but_not_its_interior() {
     let mut surface = vec![0.0f32; 3 * sim.surface().vertices().len()];
     sim.surface_positions_into(&mut surface).unwrap();
     assert!(surface.iter().all(|x| x.is_finite()));
+}
+
+/// Gravity turned at run time, or in the model before its simulator is made, steps as a model
+/// built under that gravity with the same basis: the reduced load is linear in the
+/// acceleration. Full space the same, bit for bit.
+#[test]
+fn gravity_turned_steps_as_a_model_built_under_it() {
+    let m = bar([6, 2, 2], -9.81);
+    let basis = snapshot_basis(&m, 12);
+    let model = build(Kind::Pca, &m, &basis, Rows::All);
+    let sideways = [3.0, 4.0, -2.0];
+    let mut turned_model = model.clone();
+    turned_model.gravity = sideways;
+    let under = build(
+        Kind::Pca,
+        &fem_core::integrator::FullSpaceModel::new(
+            m.mesh.clone(),
+            &turned_model.material,
+            m.pinned.clone(),
+            sideways.into(),
+            vec![],
+        )
+        .unwrap(),
+        &basis,
+        Rows::All,
+    );
+    let expected = fall(&mut under.simulator().unwrap());
+    let close = |a: &[Vec<f64>], what: &str| {
+        for (a, b) in a.iter().flatten().zip(expected.iter().flatten()) {
+            assert!((a - b).abs() <= 1e-12, "{what}: {a} against {b}");
+        }
+    };
+    let mut sim = model.simulator().unwrap();
+    assert_eq!(sim.gravity_acceleration(), [0.0, -9.81, 0.0]);
+    sim.set_gravity_acceleration(sideways).unwrap();
+    assert_eq!(sim.gravity_acceleration(), sideways);
+    close(&fall(&mut sim), "turned at run time");
+    close(
+        &fall(&mut turned_model.simulator().unwrap()),
+        "turned in the model",
+    );
+    // Off keeps the acceleration for when it is on again; a body at rest stays there.
+    sim.reset();
+    sim.set_gravity(false);
+    still(&mut sim);
+    assert_eq!(sim.gravity_acceleration(), sideways);
+    assert!(matches!(
+        sim.set_gravity_acceleration([0.0, f64::NAN, 0.0]),
+        Err(RuntimeError::NotFinite { .. })
+    ));
+    let mut full = FullRuntime::from_model(&model).unwrap();
+    full.set_gravity_acceleration(sideways).unwrap();
+    assert_eq!(
+        fall(&mut full),
+        fall(&mut FullRuntime::from_model(&under).unwrap())
+    );
+}
+
+/// A material changed after export is refused by the reduced simulator, which was made for the
+/// old one, with what to do; full space steps it.
+#[test]
+fn a_material_changed_after_export_is_refused_with_what_to_do() {
+    let (mut model, _) = simulators(-9.81);
+    model.material.density *= 4.0;
+    let e = model.simulator().unwrap_err().to_string();
+    assert!(
+        e.contains("not the one its reduced matrices were computed with")
+            && e.contains("export the model again"),
+        "{e}"
+    );
+    FullRuntime::from_model(&model).unwrap().step().unwrap();
+}
+
+/// A step says how far its solve got and which steps cost more: the reduced model's first
+/// step builds its preconditioner, later ones reuse it; no step of a gentle fall falls back to
+/// Newton; full space has neither.
+#[test]
+fn a_step_says_how_far_it_solved_and_what_made_it_costly() {
+    let (model, mut full) = simulators(-9.81);
+    let mut sim = model.simulator().unwrap();
+    let stats: Vec<_> = (0..5).map(|_| sim.step().unwrap()).collect();
+    assert!(stats[0].preconditioner_rebuilt, "{:?}", stats[0]);
+    assert!(!stats[1].preconditioner_rebuilt, "{:?}", stats[1]);
+    for s in &stats {
+        assert!(!s.newton_fallback, "{s:?}");
+        assert!(
+            s.relative_gradient <= model.solver.tolerance && s.iterations > 0,
+            "{s:?}"
+        );
+    }
+    let s = full.step().unwrap();
+    assert!(!s.preconditioner_rebuilt && !s.newton_fallback, "{s:?}");
+    assert!(s.relative_gradient.is_finite(), "{s:?}");
+}
+
+/// Letting go moves nothing until the next step: the dent a spring makes outside the basis is
+/// part of the state the last step computed (the default bar's patch jumped 5 cm back at
+/// `release` before); the step after it moves the body, without the dent.
+#[test]
+fn releasing_a_handle_moves_nothing_before_the_next_step() {
+    let (model, _) = simulators(-9.81);
+    let mut sim = model.simulator().unwrap();
+    sim.set_gravity(false);
+    let tip = tip(sim.simulator().model());
+    let start = centroid(&mut sim, &tip);
+    let h = sim.grab(&tip, 4000.0).unwrap();
+    drag(&mut sim, &[(h, start, start + Vec3::new(0.0, 0.1, 0.0))]);
+    let mut held = vec![0.0; 3 * sim.surface().vertices().len()];
+    sim.surface_positions_into(&mut held).unwrap();
+    let mut all = vec![0.0; 3 * sim.rest_positions().len()];
+    sim.positions_into(&mut all).unwrap();
+    sim.release(h).unwrap();
+    let mut after = held.clone();
+    sim.surface_positions_into(&mut after).unwrap();
+    assert_eq!(after, held);
+    let mut all_after = all.clone();
+    sim.positions_into(&mut all_after).unwrap();
+    assert_eq!(all_after, all);
+    sim.step().unwrap();
+    sim.surface_positions_into(&mut after).unwrap();
+    assert_ne!(after, held);
 }

@@ -132,6 +132,15 @@ class StepStats:
     @property
     def seconds(self) -> float:
         """Wall time of the step inside the library."""
+    @property
+    def relative_gradient(self) -> float:
+        """The solve's gradient against the step's forces when it stopped."""
+    @property
+    def preconditioner_rebuilt(self) -> bool:
+        """A reduced model's preconditioner was rebuilt at the step's start (a costly step)."""
+    @property
+    def newton_fallback(self) -> bool:
+        """A reduced model's L-BFGS crawled and the step was solved again with reduced Newton."""
 
 @final
 class RunStats:
@@ -170,7 +179,7 @@ class Simulator:
         keyframes: Union[Sequence[Sequence[float]], npt.NDArray[np.floating]],
         stiffness: Optional[float] = None,
         start: float = 0.0,
-        end: float = ...,
+        end: Optional[float] = None,
     ) -> Handle:
         """A spring ("spring", toward the rest centroid plus the keyframed offset) or a point
         load ("point", the keyframed total force) on mesh vertices, as a scene's [[force]].
@@ -181,6 +190,11 @@ class Simulator:
     def set_gravity(self, enabled: bool) -> None: ...
     @property
     def gravity(self) -> bool: ...
+    def set_gravity_acceleration(self, g: _Point) -> None:
+        """Sets gravity's acceleration (m/s²), e.g. to tilt the world; it acts while gravity
+        is on."""
+    @property
+    def gravity_acceleration(self) -> Tuple[float, float, float]: ...
     def reset(self) -> None:
         """Back to rest at time 0; handles and gravity stay."""
     def prepare_grab(self) -> None:

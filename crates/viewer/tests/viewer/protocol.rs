@@ -416,6 +416,12 @@ impl Interactive for Flaky {
     fn gravity(&self) -> bool {
         self.inner.gravity()
     }
+    fn set_gravity_acceleration(&mut self, g: [f64; 3]) -> Result<(), RuntimeError> {
+        self.inner.set_gravity_acceleration(g)
+    }
+    fn gravity_acceleration(&self) -> [f64; 3] {
+        self.inner.gravity_acceleration()
+    }
     fn reset(&mut self) {
         self.inner.reset();
     }
