@@ -51,7 +51,7 @@ impl ElementSet<'_> {
 }
 
 /// Reusable per-element scratch, so repeated assemblies do not allocate.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct AssemblyBuffers {
     energy: Vec<f64>,
     grad: Vec<LocalVector>,

@@ -19,7 +19,7 @@ use crate::mass::VertexCsr;
 pub const NO_SLOT: u32 = u32::MAX;
 
 /// Free-DOF Hessian pattern plus the slot of every element entry in the values array.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct HessianPattern {
     pub symbolic: SymbolicSparseColMat<usize>,
     /// For each element, where its local entries go in the values array.

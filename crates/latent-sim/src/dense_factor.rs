@@ -24,6 +24,18 @@ pub(crate) struct DenseFactor {
     scratch: Option<MemBuffer>,
 }
 
+/// The factor, not its scratch (the next factorisation allocates it again): a copy of a
+/// simulator solves as the original does.
+impl Clone for DenseFactor {
+    fn clone(&self) -> Self {
+        Self {
+            n: self.n,
+            l: self.l.clone(),
+            scratch: None,
+        }
+    }
+}
+
 impl std::fmt::Debug for DenseFactor {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("DenseFactor")

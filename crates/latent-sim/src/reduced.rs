@@ -206,7 +206,7 @@ impl<M: Material> WithSimd for BasisPass<'_, M> {
 }
 
 /// Scratch of the partial decode and projection, sized by [`ReducedSpace::buffers`].
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct SpaceBuffers {
     /// Packed touched values (decoded displacement, then gradients), 3 per touched vertex.
     packed: Vec<f64>,

@@ -21,7 +21,7 @@ use crate::errors::{self, Class};
 use crate::model::Model;
 
 /// Either runtime.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 #[allow(clippy::large_enum_variant)] // one per simulator
 enum Runtime {
     Reduced(ReducedRuntime),
@@ -450,6 +450,38 @@ impl Simulator {
             surface_vertices: surface.vertices().to_vec(),
             surface_triangles: surface.triangles().to_vec(),
         })
+    }
+
+    /// A copy that steps exactly as this simulator would from here (its solver's history and
+    /// handles included): keep one to roll back to (``sim = saved.copy()``) or to try a move
+    /// ahead. The handles made before the copy act on both; one made on either after it is
+    /// unknown to the other. ``copy.copy`` and ``copy.deepcopy`` make the same.
+    fn copy(&self, py: Python<'_>) -> PyResult<Self> {
+        let state = self.with(py, |s| State {
+            runtime: s.runtime.clone(),
+            timed_steps: s.timed_steps,
+            seconds: s.seconds,
+            iterations: s.iterations,
+            last: s.last,
+        })?;
+        Ok(Self {
+            state: Mutex::new(state),
+            waiting: AtomicUsize::new(0),
+            id: self.id,
+            model: self.model.clone_ref(py),
+            full_space: self.full_space,
+            rest: self.rest.clone(),
+            surface_vertices: self.surface_vertices.clone(),
+            surface_triangles: self.surface_triangles.clone(),
+        })
+    }
+
+    fn __copy__(&self, py: Python<'_>) -> PyResult<Self> {
+        self.copy(py)
+    }
+
+    fn __deepcopy__(&self, py: Python<'_>, _memo: &Bound<'_, PyAny>) -> PyResult<Self> {
+        self.copy(py)
     }
 
     /// Advances one time step, without the GIL.

@@ -267,3 +267,28 @@ def test_add_force_refuses_what_cannot_work(
     v = tip(sim)
     with pytest.raises(ld.InvalidArgumentError, match=needle):
         sim.add_force(kind, v, keyframes, stiffness=stiffness, start=span[0], end=span[1])
+
+
+def test_a_copy_steps_as_the_original_and_rolls_back(sim: ld.Simulator) -> None:
+    import copy
+
+    v = tip(sim)
+    h = sim.grab(v, 2000.0)
+    start = sim.rest_positions[v].mean(axis=0)
+
+    def drag(s: ld.Simulator, n: int) -> np.ndarray:
+        for i in range(n):
+            s.move_handle(h, start + [0.0, 0.0, 0.002 * i])
+            s.step()
+        return s.surface_positions()
+
+    drag(sim, 5)
+    saved = sim.copy()
+    ahead = drag(sim, 10)
+    for again in (saved.copy(), copy.copy(saved), copy.deepcopy(saved)):
+        np.testing.assert_array_equal(drag(again, 10), ahead)
+        assert again.steps == sim.steps
+    late = saved.grab(v, 100.0)
+    with pytest.raises(ld.HandleError, match="made on a copy"):
+        sim.release(late)
+    sim.release(h)

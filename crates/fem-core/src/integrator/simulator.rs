@@ -48,7 +48,7 @@ pub struct State {
 }
 
 /// Full-space implicit Euler time stepper.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Simulator {
     pub model: FullSpaceModel,
     pub time: TimeConfig,
@@ -73,7 +73,7 @@ pub const PRECOND_MAX_AGE: usize = 16;
 const REFACTOR_COST_ITERATIONS: usize = 10;
 
 /// L-BFGS with the factor that preconditions it, and how well that factor still serves.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct LbfgsParts {
     lbfgs: Lbfgs,
     pre: FactoredPreconditioner,

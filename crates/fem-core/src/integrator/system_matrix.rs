@@ -10,6 +10,7 @@ use crate::sparse_cholesky::SparseCholesky;
 use crate::{FemError, Mat3, Vec3};
 
 /// Pattern, symbolic factorisation and value buffers of the free-DOF Hessian, built once.
+#[derive(Clone)]
 pub(crate) struct NewtonParts {
     pub(crate) pattern: HessianPattern,
     /// The factor Newton directions solve with (and that preconditioners are swapped out of).
@@ -133,7 +134,7 @@ impl NewtonParts {
 /// elastic energy turns its Hessian exactly so when the state turns by R; M/h² (lumped, or
 /// consistent as M_v ⊗ I₃) and the springs' k·I per vertex are unchanged by one turn applied at
 /// every vertex.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct FactoredPreconditioner {
     pub(super) chol: SparseCholesky,
     pub(super) rotation: Option<Mat3>,
@@ -169,7 +170,7 @@ const MIN_FOLLOWED_TURN: f64 = 1e-2;
 /// factorisations of its preconditioner; that turn, applied to the factor, keeps it near the
 /// current Hessian. The fit is a closed form of the two states alone, so a trajectory replays
 /// bit for bit after a reset.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub(crate) struct BodyRotation {
     rest: Vec<Vec3>,
     mass: Vec<f64>,

@@ -12,7 +12,10 @@ use crate::model::ReducedModel;
 
 /// fem-core's full-space simulator with the [`Interactive`] API: the reference a program can
 /// switch to on the same mesh.
-#[derive(Debug)]
+///
+/// A clone steps exactly as the original would from where it was made (as
+/// [`crate::ReducedRuntime`]'s), its sparse factors copied.
+#[derive(Debug, Clone)]
 pub struct FullRuntime {
     sim: Simulator,
     surface: Surface,

@@ -37,10 +37,13 @@ struct Entry {
 }
 
 /// The handles of one simulator.
-#[derive(Debug)]
+/// A copy (a clone of its simulator) keeps the owner, so that the handles made before the copy
+/// act on both, and shares the count, so that a handle made on one after the copy is unknown to
+/// the other instead of naming another force there.
+#[derive(Debug, Clone)]
 pub(crate) struct Handles {
     owner: u64,
-    next: u64,
+    next: std::sync::Arc<std::sync::atomic::AtomicU64>,
     entries: Vec<Entry>,
 }
 
@@ -48,7 +51,7 @@ impl Default for Handles {
     fn default() -> Self {
         Self {
             owner: NEXT_OWNER.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
-            next: 0,
+            next: Default::default(),
             entries: Vec::new(),
         }
     }
@@ -58,9 +61,8 @@ impl Handles {
     fn insert(&mut self, force: usize, base: Option<Vec3>) -> Handle {
         let handle = Handle {
             owner: self.owner,
-            id: self.next,
+            id: self.next.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         };
-        self.next += 1;
         self.entries.push(Entry {
             handle,
             force,

@@ -82,8 +82,9 @@ pub enum RuntimeError {
     Reduced(#[from] ReducedError),
     #[error(transparent)]
     Fem(#[from] FemError),
-    /// A handle this simulator does not have any more (released already).
-    #[error("no handle {0} in this simulator (released already?)")]
+    /// A handle this simulator does not have any more (released already), or made on a copy
+    /// of it after the copy.
+    #[error("no handle {0} in this simulator (released already, or made on a copy of it?)")]
     UnknownHandle(Handle),
     /// Another simulator's handle.
     #[error("handle {0} belongs to another simulator, not to this one")]

@@ -16,7 +16,7 @@ use crate::{
 };
 
 /// The reduced simulator of a model, with its subspace's type.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 #[allow(clippy::large_enum_variant)]
 pub enum AnyReducedSimulator {
     /// PCA: q = z.
@@ -57,7 +57,13 @@ impl AnyReducedSimulator {
 
 /// A trained model stepping: the [`Interactive`] API over the reduced simulator, with exactly
 /// the solver settings the model holds (those `cargo xtask run` measures).
-#[derive(Debug)]
+///
+/// A clone steps exactly as the original would from where it was made (its solver's history,
+/// factors and handles included): keep one to roll back to (`sim = saved.clone()`), or to try
+/// a move ahead. The handles made before the clone act on both; one made on either after it is
+/// unknown to the other. A clone costs about the model's size in memory (its mesh, elements
+/// and basis rows in use); the factorisation at rest that springs pull through is shared.
+#[derive(Debug, Clone)]
 pub struct ReducedRuntime {
     sim: AnyReducedSimulator,
     surface: Surface,

@@ -92,7 +92,7 @@ struct Timers {
 }
 
 /// Implicit Euler in a subspace.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct ReducedSimulator<S: Subspace> {
     pub model: FullSpaceModel,
     pub space: ReducedSpace,
@@ -124,7 +124,7 @@ pub struct ReducedSimulator<S: Subspace> {
 }
 
 /// Reusable buffers of one step.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Work {
     u: Vec<f64>,
     grad_full: Vec<f64>,

@@ -38,7 +38,7 @@ use crate::reduced::{ReducedSpace, axpy};
 
 /// Whether springs are softened, and the factor of the full step's operator at rest that
 /// measures the patch compliance (built when the first spring needs it).
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub(super) struct SpringCompliance {
     pub(super) on: bool,
     probe: Option<Arc<StiffnessProbe>>,
@@ -88,7 +88,7 @@ impl ActiveDent<'_> {
 /// free DOFs (free DOFs × 3, column-major) and the basis's own response Â⁻¹UᵀGᵀ (k × 3); and
 /// the pull the spring exerted in the last step's state (None before its first step or when
 /// it was inactive).
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct Dent {
     full: Vec<f64>,
     basis: Vec<f64>,
@@ -261,7 +261,7 @@ impl<S: Subspace> ReducedSimulator<S> {
 
 /// Σ_f k_f/n_f Σ_v U_vᵀU_v over the springs active at the time it was updated for (k×k): the
 /// springs' constant Hessian in q, rebuilt only when a force switches on or off.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub(super) struct SpringTerm {
     pub(super) active: Vec<bool>,
     pub(super) valid: bool,
