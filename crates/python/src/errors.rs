@@ -149,6 +149,7 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         RuntimeError::UnknownHandle(_)
         | RuntimeError::ForeignHandle(_)
         | RuntimeError::NotASpring(_)
+        | RuntimeError::NotAPointLoad(_)
         | RuntimeError::NothingInReach { .. } => Class::Handle,
         RuntimeError::NoSuchVertex { .. }
         | RuntimeError::NoVertices

@@ -638,6 +638,57 @@ impl Simulator {
         .map_err(errors::runtime)
     }
 
+    /// A spring handle's target now (3 floats): where ``move_handle`` put it, or where a spring
+    /// added with ``add_force`` pulls at this time.
+    ///
+    /// Raises ``HandleError`` for a handle released already, of another simulator, or a point
+    /// load.
+    fn handle_target(&self, py: Python<'_>, handle: &Handle) -> PyResult<(f64, f64, f64)> {
+        let handle = self.own(handle)?;
+        let [x, y, z] = self
+            .with(py, |s| each!(&mut s.runtime, r => r.handle_target(handle)))?
+            .map_err(errors::runtime)?;
+        Ok((x, y, z))
+    }
+
+    /// Sets a point load's total force (N, 3 numbers) from now on: a force that changes every
+    /// frame, at the cost of moving a handle.
+    ///
+    /// Raises ``HandleError`` for a handle released already, of another simulator, or a spring,
+    /// and ``InvalidArgumentError`` for a force that is not 3 finite numbers.
+    fn set_load(&self, py: Python<'_>, handle: &Handle, force: &Bound<'_, PyAny>) -> PyResult<()> {
+        let force = point3("force", force)?;
+        let handle = self.own(handle)?;
+        self.with(
+            py,
+            |s| each!(&mut s.runtime, r => r.set_load(handle, force)),
+        )?
+        .map_err(errors::runtime)
+    }
+
+    /// The handles held now (grabs and forces added as data), in the order they were made.
+    fn handles(&self, py: Python<'_>) -> PyResult<Vec<Handle>> {
+        let held = self.with(py, |s| each!(&mut s.runtime, r => r.handles()))?;
+        Ok(held.into_iter().map(|h| self.wrap(h)).collect())
+    }
+
+    /// Velocities (m/s) of the surface vertices, an m×3 float64 array (into ``out`` when
+    /// given): (x_n − x_{n−1})/h; a reduced model's are its subspace's, without the dents its
+    /// springs make outside it.
+    #[pyo3(signature = (out = None))]
+    fn surface_velocities<'py>(
+        &self,
+        py: Python<'py>,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.read_into(
+            py,
+            self.surface_vertices.len(),
+            out,
+            |rt, buf| each!(rt, r => r.surface_velocities_into(buf)),
+        )
+    }
+
     /// Lets go of a handle.
     ///
     /// Raises ``HandleError`` for a handle released already or of another simulator.

@@ -292,3 +292,26 @@ def test_a_copy_steps_as_the_original_and_rolls_back(sim: ld.Simulator) -> None:
     with pytest.raises(ld.HandleError, match="made on a copy"):
         sim.release(late)
     sim.release(h)
+
+
+def test_targets_loads_handles_and_velocities(sim: ld.Simulator) -> None:
+    v = [tip(sim)]
+    before = sim.surface_positions()
+    sim.step()
+    h = sim.model.time_step
+    velocity = sim.surface_velocities()
+    assert velocity.shape == before.shape and velocity.dtype == np.float64
+    np.testing.assert_allclose(velocity, (sim.surface_positions() - before) / h, atol=1e-9)
+    spring = sim.grab(v, 1000.0)
+    sim.move_handle(spring, (1.0, 0.2, 0.1))
+    np.testing.assert_allclose(sim.handle_target(spring), (1.0, 0.2, 0.1), atol=1e-12)
+    load = sim.add_force("point", v, [(0.0, 0.0, 0.0, 0.0)])
+    assert sim.handles() == [spring, load]
+    sim.set_load(load, (0.0, 0.0, 5.0))
+    sim.step()
+    with pytest.raises(ld.HandleError, match="only a point load"):
+        sim.set_load(spring, (0.0, 0.0, 1.0))
+    with pytest.raises(ld.HandleError, match="only a spring"):
+        sim.handle_target(load)
+    sim.release(spring)
+    assert sim.handles() == [load]

@@ -143,6 +143,14 @@ impl Backend for FullRuntime {
     fn handles(&mut self) -> &mut Handles {
         &mut self.handles
     }
+
+    fn force(&self, index: usize) -> &ExternalForce {
+        &self.sim.model.forces[index]
+    }
+
+    fn now(&self) -> f64 {
+        self.sim.state.time
+    }
 }
 
 impl Interactive for FullRuntime {
@@ -196,6 +204,18 @@ impl Interactive for FullRuntime {
         handles::release(self, handle)
     }
 
+    fn handle_target(&mut self, handle: Handle) -> Result<[f64; 3], RuntimeError> {
+        handles::target(self, handle)
+    }
+
+    fn set_load(&mut self, handle: Handle, force: [f64; 3]) -> Result<(), RuntimeError> {
+        handles::set_load(self, handle, force)
+    }
+
+    fn handles(&mut self) -> Vec<Handle> {
+        handles::list(self)
+    }
+
     fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError> {
         handles::add_force(self, force)
     }
@@ -241,6 +261,15 @@ impl Interactive for FullRuntime {
 
     fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError> {
         self.surface_positions_into(out)
+    }
+
+    fn surface_velocities_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
+        buffer_length("surface", self.surface_u.len(), out.len())?;
+        let v = &self.sim.state.v;
+        for (o, &vertex) in out.chunks_exact_mut(3).zip(self.surface.vertices()) {
+            o.copy_from_slice(&v[3 * vertex..3 * vertex + 3]);
+        }
+        Ok(())
     }
 
     fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {

@@ -124,6 +124,9 @@ pub(crate) trait Backend {
     fn remove_force(&mut self, index: usize) -> Result<(), RuntimeError>;
     fn set_keyframes(&mut self, index: usize, keyframes: &[[f64; 4]]) -> Result<(), RuntimeError>;
     fn handles(&mut self) -> &mut Handles;
+    /// Force `index` (which exists) and the simulated time now.
+    fn force(&self, index: usize) -> &ExternalForce;
+    fn now(&self) -> f64;
 }
 
 /// The stiffest spring, against the body's own stiffness at its size (E times its bounding-box
@@ -253,6 +256,32 @@ pub(crate) fn move_handle<B: Backend>(
     let base = entry.base.ok_or(RuntimeError::NotASpring(handle))?;
     let d = Vec3::from(target) + base;
     b.set_keyframes(entry.force, &[[0.0, d.x, d.y, d.z]])
+}
+
+/// A spring handle's target now (its keyframed offset at the current time, less its base).
+pub(crate) fn target<B: Backend>(b: &mut B, handle: Handle) -> Result<[f64; 3], RuntimeError> {
+    let entry = b.handles().find(handle)?;
+    let base = entry.base.ok_or(RuntimeError::NotASpring(handle))?;
+    Ok((b.force(entry.force).value(b.now()) - base).into())
+}
+
+/// Sets a point load's total force (N) from now on.
+pub(crate) fn set_load<B: Backend>(
+    b: &mut B,
+    handle: Handle,
+    force: [f64; 3],
+) -> Result<(), RuntimeError> {
+    finite("load", force)?;
+    let entry = b.handles().find(handle)?;
+    if entry.base.is_some() {
+        return Err(RuntimeError::NotAPointLoad(handle));
+    }
+    b.set_keyframes(entry.force, &[[0.0, force[0], force[1], force[2]]])
+}
+
+/// The handles in the order they were made.
+pub(crate) fn list<B: Backend>(b: &mut B) -> Vec<Handle> {
+    b.handles().entries.iter().map(|e| e.handle).collect()
 }
 
 pub(crate) fn release<B: Backend>(b: &mut B, handle: Handle) -> Result<(), RuntimeError> {

@@ -139,6 +139,12 @@ pub enum RuntimeError {
     /// A point load has no target to move.
     #[error("handle {0} is a point load; only a spring has a target to move")]
     NotASpring(Handle),
+    /// A spring has no load to set.
+    #[error(
+        "handle {0} is a spring; only a point load has a force to set (move a spring's target \
+         with move_handle)"
+    )]
+    NotAPointLoad(Handle),
     /// A caller's buffer of the wrong length.
     #[error("the {what} buffer has {got} values, expected {expected} (3 per vertex)")]
     BufferLength {
@@ -192,6 +198,22 @@ pub trait Interactive {
     /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`], [`RuntimeError::NotASpring`],
     /// [`RuntimeError::NotFinite`].
     fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError>;
+    /// A spring handle's target now: where [`Interactive::move_handle`] put it, or where a
+    /// spring added with [`Interactive::add_force`] pulls at this time.
+    ///
+    /// # Errors
+    /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`], [`RuntimeError::NotASpring`].
+    fn handle_target(&mut self, handle: Handle) -> Result<[f64; 3], RuntimeError>;
+    /// Sets a point load's total force (N), spread over its vertices, from now on (its
+    /// keyframes become that one value): a force a program changes every frame, at the cost of
+    /// moving a handle (the preconditioner is kept).
+    ///
+    /// # Errors
+    /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`],
+    /// [`RuntimeError::NotAPointLoad`], [`RuntimeError::NotFinite`].
+    fn set_load(&mut self, handle: Handle, force: [f64; 3]) -> Result<(), RuntimeError>;
+    /// The handles (and forces added as data) held now, in the order they were made.
+    fn handles(&mut self) -> Vec<Handle>;
     /// Lets go of a handle (or removes a force added with [`Interactive::add_force`]).
     ///
     /// # Errors
@@ -245,6 +267,13 @@ pub trait Interactive {
     fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError>
     where
         Self: Sized;
+    /// Velocities (m/s) of the surface vertices (3 per vertex, in [`Surface::vertices`]'s
+    /// order) into `out`: (u_n − u_{n−1})/h, implicit Euler's; a reduced model's are the
+    /// subspace's, without the dents its springs make outside it.
+    ///
+    /// # Errors
+    /// [`RuntimeError::BufferLength`].
+    fn surface_velocities_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError>;
     /// [`Interactive::surface_positions_into`] an `f32` buffer, for a trait object
     /// (`Box<dyn Interactive>`, which cannot call a generic method): simulators of different
     /// types side by side, as the viewer holds them.

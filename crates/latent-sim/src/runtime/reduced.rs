@@ -281,6 +281,14 @@ impl Backend for ReducedRuntime {
     fn handles(&mut self) -> &mut Handles {
         &mut self.handles
     }
+
+    fn force(&self, index: usize) -> &ExternalForce {
+        &self.sim.model().forces[index]
+    }
+
+    fn now(&self) -> f64 {
+        self.sim.state().time
+    }
 }
 
 impl Interactive for ReducedRuntime {
@@ -334,6 +342,18 @@ impl Interactive for ReducedRuntime {
         handles::release(self, handle)
     }
 
+    fn handle_target(&mut self, handle: Handle) -> Result<[f64; 3], RuntimeError> {
+        handles::target(self, handle)
+    }
+
+    fn set_load(&mut self, handle: Handle, force: [f64; 3]) -> Result<(), RuntimeError> {
+        handles::set_load(self, handle, force)
+    }
+
+    fn handles(&mut self) -> Vec<Handle> {
+        handles::list(self)
+    }
+
     fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError> {
         handles::add_force(self, force)
     }
@@ -379,6 +399,12 @@ impl Interactive for ReducedRuntime {
 
     fn surface_positions_f32(&mut self, out: &mut [f32]) -> Result<(), RuntimeError> {
         self.surface_positions_into(out)
+    }
+
+    fn surface_velocities_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
+        buffer_length("surface", self.surface_u.len(), out.len())?;
+        self.surface_rows.apply(&self.sim.state().qdot, out);
+        Ok(())
     }
 
     fn surface_positions_into<T: Real>(&mut self, out: &mut [T]) -> Result<(), RuntimeError> {

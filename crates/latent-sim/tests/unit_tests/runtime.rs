@@ -589,3 +589,80 @@ fn a_clone_steps_as_the_original_and_rolls_back() {
     let mut full = full;
     assert_eq!(fall(&mut full_copy), fall(&mut full));
 }
+
+/// What a program reads back and sets per frame: a spring's target, the handles held, a point
+/// load's force (the same steps as the load added with that value), the surface's velocities
+/// ((x_n − x_{n−1})/h without springs), in full space too.
+#[test]
+fn targets_loads_handles_and_velocities() {
+    let (model, full) = simulators(-9.81);
+    let sim = model.simulator().unwrap();
+    check_handles_and_velocities(sim, model.time_step, "reduced");
+    check_handles_and_velocities(full, model.time_step, "full");
+}
+
+fn check_handles_and_velocities<S: Interactive + Clone>(mut sim: S, h: f64, what: &str) {
+    let n = sim.surface().vertices().len();
+    let (mut before, mut now, mut v) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 3 * n]);
+    for _ in 0..3 {
+        sim.surface_positions_into(&mut before).unwrap();
+        sim.step().unwrap();
+    }
+    sim.surface_positions_into(&mut now).unwrap();
+    sim.surface_velocities_into(&mut v).unwrap();
+    let scale = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(scale > 0.0, "{what}: not moving");
+    for ((x1, x0), v) in now.iter().zip(&before).zip(&v) {
+        assert!(((x1 - x0) / h - v).abs() <= 1e-9 * scale, "{what}: {v}");
+    }
+    assert!(matches!(
+        sim.surface_velocities_into(&mut [0.0; 2]),
+        Err(RuntimeError::BufferLength { .. })
+    ));
+    let tip = tip_of(&sim);
+    let spring = sim.grab(&tip, 400.0).unwrap();
+    sim.move_handle(spring, [1.0, 0.3, 0.1]).unwrap();
+    let target = sim.handle_target(spring).unwrap();
+    assert!(
+        (Vec3::from(target) - Vec3::new(1.0, 0.3, 0.1)).norm() < 1e-12,
+        "{what}: {target:?}"
+    );
+    let mut load = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], 0.5);
+    (load.kind, load.stiffness, load.start, load.end) = (
+        latent_sim::ForceKind::Point,
+        0.0,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+    );
+    load.keyframes = vec![[0.0, 0.0, 0.0, 0.0]];
+    let mut same = sim.clone();
+    let point = sim.add_force(load.clone()).unwrap();
+    assert_eq!(sim.handles(), vec![spring, point]);
+    sim.set_load(point, [0.0, 0.0, 3.0]).unwrap();
+    load.keyframes = vec![[0.0, 0.0, 0.0, 3.0]];
+    same.add_force(load).unwrap();
+    for _ in 0..3 {
+        sim.step().unwrap();
+        same.step().unwrap();
+    }
+    sim.surface_positions_into(&mut now).unwrap();
+    same.surface_positions_into(&mut before).unwrap();
+    assert_eq!(now, before, "{what}");
+    assert!(matches!(
+        sim.set_load(spring, [0.0; 3]),
+        Err(RuntimeError::NotAPointLoad(_))
+    ));
+    assert!(matches!(
+        sim.handle_target(point),
+        Err(RuntimeError::NotASpring(_))
+    ));
+    sim.release(spring).unwrap();
+    assert_eq!(sim.handles(), vec![point]);
+}
+
+/// The vertices at the bar's free end, from the rest positions.
+fn tip_of<S: Interactive>(sim: &S) -> Vec<usize> {
+    (0..sim.rest_positions().len())
+        .filter(|&v| sim.rest_positions()[v].x > 0.999)
+        .collect()
+}

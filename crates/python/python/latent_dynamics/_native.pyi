@@ -187,6 +187,16 @@ class Simulator:
         from the call."""
     def move_handle(self, handle: Handle, target: _Point) -> None: ...
     def release(self, handle: Handle) -> None: ...
+    def handle_target(self, handle: Handle) -> Tuple[float, float, float]:
+        """A spring handle's target now."""
+    def set_load(self, handle: Handle, force: _Point) -> None:
+        """Sets a point load's total force (N) from now on."""
+    def handles(self) -> list[Handle]:
+        """The handles held now, in the order they were made."""
+    def surface_velocities(
+        self, out: Optional[npt.NDArray[np.float64]] = None
+    ) -> npt.NDArray[np.float64]:
+        """Velocities (m/s) of the surface vertices, m×3 float64."""
     def copy(self) -> Simulator:
         """A copy that steps exactly as this one would from here, handles included: keep one
         to roll back to. A handle made on either after the copy is unknown to the other."""

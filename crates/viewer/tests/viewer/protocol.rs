@@ -419,6 +419,18 @@ impl Interactive for Flaky {
     fn set_gravity_acceleration(&mut self, g: [f64; 3]) -> Result<(), RuntimeError> {
         self.inner.set_gravity_acceleration(g)
     }
+    fn handle_target(&mut self, handle: Handle) -> Result<[f64; 3], RuntimeError> {
+        self.inner.handle_target(handle)
+    }
+    fn set_load(&mut self, handle: Handle, force: [f64; 3]) -> Result<(), RuntimeError> {
+        self.inner.set_load(handle, force)
+    }
+    fn handles(&mut self) -> Vec<Handle> {
+        self.inner.handles()
+    }
+    fn surface_velocities_into(&mut self, out: &mut [f64]) -> Result<(), RuntimeError> {
+        self.inner.surface_velocities_into(out)
+    }
     fn gravity_acceleration(&self) -> [f64; 3] {
         self.inner.gravity_acceleration()
     }
