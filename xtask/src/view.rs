@@ -235,8 +235,8 @@ fn run_accuracy(report: &std::path::Path, scene: &pipeline::scene::Scene) -> Str
         .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
         .and_then(|v| match v {
             serde_json::Value::Array(rows) => Some(rows),
-            mut v => match v["methods"].take() {
-                serde_json::Value::Array(rows) => Some(rows),
+            mut v => match v.get_mut("methods").map(serde_json::Value::take) {
+                Some(serde_json::Value::Array(rows)) => Some(rows),
                 _ => None,
             },
         });
@@ -308,8 +308,11 @@ mod tests {
                 "{some}"
             );
         }
-        std::fs::write(&report, "not json").unwrap();
-        assert_eq!(run_accuracy(&report, &scene), none);
+        // Not a report: said as no run, never a panic.
+        for text in ["not json", "3", r#"{"methods":4}"#, "null"] {
+            std::fs::write(&report, text).unwrap();
+            assert_eq!(run_accuracy(&report, &scene), none, "{text}");
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 

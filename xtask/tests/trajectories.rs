@@ -74,6 +74,23 @@ fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
     let table = std::fs::read_to_string(out.join("trajectories.md")).unwrap();
     assert!(table.contains("trajectory 2"), "{table}");
     let third = pca_errors(&out.join("trajectory-2").join("report.json"));
+    // Each stage once, this trajectory's reference among them.
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("trajectory-2").join("report.json")).unwrap(),
+    )
+    .unwrap();
+    let stages: Vec<&str> = report["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["stage"].as_str().unwrap())
+        .collect();
+    let mut unique = stages.clone();
+    unique.sort_unstable();
+    unique.dedup();
+    assert_eq!(unique.len(), stages.len(), "{stages:?}");
+    assert!(stages.contains(&"reference"), "{stages:?}");
+    assert_eq!(report["trajectory"], 2);
 
     // The plain scene (one test schedule) runs trajectory 2 by name, to the same errors.
     let (ok, text) = run(&dir, TINY, &["--trajectory", "2"]);

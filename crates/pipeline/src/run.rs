@@ -768,16 +768,7 @@ pub fn run(
         trajectory: opts.trajectory,
         frames: pipeline.scene.test().frames_per_schedule,
         time_step: pipeline.scene.time.step,
-        stages: pipeline
-            .outcomes
-            .iter()
-            .map(|o| StageLine {
-                stage: o.stage.to_string(),
-                cached: o.cached,
-                seconds: o.seconds,
-                summary: o.summary.clone(),
-            })
-            .collect(),
+        stages: stage_lines(&pipeline.outcomes),
         untrusted: assessment.untrusted,
         caveats: assessment.caveats,
         methods: &rows,
@@ -825,6 +816,25 @@ pub fn run(
         frame_error_plot(&plotted, &rows, h).as_bytes(),
     )?;
     Ok(rows)
+}
+
+/// Each stage's last outcome, in the order the stages first came: a pipeline that ran several
+/// test trajectories holds one `reference` per trajectory, of which this run's is the last.
+fn stage_lines(outcomes: &[crate::pipeline::StageOutcome]) -> Vec<StageLine> {
+    let mut lines: Vec<StageLine> = Vec::new();
+    for o in outcomes {
+        let line = StageLine {
+            stage: o.stage.to_string(),
+            cached: o.cached,
+            seconds: o.seconds,
+            summary: o.summary.clone(),
+        };
+        match lines.iter_mut().find(|l| l.stage == line.stage) {
+            Some(l) => *l = line,
+            None => lines.push(line),
+        }
+    }
+    lines
 }
 
 /// `report.md`, and the middle of what `run` prints: the table, where a reduced step's time

@@ -469,6 +469,21 @@ impl Scene {
                 // Vertices no tet uses are left out, as for the pins: a spring's stiffness goes
                 // to the body's vertices, and the runtime refuses the others.
                 Ok(mut f) => {
+                    // The runtime's limit, said before any stage runs.
+                    let body =
+                        latent_sim::body_stiffness(&mesh.vertices, self.material.youngs_modulus);
+                    let limit = latent_sim::MAX_SPRING_STIFFNESS * body;
+                    if f.kind == ForceKind::Spring && f.stiffness > limit {
+                        let e = latent_sim::RuntimeError::TooStiff {
+                            stiffness: f.stiffness,
+                            body,
+                            limit,
+                        };
+                        errors.push(FemError::InvalidConfig {
+                            field: format!("force[{i}].stiffness"),
+                            reason: e.to_string(),
+                        });
+                    }
                     let selected = f.vertices.len();
                     f.vertices.retain(|v| in_body(&v));
                     let stray = selected - f.vertices.len();

@@ -316,8 +316,9 @@ fn carried_by_weight(
 /// The warning on a test that the body's own weight carries far ([`carried_by_weight`]) when
 /// either the full simulation gives way on the way (elements inverted in
 /// [`GIVING_WAY_FRAMES`] of the frames, too little of the body for [`COLLAPSED_SHARE`]: the
-/// L-bracket) or at least one drifting method's restart makes most of its drift
-/// ([`AMPLIFIED_SHARE`]; AutoDef's dinosaur). The restart's own advice (a gentler pull) does
+/// L-bracket), or at least one drifting method's restart makes most of its drift
+/// ([`AMPLIFIED_SHARE`]; AutoDef's dinosaur), or it carries the body past [`BEYOND_SWING`]
+/// times its size (a coil pushed through its base). The restart's own advice (a gentler pull) does
 /// not reach the cause there, and is left out of it ([`restart_warning`]): it is the body's
 /// weight, not the drag. A fall that is meant and stays a solid (the built-in cantilever drops
 /// until it hangs) amplifies nothing and is not said.

@@ -298,6 +298,14 @@ fn pins_that_select_nothing_are_errors_reported_together() {
     let force = edit("center = [1.0, 0.1, 0.1]", "center = [5.0, 0.1, 0.1]");
     let err = build_error(&force, Path::new("."));
     assert_names(&err, &["force[0].select", "selects no vertex"]);
+    // A spring the runtime would refuse is refused before any stage runs.
+    let stiff = edit("stiffness = 200.0", "stiffness = 1.0e12");
+    let err = build_error(&stiff, Path::new("."));
+    assert_names(&err, &["force[0].stiffness", "give at most 1.039e11 N/m"]);
+    builds(
+        &edit("stiffness = 200.0", "stiffness = 1.0e11"),
+        Path::new("."),
+    );
 }
 
 #[test]

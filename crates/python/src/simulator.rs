@@ -517,7 +517,8 @@ impl Simulator {
     /// of total stiffness ``stiffness`` (N/m), its target at their current centroid.
     ///
     /// Raises ``InvalidArgumentError`` for no vertex, a vertex past the mesh, a stiffness that
-    /// is not positive, or (reduced) a vertex whose basis rows the model does not keep.
+    /// is not positive or more than 1e6 times the body's own at its size (E times its
+    /// bounding-box diagonal), or (reduced) a vertex whose basis rows the model does not keep.
     fn grab(
         &self,
         py: Python<'_>,
@@ -538,7 +539,8 @@ impl Simulator {
     /// spring of total stiffness ``stiffness`` (N/m), its target at ``point``.
     ///
     /// Raises ``HandleError`` when no surface vertex is in reach and ``InvalidArgumentError``
-    /// for a point that is not finite or a radius or stiffness that is not positive.
+    /// for a point that is not finite, a radius or stiffness that is not positive, or a
+    /// stiffness ``grab`` refuses.
     fn grab_near(
         &self,
         py: Python<'_>,
@@ -565,7 +567,7 @@ impl Simulator {
     /// spring's target.
     ///
     /// Raises ``InvalidArgumentError`` for an unknown kind, a spring without a positive
-    /// stiffness, a stiffness given to a point load, keyframes that are empty, not finite or
+    /// stiffness or with one ``grab`` refuses, a stiffness given to a point load, keyframes that are empty, not finite or
     /// out of order, ``end`` before ``start``, or a vertex as ``grab`` refuses it.
     #[pyo3(signature = (kind, vertices, keyframes, stiffness=None, start=0.0, end=None))]
     fn add_force(

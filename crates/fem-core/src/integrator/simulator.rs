@@ -13,6 +13,7 @@ use crate::assembly::{self, AssemblyBuffers, ElementSet};
 use crate::optim::{
     Lbfgs, LbfgsPreconditioner, PreconditionerUse, SolveParams, SolverConfig, SolverMethod, newton,
 };
+use crate::sparse_cholesky::SparseCholesky;
 use crate::with_material;
 
 /// The iteration cap of a step's retry with the other solver, in multiples of
@@ -36,6 +37,11 @@ pub struct StepReport {
     pub max_displacement: f64,
     /// Load-stepping sub-solves taken (quasi-static only; 0 when the direct solve converged).
     pub load_steps: usize,
+    /// The scene's solver could not finish a solve of this step and the other one went on
+    /// from where it stopped.
+    pub solver_switched: bool,
+    /// L-BFGS's preconditioner was assembled and factorised during this step.
+    pub preconditioner_factorised: bool,
 }
 
 /// Simulation state: displacement and velocity (full vectors) at time `time`.
@@ -47,8 +53,9 @@ pub struct State {
     pub v: Vec<f64>,
 }
 
-/// Full-space implicit Euler time stepper.
-#[derive(Debug, Clone)]
+/// Full-space implicit Euler time stepper. A clone steps exactly as the original would from
+/// where it was made; its factors are copies with their own record of which precisions failed.
+#[derive(Debug)]
 pub struct Simulator {
     pub model: FullSpaceModel,
     pub time: TimeConfig,
@@ -58,6 +65,8 @@ pub struct Simulator {
     newton: Option<NewtonParts>,
     lbfgs: Option<LbfgsParts>,
     lbfgs_factorizations: usize,
+    /// Whether a solve of the step under way went on with the other solver.
+    switched: bool,
     /// ü_n = (u̇_n − u̇_{n−1})/h (full) and the step n it belongs to: a start hint only.
     acceleration: Option<(usize, Vec<f64>)>,
 }
@@ -87,6 +96,38 @@ struct LbfgsParts {
     /// ([`FactoredPreconditioner`]'s rotation).
     made_at: Vec<f64>,
     turn: Option<BodyRotation>,
+}
+
+impl Clone for Simulator {
+    fn clone(&self) -> Self {
+        let mut newton = self.newton.clone();
+        let mut lbfgs = self.lbfgs.clone();
+        // The factors of one simulation share which precisions their matrices failed; a copy
+        // gets that record as it is now, its own from then on.
+        let mut factors: Vec<&mut SparseCholesky> = newton
+            .iter_mut()
+            .map(|n| &mut n.chol)
+            .chain(lbfgs.iter_mut().map(|l| &mut l.pre.chol))
+            .collect();
+        if let Some((first, rest)) = factors.split_first_mut() {
+            let flags = first.own_rejections();
+            for f in rest {
+                f.share_rejections(&flags);
+            }
+        }
+        Self {
+            model: self.model.clone(),
+            time: self.time.clone(),
+            solver: self.solver.clone(),
+            state: self.state.clone(),
+            buffers: self.buffers.clone(),
+            newton,
+            lbfgs,
+            lbfgs_factorizations: self.lbfgs_factorizations,
+            switched: self.switched,
+            acceleration: self.acceleration.clone(),
+        }
+    }
 }
 
 impl Simulator {
@@ -127,6 +168,7 @@ impl Simulator {
             newton: None,
             lbfgs: None,
             lbfgs_factorizations: 0,
+            switched: false,
             acceleration: None,
         })
     }
@@ -276,6 +318,7 @@ impl Simulator {
         // The retry gets RETRY_BUDGET times the iteration cap: a step that needs it is a rare
         // one (a body toppling, a patch dragged far), and failing it ends the whole trajectory.
         let e = first.expect_err("errors only reach here");
+        self.switched = true;
         let params = SolveParams {
             max_iterations: RETRY_BUDGET * params.max_iterations,
             ..params
@@ -446,6 +489,8 @@ impl Simulator {
     /// Advances one time step (or one quasi-static frame) and reports it.
     pub fn step(&mut self) -> Result<StepReport, FemError> {
         let start = Instant::now();
+        self.switched = false;
+        let factorizations = self.lbfgs_factorizations;
         let h = self.time.step;
         // Times from the step count, not by accumulation, so frame times stay exact multiples.
         let t = (self.state.step + 1) as f64 * h;
@@ -510,6 +555,8 @@ impl Simulator {
         report.iterations = stats.iterations;
         report.relative_gradient = stats.relative_gradient;
         report.load_steps = load_steps;
+        report.solver_switched = self.switched;
+        report.preconditioner_factorised = self.lbfgs_factorizations > factorizations;
         report.wall_seconds = start.elapsed().as_secs_f64();
         Ok(report)
     }

@@ -162,6 +162,25 @@ impl SparseCholesky {
         })
     }
 
+    /// Gives this factor rejection flags of its own, set as they are now, and returns them for
+    /// its siblings ([`Self::share_rejections`]): a copy of a simulation must not change how
+    /// the original's factors are stored.
+    pub fn own_rejections(&mut self) -> (Arc<AtomicBool>, Arc<AtomicBool>) {
+        let copy = |flag: &AtomicBool| Arc::new(AtomicBool::new(flag.load(Ordering::Relaxed)));
+        self.single_rejected = copy(&self.single_rejected);
+        self.half_rejected = copy(&self.half_rejected);
+        (
+            Arc::clone(&self.single_rejected),
+            Arc::clone(&self.half_rejected),
+        )
+    }
+
+    /// Shares `flags` ([`Self::own_rejections`]'s) with this factor.
+    pub fn share_rejections(&mut self, flags: &(Arc<AtomicBool>, Arc<AtomicBool>)) {
+        self.single_rejected = Arc::clone(&flags.0);
+        self.half_rejected = Arc::clone(&flags.1);
+    }
+
     /// An empty factor sharing this one's symbolic analysis.
     pub fn same_pattern(&self) -> Self {
         Self {
@@ -670,6 +689,30 @@ mod tests {
         let (_, mut fresh) = supernodal([16, 5, 4]);
         assert_ne!(
             fresh.factor_for_preconditioning(p.matrix(&good)).unwrap(),
+            FactorPrecision::Double
+        );
+    }
+
+    /// A copy's factors given flags of their own ([`SparseCholesky::own_rejections`]) keep
+    /// their rejections to themselves and their siblings: the original still tries f32.
+    #[test]
+    fn a_copy_with_its_own_rejections_leaves_the_original_alone() {
+        let (p, original) = supernodal([16, 5, 4]);
+        let (mut copy, mut copy_sibling) = (original.clone(), original.same_pattern());
+        let flags = copy.own_rejections();
+        copy_sibling.share_rejections(&flags);
+        assert_eq!(
+            copy.factor_for_preconditioning(p.matrix(&laplacian(&p, 1e-9)))
+                .unwrap(),
+            FactorPrecision::Double
+        );
+        let good = values(&p, 1.0);
+        assert_all_factor_as([copy_sibling], &p, &good, FactorPrecision::Double);
+        let mut original = original;
+        assert_ne!(
+            original
+                .factor_for_preconditioning(p.matrix(&good))
+                .unwrap(),
             FactorPrecision::Double
         );
     }

@@ -178,8 +178,8 @@ impl Interactive for FullRuntime {
             iterations: r.iterations,
             relative_gradient: r.relative_gradient,
             seconds: r.wall_seconds,
-            preconditioner_rebuilt: false,
-            newton_fallback: false,
+            preconditioner_rebuilt: r.preconditioner_factorised,
+            newton_fallback: r.solver_switched,
         })
     }
 

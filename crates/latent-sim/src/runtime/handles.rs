@@ -136,15 +136,20 @@ pub(crate) trait Backend {
 /// 1e300 the energy overflowed and every step failed.
 pub const MAX_SPRING_STIFFNESS: f64 = 1e6;
 
-/// `stiffness` is positive and at most [`MAX_SPRING_STIFFNESS`] times the body's own.
-fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeError> {
-    positive("stiffness", stiffness)?;
-    let rest = b.rest();
+/// The body's own stiffness at its size, E times the bounding-box diagonal of `rest` (N/m):
+/// springs up to [`MAX_SPRING_STIFFNESS`] times it are taken.
+pub fn body_stiffness(rest: &[Vec3], youngs_modulus: f64) -> f64 {
     let (lo, hi) = rest.iter().fold(
         (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)),
         |(lo, hi), x| (lo.inf(x), hi.sup(x)),
     );
-    let body = b.youngs_modulus() * (hi - lo).norm();
+    youngs_modulus * (hi - lo).norm()
+}
+
+/// `stiffness` is positive and at most [`MAX_SPRING_STIFFNESS`] times the body's own.
+fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeError> {
+    positive("stiffness", stiffness)?;
+    let body = body_stiffness(b.rest(), b.youngs_modulus());
     let limit = MAX_SPRING_STIFFNESS * body;
     if stiffness > limit {
         return Err(RuntimeError::TooStiff {

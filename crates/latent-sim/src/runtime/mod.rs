@@ -17,7 +17,7 @@ mod reduced;
 mod surface;
 
 pub use full::FullRuntime;
-pub use handles::{Handle, MAX_SPRING_STIFFNESS};
+pub use handles::{Handle, MAX_SPRING_STIFFNESS, body_stiffness};
 pub use reduced::{AnyReducedSimulator, ReducedRuntime};
 pub use surface::Surface;
 
@@ -65,13 +65,13 @@ pub struct StepStats {
     pub relative_gradient: f64,
     /// Wall time of the step.
     pub seconds: f64,
-    /// A reduced model's L-BFGS preconditioner was rebuilt at this step's start: a step that
-    /// costs several times a plain one (2.4 ms against 0.18 ms on the default bar), about once
-    /// in 20 steps while a body is dragged.
+    /// L-BFGS's preconditioner was rebuilt during this step: a step that costs several times a
+    /// plain one (a reduced model's 2.4 ms against 0.18 ms on the default bar, about once in 20
+    /// steps while a body is dragged).
     pub preconditioner_rebuilt: bool,
-    /// A reduced model's L-BFGS crawled (or its line search failed) and the step was solved
-    /// again with reduced Newton: a slow step, usually a pull far beyond what the model was
-    /// trained for. Never in full space.
+    /// L-BFGS crawled (or its line search failed) and the step was solved on with Newton (in
+    /// full space, with the other solver than the scene's): a slow step, in a reduced model
+    /// usually a pull far beyond what it was trained for.
     pub newton_fallback: bool,
 }
 
@@ -176,15 +176,15 @@ pub trait Interactive {
     ///
     /// # Errors
     /// [`RuntimeError::NoVertices`], [`RuntimeError::NoSuchVertex`],
-    /// [`RuntimeError::NotInBody`], [`RuntimeError::NotPositive`]; a reduced model without the
-    /// rows of a vertex: [`ReducedError::NoBasisRows`].
+    /// [`RuntimeError::NotInBody`], [`RuntimeError::NotPositive`], [`RuntimeError::TooStiff`];
+    /// a reduced model without the rows of a vertex: [`ReducedError::NoBasisRows`].
     fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError>;
     /// Grabs the surface vertices within `radius` of `point` (where they are now) with a spring
     /// of total stiffness `stiffness`, its target at `point`.
     ///
     /// # Errors
     /// [`RuntimeError::NothingInReach`], [`RuntimeError::NotPositive`],
-    /// [`RuntimeError::NotFinite`].
+    /// [`RuntimeError::TooStiff`], [`RuntimeError::NotFinite`].
     fn grab_near(
         &mut self,
         point: [f64; 3],
@@ -198,15 +198,17 @@ pub trait Interactive {
     /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`], [`RuntimeError::NotASpring`],
     /// [`RuntimeError::NotFinite`].
     fn move_handle(&mut self, handle: Handle, target: [f64; 3]) -> Result<(), RuntimeError>;
-    /// A spring handle's target now: where [`Interactive::move_handle`] put it, or where a
-    /// spring added with [`Interactive::add_force`] pulls at this time.
+    /// A spring handle's target now: where [`Interactive::move_handle`] put it, or where the
+    /// keyframes of a spring added with [`Interactive::add_force`] put it at this time, whether
+    /// or not its active span holds this time.
     ///
     /// # Errors
     /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`], [`RuntimeError::NotASpring`].
     fn handle_target(&mut self, handle: Handle) -> Result<[f64; 3], RuntimeError>;
     /// Sets a point load's total force (N), spread over its vertices, from now on (its
-    /// keyframes become that one value): a force a program changes every frame, at the cost of
-    /// moving a handle (the preconditioner is kept).
+    /// keyframes become that one value; it acts while its active span holds, as added): a
+    /// force a program changes every frame, at the cost of moving a handle (the preconditioner
+    /// is kept).
     ///
     /// # Errors
     /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`],
@@ -228,7 +230,8 @@ pub trait Interactive {
     /// # Errors
     /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`],
     /// [`RuntimeError::NotInBody`], [`ReducedError::Keyframes`], [`RuntimeError::ActiveSpan`],
-    /// a spring's [`RuntimeError::NotPositive`] stiffness; a reduced model without the rows of
+    /// a spring's [`RuntimeError::NotPositive`] or [`RuntimeError::TooStiff`] stiffness; a
+    /// reduced model without the rows of
     /// a vertex: [`ReducedError::NoBasisRows`].
     fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError>;
     /// Turns gravity on (its acceleration, the model's unless

@@ -62,7 +62,8 @@ impl AnyReducedSimulator {
 /// factors and handles included): keep one to roll back to (`sim = saved.clone()`), or to try
 /// a move ahead. The handles made before the clone act on both; one made on either after it is
 /// unknown to the other. A clone costs about the model's size in memory (its mesh, elements
-/// and basis rows in use); the factorisation at rest that springs pull through is shared.
+/// and basis rows in use); the factorisation at rest that springs pull through is shared once
+/// made ([`Interactive::prepare_grab`] before cloning, for many instances of one model).
 #[derive(Debug, Clone)]
 pub struct ReducedRuntime {
     sim: AnyReducedSimulator,

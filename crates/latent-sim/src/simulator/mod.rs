@@ -121,6 +121,8 @@ pub struct ReducedSimulator<S: Subspace> {
     /// Whether springs pull with the patch compliance the subspace lacks added in series
     /// ([`Self::set_spring_compliance`]), and the factor that measures it.
     compliance: SpringCompliance,
+    /// Whether a solve of the step under way was redone with reduced Newton.
+    fell_back: bool,
 }
 
 /// Reusable buffers of one step.
@@ -236,6 +238,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             zddot: vec![0.0; d],
             zddot_step: None,
             compliance: SpringCompliance::default(),
+            fell_back: false,
             model,
             space,
             subspace,
@@ -417,6 +420,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let k = self.space.k;
         self.predict();
         self.work.timers = Timers::default();
+        self.fell_back = false;
         let params = SolveParams {
             tolerance: self.solver.tolerance,
             max_iterations: self.solver.max_iterations,
@@ -576,8 +580,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             vjp_seconds: self.work.timers.vjp,
             evaluations: self.work.timers.evaluations,
             preconditioner_rebuilt: rebuilt,
-            newton_fallback: self.solver.method == SolverMethod::Lbfgs
-                && stats.iterations > self.solver.max_iterations,
+            newton_fallback: self.fell_back,
             restarted,
         })
     }
@@ -618,6 +621,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                         e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
                     ) => {
                         tracing::info!("{e}; retrying the step with reduced Newton");
+                        self.fell_back = true;
                         self.lbfgs.reset();
                         z.copy_from_slice(&self.state.z);
                         let mut s = newton(&mut obj, z, params)?;

@@ -99,11 +99,13 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// Whether springs pull with the patch compliance the subspace lacks in series (on by
     /// default; see the module's notes). Turning it on factorises the full step's operator at
     /// rest once (a full-space sparse Cholesky, the cost of one full Newton step) when a
-    /// spring needs it.
+    /// spring needs it. The dents shown are then those of the current state under the new
+    /// setting (a released spring's among them no longer).
     pub fn set_spring_compliance(&mut self, on: bool) {
         self.compliance.on = on;
         self.soften_springs();
         self.forces_changed();
+        self.settle_dents();
     }
 
     /// [`Self::soften_spring`] for every force.
