@@ -157,6 +157,7 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         | RuntimeError::ActiveSpan { .. }
         | RuntimeError::NotPositive { .. }
         | RuntimeError::TooStiff { .. }
+        | RuntimeError::AllPinned { .. }
         | RuntimeError::PointStiffness(_)
         | RuntimeError::NotFinite { .. }
         | RuntimeError::BufferLength { .. }

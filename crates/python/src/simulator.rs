@@ -518,7 +518,8 @@ impl Simulator {
     ///
     /// Raises ``InvalidArgumentError`` for no vertex, a vertex past the mesh, a stiffness that
     /// is not positive or more than 1e6 times the body's own at its size (E times its
-    /// bounding-box diagonal), or (reduced) a vertex whose basis rows the model does not keep.
+    /// bounding-box diagonal), vertices that are all pinned, or (reduced) a vertex whose basis
+    /// rows the model does not keep.
     fn grab(
         &self,
         py: Python<'_>,
@@ -598,9 +599,17 @@ impl Simulator {
             }
         };
         let keyframes: Vec<[f64; 4]> = keyframes.extract().map_err(|_| {
+            // Rows of numbers of another length are said by the first such row.
+            let rows: Option<Vec<Vec<f64>>> = keyframes.extract().ok();
+            let got = match rows
+                .as_deref()
+                .and_then(|r| r.iter().position(|row| row.len() != 4).map(|i| (i, &r[i])))
+            {
+                Some((i, row)) => format!("row {i} has {} numbers", row.len()),
+                None => describe(keyframes),
+            };
             Class::InvalidArgument.err(format!(
-                "keyframes must be rows of (t, x, y, z), got {}",
-                describe(keyframes)
+                "keyframes must be rows of 4 numbers (t, x, y, z), got {got}"
             ))
         })?;
         let force = ExternalForce {

@@ -157,9 +157,9 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: sim.grab_near((math.nan, 0.0, 0.0), 0.1, 1.0), "point must be finite"),
         (lambda: sim.grab_near((0.0, 0.0, 0.0), 0.0, 1.0), "radius must be positive"),
         (lambda: sim.grab_near((0.0, 0.1), 0.1, 1.0), r"point must be 3 numbers \(x, y, z\), got 2"),
-        (lambda: sim.move_handle(sim.grab([0], 1.0), np.zeros((3, 1))), r"got an array of shape \[3, 1\]"),
-        (lambda: sim.move_handle(sim.grab([0], 1.0), "abc"), "target must be 3 numbers"),
-        (lambda: sim.move_handle(sim.grab([0], 1.0), (0.0, math.inf, 0.0)), "target must be finite"),
+        (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), np.zeros((3, 1))), r"got an array of shape \[3, 1\]"),
+        (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), "abc"), "target must be 3 numbers"),
+        (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), (0.0, math.inf, 0.0)), "target must be finite"),
         (lambda: sim.positions(out=np.empty((n, 2))), r"expected \(%d, 3\)" % n),
         (lambda: sim.positions(out=np.empty((n, 3), dtype=np.float32)), "float64"),
         (lambda: sim.positions(out=[[0.0] * 3] * n), "numpy array"),
@@ -185,3 +185,10 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
     # The simulator still works after every refusal.
     sim.step()
     assert sim.steps == 1
+
+
+def test_a_grab_of_pinned_vertices_only_is_refused(sim: ld.Simulator) -> None:
+    rest = sim.rest_positions
+    clamped = [int(v) for v in sim.surface_vertices if rest[v, 0] < 1e-9]
+    with pytest.raises(ld.InvalidArgumentError, match="all pinned"):
+        sim.grab(clamped[:3], 100.0)

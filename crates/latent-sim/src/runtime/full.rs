@@ -86,6 +86,10 @@ impl Backend for FullRuntime {
         &self.sim.model.mesh.tets
     }
 
+    fn pinned(&self) -> &[usize] {
+        &self.sim.model.pinned
+    }
+
     fn youngs_modulus(&self) -> f64 {
         self.sim.model.youngs_modulus
     }

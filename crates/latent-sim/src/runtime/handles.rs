@@ -114,6 +114,8 @@ pub(crate) trait Backend {
     /// The material's Young's modulus (Pa): with the body's size, the scale of a spring's
     /// stiffness.
     fn youngs_modulus(&self) -> f64;
+    /// The pinned vertices, increasing.
+    fn pinned(&self) -> &[usize];
     fn surface(&self) -> &Surface;
     /// The current displacement of vertex `v` (which exists).
     fn displacement(&self, v: usize) -> Result<Vec3, RuntimeError>;
@@ -206,6 +208,14 @@ fn vertex_set<B: Backend>(b: &B, vertices: &[usize]) -> Result<Vec<usize>, Runti
     Ok(set)
 }
 
+/// A grab of pinned vertices only would move nothing: refused, as a grab of no vertex is.
+fn not_all_pinned<B: Backend>(b: &B, set: &[usize]) -> Result<(), RuntimeError> {
+    if set.iter().all(|v| b.pinned().binary_search(v).is_ok()) {
+        return Err(RuntimeError::AllPinned { count: set.len() });
+    }
+    Ok(())
+}
+
 pub(crate) fn grab<B: Backend>(
     b: &mut B,
     vertices: &[usize],
@@ -218,6 +228,7 @@ pub(crate) fn grab<B: Backend>(
         mean_u += b.displacement(v)?;
         mean_x += b.rest()[v];
     }
+    not_all_pinned(b, &set)?;
     let n = set.len() as f64;
     let (mean_u, mean_x) = (mean_u / n, mean_x / n);
     // Grabbed at the current centroid p = X̄ + ū: base = ū − p = −X̄.
@@ -247,6 +258,7 @@ pub(crate) fn grab_near<B: Backend>(
     if set.is_empty() {
         return Err(RuntimeError::NothingInReach { point, radius });
     }
+    not_all_pinned(b, &set)?;
     let mean_u = mean_u / set.len() as f64;
     attach(b, set, stiffness, mean_u, mean_u - p)
 }

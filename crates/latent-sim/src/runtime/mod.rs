@@ -95,6 +95,12 @@ pub enum RuntimeError {
     /// A vertex index past the mesh's vertices.
     #[error("vertex {vertex} does not exist (the mesh has {count})")]
     NoSuchVertex { vertex: usize, count: usize },
+    /// A grab of pinned vertices only.
+    #[error(
+        "the {count} vertices grabbed are all pinned: a spring on them moves nothing; grab free \
+         vertices"
+    )]
+    AllPinned { count: usize },
     /// A handle on no vertex.
     #[error("a handle needs at least one vertex")]
     NoVertices,
@@ -176,15 +182,16 @@ pub trait Interactive {
     ///
     /// # Errors
     /// [`RuntimeError::NoVertices`], [`RuntimeError::NoSuchVertex`],
-    /// [`RuntimeError::NotInBody`], [`RuntimeError::NotPositive`], [`RuntimeError::TooStiff`];
-    /// a reduced model without the rows of a vertex: [`ReducedError::NoBasisRows`].
+    /// [`RuntimeError::NotInBody`], [`RuntimeError::NotPositive`], [`RuntimeError::TooStiff`],
+    /// [`RuntimeError::AllPinned`]; a reduced model without the rows of a vertex:
+    /// [`ReducedError::NoBasisRows`].
     fn grab(&mut self, vertices: &[usize], stiffness: f64) -> Result<Handle, RuntimeError>;
     /// Grabs the surface vertices within `radius` of `point` (where they are now) with a spring
     /// of total stiffness `stiffness`, its target at `point`.
     ///
     /// # Errors
     /// [`RuntimeError::NothingInReach`], [`RuntimeError::NotPositive`],
-    /// [`RuntimeError::TooStiff`], [`RuntimeError::NotFinite`].
+    /// [`RuntimeError::TooStiff`], [`RuntimeError::AllPinned`], [`RuntimeError::NotFinite`].
     fn grab_near(
         &mut self,
         point: [f64; 3],

@@ -220,6 +220,10 @@ impl Backend for ReducedRuntime {
         &self.sim.model().mesh.tets
     }
 
+    fn pinned(&self) -> &[usize] {
+        &self.sim.model().pinned
+    }
+
     fn youngs_modulus(&self) -> f64 {
         self.sim.model().youngs_modulus
     }

@@ -328,7 +328,16 @@ fn a_vertex_no_tet_uses_cannot_be_grabbed() {
             other => panic!("{vertices:?}: {other:?}"),
         }
     }
-    full.grab(&[0], 10.0).unwrap();
+    // Vertex 0 is pinned (the bar is clamped at x = 0): alone it moves nothing, and is refused;
+    // beside a free vertex it is taken.
+    match full.grab(&[0], 10.0) {
+        Err(e @ RuntimeError::AllPinned { count: 1 }) => {
+            assert!(e.to_string().contains("grab free vertices"), "{e}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let free = loose - 1;
+    full.grab(&[0, free], 10.0).unwrap();
 }
 
 /// Under gravity, for 20 steps: the trajectory of the surface.
