@@ -234,7 +234,7 @@ pub struct ReducedSpace {
     pub mass: Vec<f64>,
     /// UᵀK₀U, k×k column-major, K₀ the stiffness at rest.
     pub rest_stiffness: Vec<f64>,
-    /// Uᵀ f_g: [`Self::gravity_axes`] at the model's gravity ([`Self::set_gravity`]).
+    /// Uᵀ f_g: the per-axis loads (`gravity_axes`) at the model's gravity ([`Self::set_gravity`]).
     pub gravity: Vec<f64>,
     /// Uᵀ f_g per unit acceleration along x, y and z (3 columns of k): f_g is linear in the
     /// acceleration, so a program may turn gravity any way without the basis's every row.

@@ -145,7 +145,9 @@ fn cubature_caveat(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
         })
 }
 
-/// See [`cubature_caveat`].
+/// A cubature method under [`UNCOVERED_SUBSPACE_ERROR`] off whose error is more than this
+/// many times the same subspace's over every element, and at least [`RULE_CAVEAT_ERROR`], has
+/// its rule named among what is worth knowing.
 pub const RULE_SHARE_CAVEAT: f64 = 2.0;
 pub const RULE_CAVEAT_ERROR: f64 = 0.01;
 
