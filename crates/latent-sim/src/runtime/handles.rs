@@ -37,6 +37,7 @@ struct Entry {
 }
 
 /// The handles of one simulator.
+///
 /// A copy (a clone of its simulator) keeps the owner, so that the handles made before the copy
 /// act on both, and shares the count, so that a handle made on one after the copy is unknown to
 /// the other instead of naming another force there.
@@ -223,12 +224,12 @@ pub(crate) fn grab<B: Backend>(
 ) -> Result<Handle, RuntimeError> {
     spring_stiffness(b, stiffness)?;
     let set = vertex_set(b, vertices)?;
+    not_all_pinned(b, &set)?;
     let (mut mean_u, mut mean_x) = (Vec3::zeros(), Vec3::zeros());
     for &v in &set {
         mean_u += b.displacement(v)?;
         mean_x += b.rest()[v];
     }
-    not_all_pinned(b, &set)?;
     let n = set.len() as f64;
     let (mean_u, mean_x) = (mean_u / n, mean_x / n);
     // Grabbed at the current centroid p = X̄ + ū: base = ū − p = −X̄.
