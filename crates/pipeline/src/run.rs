@@ -66,7 +66,9 @@ pub struct RunReport<'a> {
     pub trajectory: usize,
     pub frames: usize,
     pub time_step: f64,
-    /// The stages the run loaded or computed, in order, with what each chose.
+    /// Each stage the pipeline loaded or computed for this run, once (its last outcome: a
+    /// pipeline that ran several test trajectories has one `reference` per trajectory), in the
+    /// order the stages first came, with what each chose.
     pub stages: Vec<StageLine>,
     /// [`crate::trust::assess`]'s figures not to be trusted, and what the figures do not say
     /// by themselves.

@@ -495,6 +495,15 @@ impl Scene {
                                  of the body: select vertices of the body"
                             ),
                         });
+                    } else if f.vertices.iter().all(|v| pinned.binary_search(v).is_ok()) {
+                        errors.push(FemError::InvalidConfig {
+                            field: format!("force[{i}].select"),
+                            reason: format!(
+                                "selects only pinned vertices ({}): a force on them moves \
+                                 nothing; select free vertices",
+                                f.vertices.len()
+                            ),
+                        });
                     } else {
                         if stray > 0 {
                             crate::pipeline::warn_once(&format!(

@@ -306,6 +306,10 @@ fn pins_that_select_nothing_are_errors_reported_together() {
         &edit("stiffness = 200.0", "stiffness = 1.0e11"),
         Path::new("."),
     );
+    // A force on pinned vertices only moves nothing.
+    let on_pins = edit("center = [1.0, 0.1, 0.1]", "center = [0.0, 0.1, 0.1]");
+    let err = build_error(&on_pins, Path::new("."));
+    assert_names(&err, &["force[0].select", "only pinned vertices"]);
 }
 
 #[test]

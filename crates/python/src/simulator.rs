@@ -65,11 +65,12 @@ pub struct StepStats {
     relative_gradient: f64,
     /// Wall time of the step inside the library (s), without the Python call around it.
     seconds: f64,
-    /// A reduced model's preconditioner was rebuilt at the step's start (a step several times
-    /// a plain one's cost, about once in 20 while a body is dragged).
+    /// L-BFGS's preconditioner was rebuilt during the step (a step several times a plain one's
+    /// cost; a reduced model's about once in 20 while a body is dragged).
     preconditioner_rebuilt: bool,
-    /// A reduced model's L-BFGS crawled and the step was solved again with reduced Newton (a
-    /// slow step, usually a pull far beyond the training).
+    /// L-BFGS crawled and the step was solved on with Newton (in full space, with the other
+    /// solver than the scene's): a slow step, in a reduced model usually a pull far beyond the
+    /// training.
     newton_fallback: bool,
 }
 
@@ -540,8 +541,8 @@ impl Simulator {
     /// spring of total stiffness ``stiffness`` (N/m), its target at ``point``.
     ///
     /// Raises ``HandleError`` when no surface vertex is in reach and ``InvalidArgumentError``
-    /// for a point that is not finite, a radius or stiffness that is not positive, or a
-    /// stiffness ``grab`` refuses.
+    /// for a point that is not finite, a radius or stiffness that is not positive, a stiffness
+    /// ``grab`` refuses, or only pinned vertices in reach.
     fn grab_near(
         &self,
         py: Python<'_>,
@@ -568,7 +569,8 @@ impl Simulator {
     /// spring's target.
     ///
     /// Raises ``InvalidArgumentError`` for an unknown kind, a spring without a positive
-    /// stiffness or with one ``grab`` refuses, a stiffness given to a point load, keyframes that are empty, not finite or
+    /// stiffness or with one ``grab`` refuses, a stiffness given to a point load, vertices that
+    /// are all pinned, keyframes that are empty, not finite or
     /// out of order, ``end`` before ``start``, or a vertex as ``grab`` refuses it.
     #[pyo3(signature = (kind, vertices, keyframes, stiffness=None, start=0.0, end=None))]
     fn add_force(

@@ -37,6 +37,10 @@ impl FullSpaceModel {
         forces: Vec<ExternalForce>,
     ) -> Result<Self, FemError> {
         material.validate()?;
+        // Sorted and each once, as the field says (a lookup by binary search relies on it).
+        let mut pinned = pinned;
+        pinned.sort_unstable();
+        pinned.dedup();
         if !gravity.iter().all(|g| g.is_finite()) {
             return Err(FemError::InvalidConfig {
                 field: "gravity.acceleration".into(),

@@ -313,7 +313,7 @@ pub(crate) fn add_force<B: Backend>(
 ) -> Result<Handle, RuntimeError> {
     // Checked, not reordered: the order of a force's vertices is the order its terms are summed
     // in, which a replayed schedule keeps so that its trajectory is the same bit for bit.
-    vertex_set(b, &force.vertices)?;
+    not_all_pinned(b, &vertex_set(b, &force.vertices)?)?;
     let k = &force.keyframes;
     if k.is_empty()
         || k.iter().flatten().any(|x| !x.is_finite())

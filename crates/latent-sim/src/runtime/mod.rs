@@ -97,8 +97,8 @@ pub enum RuntimeError {
     NoSuchVertex { vertex: usize, count: usize },
     /// A grab of pinned vertices only.
     #[error(
-        "the {count} vertices grabbed are all pinned: a spring on them moves nothing; grab free \
-         vertices"
+        "the vertices grabbed ({count}) are all pinned: a spring on them moves nothing; grab \
+         free vertices"
     )]
     AllPinned { count: usize },
     /// A handle on no vertex.
@@ -237,8 +237,8 @@ pub trait Interactive {
     /// # Errors
     /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`],
     /// [`RuntimeError::NotInBody`], [`ReducedError::Keyframes`], [`RuntimeError::ActiveSpan`],
-    /// a spring's [`RuntimeError::NotPositive`] or [`RuntimeError::TooStiff`] stiffness; a
-    /// reduced model without the rows of
+    /// a spring's [`RuntimeError::NotPositive`] or [`RuntimeError::TooStiff`] stiffness,
+    /// [`RuntimeError::AllPinned`]; a reduced model without the rows of
     /// a vertex: [`ReducedError::NoBasisRows`].
     fn add_force(&mut self, force: ExternalForce) -> Result<Handle, RuntimeError>;
     /// Turns gravity on (its acceleration, the model's unless

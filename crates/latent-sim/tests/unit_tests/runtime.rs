@@ -514,7 +514,7 @@ fn a_material_changed_after_export_is_refused_with_what_to_do() {
 
 /// A step says how far its solve got and which steps cost more: the reduced model's first
 /// step builds its preconditioner, later ones reuse it; no step of a gentle fall falls back to
-/// Newton; full space has neither.
+/// Newton; a solver held to two iterations does, reduced and in full space.
 #[test]
 fn a_step_says_how_far_it_solved_and_what_made_it_costly() {
     let (model, mut full) = simulators(-9.81);
@@ -539,6 +539,12 @@ fn a_step_says_how_far_it_solved_and_what_made_it_costly() {
     let mut capped = model.clone();
     (capped.solver.max_iterations, capped.solver.tolerance) = (2, 1e-10);
     let s = capped.simulator().unwrap().step().unwrap();
+    assert!(s.newton_fallback, "{s:?}");
+    (
+        capped.full_solver.max_iterations,
+        capped.full_solver.tolerance,
+    ) = (2, 1e-10);
+    let s = FullRuntime::from_model(&capped).unwrap().step().unwrap();
     assert!(s.newton_fallback, "{s:?}");
 }
 

@@ -137,10 +137,11 @@ class StepStats:
         """The solve's gradient against the step's forces when it stopped."""
     @property
     def preconditioner_rebuilt(self) -> bool:
-        """A reduced model's preconditioner was rebuilt at the step's start (a costly step)."""
+        """L-BFGS's preconditioner was rebuilt during the step (a costly step)."""
     @property
     def newton_fallback(self) -> bool:
-        """A reduced model's L-BFGS crawled and the step was solved again with reduced Newton."""
+        """L-BFGS crawled and the step was solved on with Newton (in full space, with the
+        other solver than the scene's)."""
 
 @final
 class RunStats:
