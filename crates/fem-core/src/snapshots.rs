@@ -192,6 +192,16 @@ impl ScheduleConfig {
                 bad(name, format!("needs 0 < min ≤ max, got {r:?}"));
             }
         }
+        if self.stiffness[1] > MAX_STIFFNESS_FACTOR {
+            bad(
+                "stiffness",
+                format!(
+                    "at most {MAX_STIFFNESS_FACTOR:e} times the body's own stiffness at the \
+                     patch (a grip that much stiffer holds as rigidly as any), got {}",
+                    self.stiffness[1]
+                ),
+            );
+        }
         if !(self.patch_radius.is_finite() && self.patch_radius > 0.0) {
             bad(
                 "patch_radius",
@@ -369,6 +379,13 @@ fn spread_vertex(mesh: &crate::TetMesh, candidates: &[usize], seed: u64, index: 
     }
     candidates[current]
 }
+
+/// The largest multiple of the body's stiffness at a patch a schedule's spring may take: the
+/// defaults' springs (0.5–2 times it) came to 0.2–0.3 times E times the bounding-box diagonal
+/// on the default bar, so this keeps every generated spring far below the runtime's limit of
+/// 10⁶ times that (`latent_sim::MAX_SPRING_STIFFNESS`), which a test schedule over it would
+/// otherwise meet only once the methods run.
+pub const MAX_STIFFNESS_FACTOR: f64 = 1e4;
 
 /// The body's stiffness at a surface patch: A = K₀ + M/T² factorised once per mesh.
 pub struct StiffnessProbe {

@@ -240,6 +240,10 @@ fn out_of_range_values_are_reported_together() {
         8,
         "one line per problem: {err}"
     );
+    // A schedule's spring past 10⁴ times the patch's stiffness, which the runtime would refuse
+    // only once the methods run.
+    let err = read_error(&(BASE.to_string() + "\n[test]\nstiffness = [0.5, 1.0e5]\n"));
+    assert_names(&err, &["test.stiffness", "at most 1e4 times"]);
 }
 
 #[test]
