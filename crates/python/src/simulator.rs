@@ -39,7 +39,7 @@ macro_rules! each {
 }
 
 /// What the mutex guards: the runtime and the figures of the steps taken.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 struct State {
     runtime: Runtime,
     timed_steps: usize,
@@ -458,13 +458,7 @@ impl Simulator {
     /// ahead. The handles made before the copy act on both; one made on either after it is
     /// unknown to the other. ``copy.copy`` and ``copy.deepcopy`` make the same.
     fn copy(&self, py: Python<'_>) -> PyResult<Self> {
-        let state = self.with(py, |s| State {
-            runtime: s.runtime.clone(),
-            timed_steps: s.timed_steps,
-            seconds: s.seconds,
-            iterations: s.iterations,
-            last: s.last,
-        })?;
+        let state = self.with(py, |s| s.clone())?;
         Ok(Self {
             state: Mutex::new(state),
             waiting: AtomicUsize::new(0),
