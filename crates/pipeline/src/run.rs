@@ -271,6 +271,36 @@ impl Buckling {
     /// the training poses in the test; at 10⁶ Pa it stood (`neural-cubature` 1.6 %).
     pub const MARGIN: f64 = 2.0;
 
+    /// The period of the body's slowest swing, estimated from its sag δ under gravity g as a
+    /// mass on a spring that gravity stretches by δ: 2π √(δ/g) (s). None without a sag.
+    pub fn swing_period(&self, g: f64) -> Option<f64> {
+        (self.sag > 0.0 && g > 0.0 && self.sag.is_finite())
+            .then(|| 2.0 * std::f64::consts::PI * (self.sag / g).sqrt())
+    }
+
+    /// What to say of a time step `h` longer than [`Self::swing_period`]: implicit Euler then
+    /// damps every motion of the body out within one step (at ωh = 2π a free swing keeps
+    /// 1/(1 + 4π²), 2.5 %, of its amplitude a step), so the body creeps to its rest pose and no
+    /// drag's dynamics are left to compare. Most often a step written in milliseconds
+    /// (`step = 16.67` for 60 Hz), which nothing else said: a game developer's scene ran to
+    /// t = 1,667 s on a test of 100 frames without a word.
+    pub fn step_warning(&self, h: f64, g: f64) -> Option<String> {
+        let period = self.swing_period(g)?;
+        (h > period).then(|| {
+            format!(
+                "the time step h = {h} s is {:.1} times the period of the body's slowest swing \
+                 (about {period:.3} s, from its {:.3e} m sag under gravity), so implicit Euler \
+                 damps every motion out within a step and the body only creeps to rest: a \
+                 step meant in milliseconds is written in seconds (`[time] step = {}`), and \
+                 a step below {:.3} s (a tenth of the period) follows the body's swing",
+                h / period,
+                self.sag,
+                h / 1000.0,
+                period / 10.0
+            )
+        })
+    }
+
     /// The load factor below 1 when the estimate holds: the body buckles under its own weight.
     pub fn buckles(&self) -> Option<f64> {
         let l = self.load_factor?;
@@ -733,6 +763,15 @@ pub fn run(
             .buckling
             .get_or_init(|| Buckling::of(&pipeline.model));
         row.scene_warnings = pipeline.warnings.clone();
+        let time = &pipeline.scene.time;
+        let g = pipeline.scene.gravity.acceleration;
+        let g = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        if let Some(b) = &row.buckling
+            && !time.quasi_static
+            && let Some(w) = b.step_warning(time.step, g)
+        {
+            row.scene_warnings.push(w);
+        }
     }
     for i in 0..rows.len() {
         if !crate::trust::drifting(&rows[i]) {
@@ -1587,6 +1626,32 @@ pub fn markdown(rows: &[MethodReport]) -> String {
 
 #[cfg(test)]
 mod tests {
+    /// A step longer than the body's slowest swing is said, naming the step in seconds that a
+    /// step in milliseconds meant; a step within it, no sag, or no gravity say nothing.
+    #[test]
+    fn a_step_past_the_slowest_swing_is_said() {
+        let b = super::Buckling {
+            load_factor: None,
+            sag: 0.05,
+            size: 0.3,
+            standing_modulus: None,
+            firm_modulus: 1e5,
+            converged: true,
+        };
+        let period = b.swing_period(9.81).unwrap();
+        assert!((period - 2.0 * std::f64::consts::PI * (0.05f64 / 9.81).sqrt()).abs() < 1e-12);
+        assert!((period - 0.4486).abs() < 1e-3, "{period}");
+        let w = b.step_warning(16.67, 9.81).expect("a step in milliseconds");
+        assert!(w.contains("`[time] step = 0.01667`"), "{w}");
+        assert!(w.contains("37.2 times"), "{w}");
+        assert_eq!(b.step_warning(0.01667, 9.81), None);
+        assert_eq!(b.step_warning(0.4, 9.81), None);
+        assert!(b.step_warning(0.5, 9.81).is_some());
+        assert_eq!(b.step_warning(16.67, 0.0), None);
+        let flat = super::Buckling { sag: 0.0, ..b };
+        assert_eq!(flat.step_warning(16.67, 9.81), None);
+    }
+
     use super::{ErrorAccumulator, Method, MethodReport, mean, standing_line};
     use fem_core::element::Elements;
     use fem_core::mass::{MassKind, MassMatrix};

@@ -632,7 +632,8 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                 )
             } else {
                 "add training schedules that reach such poses (`[training] schedules`, \
-                 `kinds`, larger amplitudes)"
+                 `kinds`, or larger amplitudes: the upper end of `offset`, a fraction of the \
+                 bounding-box diagonal)"
                     .to_string()
             };
             // Where the run has measured the trajectory close to the full one, it is a caveat:

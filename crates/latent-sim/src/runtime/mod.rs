@@ -89,8 +89,15 @@ pub enum RuntimeError {
     /// Another simulator's handle.
     #[error("handle {0} belongs to another simulator, not to this one")]
     ForeignHandle(Handle),
-    /// No surface vertex within the radius of the point.
-    #[error("no surface vertex within {radius} of ({}, {}, {})", point[0], point[1], point[2])]
+    /// No surface vertex within the radius of the point, where the surface is now (deformed).
+    #[error(
+        "no surface vertex within {} of ({}, {}, {}) where the surface is now (deformed, not at \
+         rest): a larger radius, or a point nearer the body",
+        four_digits(*radius),
+        four_digits(point[0]),
+        four_digits(point[1]),
+        four_digits(point[2])
+    )]
     NothingInReach { point: [f64; 3], radius: f64 },
     /// A vertex index past the mesh's vertices.
     #[error("vertex {vertex} does not exist (the mesh has {count})")]
@@ -319,5 +326,19 @@ fn buffer_length(what: &'static str, expected: usize, got: usize) -> Result<(), 
             expected,
             got,
         })
+    }
+}
+
+/// `x` to four significant digits, for messages (0.01704 and 1.704e-5, not 0.017043437257239995).
+fn four_digits(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor();
+    if (-4.0..6.0).contains(&magnitude) {
+        let decimals = (3.0 - magnitude).max(0.0) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.3e}")
     }
 }

@@ -224,6 +224,16 @@ fn refusals<S: Interactive>(sim: &mut S, what: &str) {
         sim.grab_near([5.0, 5.0, 5.0], 0.1, 1.0),
         Err(RuntimeError::NothingInReach { .. })
     ));
+    // The message rounds what it names and says which surface it searched.
+    let message = sim
+        .grab_near([5.0, 1.0 / 3.0, 2e-7], 0.017043437257239995, 1.0)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        message,
+        "no surface vertex within 0.01704 of (5.000, 0.3333, 2.000e-7) where the surface is now \
+         (deformed, not at rest): a larger radius, or a point nearer the body"
+    );
     assert!(matches!(
         sim.grab_near([f64::NAN, 0.0, 0.0], 0.1, 1.0),
         Err(RuntimeError::NotFinite { .. })
