@@ -155,6 +155,7 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         | RuntimeError::NoVertices
         | RuntimeError::NotInBody { .. }
         | RuntimeError::ActiveSpan { .. }
+        | RuntimeError::SpanOver { .. }
         | RuntimeError::NotPositive { .. }
         | RuntimeError::TooStiff { .. }
         | RuntimeError::AllPinned { .. }

@@ -259,6 +259,7 @@ def test_add_force_applies_springs_and_point_loads_as_data(model: ld.Model) -> N
         ("point", [(1, 0, 0, 1), (0, 0, 0, 1)], None, (0.0, 1.0), "keyframe"),
         ("point", [(0, 0, 0)], None, (0.0, 1.0), "row 0 has 3 numbers"),
         ("point", [(0, 0, 0, 1)], None, (1.0, 0.5), "span"),
+        ("point", [(0, 0, 0, 1)], None, (-1.0, 0.0), "would never act"),
     ],
 )
 def test_add_force_refuses_what_cannot_work(

@@ -327,6 +327,13 @@ pub(crate) fn add_force<B: Backend>(
             end: force.end,
         });
     }
+    // It acts while start ≤ t < end at the next steps' times t, all later than now.
+    if force.end <= b.now() {
+        return Err(RuntimeError::SpanOver {
+            end: force.end,
+            now: b.now(),
+        });
+    }
     let base = match force.kind {
         ForceKind::Spring => {
             spring_stiffness(b, force.stiffness)?;

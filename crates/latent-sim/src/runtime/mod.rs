@@ -123,6 +123,13 @@ pub enum RuntimeError {
          always), so start ≤ end, got start = {start}, end = {end}"
     )]
     ActiveSpan { start: f64, end: f64 },
+    /// A force whose active span ended before the simulation's clock: it would never act.
+    #[error(
+        "the force's active span ends at t = {end} s, not after the simulation's clock (t = \
+         {now} s), so it would never act: spans and keyframe times are on the simulation's \
+         clock (`time`), not times from now"
+    )]
+    SpanOver { end: f64, now: f64 },
     /// A number that must be positive and finite (a stiffness, a radius) is not.
     #[error("the {what} must be positive and finite, got {value}")]
     NotPositive { what: &'static str, value: f64 },
@@ -244,6 +251,7 @@ pub trait Interactive {
     /// # Errors
     /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`],
     /// [`RuntimeError::NotInBody`], [`ReducedError::Keyframes`], [`RuntimeError::ActiveSpan`],
+    /// [`RuntimeError::SpanOver`],
     /// a spring's [`RuntimeError::NotPositive`] or [`RuntimeError::TooStiff`] stiffness,
     /// [`RuntimeError::AllPinned`]; a reduced model without the rows of
     /// a vertex: [`ReducedError::NoBasisRows`].

@@ -265,6 +265,22 @@ fn interaction_errors_are_typed() {
         }
         other => panic!("{other:?}"),
     }
+    // A force whose span is over by now would never act: refused, saying whose clock spans are
+    // on. One that ends later is taken.
+    for _ in 0..5 {
+        full.step().unwrap();
+    }
+    let now = full.time();
+    for (end, refused) in [(now - 0.01, true), (now, true), (now + 1e-9, false)] {
+        let late = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], end);
+        match full.add_force(late) {
+            Err(e @ RuntimeError::SpanOver { .. }) if refused => {
+                assert!(e.to_string().contains("simulation's clock"), "{e}")
+            }
+            Ok(h) if !refused => full.release(h).unwrap(),
+            other => panic!("end {end} at t = {now}: {other:?}"),
+        }
+    }
     // A point load with a stiffness, which only springs have (as a scene's `[[force]]` says).
     let mut point = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], 0.5);
     point.kind = latent_sim::ForceKind::Point;
