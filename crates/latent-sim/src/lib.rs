@@ -121,8 +121,8 @@ pub use neural::NeuralSubspace;
 pub use onset::{Augmented, DirectionParts};
 pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers, SpaceParts};
 pub use runtime::{
-    AnyReducedSimulator, FullRuntime, Handle, Interactive, MAX_SPRING_STIFFNESS, Real,
-    ReducedRuntime, RuntimeError, StepStats, Surface, body_stiffness,
+    AnyReducedSimulator, FullRuntime, Handle, Interactive, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS,
+    Real, ReducedRuntime, RuntimeError, StepStats, Surface, body_stiffness,
 };
 pub use simulator::{
     ActiveDent, PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,

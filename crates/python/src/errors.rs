@@ -158,6 +158,7 @@ pub fn runtime_class(e: &RuntimeError) -> Class {
         | RuntimeError::SpanOver { .. }
         | RuntimeError::NotPositive { .. }
         | RuntimeError::TooStiff { .. }
+        | RuntimeError::TooLarge { .. }
         | RuntimeError::AllPinned { .. }
         | RuntimeError::PointStiffness(_)
         | RuntimeError::NotFinite { .. }

@@ -149,6 +149,30 @@ pub fn body_stiffness(rest: &[Vec3], youngs_modulus: f64) -> f64 {
     youngs_modulus * (hi - lo).norm()
 }
 
+/// The largest point load, against the force that strains the body by its own size (E times
+/// the square of its bounding-box diagonal, N): as for springs, a load that much larger only
+/// overflows the solves (a game developer's load of 1e300 N failed its first step with a
+/// line-search message that named nothing).
+pub const MAX_POINT_LOAD: f64 = 1e6;
+
+/// Every value of a point load is at most [`MAX_POINT_LOAD`] times the body's own force scale.
+fn point_load(
+    b: &impl Backend,
+    values: impl IntoIterator<Item = [f64; 3]>,
+) -> Result<(), RuntimeError> {
+    let body = body_stiffness(b.rest(), b.youngs_modulus());
+    let size = body / b.youngs_modulus();
+    let body = body * size;
+    let limit = MAX_POINT_LOAD * body;
+    for v in values {
+        let load = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if load > limit {
+            return Err(RuntimeError::TooLarge { load, body, limit });
+        }
+    }
+    Ok(())
+}
+
 /// `stiffness` is positive and at most [`MAX_SPRING_STIFFNESS`] times the body's own.
 fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeError> {
     positive("stiffness", stiffness)?;
@@ -294,6 +318,7 @@ pub(crate) fn set_load<B: Backend>(
     if entry.base.is_some() {
         return Err(RuntimeError::NotAPointLoad(handle));
     }
+    point_load(b, [force])?;
     b.set_keyframes(entry.force, &[[0.0, force[0], force[1], force[2]]])
 }
 
@@ -347,7 +372,10 @@ pub(crate) fn add_force<B: Backend>(
         ForceKind::Point if force.stiffness != 0.0 => {
             return Err(RuntimeError::PointStiffness(force.stiffness));
         }
-        ForceKind::Point => None,
+        ForceKind::Point => {
+            point_load(b, force.keyframes.iter().map(|k| [k[1], k[2], k[3]]))?;
+            None
+        }
     };
     let index = b.push_force(force)?;
     Ok(b.handles().insert(index, base))

@@ -17,7 +17,7 @@ mod reduced;
 mod surface;
 
 pub use full::FullRuntime;
-pub use handles::{Handle, MAX_SPRING_STIFFNESS, body_stiffness};
+pub use handles::{Handle, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS, body_stiffness};
 pub use reduced::{AnyReducedSimulator, ReducedRuntime};
 pub use surface::Surface;
 
@@ -150,6 +150,14 @@ pub enum RuntimeError {
         body: f64,
         limit: f64,
     },
+    /// A point load far larger than the body's own force scale ([`handles::MAX_POINT_LOAD`]).
+    #[error(
+        "a point load of {load:.3e} N is more than {max:e} times the force that strains the body \
+         by its own size (E × the square of its bounding-box diagonal = {body:.3e} N): it would \
+         only overflow the solves; give at most {limit:.3e} N",
+        max = handles::MAX_POINT_LOAD
+    )]
+    TooLarge { load: f64, body: f64, limit: f64 },
     /// A point load given a stiffness, which only a spring has.
     #[error(
         "a point load has no stiffness, got {0}: give it 0 (its keyframes are its force), or make \

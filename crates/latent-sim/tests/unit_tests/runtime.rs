@@ -292,6 +292,25 @@ fn interaction_errors_are_typed() {
         other => panic!("{other:?}"),
     }
     point.stiffness = 0.0;
+    // A point load a million times the force that strains the body by its size, and more, is
+    // refused when added and when set; the limit itself is taken.
+    let size = bar_diagonal();
+    let limit = latent_sim::MAX_POINT_LOAD * model.material.youngs_modulus * size * size;
+    let mut huge = point.clone();
+    huge.keyframes[1][2] = -1e300;
+    match full.add_force(huge) {
+        Err(e @ RuntimeError::TooLarge { .. }) => {
+            assert!(e.to_string().contains("give at most"), "{e}")
+        }
+        other => panic!("{other:?}"),
+    }
+    let load = full.add_force(point.clone()).unwrap();
+    assert!(matches!(
+        full.set_load(load, [0.0, -1.01 * limit, 0.0]),
+        Err(RuntimeError::TooLarge { .. })
+    ));
+    full.set_load(load, [0.0, -0.99 * limit, 0.0]).unwrap();
+    full.release(load).unwrap();
     full.add_force(point).unwrap();
     // A spring a million times stiffer than the body at its size, and more, is refused by every
     // way of adding one (1e300 overflowed the energy at the next step); the limit itself is
