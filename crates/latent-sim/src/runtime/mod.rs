@@ -241,7 +241,8 @@ pub trait Interactive {
     ///
     /// # Errors
     /// [`RuntimeError::UnknownHandle`], [`RuntimeError::ForeignHandle`],
-    /// [`RuntimeError::NotAPointLoad`], [`RuntimeError::NotFinite`].
+    /// [`RuntimeError::NotAPointLoad`], [`RuntimeError::NotFinite`],
+    /// [`RuntimeError::TooLarge`].
     fn set_load(&mut self, handle: Handle, force: [f64; 3]) -> Result<(), RuntimeError>;
     /// The handles (and forces added as data) held now, in the order they were made.
     fn handles(&mut self) -> Vec<Handle>;
@@ -259,7 +260,7 @@ pub trait Interactive {
     /// # Errors
     /// [`RuntimeError::NoSuchVertex`], [`RuntimeError::NoVertices`],
     /// [`RuntimeError::NotInBody`], [`ReducedError::Keyframes`], [`RuntimeError::ActiveSpan`],
-    /// [`RuntimeError::SpanOver`],
+    /// [`RuntimeError::SpanOver`], a point load's [`RuntimeError::TooLarge`] value,
     /// a spring's [`RuntimeError::NotPositive`] or [`RuntimeError::TooStiff`] stiffness,
     /// [`RuntimeError::AllPinned`]; a reduced model without the rows of
     /// a vertex: [`ReducedError::NoBasisRows`].
