@@ -764,11 +764,9 @@ pub fn run(
             .get_or_init(|| Buckling::of(&pipeline.model));
         row.scene_warnings = pipeline.warnings.clone();
         let time = &pipeline.scene.time;
-        let g = pipeline.scene.gravity.acceleration;
-        let g = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
         if let Some(b) = &row.buckling
             && !time.quasi_static
-            && let Some(w) = b.step_warning(time.step, g)
+            && let Some(w) = b.step_warning(time.step, pipeline.scene.gravity.magnitude())
         {
             row.scene_warnings.push(w);
         }

@@ -30,7 +30,7 @@ pub const HEAVY_BODY: f64 = 0.25;
 /// box size (metres).
 pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     let g = scene.gravity.acceleration;
-    let g_norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let g_norm = scene.gravity.magnitude();
     if !scene.gravity.is_on() || !g_norm.is_finite() {
         return None;
     }

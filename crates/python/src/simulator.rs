@@ -66,7 +66,7 @@ pub struct StepStats {
     /// Wall time of the step inside the library (s), without the Python call around it.
     seconds: f64,
     /// L-BFGS's preconditioner was rebuilt during the step (a step several times a plain one's
-    /// cost; a reduced model's about once in 20 while a body is dragged).
+    /// cost; in a reduced model one step in two to five while the body moves, rarely at rest).
     preconditioner_rebuilt: bool,
     /// L-BFGS crawled and the step was solved on with Newton (in full space, with the other
     /// solver than the scene's): a slow step, in a reduced model usually a pull far beyond the

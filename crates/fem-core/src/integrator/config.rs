@@ -60,6 +60,11 @@ impl GravityConfig {
     pub fn is_on(&self) -> bool {
         self.acceleration.iter().any(|&g| g != 0.0)
     }
+
+    /// |g|, the acceleration's magnitude (m/s²).
+    pub fn magnitude(&self) -> f64 {
+        self.acceleration.iter().map(|x| x * x).sum::<f64>().sqrt()
+    }
 }
 
 impl Default for GravityConfig {

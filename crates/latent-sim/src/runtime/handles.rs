@@ -142,11 +142,16 @@ pub const MAX_SPRING_STIFFNESS: f64 = 1e6;
 /// The body's own stiffness at its size, E times the bounding-box diagonal of `rest` (N/m):
 /// springs up to [`MAX_SPRING_STIFFNESS`] times it are taken.
 pub fn body_stiffness(rest: &[Vec3], youngs_modulus: f64) -> f64 {
+    youngs_modulus * diagonal(rest)
+}
+
+/// The bounding-box diagonal of `rest` (m).
+fn diagonal(rest: &[Vec3]) -> f64 {
     let (lo, hi) = rest.iter().fold(
         (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)),
         |(lo, hi), x| (lo.inf(x), hi.sup(x)),
     );
-    youngs_modulus * (hi - lo).norm()
+    (hi - lo).norm()
 }
 
 /// The largest point load, against the force that strains the body by its own size (E times
@@ -160,9 +165,8 @@ fn point_load(
     b: &impl Backend,
     values: impl IntoIterator<Item = [f64; 3]>,
 ) -> Result<(), RuntimeError> {
-    let body = body_stiffness(b.rest(), b.youngs_modulus());
-    let size = body / b.youngs_modulus();
-    let body = body * size;
+    let size = diagonal(b.rest());
+    let body = b.youngs_modulus() * size * size;
     let limit = MAX_POINT_LOAD * body;
     for v in values {
         let load = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();

@@ -66,8 +66,8 @@ pub struct StepStats {
     /// Wall time of the step.
     pub seconds: f64,
     /// L-BFGS's preconditioner was rebuilt during this step: a step that costs several times a
-    /// plain one (a reduced model's 2.4 ms against 0.18 ms on the default bar, about once in 20
-    /// steps while a body is dragged).
+    /// plain one (a reduced model's 2.4 ms against 0.18 ms on the default bar; one step in two
+    /// to five while the body moves, rarely at rest).
     pub preconditioner_rebuilt: bool,
     /// L-BFGS crawled (or its line search failed) and the step was solved on with Newton (in
     /// full space, with the other solver than the scene's): a slow step, in a reduced model
