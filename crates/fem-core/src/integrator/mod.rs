@@ -23,6 +23,7 @@
 mod config;
 mod model;
 mod simulator;
+mod solver_choice;
 mod step_objective;
 mod system_matrix;
 
