@@ -287,15 +287,25 @@ impl Buckling {
     pub fn step_warning(&self, h: f64, g: f64) -> Option<String> {
         let period = self.swing_period(g)?;
         (h > period).then(|| {
+            // Steps are written in milliseconds as 1, 10 or 16.67; a step under a second is
+            // one meant in seconds, for a body stiffer or smaller than the step suits.
+            let milliseconds = if h >= 1.0 {
+                format!(
+                    "a step meant in milliseconds is written in seconds (`[time] step = {}`), \
+                     and ",
+                    h / 1000.0
+                )
+            } else {
+                String::new()
+            };
             format!(
                 "the time step h = {h} s is {:.1} times the period of the body's slowest swing \
                  (about {period:.3} s, from its {:.3e} m sag under gravity), so implicit Euler \
-                 damps every motion out within a step and the body only creeps to rest: a \
-                 step meant in milliseconds is written in seconds (`[time] step = {}`), and \
-                 a step below {:.3} s (a tenth of the period) follows the body's swing",
+                 damps every motion out within a step and the body only creeps to rest: \
+                 {milliseconds}a step below {:.3} s (a tenth of the period) follows the body's \
+                 swing",
                 h / period,
                 self.sag,
-                h / 1000.0,
                 period / 10.0
             )
         })
@@ -1644,7 +1654,11 @@ mod tests {
         assert!(w.contains("37.2 times"), "{w}");
         assert_eq!(b.step_warning(0.01667, 9.81), None);
         assert_eq!(b.step_warning(0.4, 9.81), None);
-        assert!(b.step_warning(0.5, 9.81).is_some());
+        let seconds = b.step_warning(0.5, 9.81).expect("a step past the swing");
+        assert!(
+            !seconds.contains("milliseconds") && seconds.contains("below 0.045 s"),
+            "{seconds}"
+        );
         assert_eq!(b.step_warning(16.67, 0.0), None);
         let flat = super::Buckling { sag: 0.0, ..b };
         assert_eq!(flat.step_warning(16.67, 9.81), None);
