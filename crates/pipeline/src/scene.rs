@@ -25,6 +25,10 @@ pub const WIDER_PIN: f64 = 0.02;
 /// is at 0.025, a 2 m one at 0.2; a 15 m bunny whose file was in centimetres at 1.5.
 pub const HEAVY_BODY: f64 = 0.25;
 
+/// A body larger than this (m) that its weight cannot carry is most likely a mesh in centimetres
+/// or millimetres read as metres (a 25 cm part becomes 25 m); below it, units are not suggested.
+pub const UNIT_MISTAKE_SIZE: f64 = 3.0;
+
 /// What to say of a body that its own weight strains by more than [`HEAVY_BODY`]: most often a
 /// mesh in other units than metres, else too soft a material. `extent` is the body's bounding
 /// box size (metres).
@@ -37,13 +41,20 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     let height: f64 = (0..3).map(|i| (g[i] / g_norm).abs() * extent[i]).sum();
     let m = &scene.material;
     let strain = m.density * g_norm * height / m.youngs_modulus;
+    let size = extent.iter().fold(0.0f64, |a, &x| a.max(x));
+    let remedy = if size > UNIT_MISTAKE_SIZE {
+        format!(
+            "At {size:.1} m across, the mesh may not be in metres: set `[mesh] scale` (0.01 for \
+             centimetres, 0.001 for millimetres); else a stiffer `[material] youngs_modulus`"
+        )
+    } else {
+        "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up".into()
+    };
     (strain > HEAVY_BODY).then(|| {
         format!(
             "its own weight strains the body by about ρgH/E = {strain:.2} (ρ = {} kg/m³, g = \
              {g_norm:.2} m/s², H = {height:.3} m its height along gravity, E = {:.1e} Pa), more \
-             than a solid carries: it will sag or collapse under gravity alone. If the mesh is not \
-             in metres, set `[mesh] scale` (0.01 for centimetres, 0.001 for millimetres); else a \
-             stiffer `[material] youngs_modulus`",
+             than a solid carries: it will sag or collapse under gravity alone. {remedy}",
             m.density, m.youngs_modulus
         )
     })
@@ -889,7 +900,8 @@ mod tests {
     }
 
     /// A body its own weight would strain past [`HEAVY_BODY`] is said, with `[mesh] scale`
-    /// first: the built-in scene is far below it, the same bar 100 times larger above.
+    /// first when it is larger than a soft part usually is: the built-in scene is far below
+    /// it, the same bar 100 times larger above.
     #[test]
     fn a_body_too_heavy_for_its_stiffness_is_said() {
         let s = Scene::builtin();
@@ -900,6 +912,12 @@ mod tests {
         let large = extent.map(|x| 100.0 * x);
         let w = weight_warning(&s, large).expect("a bar 100 times larger");
         assert!(w.contains("`[mesh] scale`"), "{w}");
+        assert!(w.contains("youngs_modulus"), "{w}");
+        // A body of its own size made 1,000 times softer: units are not what to change.
+        let mut soft = s.clone();
+        soft.material.youngs_modulus /= 1000.0;
+        let w = weight_warning(&soft, extent).expect("a bar too soft to hold itself");
+        assert!(!w.contains("`[mesh] scale`"), "{w}");
         assert!(w.contains("youngs_modulus"), "{w}");
         let mut weightless = s.clone();
         weightless.gravity.acceleration = [0.0; 3];
