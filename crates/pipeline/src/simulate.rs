@@ -191,12 +191,6 @@ impl Summary {
             self.frames_written,
             out.display()
         );
-        let chosen = self.steps.iter().filter(|r| r.newton_chosen).count();
-        if chosen > 0 {
-            s.push_str(&format!(
-                "L-BFGS crawled on this body, so {chosen} of its steps went to Newton\n"
-            ));
-        }
         if self.frames_written > 0 {
             s.push_str(&format!(
                 "open {} in ParaView\n",

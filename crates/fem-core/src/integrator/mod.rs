@@ -20,10 +20,10 @@
 //! problem (`model.rs`), one step's objective (`step_objective.rs`), the system matrix and its
 //! factor (`system_matrix.rs`), and the time stepper (`simulator.rs`).
 
+mod aged_reuse;
 mod config;
 mod model;
 mod simulator;
-mod solver_choice;
 mod step_objective;
 mod system_matrix;
 

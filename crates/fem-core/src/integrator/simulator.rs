@@ -5,7 +5,7 @@
 
 use std::time::Instant;
 
-use super::solver_choice::{AgedReuse, SolveOutcome, SolverChoice, newton_iteration_cost};
+use super::aged_reuse::AgedReuse;
 use super::step_objective::StepObjective;
 use super::system_matrix::BodyRotation;
 use super::{FactoredPreconditioner, FullSpaceModel, NewtonParts, TimeConfig};
@@ -41,9 +41,6 @@ pub struct StepReport {
     /// The scene's solver could not finish a solve of this step and the other one went on
     /// from where it stopped.
     pub solver_switched: bool,
-    /// An L-BFGS scene's step went to Newton because L-BFGS had crawled on the steps before
-    /// (see the integrator's `solver_choice` rules).
-    pub newton_chosen: bool,
     /// L-BFGS's preconditioner was assembled and factorised during this step.
     pub preconditioner_factorised: bool,
 }
@@ -73,13 +70,6 @@ pub struct Simulator {
     switched: bool,
     /// ü_n = (u̇_n − u̇_{n−1})/h (full) and the step n it belongs to: a start hint only.
     acceleration: Option<(usize, Vec<f64>)>,
-    /// Which solver an L-BFGS scene's next steps use.
-    choice: SolverChoice,
-    /// Whether the choice sent a solve of the step under way to Newton.
-    chose_newton: bool,
-    /// The L-BFGS attempt that finished the last solve: its iterations, and whether its factor
-    /// was fresh.
-    finishing_attempt: (usize, bool),
 }
 
 /// Steps a current-state L-BFGS preconditioner serves at most before it is refactorised.
@@ -139,9 +129,6 @@ impl Clone for Simulator {
             lbfgs_factorizations: self.lbfgs_factorizations,
             switched: self.switched,
             acceleration: self.acceleration.clone(),
-            choice: self.choice.clone(),
-            chose_newton: self.chose_newton,
-            finishing_attempt: self.finishing_attempt,
         }
     }
 }
@@ -186,9 +173,6 @@ impl Simulator {
             lbfgs_factorizations: 0,
             switched: false,
             acceleration: None,
-            choice: SolverChoice::default(),
-            chose_newton: false,
-            finishing_attempt: (0, false),
         })
     }
 
@@ -281,7 +265,6 @@ impl Simulator {
         self.state.u.fill(0.0);
         self.state.v.fill(0.0);
         self.acceleration = None;
-        self.choice = SolverChoice::default();
         self.forces_changed();
     }
 
@@ -300,68 +283,10 @@ impl Simulator {
         self.lbfgs_factorizations
     }
 
-    /// Solves one minimisation at time `t` and load factor `load`, from `x` (free DOFs), with
-    /// the scene's solver; an L-BFGS scene's solve goes to Newton while L-BFGS crawls
-    /// ([`SolverChoice`]). With the rest-state factor (AutoDef's choice, asked for by name) the
-    /// scene's solver is kept.
+    /// Solves one minimisation at time `t` and load factor `load`, from `x` (free DOFs).
+    /// A step the scene's solver cannot finish is redone with the other one.
     fn solve(
         &mut self,
-        x: &mut [f64],
-        t: f64,
-        predicted: &[f64],
-        load: f64,
-    ) -> Result<crate::optim::SolveStats, FemError> {
-        if self.solver.method != SolverMethod::Lbfgs
-            || self.solver.preconditioner != LbfgsPreconditioner::CurrentState
-        {
-            return self.solve_with(self.solver.method, x, t, predicted, load);
-        }
-        self.ensure_newton()?;
-        let newton_cost = {
-            let parts = self.newton.as_ref().expect("built above");
-            newton_iteration_cost(parts.chol.factor_nnz(), parts.pattern.nnz())
-        };
-        let method = if self.choice.newton() {
-            SolverMethod::Newton
-        } else {
-            SolverMethod::Lbfgs
-        };
-        if self.choice.probing()
-            && let Some(p) = &mut self.lbfgs
-        {
-            // The factor from before the Newton steps is stale.
-            p.failed = true;
-        }
-        self.chose_newton |= method == SolverMethod::Newton;
-        let switched = self.switched;
-        self.switched = false;
-        let result = self.solve_with(method, x, t, predicted, load);
-        let retried = self.switched;
-        self.switched |= switched;
-        let outcome = match (&result, method, retried) {
-            (Ok(s), SolverMethod::Newton, false) => Some(SolveOutcome::Newton(s.iterations)),
-            (Ok(_), SolverMethod::Newton, true) => Some(SolveOutcome::NewtonFailed),
-            (Ok(_), SolverMethod::Lbfgs, false) => {
-                let (iterations, fresh) = self.finishing_attempt;
-                Some(SolveOutcome::Lbfgs(
-                    iterations + if fresh { REFACTOR_COST_ITERATIONS } else { 0 },
-                ))
-            }
-            // Newton went on from where L-BFGS stopped: its count says little of a whole
-            // Newton solve, and is not kept.
-            (Ok(_), SolverMethod::Lbfgs, true) => Some(SolveOutcome::LbfgsFailed),
-            _ => None,
-        };
-        if let Some(outcome) = outcome {
-            self.choice.record(outcome, newton_cost);
-        }
-        result
-    }
-
-    /// One minimisation with `method`; a solve it cannot finish is redone with the other solver.
-    fn solve_with(
-        &mut self,
-        method: SolverMethod,
         x: &mut [f64],
         t: f64,
         predicted: &[f64],
@@ -377,7 +302,7 @@ impl Simulator {
         } else {
             1.0 / (self.time.step * self.time.step)
         };
-        let first = match method {
+        let first = match self.solver.method {
             SolverMethod::Newton => self.solve_newton(x, t, inv_h2, predicted, load, params),
             SolverMethod::Lbfgs => self.solve_lbfgs(x, t, inv_h2, predicted, load, params),
         };
@@ -402,7 +327,7 @@ impl Simulator {
             max_iterations: RETRY_BUDGET * params.max_iterations,
             ..params
         };
-        let retry = match method {
+        let retry = match self.solver.method {
             SolverMethod::Newton => {
                 tracing::info!("{e}; retrying the step with L-BFGS");
                 self.solve_lbfgs(x, t, inv_h2, predicted, load, params)
@@ -414,7 +339,7 @@ impl Simulator {
         };
         // A retry that fails too is said as both solvers' failure, with every iteration spent:
         // "L-BFGS did not converge" alone reads as the scene's solver failing on its own.
-        let both = match method {
+        let both = match self.solver.method {
             SolverMethod::Newton => "Newton, then L-BFGS from where it stopped",
             SolverMethod::Lbfgs => "L-BFGS, then Newton from where it stopped",
         };
@@ -484,6 +409,7 @@ impl Simulator {
         let current = self.solver.preconditioner == LbfgsPreconditioner::CurrentState;
         // Iterations of cut-short attempts, counted into the step's total.
         let mut spent = 0;
+        // Where aged factors keep failing their first reuse, a step starts with a fresh one.
         let mut refresh = current
             && self
                 .lbfgs
@@ -530,7 +456,6 @@ impl Simulator {
             let mut result = parts.lbfgs.minimize(&mut obj, &mut parts.pre, x, attempt);
             match &mut result {
                 Ok(s) => {
-                    self.finishing_attempt = (s.iterations, fresh);
                     if !fresh {
                         parts.reuse.reuse_served();
                     }
@@ -580,7 +505,6 @@ impl Simulator {
     pub fn step(&mut self) -> Result<StepReport, FemError> {
         let start = Instant::now();
         self.switched = false;
-        self.chose_newton = false;
         let factorizations = self.lbfgs_factorizations;
         let h = self.time.step;
         // Times from the step count, not by accumulation, so frame times stay exact multiples.
@@ -647,7 +571,6 @@ impl Simulator {
         report.relative_gradient = stats.relative_gradient;
         report.load_steps = load_steps;
         report.solver_switched = self.switched;
-        report.newton_chosen = self.chose_newton;
         report.preconditioner_factorised = self.lbfgs_factorizations > factorizations;
         report.wall_seconds = start.elapsed().as_secs_f64();
         Ok(report)

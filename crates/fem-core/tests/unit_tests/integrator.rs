@@ -225,13 +225,7 @@ fn newton_and_lbfgs_give_the_same_trajectory() {
         let mut sim = Simulator::new(m, dynamic(STEPS), cfg).unwrap();
         let mut iters = 0;
         for _ in 0..STEPS {
-            let r = sim.step().unwrap();
-            assert!(
-                !r.newton_chosen,
-                "L-BFGS does not crawl here: step {}",
-                r.step
-            );
-            iters += r.iterations;
+            iters += sim.step().unwrap().iterations;
         }
         runs.push((sim.state.u.clone(), iters, sim.lbfgs_factorizations()));
     }
@@ -708,58 +702,6 @@ fn a_step_lbfgs_cannot_finish_is_finished_by_newton_from_where_it_stopped() {
     for (a, b) in retried.state.u.iter().zip(&newton.state.u) {
         assert!((a - b).abs() <= 1e-6 * scale, "{a} against {b}");
     }
-}
-
-/// An L-BFGS scene whose L-BFGS keeps failing sends its steps to Newton after two such steps,
-/// tries L-BFGS again after 8 Newton steps, and waits twice as long after a try that fails
-/// again; the trajectory stays Newton's.
-#[test]
-fn steps_go_to_newton_while_lbfgs_keeps_failing_and_lbfgs_is_tried_again() {
-    let m = model(
-        beam([10, 2, 2]),
-        MaterialModel::StableNeoHookean,
-        1e5,
-        [0.0, -9.81, 0.0],
-        vec![],
-    );
-    let capped = SolverConfig {
-        method: SolverMethod::Lbfgs,
-        tolerance: 1e-9,
-        max_iterations: 2,
-        ..Default::default()
-    };
-    const STEPS: usize = 30;
-    let mut chosen = Simulator::new(m.clone(), dynamic(STEPS), capped).unwrap();
-    let mut newton = Simulator::new(m, dynamic(STEPS), solver(SolverMethod::Newton, 1e-9)).unwrap();
-    let mut pattern = String::new();
-    for _ in 0..STEPS {
-        let r = chosen.step().unwrap();
-        let n = newton.step().unwrap();
-        assert!(!n.newton_chosen, "a Newton scene's steps are not chosen");
-        // The cap cuts short some of Newton's solves too, which L-BFGS then finishes.
-        pattern.push(match (r.newton_chosen, r.solver_switched) {
-            (true, false) => {
-                assert_eq!(r.iterations, n.iterations, "step {}", r.step);
-                'N'
-            }
-            (true, true) => 'N',
-            (false, true) => 'L',
-            other => panic!("step {}: {other:?}", r.step),
-        });
-    }
-    // Two failed L-BFGS steps, 8 Newton, a failed try, 16 Newton, a try.
-    assert_eq!(
-        pattern,
-        format!("LL{}L{}L{}", "N".repeat(8), "N".repeat(16), "N".repeat(2))
-    );
-    let scale = newton.state.u.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    for (a, b) in chosen.state.u.iter().zip(&newton.state.u) {
-        assert!((a - b).abs() <= 1e-6 * scale, "{a} against {b}");
-    }
-    // Back at rest, the choice starts over.
-    chosen.reset();
-    let r = chosen.step().unwrap();
-    assert!(!r.newton_chosen && r.solver_switched);
 }
 
 /// A step that neither solver finishes, the retry included, is said as both solvers' failure,
