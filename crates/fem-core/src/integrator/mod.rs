@@ -18,7 +18,8 @@
 //!
 //! The pieces, one a file: the scene's `[time]` and `[gravity]` sections (`config.rs`), the
 //! problem (`model.rs`), one step's objective (`step_objective.rs`), the system matrix and its
-//! factor (`system_matrix.rs`), and the time stepper (`simulator.rs`).
+//! factor (`system_matrix.rs`), the time stepper (`simulator.rs`) and when its L-BFGS skips an aged
+//! factor (`aged_reuse.rs`).
 
 mod aged_reuse;
 mod config;

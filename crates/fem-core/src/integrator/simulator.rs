@@ -265,6 +265,9 @@ impl Simulator {
         self.state.u.fill(0.0);
         self.state.v.fill(0.0);
         self.acceleration = None;
+        if let Some(p) = &mut self.lbfgs {
+            p.reuse = AgedReuse::default();
+        }
         self.forces_changed();
     }
 
