@@ -41,16 +41,18 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     let height: f64 = (0..3).map(|i| (g[i] / g_norm).abs() * extent[i]).sum();
     let m = &scene.material;
     let strain = m.density * g_norm * height / m.youngs_modulus;
-    let size = extent.iter().fold(0.0f64, |a, &x| a.max(x));
-    let remedy = if size > UNIT_MISTAKE_SIZE {
-        format!(
-            "At {size:.1} m across, the mesh may not be in metres: set `[mesh] scale` (0.01 for \
-             centimetres, 0.001 for millimetres); else a stiffer `[material] youngs_modulus`"
-        )
-    } else {
-        "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up".into()
-    };
     (strain > HEAVY_BODY).then(|| {
+        let size = extent.iter().fold(0.0f64, |a, &x| a.max(x));
+        let remedy = if size > UNIT_MISTAKE_SIZE {
+            format!(
+                "At {size:.1} m across, the mesh may not be in metres: set `[mesh] scale` (0.01 \
+                 for centimetres, 0.001 for millimetres); else a stiffer `[material] \
+                 youngs_modulus`"
+            )
+        } else {
+            "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up"
+                .into()
+        };
         format!(
             "its own weight strains the body by about ρgH/E = {strain:.2} (ρ = {} kg/m³, g = \
              {g_norm:.2} m/s², H = {height:.3} m its height along gravity, E = {:.1e} Pa), more \
