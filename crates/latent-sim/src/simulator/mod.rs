@@ -21,7 +21,7 @@ mod springs;
 pub use springs::ActiveDent;
 
 pub(crate) use kernels::sandwich;
-use preconditioner::PRECOND_EXTRA_ITERATIONS;
+use preconditioner::{AGED_SOLVE_EXTRA_ITERATIONS, PRECOND_EXTRA_ITERATIONS};
 pub use preconditioner::{PRECOND_MAX_AGE, Preconditioning};
 use springs::{SpringCompliance, SpringTerm};
 
@@ -57,10 +57,12 @@ pub struct ReducedStepReport {
     pub vjp_seconds: f64,
     /// Evaluations of the step energy and its gradient (iterations plus line-search trials).
     pub evaluations: usize,
-    /// Whether the L-BFGS preconditioner was rebuilt at the start of this step.
+    /// Whether the L-BFGS preconditioner was rebuilt in this step: at its start, or within
+    /// its solve where the aged one had cost a rebuild's worth of iterations beyond its first
+    /// solve (see [`PRECOND_EXTRA_ITERATIONS`]).
     pub preconditioner_rebuilt: bool,
     /// Whether L-BFGS crawled or its line search failed and the step was solved again with
-    /// reduced Newton from z_n (`iterations` then counts L-BFGS's cap too).
+    /// reduced Newton from z_n (`iterations` then counts L-BFGS's iterations too).
     pub newton_fallback: bool,
     /// Whether the step started again from z_n, the last step's answer, because it could not
     /// be solved from its extrapolated start: the energy was not finite there (an element
@@ -87,6 +89,8 @@ struct Timers {
     vjp: f64,
     /// Building and factorising Newton's matrix.
     newton: f64,
+    /// Rebuilding the preconditioner within a solve, where an aged one stopped serving.
+    precond: f64,
     /// Evaluations of the energy and its gradient.
     evaluations: usize,
 }
@@ -123,6 +127,8 @@ pub struct ReducedSimulator<S: Subspace> {
     compliance: SpringCompliance,
     /// Whether a solve of the step under way was redone with reduced Newton.
     fell_back: bool,
+    /// Whether a solve of the step under way rebuilt the preconditioner at its iterate.
+    rebuilt_in_solve: bool,
 }
 
 /// Reusable buffers of one step.
@@ -239,6 +245,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             zddot_step: None,
             compliance: SpringCompliance::default(),
             fell_back: false,
+            rebuilt_in_solve: false,
             model,
             space,
             subspace,
@@ -421,6 +428,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         self.predict();
         self.work.timers = Timers::default();
         self.fell_back = false;
+        self.rebuilt_in_solve = false;
         let params = SolveParams {
             tolerance: self.solver.tolerance,
             max_iterations: self.solver.max_iterations,
@@ -446,6 +454,9 @@ impl<S: Subspace> ReducedSimulator<S> {
         let pstart = Instant::now();
         let mut rebuilt = false;
         let mut restarted = false;
+        // Whether the step is solved with a preconditioner made for an earlier one, that a
+        // solve may rebuild at its iterate (see `solve`).
+        let mut aged = false;
         if self.solver.method == SolverMethod::Lbfgs {
             let d = self.subspace.latent_dim();
             let current = self.precond_active.as_ref().is_some_and(|a| {
@@ -512,10 +523,12 @@ impl<S: Subspace> ReducedSimulator<S> {
                 // A new preconditioner also marks a change of the curvature (a force switched,
                 // or the state moved on): the next solve starts without the old pairs.
                 self.lbfgs.reset();
+            } else {
+                aged = depends_on_state && preconditioning == Preconditioning::CurrentState;
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
-        let stats = match self.solve(&mut z, t, params) {
+        let stats = match self.solve(&mut z, t, params, aged) {
             // The extrapolated start can leave the region where the energy is defined (an
             // element inverted under the classic Neo-Hookean model, whose energy is then not
             // finite) where z_n, the last step's answer, was inside it: start again from z_n.
@@ -524,7 +537,7 @@ impl<S: Subspace> ReducedSimulator<S> {
                 restarted = true;
                 self.lbfgs.reset();
                 z.copy_from_slice(&self.state.z);
-                self.solve(&mut z, t, params)?
+                self.solve(&mut z, t, params, aged && !self.rebuilt_in_solve)?
             }
             r => r?,
         };
@@ -545,7 +558,6 @@ impl<S: Subspace> ReducedSimulator<S> {
                 (q_new[i] - self.state.q[i]) / h
             };
         }
-        self.precond_use.record(stats.iterations);
         for ((v, a), (new, old)) in self
             .state
             .zdot
@@ -574,25 +586,29 @@ impl<S: Subspace> ReducedSimulator<S> {
             iterations: stats.iterations,
             relative_gradient: stats.relative_gradient,
             wall_seconds: start.elapsed().as_secs_f64(),
-            precond_seconds: precond_seconds + self.work.timers.newton,
+            precond_seconds: precond_seconds + self.work.timers.precond + self.work.timers.newton,
             decode_seconds: self.work.timers.decode,
             elastic_seconds: self.work.timers.elastic,
             vjp_seconds: self.work.timers.vjp,
             evaluations: self.work.timers.evaluations,
-            preconditioner_rebuilt: rebuilt,
+            preconditioner_rebuilt: rebuilt || self.rebuilt_in_solve,
             newton_fallback: self.fell_back,
             restarted,
         })
     }
 
     /// Minimises the step objective at time `t` from `z` (overwritten) with the configured
-    /// solver; an L-BFGS solve that crawls or whose line search fails is redone with reduced
-    /// Newton from z_n.
+    /// solver. With L-BFGS, a solve with an `aged` preconditioner (made for an earlier step) gets
+    /// the iterations its first solve took plus what a rebuild costs; past that, the
+    /// preconditioner is rebuilt at the solve's iterate and L-BFGS goes on from there. A solve
+    /// that crawls or whose line search fails with a fresh preconditioner is redone with
+    /// reduced Newton from z_n, and the next step rebuilds the preconditioner.
     fn solve(
         &mut self,
         z: &mut [f64],
         t: f64,
         params: SolveParams,
+        mut aged: bool,
     ) -> Result<SolveStats, FemError> {
         let inv_h2 = self.inv_h2();
         let mut obj = StepObjective {
@@ -605,34 +621,76 @@ impl<S: Subspace> ReducedSimulator<S> {
             scale: 0.0,
             noise: 0.0,
         };
-        match self.solver.method {
-            SolverMethod::Lbfgs => {
-                // The curvature pairs of the last steps' solves are kept until the
-                // preconditioner is rebuilt: 10 % fewer iterations on the catapult.
-                match self
-                    .lbfgs
-                    .minimize_warm(&mut obj, &mut self.precond, z, params)
-                {
-                    Ok(s) => Ok(s),
-                    // Where the energy curves far more than the rest-state preconditioner
-                    // says (a nearly degenerate element along the subspace), L-BFGS crawls:
-                    // redo the step with Newton on the reduced Hessian.
-                    Err(
-                        e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. }),
-                    ) => {
-                        tracing::info!("{e}; retrying the step with reduced Newton");
-                        self.fell_back = true;
-                        self.lbfgs.reset();
-                        z.copy_from_slice(&self.state.z);
-                        let mut s = newton(&mut obj, z, params)?;
-                        s.iterations += params.max_iterations;
-                        Ok(s)
-                    }
-                    Err(e) => Err(e),
-                }
-            }
-            SolverMethod::Newton => newton(&mut obj, z, params),
+        if self.solver.method == SolverMethod::Newton {
+            return newton(&mut obj, z, params);
         }
+        // Iterations of attempts cut short, counted into the step's total.
+        let mut spent = 0;
+        let e = loop {
+            // An aged preconditioner that no longer serves is rebuilt at the iterate (see
+            // AGED_SOLVE_EXTRA_ITERATIONS) rather than left to run L-BFGS to its cap and then
+            // Newton.
+            let cap = if aged {
+                params
+                    .max_iterations
+                    .min(self.precond_use.fresh_iterations() + AGED_SOLVE_EXTRA_ITERATIONS)
+            } else {
+                params.max_iterations
+            };
+            let attempt = SolveParams {
+                max_iterations: cap,
+                ..params
+            };
+            // The curvature pairs of the last steps' solves are kept until the preconditioner
+            // is rebuilt: 10 % fewer iterations on the catapult.
+            match self
+                .lbfgs
+                .minimize_warm(&mut obj, &mut self.precond, z, attempt)
+            {
+                Ok(mut s) => {
+                    self.precond_use.record(s.iterations);
+                    s.iterations += spent;
+                    return Ok(s);
+                }
+                Err(e @ (FemError::NotConverged { .. } | FemError::LineSearchFailed { .. })) => {
+                    spent += match e {
+                        FemError::NotConverged { iterations, .. } => iterations,
+                        FemError::LineSearchFailed { iteration, .. } => iteration + 1,
+                        _ => 0,
+                    };
+                    if !aged {
+                        break e;
+                    }
+                    // L-BFGS accepts only steps that lower the energy: the iterate is at
+                    // least as good as the start, and the matrix there sees the motion so far.
+                    aged = false;
+                    let start = Instant::now();
+                    let factored = obj.factor_gauss_newton(z, &mut self.precond, "preconditioner");
+                    obj.work.timers.precond += start.elapsed().as_secs_f64();
+                    if factored.is_err() {
+                        // Forms the matrix again at the step's start before the next solve.
+                        self.precond_active = None;
+                        break e;
+                    }
+                    self.precond_use.restart();
+                    self.lbfgs.reset();
+                    self.rebuilt_in_solve = true;
+                }
+                Err(e) => return Err(e),
+            }
+        };
+        // Where the energy curves far more than even a fresh preconditioner says (a nearly
+        // degenerate element along the subspace), L-BFGS crawls: redo the step with Newton on
+        // the reduced Hessian. The preconditioner is rebuilt at the next step's start: the
+        // count of this solve would make a poor yardstick for the next ones.
+        tracing::info!("{e}; retrying the step with reduced Newton");
+        self.fell_back = true;
+        self.precond_active = None;
+        self.lbfgs.reset();
+        z.copy_from_slice(&self.state.z);
+        let mut s = newton(&mut obj, z, params)?;
+        s.iterations += spent;
+        Ok(s)
     }
 
     /// The inertial prediction q̃ = q_n + h q̇_n of the next step (q_n when quasi-static).

@@ -20,6 +20,20 @@ pub const PRECOND_MAX_AGE: usize = 64;
 /// half again as many iterations as the first), about 5 % less time.
 pub(super) const PRECOND_EXTRA_ITERATIONS: usize = 8;
 
+/// A solve with a preconditioner made for an earlier step gets the iterations the first solve
+/// with it took plus this many; past that the preconditioner is rebuilt at the solve's iterate
+/// and L-BFGS goes on from there. Before, such a solve ran to the iteration cap and was redone by
+/// reduced Newton from the step's start, and a preconditioner whose first solve had failed that
+/// way kept the failure as its yardstick and was never found stale: a jelly (d = 112, 500
+/// elements) dragged, punched and turned by gravity in a 60 Hz loop fell back to Newton in 123
+/// of 447 steps, 60 of 60 with gravity sideways on 2 rebuilds. At this cap: 10 fallbacks, 22.6
+/// instead of 41.2 iterations a step, and its mean step about halved. The cap is well above a
+/// rebuild's cost (10–30 evaluations at 500 elements) so that a solve a few iterations longer
+/// than the first, which normal motion gives, keeps its preconditioner: at 8 the catapult's and
+/// the dinosaur's test drags rebuilt 56 and 66 times instead of 35 and 40 and ran 17–25 %
+/// slower; at 32 every test drag of AutoDef's meshes steps as before, to the bit.
+pub(super) const AGED_SOLVE_EXTRA_ITERATIONS: usize = 32;
+
 /// The matrix that preconditions the reduced L-BFGS.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]

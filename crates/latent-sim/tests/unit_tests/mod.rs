@@ -1220,3 +1220,41 @@ fn the_trajectory_does_not_depend_on_the_units_of_z() {
         assert!(diff <= 1e-2 * size, "step {step}: {diff:.2e} of {size:.2e}");
     }
 }
+
+/// A step that fell back to Newton leaves the next step a fresh preconditioner, and a solve
+/// whose preconditioner was made for an earlier step and no longer serves rebuilds it at its
+/// iterate instead of giving up on L-BFGS. Before, the fallback's count became the
+/// preconditioner's yardstick, so it was never found stale, and every later solve with it ran to
+/// the cap and fell back again.
+#[test]
+fn a_preconditioner_that_stops_serving_is_rebuilt() {
+    let m = model();
+    let n = m.dofs.num_free();
+    let space = reduced_space(&m, &full_rank_basis(&m), n, None).unwrap();
+    let mut red = ReducedSimulator::new(
+        m,
+        space,
+        LinearSubspace::new(n),
+        time(10),
+        solver(SolverMethod::Lbfgs),
+    )
+    .unwrap();
+    red.preconditioning = Preconditioning::CurrentState;
+    let mut step = |cap: usize| {
+        red.solver.max_iterations = cap;
+        let r = red.step().unwrap();
+        (r.preconditioner_rebuilt, r.newton_fallback, r.iterations)
+    };
+    // The first step takes 4 iterations to 1e-10 with a fresh preconditioner: held to 3, L-BFGS
+    // fails and Newton from the start finishes it.
+    let (rebuilt, fell_back, iterations) = step(3);
+    assert!(rebuilt && fell_back && iterations > 3, "{iterations}");
+    assert_eq!(step(500), (true, false, 4), "the step after the fallback");
+    assert!(!step(500).0);
+    assert!(!step(500).0);
+    // Later steps take 5–6 iterations with the aged preconditioner: held to 2, L-BFGS rebuilds it
+    // at its iterate and finishes.
+    let (rebuilt, fell_back, iterations) = step(2);
+    assert!(rebuilt && !fell_back && iterations > 2, "{iterations}");
+    assert!(!step(500).0);
+}
