@@ -27,11 +27,11 @@ pub(super) const PRECOND_EXTRA_ITERATIONS: usize = 8;
 /// way kept the failure as its yardstick and was never found stale: a jelly (d = 112, 500
 /// elements) dragged, punched and turned by gravity in a 60 Hz loop fell back to Newton in 123
 /// of 447 steps, 60 of 60 with gravity sideways on 2 rebuilds. At this cap: 10 fallbacks, 22.6
-/// instead of 41.2 iterations a step, and its mean step about halved. The cap is well above a
-/// rebuild's cost (10–30 evaluations at 500 elements) so that a solve a few iterations longer
+/// instead of 41.2 iterations a step, and its mean step about halved. The cap is at the upper
+/// end of a rebuild's cost (10–30 evaluations at 500 elements) so that a solve a few iterations longer
 /// than the first, which normal motion gives, keeps its preconditioner: at 8 the catapult's and
-/// the dinosaur's test drags rebuilt 56 and 66 times instead of 35 and 40 and ran 17–25 %
-/// slower; at 32 every test drag of AutoDef's meshes steps as before, to the bit.
+/// the dinosaur's test drags rebuilt 56 and 66 times in 100 steps instead of 35 and 40; at 32
+/// AutoDef's six meshes step their test drags 0 and 1 as before, to the bit.
 pub(super) const AGED_SOLVE_EXTRA_ITERATIONS: usize = 32;
 
 /// The matrix that preconditions the reduced L-BFGS.
