@@ -58,8 +58,8 @@ pub struct ReducedStepReport {
     /// Evaluations of the step energy and its gradient (iterations plus line-search trials).
     pub evaluations: usize,
     /// Whether the L-BFGS preconditioner was rebuilt in this step: at its start, or within
-    /// its solve where the aged one had cost a rebuild's worth of iterations beyond its first
-    /// solve (see [`PRECOND_EXTRA_ITERATIONS`]).
+    /// its solve, where one kept from earlier steps had run 32 iterations past the count of
+    /// the first solve it served.
     pub preconditioner_rebuilt: bool,
     /// Whether L-BFGS crawled or its line search failed and the step was solved again with
     /// reduced Newton from z_n (`iterations` then counts L-BFGS's iterations too).
@@ -668,8 +668,6 @@ impl<S: Subspace> ReducedSimulator<S> {
                     let factored = obj.factor_gauss_newton(z, &mut self.precond, "preconditioner");
                     obj.work.timers.precond += start.elapsed().as_secs_f64();
                     if factored.is_err() {
-                        // Forms the matrix again at the step's start before the next solve.
-                        self.precond_active = None;
                         break e;
                     }
                     self.precond_use.restart();
