@@ -21,7 +21,7 @@ mod springs;
 pub use springs::ActiveDent;
 
 pub(crate) use kernels::sandwich;
-use preconditioner::{AGED_SOLVE_EXTRA_ITERATIONS, PRECOND_EXTRA_ITERATIONS};
+use preconditioner::{FRESH_REBUILDS_IN_SOLVE, PRECOND_EXTRA_ITERATIONS, REBUILD_AFTER_ITERATIONS};
 pub use preconditioner::{PRECOND_MAX_AGE, Preconditioning};
 use springs::{SpringCompliance, SpringTerm};
 
@@ -57,9 +57,9 @@ pub struct ReducedStepReport {
     pub vjp_seconds: f64,
     /// Evaluations of the step energy and its gradient (iterations plus line-search trials).
     pub evaluations: usize,
-    /// Whether the L-BFGS preconditioner was rebuilt in this step: at its start, or within
-    /// its solve, where one kept from earlier steps had run 32 iterations past the count of
-    /// the first solve it served.
+    /// Whether the L-BFGS preconditioner was rebuilt in this step: at its start, or within its
+    /// solve, where it had served 32 iterations without converging beyond the count of the
+    /// first solve it served (none for one made in this step).
     pub preconditioner_rebuilt: bool,
     /// Whether L-BFGS crawled or its line search failed and the step was solved again with
     /// reduced Newton from z_n (`iterations` then counts L-BFGS's iterations too).
@@ -81,6 +81,18 @@ pub struct ReducedEnergy {
     pub total: f64,
 }
 
+/// The preconditioner a step's L-BFGS solve starts with, which decides whether the solve may
+/// rebuild it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Starting {
+    /// A matrix a solve never rebuilds: the rest state's (`preconditioner = "rest"`).
+    Fixed,
+    /// The current-state matrix, made at this step's start.
+    Fresh,
+    /// The current-state matrix, kept from an earlier step.
+    Aged,
+}
+
 /// Time spent in each part of the objective, accumulated over one step.
 #[derive(Debug, Clone, Copy, Default)]
 struct Timers {
@@ -89,7 +101,7 @@ struct Timers {
     vjp: f64,
     /// Building and factorising Newton's matrix.
     newton: f64,
-    /// Rebuilding the preconditioner within a solve, where an aged one stopped serving.
+    /// Rebuilding the preconditioner within a solve, where it stopped serving.
     precond: f64,
     /// Evaluations of the energy and its gradient.
     evaluations: usize,
@@ -454,9 +466,7 @@ impl<S: Subspace> ReducedSimulator<S> {
         let pstart = Instant::now();
         let mut rebuilt = false;
         let mut restarted = false;
-        // Whether the step is solved with a preconditioner made for an earlier one, that a
-        // solve may rebuild at its iterate (see `solve`).
-        let mut aged = false;
+        let mut starting = Starting::Fixed;
         if self.solver.method == SolverMethod::Lbfgs {
             let d = self.subspace.latent_dim();
             let current = self.precond_active.as_ref().is_some_and(|a| {
@@ -523,12 +533,17 @@ impl<S: Subspace> ReducedSimulator<S> {
                 // A new preconditioner also marks a change of the curvature (a force switched,
                 // or the state moved on): the next solve starts without the old pairs.
                 self.lbfgs.reset();
-            } else {
-                aged = depends_on_state && preconditioning == Preconditioning::CurrentState;
+            }
+            if preconditioning == Preconditioning::CurrentState {
+                starting = if rebuilt {
+                    Starting::Fresh
+                } else {
+                    Starting::Aged
+                };
             }
         }
         let precond_seconds = pstart.elapsed().as_secs_f64();
-        let stats = match self.solve(&mut z, t, params, aged) {
+        let stats = match self.solve(&mut z, t, params, starting) {
             // The extrapolated start can leave the region where the energy is defined (an
             // element inverted under the classic Neo-Hookean model, whose energy is then not
             // finite) where z_n, the last step's answer, was inside it: start again from z_n.
@@ -537,7 +552,12 @@ impl<S: Subspace> ReducedSimulator<S> {
                 restarted = true;
                 self.lbfgs.reset();
                 z.copy_from_slice(&self.state.z);
-                self.solve(&mut z, t, params, aged && !self.rebuilt_in_solve)?
+                let now = if self.rebuilt_in_solve {
+                    Starting::Fresh
+                } else {
+                    starting
+                };
+                self.solve(&mut z, t, params, now)?
             }
             r => r?,
         };
@@ -598,17 +618,19 @@ impl<S: Subspace> ReducedSimulator<S> {
     }
 
     /// Minimises the step objective at time `t` from `z` (overwritten) with the configured
-    /// solver. With L-BFGS, a solve with an `aged` preconditioner (made for an earlier step) gets
-    /// the iterations its first solve took plus what a rebuild costs; past that, the
-    /// preconditioner is rebuilt at the solve's iterate and L-BFGS goes on from there. A solve
-    /// that crawls or whose line search fails with a fresh preconditioner is redone with
+    /// solver. With L-BFGS and a current-state preconditioner, once the preconditioner has
+    /// served [`REBUILD_AFTER_ITERATIONS`] iterations without converging, beyond what its first
+    /// solve took when it was `starting` as [`Starting::Aged`], it is rebuilt at the solve's
+    /// iterate and L-BFGS goes on from there: once for an aged one, then up to
+    /// [`FRESH_REBUILDS_IN_SOLVE`] times for fresh ones, after which L-BFGS has the full
+    /// iteration cap. A solve that still crawls or whose line search fails is redone with
     /// reduced Newton from z_n, and the next step rebuilds the preconditioner.
     fn solve(
         &mut self,
         z: &mut [f64],
         t: f64,
         params: SolveParams,
-        mut aged: bool,
+        starting: Starting,
     ) -> Result<SolveStats, FemError> {
         let inv_h2 = self.inv_h2();
         let mut obj = StepObjective {
@@ -626,19 +648,16 @@ impl<S: Subspace> ReducedSimulator<S> {
         }
         // Iterations of attempts cut short, counted into the step's total.
         let mut spent = 0;
+        let mut precond = starting;
+        let mut fresh_rebuilds = FRESH_REBUILDS_IN_SOLVE;
         let e = loop {
-            // An aged preconditioner that no longer serves is rebuilt at the iterate (see
-            // AGED_SOLVE_EXTRA_ITERATIONS) rather than left to run L-BFGS to its cap and then
-            // Newton.
-            let cap = if aged {
-                params
-                    .max_iterations
-                    .min(self.precond_use.fresh_iterations() + AGED_SOLVE_EXTRA_ITERATIONS)
-            } else {
-                params.max_iterations
+            let cap = match precond {
+                Starting::Aged => self.precond_use.fresh_iterations() + REBUILD_AFTER_ITERATIONS,
+                Starting::Fresh if fresh_rebuilds > 0 => REBUILD_AFTER_ITERATIONS,
+                _ => params.max_iterations,
             };
             let attempt = SolveParams {
-                max_iterations: cap,
+                max_iterations: cap.min(params.max_iterations),
                 ..params
             };
             // The curvature pairs of the last steps' solves are kept until the preconditioner
@@ -658,18 +677,20 @@ impl<S: Subspace> ReducedSimulator<S> {
                         FemError::LineSearchFailed { iteration, .. } => iteration + 1,
                         _ => 0,
                     };
-                    if !aged {
-                        break e;
+                    match precond {
+                        Starting::Aged => {}
+                        Starting::Fresh if fresh_rebuilds > 0 => fresh_rebuilds -= 1,
+                        _ => break e,
                     }
                     // L-BFGS accepts only steps that lower the energy: the iterate is at
                     // least as good as the start, and the matrix there sees the motion so far.
-                    aged = false;
                     let start = Instant::now();
                     let factored = obj.factor_gauss_newton(z, &mut self.precond, "preconditioner");
                     obj.work.timers.precond += start.elapsed().as_secs_f64();
                     if factored.is_err() {
                         break e;
                     }
+                    precond = Starting::Fresh;
                     self.precond_use.restart();
                     self.lbfgs.reset();
                     self.rebuilt_in_solve = true;
@@ -679,11 +700,13 @@ impl<S: Subspace> ReducedSimulator<S> {
         };
         // Where the energy curves far more than even a fresh preconditioner says (a nearly
         // degenerate element along the subspace), L-BFGS crawls: redo the step with Newton on
-        // the reduced Hessian. The preconditioner is rebuilt at the next step's start: the
-        // count of this solve would make a poor yardstick for the next ones.
+        // the reduced Hessian. A current-state preconditioner is rebuilt at the next step's
+        // start: the count of this solve would make a poor yardstick for the next ones.
         tracing::info!("{e}; retrying the step with reduced Newton");
         self.fell_back = true;
-        self.precond_active = None;
+        if starting != Starting::Fixed {
+            self.precond_active = None;
+        }
         self.lbfgs.reset();
         z.copy_from_slice(&self.state.z);
         let mut s = newton(&mut obj, z, params)?;

@@ -20,19 +20,26 @@ pub const PRECOND_MAX_AGE: usize = 64;
 /// half again as many iterations as the first), about 5 % less time.
 pub(super) const PRECOND_EXTRA_ITERATIONS: usize = 8;
 
-/// A solve with a preconditioner made for an earlier step gets the iterations the first solve
-/// with it took plus this many; past that the preconditioner is rebuilt at the solve's iterate
-/// and L-BFGS goes on from there. Before, such a solve ran to the iteration cap and was redone by
-/// reduced Newton from the step's start, and a preconditioner whose first solve had failed that
-/// way kept the failure as its yardstick and was never found stale: a jelly (d = 112, 500
-/// elements) dragged, punched and turned by gravity in a 60 Hz loop fell back to Newton in 123
-/// of 447 steps, 60 of 60 with gravity sideways on 2 rebuilds. At this cap: 10 fallbacks, 22.6
-/// instead of 41.2 iterations a step, and its mean step about halved. The cap is at the upper
-/// end of a rebuild's cost (10–30 evaluations at 500 elements) so that a solve a few iterations longer
-/// than the first, which normal motion gives, keeps its preconditioner: at 8 the catapult's and
-/// the dinosaur's test drags rebuilt 56 and 66 times in 100 steps instead of 35 and 40; at 32
-/// AutoDef's six meshes step their test drags 0 and 1 as before, to the bit.
-pub(super) const AGED_SOLVE_EXTRA_ITERATIONS: usize = 32;
+/// A current-state preconditioner that has served this many iterations of a solve without
+/// converging, beyond what its first solve took when it was kept from an earlier step, is
+/// rebuilt at the solve's iterate, and L-BFGS goes on from there. Before stop 64 such a solve ran
+/// to the iteration cap and was redone by reduced Newton from the step's start, and a
+/// preconditioner whose first solve had failed that way kept the failure as its yardstick and
+/// was never found stale: a jelly (d = 112, 500 elements) dragged, punched and turned by gravity
+/// in a 60 Hz loop fell back to Newton in 123 of 447 steps, 60 of 60 with gravity sideways on 2
+/// rebuilds. The count is at the upper end of a rebuild's cost (10–30 evaluations at 500
+/// elements), so that a solve a few iterations longer than the first, which normal motion
+/// gives, keeps its preconditioner: at 8 the catapult's and the dinosaur's test drags rebuilt
+/// 56 and 66 times in 100 steps instead of 35 and 40; at 32, 35 and 40.
+pub(super) const REBUILD_AFTER_ITERATIONS: usize = 32;
+
+/// How many times a solve rebuilds a preconditioner made within the step (at the step's start
+/// or by an earlier rebuild) before L-BFGS gets the full iteration cap and then, failing that,
+/// reduced Newton. A step far from anything trained (a punch of two body weights, gravity
+/// turned) can outrun even a fresh matrix; two more rebuilds finished every such step of five
+/// game loops where one rebuild of the aged matrix left 1–19 to Newton, and took their worst
+/// frames from 139–337 to 75–104 ms (the jelly, a starfish, a stool); four did no better.
+pub(super) const FRESH_REBUILDS_IN_SOLVE: usize = 2;
 
 /// The matrix that preconditions the reduced L-BFGS.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

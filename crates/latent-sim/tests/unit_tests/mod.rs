@@ -1221,40 +1221,59 @@ fn the_trajectory_does_not_depend_on_the_units_of_z() {
     }
 }
 
-/// A step that fell back to Newton leaves the next step a fresh preconditioner, and a solve
-/// whose preconditioner was made for an earlier step and no longer serves rebuilds it at its
-/// iterate instead of giving up on L-BFGS. Before, the fallback's count became the
-/// preconditioner's yardstick, so it was never found stale, and every later solve with it ran to
-/// the cap and fell back again.
+/// A current-state preconditioner that has served a solve 32 iterations past its first solve's
+/// count (none for one made in the step), or past the iteration cap, is rebuilt at the solve's
+/// iterate, and L-BFGS goes on from there instead of handing the step to Newton. The rest
+/// state's matrix is never rebuilt within a solve: a solve that cannot finish with it falls back
+/// to Newton.
 #[test]
-fn a_preconditioner_that_stops_serving_is_rebuilt() {
+fn a_preconditioner_that_stops_serving_is_rebuilt_within_the_solve() {
     let m = model();
     let n = m.dofs.num_free();
     let space = reduced_space(&m, &full_rank_basis(&m), n, None).unwrap();
-    let mut red = ReducedSimulator::new(
-        m,
-        space,
-        LinearSubspace::new(n),
-        time(10),
-        solver(SolverMethod::Lbfgs),
-    )
-    .unwrap();
-    red.preconditioning = Preconditioning::CurrentState;
-    let mut step = |cap: usize| {
+    let simulator = |preconditioning| {
+        let mut red = ReducedSimulator::new(
+            m.clone(),
+            space.clone(),
+            LinearSubspace::new(n),
+            time(10),
+            solver(SolverMethod::Lbfgs),
+        )
+        .unwrap();
+        red.preconditioning = preconditioning;
+        red
+    };
+    let step = |red: &mut ReducedSimulator<LinearSubspace>, cap: usize| {
         red.solver.max_iterations = cap;
         let r = red.step().unwrap();
         (r.preconditioner_rebuilt, r.newton_fallback, r.iterations)
     };
-    // The first step takes 4 iterations to 1e-10 with a fresh preconditioner: held to 3, L-BFGS
-    // fails and Newton from the start finishes it.
-    let (rebuilt, fell_back, iterations) = step(3);
-    assert!(rebuilt && fell_back && iterations > 3, "{iterations}");
-    assert_eq!(step(500), (true, false, 4), "the step after the fallback");
-    assert!(!step(500).0);
-    assert!(!step(500).0);
-    // Later steps take 5–6 iterations with the aged preconditioner: held to 2, L-BFGS rebuilds it
-    // at its iterate and finishes.
-    let (rebuilt, fell_back, iterations) = step(2);
+    let mut red = simulator(Preconditioning::CurrentState);
+    // The first step takes 4 iterations to 1e-10 with the preconditioner made at its start:
+    // held to 3 at a time, L-BFGS rebuilds it at its iterate and finishes.
+    let (rebuilt, fell_back, iterations) = step(&mut red, 3);
+    assert!(rebuilt && !fell_back && iterations > 3, "{iterations}");
+    // The next two steps keep it (5 iterations each); the third rebuilds it at its start, as
+    // the two took 8 more than its first solve.
+    let kept: Vec<_> = (0..4).map(|_| step(&mut red, 500)).collect();
+    assert_eq!(
+        kept,
+        [
+            (false, false, 5),
+            (false, false, 5),
+            (true, false, 3),
+            (false, false, 6)
+        ]
+    );
+    // The next step takes 7 iterations with the kept preconditioner: held to 2, L-BFGS rebuilds
+    // it at its iterate and finishes, as above.
+    let (rebuilt, fell_back, iterations) = step(&mut red, 2);
     assert!(rebuilt && !fell_back && iterations > 2, "{iterations}");
-    assert!(!step(500).0);
+    assert!(!step(&mut red, 500).0);
+    // The rest state's matrix, held to 3: Newton finishes the step, and the matrix is kept.
+    let mut red = simulator(Preconditioning::Rest);
+    assert!(step(&mut red, 500).0);
+    let (rebuilt, fell_back, _) = step(&mut red, 3);
+    assert!(!rebuilt && fell_back);
+    assert!(!step(&mut red, 500).0);
 }

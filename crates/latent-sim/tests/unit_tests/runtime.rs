@@ -579,10 +579,14 @@ fn a_step_says_how_far_it_solved_and_what_made_it_costly() {
     assert_eq!(s.preconditioner_rebuilt, lbfgs, "{s:?}");
     assert!(!s.newton_fallback, "{s:?}");
     assert!(s.relative_gradient.is_finite(), "{s:?}");
-    // L-BFGS held to two iterations cannot finish a step to 1e-10: Newton does, and the step
-    // says so.
+    // L-BFGS held to two iterations at a time finishes a step to 1e-10 by rebuilding its
+    // preconditioner at its iterate; with the rest state's, which a solve never rebuilds, it
+    // cannot: Newton does, and the step says so.
     let mut capped = model.clone();
     (capped.solver.max_iterations, capped.solver.tolerance) = (2, 1e-10);
+    let s = capped.simulator().unwrap().step().unwrap();
+    assert!(s.preconditioner_rebuilt && !s.newton_fallback, "{s:?}");
+    capped.preconditioning = latent_sim::Preconditioning::Rest;
     let s = capped.simulator().unwrap().step().unwrap();
     assert!(s.newton_fallback, "{s:?}");
     (
