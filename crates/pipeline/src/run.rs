@@ -312,9 +312,12 @@ impl Buckling {
     }
 
     /// The load factor below 1 when the estimate holds: the body buckles under its own weight.
+    /// An unconverged search counts too, as its load factor is an upper bound
+    /// ([`fem_core::stability::GravityBuckling::load_factor`]): a thin stool whose search
+    /// stopped at 0.255 fell under its weight and was not warned of.
     pub fn buckles(&self) -> Option<f64> {
         let l = self.load_factor?;
-        (self.converged && l < 1.0 && self.sag < Self::VALID_SAG * self.size).then_some(l)
+        (l < 1.0 && self.sag < Self::VALID_SAG * self.size).then_some(l)
     }
 }
 

@@ -254,23 +254,29 @@ fn linear_warning(r: &MethodReport) -> Option<String> {
 fn buckling_warning(r: &MethodReport) -> Option<String> {
     let b = r.buckling?;
     let load = b.buckles()?;
+    // Unconverged, the load factor is an upper bound and the modulus a lower one.
+    let (at_most, least) = if b.converged {
+        ("", "")
+    } else {
+        ("at most ", "at least ")
+    };
     // Twice the modulus at which it would just stand: near its buckling load a body still
     // sways far ([`crate::run::Buckling::MARGIN`]).
     let stiffer = b
         .standing_modulus
         .map(|e| {
             format!(
-                " (`[material] youngs_modulus` of {:.2e} Pa or more, {} times the {e:.2e} Pa at \
-                 which it would just stand)",
+                " (`[material] youngs_modulus` of {:.2e} Pa or more, {} times the {least}{e:.2e} \
+                 Pa at which it would just stand)",
                 crate::run::Buckling::MARGIN * e,
                 crate::run::Buckling::MARGIN
             )
         })
         .unwrap_or_default();
     Some(format!(
-        "{}: the body buckles under its own weight as it is pinned: {:.2} times its weight \
-         would buckle it (linearised at rest, where its weight sags it by {:.2e} m), so under \
-         the scene's gravity its shape runs away from rest along a buckling mode, grown from \
+        "{}: the body buckles under its own weight as it is pinned: {at_most}{:.2} times its \
+         weight would buckle it (linearised at rest, where its weight sags it by {:.2e} m), so \
+         under the scene's gravity its shape runs away from rest along a buckling mode, grown from \
          whatever small difference starts it, and the test measures how each method follows \
          that instability; pins where it buckles, a stiffer material{stiffer} or a lighter \
          load (`[gravity]`) keep it standing",
@@ -940,6 +946,37 @@ mod tests {
             "{}",
             pulled[0]
         );
+    }
+
+    /// A body whose buckling search stopped short is warned of when the bound it found is
+    /// below 1, as an upper bound ("at most"); a thin stool that fell under its weight was not.
+    #[test]
+    fn an_unconverged_buckling_bound_below_one_is_told_as_a_bound() {
+        let full = |converged: bool, load: f64| MethodReport {
+            buckling: Some(crate::run::Buckling {
+                load_factor: Some(load),
+                sag: 0.004,
+                size: 0.6,
+                standing_modulus: Some(1e5 / load),
+                firm_modulus: crate::run::Buckling::firm(1e5, 0.004, 0.6, Some(1e5 / load)),
+                converged,
+            }),
+            ..row(Method::Full, 0.0, 0.0)
+        };
+        let said = |r: MethodReport| {
+            assess(&[r])
+                .untrusted
+                .into_iter()
+                .filter(|w| w.contains("buckles under its own weight"))
+                .collect::<Vec<_>>()
+        };
+        let w = said(full(false, 0.255));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("at most 0.26 times its weight"), "{}", w[0]);
+        assert!(w[0].contains("the at least 3.92e5 Pa"), "{}", w[0]);
+        let w = said(full(true, 0.255));
+        assert!(w[0].contains("pinned: 0.26 times its weight"), "{}", w[0]);
+        assert!(said(full(false, 1.5)).is_empty());
     }
 
     /// A body whose weight carries it far over the test, where the full dynamics amplify a
