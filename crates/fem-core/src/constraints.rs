@@ -1,7 +1,7 @@
 //! Vertex selections (axis plane, box, sphere, index list), pinned vertices and the map between
 //! full degrees of freedom (3 per vertex) and the free ones the solvers work on.
 
-use crate::{FemError, TetMesh, Vec3};
+use crate::{FemError, TetMesh, Vec3, four_digits};
 
 /// Which side of the bounding box an axis plane sits on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -167,7 +167,23 @@ impl VertexSelection {
         out.sort_unstable();
         out.dedup();
         if out.is_empty() {
-            return Err(bad("", "selects no vertex of the mesh".into()));
+            // A box or sphere placed where the body is not: say where the body is, in the
+            // scene's units (a mesh in millimetres read without `scale` is 1000 times larger).
+            let (lo, hi) = mesh.bounding_box();
+            // A coordinate at round-off from zero (−7.3e-17 on a mesh made at the origin) is 0.
+            let tiny = 1e-9 * (hi - lo).norm();
+            let at = |x: f64| four_digits(if x.abs() < tiny { 0.0 } else { x });
+            let span = |a: usize| format!("{} to {}", at(lo[a]), at(hi[a]));
+            return Err(bad(
+                "",
+                format!(
+                    "selects no vertex of the mesh, which spans x {}, y {}, z {} (m, after \
+                     `[mesh] scale`)",
+                    span(0),
+                    span(1),
+                    span(2)
+                ),
+            ));
         }
         Ok(out)
     }

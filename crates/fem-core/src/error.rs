@@ -111,3 +111,17 @@ impl FemError {
         )
     }
 }
+
+/// `x` to four significant digits, for messages (0.01704 and 1.704e-5, not 0.017043437257239995).
+pub fn four_digits(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let magnitude = x.abs().log10().floor();
+    if (-4.0..6.0).contains(&magnitude) {
+        let decimals = (3.0 - magnitude).max(0.0) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.3e}")
+    }
+}

@@ -38,7 +38,7 @@ pub mod step_norm;
 /// names the one the schedules are drawn with.
 pub use rng;
 
-pub use error::{FemError, MeshError};
+pub use error::{FemError, MeshError, four_digits};
 pub use mesh::TetMesh;
 
 /// 3-vector of `f64`, the coordinate type used throughout.

@@ -4,7 +4,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use fem_core::FemError;
 use fem_core::TetMesh;
 use fem_core::constraints::VertexSelection;
 use fem_core::forces::{ForceConfig, ForceKind};
@@ -14,11 +13,17 @@ use fem_core::mesh::NO_COMPONENT;
 use fem_core::mesh::{MeshConfig, ValidationReport};
 use fem_core::optim::SolverConfig;
 use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
+use fem_core::{FemError, four_digits};
 use pca::PcaConfig;
 
 /// The share of a body's extent along a pin plane's axis that [`Scene::build_model`]'s advice
 /// (and the mesh suite's minimal scenes) pin: 2 %, the bottom of a standing body.
 pub const WIDER_PIN: f64 = 0.02;
+
+/// Pins that hold more than this share of a body's vertices are worth a word: a body stands
+/// or hangs from a few percent of them, and a tester's fork made z-up and pinned at its lowest
+/// y (the README's plane) lay on its side glued along it, 35 % of it held, and nothing said so.
+pub const MANY_PINNED: f64 = 0.25;
 
 /// A body whose own weight would strain it by more than this (ρ g H / E, H its height along
 /// gravity) cannot stand or hang as the solid it is modelled as: a 25 cm body of E = 10⁵ Pa
@@ -391,6 +396,42 @@ impl Scene {
         })
     }
 
+    /// When the pins hold more than [`MANY_PINNED`] of the body's `body` vertices (`held`):
+    /// what that makes of the body, and, where no pin plane lies across the mesh's tallest
+    /// axis, that a mesh made standing on another axis is pinned there.
+    fn many_pinned(&self, mesh: &TetMesh, body: usize, held: usize) -> Option<String> {
+        if body == 0 || held as f64 <= MANY_PINNED * body as f64 {
+            return None;
+        }
+        let (lo, hi) = mesh.bounding_box();
+        let extent = hi - lo;
+        let name = ["x", "y", "z"];
+        let tallest = (0..3).max_by(|&a, &b| extent[a].total_cmp(&extent[b]))?;
+        let planes: Vec<usize> = self
+            .pin
+            .iter()
+            .filter_map(|p| p.plane.as_ref().map(|q| q.axis.index()))
+            .collect();
+        let turn = match planes.first() {
+            Some(&a) if !planes.contains(&tallest) => format!(
+                "; the mesh is tallest along {} ({} m, against {} m along {}): if it was made \
+                 standing or hanging along {}, set the pin plane's `axis` and `[gravity]` to it",
+                name[tallest],
+                four_digits(extent[tallest]),
+                four_digits(extent[a]),
+                name[a],
+                name[tallest]
+            ),
+            _ => String::new(),
+        };
+        Some(format!(
+            "the pins hold {held} of the body's {body} vertices ({:.0} %), where a body stands \
+             or hangs from a few percent of them: the rest moves as a body glued along a whole \
+             side{turn}",
+            100.0 * held as f64 / body as f64
+        ))
+    }
+
     /// With the mesh loaded: the pins must leave some vertex of the body free. `body` counts
     /// the body's vertices, `held` those the pins hold, `selected` each pin's.
     fn check_pinned_not_all(
@@ -475,6 +516,12 @@ impl Scene {
         let mut warnings = Vec::new();
         if errors.is_empty() {
             self.check_pieces(&mesh, &pieces, &pinned, &mut errors, &mut warnings);
+        }
+        if errors.is_empty()
+            && let Some(line) = self.many_pinned(&mesh, body, held)
+        {
+            crate::pipeline::warn_once(&format!("{}: {line}", self.source));
+            warnings.push(line);
         }
         let mut forces = Vec::new();
         for (i, f) in self.force.iter().enumerate() {

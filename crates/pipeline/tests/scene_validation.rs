@@ -298,6 +298,8 @@ fn pins_that_select_nothing_are_errors_reported_together() {
         &err,
         &["pin[0]", "selects no vertex", "pin[1].indices", "99999"],
     );
+    // Where the body is, so that the user sees how far off the sphere was (the default bar).
+    assert_names(&err, &["spans x 0 to 1.000, y 0 to 0.2000"]);
 
     let force = edit("center = [1.0, 0.1, 0.1]", "center = [5.0, 0.1, 0.1]");
     let err = build_error(&force, Path::new("."));
@@ -728,4 +730,25 @@ fn the_models_warnings_are_kept_for_the_report() {
         "{}",
         p.warnings[0]
     );
+    // A pin plane across the bar's thickness holds half of it, glued along a whole side: said,
+    // with the bar's long axis (a mesh made standing along x).
+    let side = scene(&edit(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "plane = { axis = \"y\", side = \"min\", tolerance = 1.0e-6 }",
+    ));
+    let p = pipeline::pipeline::Pipeline::new(&side, &dir.join("d")).unwrap();
+    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+    for needle in [
+        "the pins hold 10 of the body's 20 vertices (50 %)",
+        "tallest along x (1.000 m, against 0.2000 m along y)",
+        "set the pin plane's `axis` and `[gravity]` to it",
+    ] {
+        assert!(
+            p.warnings[0].contains(needle),
+            "{needle}: {}",
+            p.warnings[0]
+        );
+    }
+    // Pinned across its long axis as the README's plane pins, it is not.
+    assert!(quiet.warnings.is_empty());
 }

@@ -37,7 +37,7 @@ def main() -> None:
     args = parser.parse_args()
 
     model = ld.Model.load(args.model)
-    print(model)
+    print(f"{model}, stepped in full space" if args.full else model)
     sim = ld.Simulator(model, full_space=args.full)
     sim.prepare_grab()
     h = model.time_step

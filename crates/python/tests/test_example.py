@@ -35,6 +35,7 @@ def test_game_loop_example_runs_every_phase(neural_path: pathlib.Path, full: boo
         check=True, capture_output=True, text=True,
     )
     lines = done.stdout.splitlines()
+    assert lines[0].endswith(", stepped in full space") == full, lines[0]
     summary = next(line for line in lines if " steps: mean " in line)
     assert "Newton fallbacks" in summary and "0 failed steps" in summary, done.stdout
     table = lines[lines.index(next(line for line in lines if line.startswith("phase"))) + 1:]

@@ -22,7 +22,7 @@ pub use reduced::{AnyReducedSimulator, ReducedRuntime};
 pub use surface::Surface;
 
 use fem_core::forces::ExternalForce;
-use fem_core::{FemError, Vec3};
+use fem_core::{FemError, Vec3, four_digits};
 
 use crate::ReducedError;
 
@@ -343,19 +343,5 @@ fn buffer_length(what: &'static str, expected: usize, got: usize) -> Result<(), 
             expected,
             got,
         })
-    }
-}
-
-/// `x` to four significant digits, for messages (0.01704 and 1.704e-5, not 0.017043437257239995).
-fn four_digits(x: f64) -> String {
-    if x == 0.0 || !x.is_finite() {
-        return format!("{x}");
-    }
-    let magnitude = x.abs().log10().floor();
-    if (-4.0..6.0).contains(&magnitude) {
-        let decimals = (3.0 - magnitude).max(0.0) as usize;
-        format!("{x:.decimals$}")
-    } else {
-        format!("{x:.3e}")
     }
 }
