@@ -497,6 +497,7 @@ mod tests {
                 max_vertex_error: err,
                 iterations: 1.0,
                 subspace_error: 0.0,
+                projected_strain: None,
                 step_error: 0.0,
                 decode_ms: 0.0,
                 elastic_ms: 0.0,

@@ -166,6 +166,13 @@ pub struct MethodReport {
     /// under gravity (the test's end when some schedules start from the body's fall).
     #[serde(default)]
     pub training_seconds: f64,
+    /// The largest ratio over frames of the elastic energy of the reference's representation in
+    /// this method's subspace to the reference's own, with its time (s), over the frames whose
+    /// reference energy is at least [`STRAIN_FRAMES`] of the largest (None for full space, or
+    /// when no frame's energies are both finite and positive). Far above 1, the subspace holds
+    /// the poses in the mass norm only by straining them, which a step will not do.
+    #[serde(default)]
+    pub projected_strain: Option<(f64, f64)>,
     /// Steps that started again from the last state because they could not be solved from
     /// their extrapolated start (an element inverted there, where the classic Neo-Hookean
     /// energy is not defined, or the preconditioner could not be factorised; zero for full
@@ -1211,6 +1218,7 @@ pub fn measure(
             max_vertex_error: 0.0,
             iterations: mean_usize(&reference.iterations),
             subspace_error: 0.0,
+            projected_strain: None,
             step_error: 0.0,
             frame_errors: vec![0.0; reference.frames.len()],
             subspace_frame_errors: Vec::new(),
@@ -1339,17 +1347,18 @@ pub fn measure(
         .map_or_else(StepParts::default, |(_, p)| *p);
     let done = iterations.len().max(1);
     let per_step_ms = |seconds: f64| seconds * 1e3 / done as f64;
-    let (subspace_frame_errors, step_frame_errors) = if method.is_full() {
-        (Vec::new(), Vec::new())
+    let ((subspace_frame_errors, projected_strain), step_frame_errors) = if method.is_full() {
+        ((Vec::new(), None), Vec::new())
     } else {
         let fit = pipeline.pca(stage_progress)?;
         let states = reference_states(&fit.basis, &reference.frames);
+        let h = pipeline.scene.time.step;
         match last_runner.as_mut() {
             Some(runner) => (
-                subspace_errors(runner, &model, &fit.basis, &states, &reference.frames)?,
+                subspace_errors(runner, &model, &fit.basis, &states, &reference.frames, h)?,
                 step_errors(method, runner, &states, &reference.frames)?,
             ),
-            None => (Vec::new(), Vec::new()),
+            None => ((Vec::new(), None), Vec::new()),
         }
     };
     let (mut training_distance, mut training_distance_time, mut training_seconds) = (0.0, 0.0, 0.0);
@@ -1387,6 +1396,7 @@ pub fn measure(
         max_vertex_error: errors.max_vertex,
         iterations: mean_usize(&iterations),
         subspace_error: mean(&subspace_frame_errors),
+        projected_strain,
         step_error: mean(&step_frame_errors),
         decode_ms: per_step_ms(parts.decode),
         elastic_ms: per_step_ms(parts.elastic),
@@ -1426,17 +1436,22 @@ fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>>
 /// `runner`'s subspace: its state set to each frame's coefficients (`states`,
 /// [`reference_states`]), which the runtime encodes (for PCA, q itself; for the autoencoder with
 /// its linear directions, the nearest point of the subspace), and the error of U q. A spring's
-/// dent, which the runtime's displacement adds outside the subspace, is left out.
+/// dent, which the runtime's displacement adds outside the subspace, is left out. With it, the
+/// largest ratio of U q's elastic energy to the frame's ([`largest_strain_ratio`]) and its time,
+/// frames `time_step` apart.
 fn subspace_errors(
     runner: &mut Runner,
     model: &FullSpaceModel,
     basis: &pca::PcaBasis,
     states: &[Vec<f64>],
     frames: &[Vec<f64>],
-) -> Result<Vec<f64>> {
+    time_step: f64,
+) -> Result<SubspaceFit> {
     let mut free = vec![0.0; basis.n()];
     let (mut u, mut r) = (vec![0.0; model.num_full()], vec![0.0; model.num_full()]);
     let mut errors = ErrorAccumulator::default();
+    let mut buf = fem_core::assembly::AssemblyBuffers::default();
+    let (mut reference, mut projected) = (Vec::new(), Vec::new());
     for (j, f) in frames.iter().enumerate() {
         runner.set_state(j + 1, &states[j + 1], &states[j])?;
         let q = runner
@@ -1446,8 +1461,40 @@ fn subspace_errors(
         model.dofs.scatter(&free, &mut u);
         model.dofs.scatter(f, &mut r);
         errors.add_full(&model.mass, &u, &r);
+        reference.push(model.elastic_energy(&r, &mut buf));
+        projected.push(model.elastic_energy(&u, &mut buf));
     }
-    Ok(errors.rel)
+    let strain = largest_strain_ratio(&reference, &projected)
+        .map(|(ratio, j)| (ratio, (j + 1) as f64 * time_step));
+    Ok((errors.rel, strain))
+}
+
+/// The subspace error frame by frame, and the largest strain ratio with its time
+/// ([`MethodReport::projected_strain`]).
+type SubspaceFit = (Vec<f64>, Option<(f64, f64)>);
+
+/// Frames whose reference elastic energy is below this share of the test's largest are left
+/// out of [`MethodReport::projected_strain`]: near rest the ratio of two small energies says
+/// little (the chain of stop 65 at its first frame: 3.4 at 1/300 of the largest).
+pub const STRAIN_FRAMES: f64 = 0.1;
+
+/// The largest ratio of `projected` to `reference` elastic energy (per frame) over the frames
+/// [`STRAIN_FRAMES`] admits, and the index of its frame.
+fn largest_strain_ratio(reference: &[f64], projected: &[f64]) -> Option<(f64, usize)> {
+    let top = reference
+        .iter()
+        .copied()
+        .filter(|e| e.is_finite())
+        .fold(0.0, f64::max);
+    reference
+        .iter()
+        .zip(projected)
+        .enumerate()
+        .filter(|(_, (r, p))| {
+            r.is_finite() && p.is_finite() && **r > 0.0 && **r >= STRAIN_FRAMES * top
+        })
+        .map(|(j, (r, p))| (p / r, j))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
 }
 
 /// The relative error of one step of reduced `runner` from each frame's two predecessors in
@@ -1687,6 +1734,21 @@ mod tests {
         assert_eq!(b.step_warning(16.67, 0.0), None);
         let flat = super::Buckling { sag: 0.0, ..b };
         assert_eq!(flat.step_warning(16.67, 9.81), None);
+    }
+
+    /// The largest projected-to-reference energy ratio, over the frames whose reference energy
+    /// is at least a tenth of the largest; frames near rest, non-finite or zero energies left out.
+    #[test]
+    fn the_strain_ratio_skips_frames_near_rest() {
+        let reference = [1e-4, 1.0, 2.0, 0.05, f64::NAN, 3.0];
+        let projected = [1.0, 3.0, 2.2, 5.0, 1.0, f64::INFINITY];
+        // Frame 0 (3/10⁴ of the largest, ratio 10⁴) and frame 3 (ratio 100, at 1/60) are near
+        // rest; frame 4's reference and frame 5's projection are not finite.
+        assert_eq!(
+            super::largest_strain_ratio(&reference, &projected),
+            Some((3.0, 1))
+        );
+        assert_eq!(super::largest_strain_ratio(&[0.0; 3], &[1.0; 3]), None);
     }
 
     use super::{ErrorAccumulator, Method, MethodReport, mean, standing_line};
