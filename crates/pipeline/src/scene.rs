@@ -20,9 +20,11 @@ use pca::PcaConfig;
 /// (and the mesh suite's minimal scenes) pin: 2 %, the bottom of a standing body.
 pub const WIDER_PIN: f64 = 0.02;
 
-/// Pins that hold more than this share of a body's vertices are worth a word: a body stands
-/// or hangs from a few percent of them, and a tester's fork made z-up and pinned at its lowest
-/// y (the README's plane) lay on its side glued along it, 35 % of it held, and nothing said so.
+/// Pin planes that hold more than this share of a body's vertices are worth a word: a body
+/// stands or hangs from a few percent of them, and a tester's fork made z-up and pinned at its
+/// lowest y (the README's plane) lay on its side glued along it, 35 % of it held, and nothing
+/// said so. A `box` or `sphere` drawn around a whole part (one bell of a dumbbell, 44 % of its
+/// vertices) holds what the user chose, and is not counted.
 pub const MANY_PINNED: f64 = 0.25;
 
 /// A body whose own weight would strain it by more than this (ρ g H / E, H its height along
@@ -396,9 +398,9 @@ impl Scene {
         })
     }
 
-    /// When the pins hold more than [`MANY_PINNED`] of the body's `body` vertices (`held`):
-    /// what that makes of the body, and, where no pin plane lies across the mesh's tallest
-    /// axis, that a mesh made standing on another axis is pinned there.
+    /// When the pin planes hold more than [`MANY_PINNED`] of the body's `body` vertices
+    /// (`held`): what that makes of the body, and, where no pin plane lies across the mesh's
+    /// tallest axis, that a mesh made standing on another axis is pinned there.
     fn many_pinned(&self, mesh: &TetMesh, body: usize, held: usize) -> Option<String> {
         if body == 0 || held as f64 <= MANY_PINNED * body as f64 {
             return None;
@@ -425,9 +427,9 @@ impl Scene {
             _ => String::new(),
         };
         Some(format!(
-            "the pins hold {held} of the body's {body} vertices ({:.0} %), where a body stands \
-             or hangs from a few percent of them: the rest moves as a body glued along a whole \
-             side{turn}",
+            "the pin planes hold {held} of the body's {body} vertices ({:.0} %), where a body \
+             stands or hangs from a few percent of them: the rest moves as a body glued along a \
+             whole side{turn}",
             100.0 * held as f64 / body as f64
         ))
     }
@@ -496,12 +498,15 @@ impl Scene {
         let in_body = |v: &&usize| of_body(&pieces.0, **v);
         let body = mesh.num_vertices() - report.unreferenced_vertices;
         let mut pinned = Vec::new();
-        // Each pin's vertices of the body.
-        let mut selected = Vec::new();
+        // Each pin's vertices of the body, and those of the pin planes.
+        let (mut selected, mut by_planes) = (Vec::new(), Vec::new());
         for (i, p) in self.pin.iter().enumerate() {
             match p.select(&mesh, &format!("pin[{i}]")) {
                 Ok(v) => {
                     selected.push(v.iter().filter(in_body).count());
+                    if p.plane.is_some() {
+                        by_planes.extend(v.iter().copied().filter(|v| in_body(&v)));
+                    }
                     pinned.extend(v);
                 }
                 Err(e) => errors.push(e),
@@ -517,8 +522,10 @@ impl Scene {
         if errors.is_empty() {
             self.check_pieces(&mesh, &pieces, &pinned, &mut errors, &mut warnings);
         }
+        by_planes.sort_unstable();
+        by_planes.dedup();
         if errors.is_empty()
-            && let Some(line) = self.many_pinned(&mesh, body, held)
+            && let Some(line) = self.many_pinned(&mesh, body, by_planes.len())
         {
             crate::pipeline::warn_once(&format!("{}: {line}", self.source));
             warnings.push(line);

@@ -739,7 +739,7 @@ fn the_models_warnings_are_kept_for_the_report() {
     let p = pipeline::pipeline::Pipeline::new(&side, &dir.join("d")).unwrap();
     assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
     for needle in [
-        "the pins hold 10 of the body's 20 vertices (50 %)",
+        "the pin planes hold 10 of the body's 20 vertices (50 %)",
         "tallest along x (1.000 m, against 0.2000 m along y)",
         "set the pin plane's `axis` and `[gravity]` to it",
     ] {
@@ -749,6 +749,13 @@ fn the_models_warnings_are_kept_for_the_report() {
             p.warnings[0]
         );
     }
-    // Pinned across its long axis as the README's plane pins, it is not.
+    // Pinned across its long axis as the README's plane pins, it is not; nor is a box drawn
+    // around the same half (a part the user chose to hold, as one bell of a dumbbell).
     assert!(quiet.warnings.is_empty());
+    let part = scene(&edit(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "box = { min = [-0.01, -0.01, -0.01], max = [1.01, 0.01, 0.21] }",
+    ));
+    let p = pipeline::pipeline::Pipeline::new(&part, &dir.join("e")).unwrap();
+    assert!(p.warnings.is_empty(), "{:?}", p.warnings);
 }
