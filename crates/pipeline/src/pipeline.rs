@@ -682,7 +682,9 @@ impl<'a> Pipeline<'a> {
             .iter()
             .cloned()
             .chain(fem_core::mesh::size_warning((hi - lo).norm()))
+            .chain(fem_core::mesh::thin_warning(&model.mesh))
             .chain(crate::scene::weight_warning(scene, (hi - lo).into()))
+            .chain(crate::scene::density_warning(scene.material.density))
             .collect();
         for w in &warnings {
             warn_once(&format!("{}: {w}", scene.source));

@@ -36,6 +36,47 @@ pub const HEAVY_BODY: f64 = 0.25;
 /// or millimetres read as metres (a 25 cm part becomes 25 m); below it, units are not suggested.
 pub const UNIT_MISTAKE_SIZE: f64 = 3.0;
 
+/// What a warning of a body its weight carries away says first when the body is `size` metres
+/// across and larger than [`UNIT_MISTAKE_SIZE`]: that the mesh may not be in metres. A tester's
+/// 10 cm mushroom read as 10 m (E = 10⁶ Pa, ρgH/E = 0.1) was told only to take a modulus 56
+/// times stiffer.
+pub fn unit_hint(size: f64) -> Option<String> {
+    (size > UNIT_MISTAKE_SIZE).then(|| {
+        format!(
+            "at {size:.1} m across, the mesh may not be in metres: set `[mesh] scale` (0.01 for \
+             centimetres, 0.001 for millimetres)"
+        )
+    })
+}
+
+/// Densities below this (kg/m³) are lighter than any solid a soft body is made of (foams start
+/// at about 10, silica aerogel near 2): most often one written in g/cm³ (1.0 for water).
+pub const LIGHT_DENSITY: f64 = 10.0;
+
+/// Densities above this (kg/m³) are heavier than any element (osmium 22,590).
+pub const HEAVY_DENSITY: f64 = 25_000.0;
+
+/// What to say of a `[material] density` outside [[`LIGHT_DENSITY`], [`HEAVY_DENSITY`]]: the
+/// body then swings about √1000 times faster or slower than meant, and the only other word of
+/// it was a time step said to be too long for its swing.
+pub fn density_warning(density: f64) -> Option<String> {
+    if density < LIGHT_DENSITY {
+        Some(format!(
+            "`[material] density` = {density} kg/m³ is lighter than any solid (foams start at \
+             about 10 kg/m³): a scene is in SI units, so a density in g/cm³ is 1000 times too \
+             small (water is 1000 kg/m³, rubber about 1100), and the body swings about 30 times \
+             faster than meant"
+        ))
+    } else if density > HEAVY_DENSITY {
+        Some(format!(
+            "`[material] density` = {density} kg/m³ is heavier than any element (osmium is \
+             22,590 kg/m³): a scene is in SI units (kg/m³; water is 1000)"
+        ))
+    } else {
+        None
+    }
+}
+
 /// What to say of a body that its own weight strains by more than [`HEAVY_BODY`]: most often a
 /// mesh in other units than metres, else too soft a material. `extent` is the body's bounding
 /// box size (metres).
@@ -50,15 +91,15 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     let strain = m.density * g_norm * height / m.youngs_modulus;
     (strain > HEAVY_BODY).then(|| {
         let size = extent.iter().fold(0.0f64, |a, &x| a.max(x));
-        let remedy = if size > UNIT_MISTAKE_SIZE {
-            format!(
-                "At {size:.1} m across, the mesh may not be in metres: set `[mesh] scale` (0.01 \
-                 for centimetres, 0.001 for millimetres); else a stiffer `[material] \
-                 youngs_modulus`"
-            )
-        } else {
-            "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up"
-                .into()
+        let remedy = match unit_hint(size) {
+            Some(units) => format!(
+                "A{}; else a stiffer `[material] youngs_modulus`",
+                &units[1..]
+            ),
+            None => {
+                "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up"
+                    .into()
+            }
         };
         format!(
             "its own weight strains the body by about ρgH/E = {strain:.2} (ρ = {} kg/m³, g = \
@@ -983,6 +1024,22 @@ mod tests {
         down.gravity.acceleration = [0.0, -9.81, 0.0];
         assert_eq!(weight_warning(&down, [100.0, 0.1, 0.1]), None);
         assert!(weight_warning(&down, [0.1, 100.0, 0.1]).is_some());
+    }
+
+    /// A density written in g/cm³ (or far above any element) is said; every real solid's is not.
+    #[test]
+    fn a_density_in_other_units_is_said() {
+        let w = density_warning(1.0).expect("1 kg/m³");
+        assert!(
+            w.contains("g/cm³") && w.contains("1000 times too small"),
+            "{w}"
+        );
+        assert!(density_warning(30_000.0).is_some());
+        for rho in [12.0, 30.0, 920.0, 1000.0, 1100.0, 7850.0, 19_300.0] {
+            assert_eq!(density_warning(rho), None, "{rho}");
+        }
+        assert_eq!(unit_hint(UNIT_MISTAKE_SIZE), None);
+        assert!(unit_hint(14.0).is_some_and(|h| h.starts_with("at 14.0 m across")));
     }
 
     #[test]

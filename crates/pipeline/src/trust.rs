@@ -273,13 +273,14 @@ fn buckling_warning(r: &MethodReport) -> Option<String> {
             )
         })
         .unwrap_or_default();
+    let units = crate::scene::unit_hint(b.size).map_or(String::new(), |u| format!("{u}; else "));
     Some(format!(
         "{}: the body buckles under its own weight as it is pinned: {at_most}{:.2} times its \
          weight would buckle it (linearised at rest, where its weight sags it by {:.2e} m), so \
          under the scene's gravity its shape runs away from rest along a buckling mode, grown from \
          whatever small difference starts it, and the test measures how each method follows \
-         that instability; pins where it buckles, a stiffer material{stiffer} or a lighter \
-         load (`[gravity]`) keep it standing",
+         that instability; {units}pins where it buckles, a stiffer material{stiffer} or a \
+         lighter load (`[gravity]`) keep it standing",
         if r.method.is_full() {
             format!("{}", r.method)
         } else {
@@ -387,12 +388,14 @@ fn fall_warning(rows: &[MethodReport]) -> Option<String> {
         "; if the fall is meant, the one-step errors say more of each method than its \
          trajectory error"
     };
+    let units = crate::scene::unit_hint(b.size).map_or(String::new(), |u| format!("{u}; else "));
     Some(format!(
         "{who} moves the body up to {:.3} m at t = {:.2} s, {:.0} % of its {:.3} m \
          bounding-box diagonal, far beyond what the drag asks: its own weight carries it (the \
          linear response to gravity at rest already moves it {:.0} % of its size){through}\
-         {inverted}{drift}. If the body should stand as pinned, a stiffer material (`[material] \
-         youngs_modulus` of {:.1e} Pa or more) or pins that hold more of it keep it up{meant}",
+         {inverted}{drift}. If the body should stand as pinned, {units}a stiffer material \
+         (`[material] youngs_modulus` of {:.1e} Pa or more) or pins that hold more of it keep it \
+         up{meant}",
         c.travel,
         c.travel_time,
         pct(c.travel / b.size),
@@ -461,9 +464,24 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
                      schedules`, `kinds`, `offset`) or a larger subspace (`[pca]`) hold them \
                      with less strain"
                 ),
-                None => "which a larger subspace lowers (`[pca]`, and for the neural methods \
-                         `[autoencoder] latent_dim`)"
-                    .to_string(),
+                None => {
+                    // A tester read "holds the test trajectory to 0.0 %" and then "each step is
+                    // 0.24 % off, which a larger subspace lowers" as a contradiction: both said.
+                    let reach = if r.step_error >= 4.0 * r.subspace_error {
+                        format!(
+                            "from states its subspace holds to {} %: the energy along what the \
+                             subspace leaves out (stiffness the mass norm hardly sees), not its \
+                             reach, sets where a step lands, ",
+                            fine_pct(r.subspace_error)
+                        )
+                    } else {
+                        String::new()
+                    };
+                    format!(
+                        "{reach}which a larger subspace lowers (`[pca]`, and for the neural \
+                         methods `[autoencoder] latent_dim`)"
+                    )
+                }
             },
         };
         format!(
@@ -526,6 +544,16 @@ fn fitted_parts(method: crate::simulate::Method) -> &'static str {
 }
 
 /// `lo–hi` with `digits` decimals, or one figure where the two print the same.
+/// A fraction as a percentage with one decimal, or two below 0.1 % (a subspace error "0.0 %"
+/// read as none at all).
+fn fine_pct(x: f64) -> String {
+    if 100.0 * x < 0.1 {
+        format!("{:.2}", 100.0 * x)
+    } else {
+        format!("{:.1}", 100.0 * x)
+    }
+}
+
 fn span(lo: f64, hi: f64, digits: usize) -> String {
     let (lo, hi) = (format!("{lo:.digits$}"), format!("{hi:.digits$}"));
     if lo == hi { lo } else { format!("{lo}–{hi}") }
@@ -684,18 +712,18 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             let dynamics_drift = r.subspace_error <= r.mean_rel_error / 4.0;
             let why = if dynamics_drift && r.restart.is_some() {
                 format!(
-                    "its subspace holds the test trajectory to {:.1} %, so the trajectory drifts \
+                    "its subspace holds the test trajectory to {} %, so the trajectory drifts \
                      away (below)",
-                    pct(r.subspace_error)
+                    fine_pct(r.subspace_error)
                 )
             } else if dynamics_drift {
                 format!(
-                    "its subspace holds the test trajectory to {:.1} % and a single step from \
+                    "its subspace holds the test trajectory to {} % and a single step from \
                      it is {:.1} % off, so the reduced dynamics drift away from the full ones \
                      (large rotations in a linear subspace, a decoder trained on too little): \
                      try the neural methods with a larger `[autoencoder] latent_dim` or \
                      `[reduced] complement_directions`, or more training schedules",
-                    pct(r.subspace_error),
+                    fine_pct(r.subspace_error),
                     pct(r.step_error)
                 )
             } else {
@@ -1081,6 +1109,23 @@ mod tests {
             two[0]
         );
         assert!(!w[0].contains("  "), "{}", w[0]);
+        assert!(!w[0].contains("`[mesh] scale`"), "{}", w[0]);
+        // The same fall 44 times larger (a part in centimetres read as metres): the units come
+        // first, before a modulus 10 times stiffer.
+        let mut large = full(0.44 * 44.0, 0.17 * 44.0);
+        if let Some(b) = &mut large.buckling {
+            b.size *= 44.0;
+        }
+        let w = said(&[large, amplified.clone()]);
+        assert!(
+            w[0].contains(
+                "If the body should stand as pinned, at 15.0 m across, the mesh may not be in \
+                 metres: set `[mesh] scale` (0.01 for centimetres, 0.001 for millimetres); else \
+                 a stiffer material"
+            ),
+            "{}",
+            w[0]
+        );
         // Not where the drift is the method's own, the body moves little, or its weight
         // hardly sags it.
         assert!(said(&[full(0.44, 0.17), own]).is_empty());
@@ -1176,6 +1221,17 @@ mod tests {
         assert_eq!(crate::run::Buckling::firm(1e5, 0.002, 0.4, Some(2e5)), 4e5);
         assert!((crate::run::Buckling::firm(1e5, 0.2, 0.4, Some(2e5)) - 1e6).abs() < 1e-6);
         assert!(!w[0].contains("  "), "{}", w[0]);
+        assert!(!w[0].contains("`[mesh] scale`"), "{}", w[0]);
+        let mut large = with(Some(0.5), 0.002);
+        if let Some(b) = &mut large.buckling {
+            b.size = 10.0;
+        }
+        let w = assess(&[large]).untrusted;
+        assert!(
+            w[0].contains("instability; at 10.0 m across, the mesh may not be in metres"),
+            "{}",
+            w[0]
+        );
         for quiet in [
             with(Some(0.33), 1.2),
             with(Some(2.0), 0.002),
@@ -1316,6 +1372,21 @@ mod tests {
             w[0]
         );
         assert!(w[0].ends_with("which a larger subspace lowers (`[pca]`, and for the neural methods `[autoencoder] latent_dim`)"), "{}", w[0]);
+        assert!(!w[0].contains("from states its subspace holds"), "{}", w[0]);
+        // A subspace that holds the frames ten times closer than a step lands (a tester's
+        // mushroom: 0.02 % and 0.24 %) is said with both.
+        let close = MethodReport {
+            step_error: 0.0024,
+            ..with_restart(row(Method::Pca, 0.12, 0.0002), 0.02, 0.2)
+        };
+        let w = assess(&[close]).untrusted;
+        assert!(
+            w.iter().any(|w| w.contains(
+                "each step is 0.24 % off (one-step error), from states its subspace holds to \
+                 0.02 %: the energy along what the subspace leaves out"
+            )),
+            "{w:?}"
+        );
         // A cubature method whose subspace over every element steps at most half as far off:
         // the rule makes the steps' error, and the subspace is not blamed.
         let ruled = |every_step: f64| {

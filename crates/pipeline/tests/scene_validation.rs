@@ -700,7 +700,20 @@ fn every_shipped_scene_reads_and_builds() {
 #[test]
 fn the_models_warnings_are_kept_for_the_report() {
     let dir = scratch("model-warnings");
-    let scene = |text: &str| Scene::from_str(text, Path::new("."), "tall.toml").unwrap();
+    // BASE's bar is one cell thick, and said to be: its tets lock in bending.
+    let thin = Scene::from_str(BASE, Path::new("."), "thin.toml").unwrap();
+    let p = pipeline::pipeline::Pipeline::new(&thin, &dir.join("thin")).unwrap();
+    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+    assert!(
+        p.warnings[0].contains("the body is about one element thick"),
+        "{}",
+        p.warnings[0]
+    );
+    // Two cells across, it is not; the rest of the test starts from there.
+    let scene = |text: &str| {
+        let text = text.replace("cells = [4, 1, 1]", "cells = [8, 2, 2]");
+        Scene::from_str(&text, Path::new("."), "tall.toml").unwrap()
+    };
     let base = scene(BASE);
     let quiet = pipeline::pipeline::Pipeline::new(&base, &dir.join("a")).unwrap();
     assert!(quiet.warnings.is_empty(), "{:?}", quiet.warnings);
@@ -726,12 +739,12 @@ fn the_models_warnings_are_kept_for_the_report() {
     let p = pipeline::pipeline::Pipeline::new(&hinge, &dir.join("c")).unwrap();
     assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
     assert!(
-        p.warnings[0].starts_with("the pins hold the body by 2 vertices on one line"),
+        p.warnings[0].starts_with("the pins hold the body by 3 vertices on one line"),
         "{}",
         p.warnings[0]
     );
-    // A pin plane across the bar's thickness holds half of it, glued along a whole side: said,
-    // with the bar's long axis (a mesh made standing along x).
+    // A pin plane across the bar's thickness holds a third of it, glued along a whole side:
+    // said, with the bar's long axis (a mesh made standing along x).
     let side = scene(&edit(
         "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
         "plane = { axis = \"y\", side = \"min\", tolerance = 1.0e-6 }",
@@ -739,7 +752,7 @@ fn the_models_warnings_are_kept_for_the_report() {
     let p = pipeline::pipeline::Pipeline::new(&side, &dir.join("d")).unwrap();
     assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
     for needle in [
-        "the pin planes hold 10 of the body's 20 vertices (50 %)",
+        "the pin planes hold 27 of the body's 81 vertices (33 %)",
         "tallest along x (1.000 m, against 0.2000 m along y)",
         "set the pin plane's `axis` and `[gravity]` to it",
     ] {

@@ -162,10 +162,11 @@ pub fn validate_located(
     report.unreferenced_vertices = referenced.iter().filter(|r| !**r).count();
     report.components = mesh.vertex_components().1;
     if report.flipped_tets > 0 {
+        let n = report.flipped_tets;
         tracing::warn!(
-            "{}: flipped {} inverted rest tets",
+            "{}: {n} {} wound inside out (inverted at rest), flipped",
             path.display(),
-            report.flipped_tets
+            if n == 1 { "tet was" } else { "tets were" }
         );
     }
     if report.components > 1 {
@@ -176,11 +177,18 @@ pub fn validate_located(
         );
     }
     if report.unreferenced_vertices > 0 {
+        let n = report.unreferenced_vertices;
         tracing::warn!(
-            "{}: {} vertices are not referenced by any tet (they are not part of the body: \
-             they do not move, and its size and pin planes are taken without them)",
+            "{}: {n} {} by no tet (not part of the body: {} not move, and its size and pin \
+             planes are taken without {})",
             path.display(),
-            report.unreferenced_vertices
+            if n == 1 {
+                "vertex is used"
+            } else {
+                "vertices are used"
+            },
+            if n == 1 { "it does" } else { "they do" },
+            if n == 1 { "it" } else { "them" }
         );
     }
     Ok(report)
