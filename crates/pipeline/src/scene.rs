@@ -64,8 +64,8 @@ pub fn density_warning(density: f64) -> Option<String> {
         Some(format!(
             "`[material] density` = {density} kg/m³ is lighter than any solid (foams start at \
              about 10 kg/m³): a scene is in SI units, so a density in g/cm³ is 1000 times too \
-             small (water is 1000 kg/m³, rubber about 1100), and the body swings about 30 times \
-             faster than meant"
+             small (water is 1000 kg/m³, rubber about 1100), and a body 1000 times too light \
+             swings about 30 times too fast"
         ))
     } else if density > HEAVY_DENSITY {
         Some(format!(
