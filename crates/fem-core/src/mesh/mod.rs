@@ -207,7 +207,7 @@ pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
     let thin = mesh
         .tets
         .iter()
-        .filter(|t| t.iter().all(|&v| on_surface[v as usize]))
+        .filter(|t| t.iter().all(|&v| on_surface[v]))
         .count();
     (tets > 0 && thin as f64 >= THIN_SHARE * tets as f64).then(|| {
         format!(
