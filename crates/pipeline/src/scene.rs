@@ -20,6 +20,10 @@ use pca::PcaConfig;
 /// (and the mesh suite's minimal scenes) pin: 2 %, the bottom of a standing body.
 pub const WIDER_PIN: f64 = 0.02;
 
+/// The share of a body's vertices that the radius [`Scene::build_model`]'s advice gives a `sphere`
+/// pin holding the body at a point takes in (at least four).
+pub const WIDER_SPHERE_SHARE: f64 = 0.02;
+
 /// Pin planes that hold more than this share of a body's vertices are worth a word: a body
 /// stands or hangs from a few percent of them, and a tester's fork made z-up and pinned at its
 /// lowest y (the README's plane) lay on its side glued along it, 35 % of it held, and nothing
@@ -434,7 +438,34 @@ impl Scene {
                 )
             })
         });
-        wider.unwrap_or_else(|| {
+        // A sphere pin around the point (a tester's, at a single vertex, was told of a plane's
+        // tolerance it did not have): the radius that takes in the nearest
+        // [`WIDER_SPHERE_SHARE`] of the body's vertices, and at least four, off one line.
+        let body = (0..mesh.num_vertices()).filter(|v| in_body(v)).count();
+        let want = ((WIDER_SPHERE_SHARE * body as f64).ceil() as usize).max(4);
+        let sphere = || {
+            self.pin.iter().enumerate().find_map(|(i, p)| {
+                let c = fem_core::Vec3::from(p.sphere.as_ref()?.center);
+                let mut near: Vec<(f64, usize)> = (0..mesh.num_vertices())
+                    .filter(|v| in_body(v))
+                    .map(|v| ((mesh.vertices[v] - c).norm(), v))
+                    .collect();
+                near.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let radius = near.get(want - 1)?.0 * (1.0 + 1e-6);
+                let at: Vec<fem_core::Vec3> = near[..want]
+                    .iter()
+                    .map(|&(_, v)| mesh.vertices[v])
+                    .collect();
+                (want > held_now && !collinear(&at)).then(|| {
+                    format!(
+                        "pin[{i}]'s sphere with `radius = {}` holds the nearest {want} vertices, \
+                         or a `box` holds it fixed",
+                        four_digits(radius)
+                    )
+                })
+            })
+        };
+        wider.or_else(sphere).unwrap_or_else(|| {
             "a pin plane's larger `tolerance`, or a `box`, holds it fixed".to_string()
         })
     }
@@ -994,6 +1025,21 @@ mod tests {
         );
         let all = scene.wider_pin(&mesh, &piece, &face);
         assert!(all.starts_with("a pin plane's larger `tolerance`"), "{all}");
+        // A sphere pin at one corner: the radius that takes in four vertices off one line (the
+        // corner's three neighbours at 0.2, 0.2 and 0.25 m).
+        let text = text.replace(
+            "plane = { axis = \"x\", side = \"min\", tolerance = 0.0 }",
+            "sphere = { center = [0.0, 0.0, 0.0], radius = 0.01 }",
+        );
+        let scene = Scene::from_str(&text, Path::new("."), "w.toml").unwrap();
+        let corner: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].norm() == 0.0)
+            .collect();
+        let one = scene.wider_pin(&mesh, &piece, &corner);
+        assert!(
+            one.starts_with("pin[0]'s sphere with `radius = 0.2500` holds the nearest 4 vertices"),
+            "{one}"
+        );
     }
 
     /// A body its own weight would strain past [`HEAVY_BODY`] is said, with `[mesh] scale`
