@@ -697,51 +697,58 @@ fn every_shipped_scene_reads_and_builds() {
 
 /// What building the model warns of is kept for `run`'s list, first among the figures not to be
 /// trusted: a body 3 m tall of E = 10⁵ Pa, which its own weight would crush.
+/// The warnings building `scene`'s model gives (cache folder `cache`).
+fn model_warnings(scene: &Scene, cache: &Path) -> Vec<String> {
+    pipeline::pipeline::Pipeline::new(scene, cache)
+        .unwrap()
+        .warnings
+}
+
+/// The one warning building `scene`'s model gives, checked to contain every needle.
+fn only_warning(scene: &Scene, cache: &Path, needles: &[&str]) -> String {
+    let w = model_warnings(scene, cache);
+    assert_eq!(w.len(), 1, "{w:?}");
+    for needle in needles {
+        assert!(w[0].contains(needle), "{needle}: {}", w[0]);
+    }
+    w[0].clone()
+}
+
 #[test]
 fn the_models_warnings_are_kept_for_the_report() {
     let dir = scratch("model-warnings");
     // BASE's bar is one cell thick, and said to be: its tets lock in bending.
     let thin = Scene::from_str(BASE, Path::new("."), "thin.toml").unwrap();
-    let p = pipeline::pipeline::Pipeline::new(&thin, &dir.join("thin")).unwrap();
-    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
-    assert!(
-        p.warnings[0].contains("the body is about one element thick"),
-        "{}",
-        p.warnings[0]
+    only_warning(
+        &thin,
+        &dir.join("thin"),
+        &["the body is about one element thick"],
     );
     // Two cells across, it is not; the rest of the test starts from there.
     let scene = |text: &str| {
         let text = text.replace("cells = [4, 1, 1]", "cells = [8, 2, 2]");
         Scene::from_str(&text, Path::new("."), "tall.toml").unwrap()
     };
-    let base = scene(BASE);
-    let quiet = pipeline::pipeline::Pipeline::new(&base, &dir.join("a")).unwrap();
-    assert!(quiet.warnings.is_empty(), "{:?}", quiet.warnings);
+    let quiet = model_warnings(&scene(BASE), &dir.join("a"));
+    assert!(quiet.is_empty(), "{quiet:?}");
     let tall = scene(&edit("size = [1.0, 0.2, 0.2]", "size = [1.0, 3.0, 0.2]"));
-    let p = pipeline::pipeline::Pipeline::new(&tall, &dir.join("b")).unwrap();
-    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
-    assert!(p.warnings[0].contains("ρgH/E = 0.29"), "{}", p.warnings[0]);
+    let w = only_warning(&tall, &dir.join("b"), &["ρgH/E = 0.29"]);
     let row = pipeline::run::MethodReport {
-        scene_warnings: p.warnings.clone(),
+        scene_warnings: vec![w.clone()],
         ..Default::default()
     };
     let listed = pipeline::trust::assess(&[row]).untrusted;
-    assert_eq!(
-        listed.first(),
-        Some(&format!("the scene: {}", p.warnings[0]))
-    );
+    assert_eq!(listed.first(), Some(&format!("the scene: {w}")));
     // Pins that hold the body along one line (a hinge) are kept too: the run said nothing of
     // them once the stages had printed over the first warning.
     let hinge = scene(&edit(
         "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
         "box = { min = [-0.01, -0.01, -0.01], max = [0.01, 0.21, 0.01] }",
     ));
-    let p = pipeline::pipeline::Pipeline::new(&hinge, &dir.join("c")).unwrap();
-    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
+    let w = only_warning(&hinge, &dir.join("c"), &[]);
     assert!(
-        p.warnings[0].starts_with("the pins hold the body by 3 vertices on one line"),
-        "{}",
-        p.warnings[0]
+        w.starts_with("the pins hold the body by 3 vertices on one line"),
+        "{w}"
     );
     // A pin plane across the bar's thickness holds a third of it, glued along a whole side:
     // said, with the bar's long axis (a mesh made standing along x).
@@ -749,26 +756,22 @@ fn the_models_warnings_are_kept_for_the_report() {
         "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
         "plane = { axis = \"y\", side = \"min\", tolerance = 1.0e-6 }",
     ));
-    let p = pipeline::pipeline::Pipeline::new(&side, &dir.join("d")).unwrap();
-    assert_eq!(p.warnings.len(), 1, "{:?}", p.warnings);
-    for needle in [
-        "the pin planes hold 27 of the body's 81 vertices (33 %)",
-        "tallest along x (1.000 m, against 0.2000 m along y)",
-        "set the pin plane's `axis` and `[gravity]` to it",
-    ] {
-        assert!(
-            p.warnings[0].contains(needle),
-            "{needle}: {}",
-            p.warnings[0]
-        );
-    }
-    // Pinned across its long axis as the README's plane pins, it is not; nor is a box drawn
-    // around the same half (a part the user chose to hold, as one bell of a dumbbell).
-    assert!(quiet.warnings.is_empty());
+    only_warning(
+        &side,
+        &dir.join("d"),
+        &[
+            "the pin planes hold 27 of the body's 81 vertices (33 %)",
+            "tallest along x (1.000 m, against 0.2000 m along y)",
+            "set the pin plane's `axis` and `[gravity]` to it",
+        ],
+    );
+    // Pinned across its long axis as the README's plane pins, it is not (`quiet`); nor is a
+    // box drawn around the same third (a part the user chose to hold, as one bell of a
+    // dumbbell).
     let part = scene(&edit(
         "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
         "box = { min = [-0.01, -0.01, -0.01], max = [1.01, 0.01, 0.21] }",
     ));
-    let p = pipeline::pipeline::Pipeline::new(&part, &dir.join("e")).unwrap();
-    assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+    let w = model_warnings(&part, &dir.join("e"));
+    assert!(w.is_empty(), "{w:?}");
 }
