@@ -20,6 +20,16 @@ use pca::PcaConfig;
 /// (and the mesh suite's minimal scenes) pin: 2 %, the bottom of a standing body.
 pub const WIDER_PIN: f64 = 0.02;
 
+/// `x` (> 0) rounded up to four significant figures, as [`four_digits`] prints it; the smallest
+/// positive normal number where `x` is not positive and finite.
+fn up_to_four_figures(x: f64) -> f64 {
+    if !(x.is_finite() && x > 0.0) {
+        return f64::MIN_POSITIVE;
+    }
+    let unit = 10f64.powf(x.log10().floor() - 3.0);
+    (x / unit).ceil() * unit
+}
+
 /// The share of a body's vertices that the radius [`Scene::build_model`]'s advice gives a `sphere`
 /// pin holding the body at a point takes in (at least four).
 pub const WIDER_SPHERE_SHARE: f64 = 0.02;
@@ -27,8 +37,8 @@ pub const WIDER_SPHERE_SHARE: f64 = 0.02;
 /// Pin planes that hold more than this share of a body's vertices are worth a word: a body
 /// stands or hangs from a few percent of them, and a tester's fork made z-up and pinned at its
 /// lowest y (the README's plane) lay on its side glued along it, 35 % of it held, and nothing
-/// said so. A `box` or `sphere` drawn around a whole part (one bell of a dumbbell, 44 % of its
-/// vertices) holds what the user chose, and is not counted.
+/// said so. A `box`, `sphere` or list of `indices` drawn around a whole part (one bell of a
+/// dumbbell, 44 % of its vertices) holds what the user chose, and is not counted.
 pub const MANY_PINNED: f64 = 0.25;
 
 /// A body whose own weight would strain it by more than this (ρ g H / E, H its height along
@@ -36,12 +46,14 @@ pub const MANY_PINNED: f64 = 0.25;
 /// is at 0.025, a 2 m one at 0.2; a 15 m bunny whose file was in centimetres at 1.5.
 pub const HEAVY_BODY: f64 = 0.25;
 
-/// A body larger than this (m) that its weight cannot carry is most likely a mesh in centimetres
-/// or millimetres read as metres (a 25 cm part becomes 25 m); below it, units are not suggested.
+/// A body larger than this (m, its bounding box's diagonal) that its weight cannot carry is most
+/// likely a mesh in centimetres or millimetres read as metres (a 25 cm part becomes 25 m); below
+/// it, units are not suggested.
 pub const UNIT_MISTAKE_SIZE: f64 = 3.0;
 
 /// What a warning of a body its weight carries away says first when the body is `size` metres
-/// across and larger than [`UNIT_MISTAKE_SIZE`]: that the mesh may not be in metres. A tester's
+/// across (its bounding box's diagonal) and larger than [`UNIT_MISTAKE_SIZE`]: that the mesh
+/// may not be in metres. A tester's
 /// 10 cm mushroom read as 10 m (E = 10⁶ Pa, ρgH/E = 0.1) was told only to take a modulus 56
 /// times stiffer.
 pub fn unit_hint(size: f64) -> Option<String> {
@@ -94,7 +106,8 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     let m = &scene.material;
     let strain = m.density * g_norm * height / m.youngs_modulus;
     (strain > HEAVY_BODY).then(|| {
-        let size = extent.iter().fold(0.0f64, |a, &x| a.max(x));
+        // The bounding box's diagonal, as the fall and buckling warnings measure a body.
+        let size = extent.iter().map(|x| x * x).sum::<f64>().sqrt();
         let remedy = match unit_hint(size) {
             Some(units) => format!(
                 "A{}; else a stiffer `[material] youngs_modulus`",
@@ -405,7 +418,8 @@ impl Scene {
 
     /// What holds a body the pins hold at a point or along a line: the first pin plane that,
     /// with a tolerance of [`WIDER_PIN`] of the body's extent along its axis, holds more of the
-    /// body's vertices than the pins do now and not all on one line, and how many; else a
+    /// body's vertices than the pins do now and not all on one line, and how many; else the
+    /// first sphere pin with the radius that takes in [`WIDER_SPHERE_SHARE`] of them; else a
     /// `box`. `piece` is [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
     fn wider_pin(&self, mesh: &TetMesh, piece: &[usize], pinned: &[usize]) -> String {
         let (lo, hi) = mesh.bounding_box();
@@ -451,15 +465,20 @@ impl Scene {
                     .map(|v| ((mesh.vertices[v] - c).norm(), v))
                     .collect();
                 near.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let radius = near.get(want - 1)?.0 * (1.0 + 1e-6);
-                let at: Vec<fem_core::Vec3> = near[..want]
+                // Rounded up to the four figures it is printed with, so that the radius as
+                // written takes in the vertex it was chosen for, and every vertex it takes in
+                // counted (a grid puts several at one distance).
+                let radius = up_to_four_figures(near.get(want - 1)?.0);
+                let at: Vec<fem_core::Vec3> = near
                     .iter()
+                    .take_while(|&&(d, _)| d <= radius)
                     .map(|&(_, v)| mesh.vertices[v])
                     .collect();
-                (want > held_now && !collinear(&at)).then(|| {
+                let held = at.len();
+                (held > held_now && !collinear(&at)).then(|| {
                     format!(
-                        "pin[{i}]'s sphere with `radius = {}` holds the nearest {want} vertices, \
-                         or a `box` holds it fixed",
+                        "pin[{i}]'s sphere with `radius = {}` holds {held} vertices, or a `box` \
+                         holds it fixed",
                         four_digits(radius)
                     )
                 })
@@ -1037,9 +1056,29 @@ mod tests {
             .collect();
         let one = scene.wider_pin(&mesh, &piece, &corner);
         assert!(
-            one.starts_with("pin[0]'s sphere with `radius = 0.2500` holds the nearest 4 vertices"),
+            one.starts_with("pin[0]'s sphere with `radius = 0.2500` holds 4 vertices"),
             "{one}"
         );
+        // At the middle of a face two cells across, four vertices lie at the fourth distance:
+        // all five the radius takes in are counted.
+        let text = text
+            .replace("cells = [4, 1, 1]", "cells = [4, 2, 2]")
+            .replace("center = [0.0, 0.0, 0.0]", "center = [0.0, 0.1, 0.1]");
+        let scene = Scene::from_str(&text, Path::new("."), "w.toml").unwrap();
+        let mesh = scene.build_model().unwrap().model.mesh;
+        let (piece, _) = mesh.vertex_components();
+        let centre: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| (mesh.vertices[v] - fem_core::Vec3::new(0.0, 0.1, 0.1)).norm() < 1e-12)
+            .collect();
+        let one = scene.wider_pin(&mesh, &piece, &centre);
+        assert!(
+            one.starts_with("pin[0]'s sphere with `radius = 0.1000` holds 5 vertices"),
+            "{one}"
+        );
+        // The printed radius never falls short of the distance it was chosen for.
+        assert_eq!(four_digits(up_to_four_figures(0.12344)), "0.1235");
+        assert!(up_to_four_figures(0.12344) >= 0.12344);
+        assert!(up_to_four_figures(0.1) >= 0.1);
     }
 
     /// A body its own weight would strain past [`HEAVY_BODY`] is said, with `[mesh] scale`

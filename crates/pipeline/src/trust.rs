@@ -388,14 +388,17 @@ fn fall_warning(rows: &[MethodReport]) -> Option<String> {
         "; if the fall is meant, the one-step errors say more of each method than its \
          trajectory error"
     };
-    let units = crate::scene::unit_hint(b.size).map_or(String::new(), |u| format!("{u}; else "));
+    // The units first, whatever the body should do.
+    let stand = match crate::scene::unit_hint(b.size) {
+        Some(u) => format!("A{}. Else, if the body should stand as pinned", &u[1..]),
+        None => "If the body should stand as pinned".to_string(),
+    };
     Some(format!(
         "{who} moves the body up to {:.3} m at t = {:.2} s, {:.0} % of its {:.3} m \
          bounding-box diagonal, far beyond what the drag asks: its own weight carries it (the \
          linear response to gravity at rest already moves it {:.0} % of its size){through}\
-         {inverted}{drift}. If the body should stand as pinned, {units}a stiffer material \
-         (`[material] youngs_modulus` of {:.1e} Pa or more) or pins that hold more of it keep it \
-         up{meant}",
+         {inverted}{drift}. {stand}, a stiffer material (`[material] youngs_modulus` of {:.1e} \
+         Pa or more) or pins that hold more of it keep it up{meant}",
         c.travel,
         c.travel_time,
         pct(c.travel / b.size),
@@ -467,20 +470,20 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
                 None => {
                     // A tester read "holds the test trajectory to 0.0 %" and then "each step is
                     // 0.24 % off, which a larger subspace lowers" as a contradiction: both said.
-                    let reach = if r.step_error >= 4.0 * r.subspace_error {
+                    if r.step_error >= 4.0 * r.subspace_error {
                         format!(
                             "from states its subspace holds to {} %: the energy along what the \
                              subspace leaves out (stiffness the mass norm hardly sees), not its \
-                             reach, sets where a step lands, ",
+                             reach, sets where a step lands; a larger subspace takes in more of \
+                             that stiffness (`[pca]`, and for the neural methods \
+                             `[autoencoder] latent_dim`)",
                             fine_pct(r.subspace_error)
                         )
                     } else {
-                        String::new()
-                    };
-                    format!(
-                        "{reach}which a larger subspace lowers (`[pca]`, and for the neural \
-                         methods `[autoencoder] latent_dim`)"
-                    )
+                        "which a larger subspace lowers (`[pca]`, and for the neural methods \
+                         `[autoencoder] latent_dim`)"
+                            .to_string()
+                    }
                 }
             },
         };
@@ -543,17 +546,20 @@ fn fitted_parts(method: crate::simulate::Method) -> &'static str {
     }
 }
 
-/// `lo–hi` with `digits` decimals, or one figure where the two print the same.
-/// A fraction as a percentage with one decimal, or two below 0.1 % (a subspace error "0.0 %"
-/// read as none at all).
+/// A fraction as a percentage with one decimal, two below 0.1 %, and "under 0.01" below that
+/// (a subspace error "0.0 %" read as none at all).
 fn fine_pct(x: f64) -> String {
-    if 100.0 * x < 0.1 {
-        format!("{:.2}", 100.0 * x)
+    let p = 100.0 * x;
+    if p < 0.01 {
+        "under 0.01".to_string()
+    } else if p < 0.1 {
+        format!("{p:.2}")
     } else {
-        format!("{:.1}", 100.0 * x)
+        format!("{p:.1}")
     }
 }
 
+/// `lo–hi` with `digits` decimals, or one figure where the two print the same.
 fn span(lo: f64, hi: f64, digits: usize) -> String {
     let (lo, hi) = (format!("{lo:.digits$}"), format!("{hi:.digits$}"));
     if lo == hi { lo } else { format!("{lo}–{hi}") }
@@ -1119,9 +1125,9 @@ mod tests {
         let w = said(&[large, amplified.clone()]);
         assert!(
             w[0].contains(
-                "If the body should stand as pinned, at 15.0 m across, the mesh may not be in \
-                 metres: set `[mesh] scale` (0.01 for centimetres, 0.001 for millimetres); else \
-                 a stiffer material"
+                ". At 15.0 m across, the mesh may not be in metres: set `[mesh] scale` (0.01 \
+                 for centimetres, 0.001 for millimetres). Else, if the body should stand as \
+                 pinned, a stiffer material"
             ),
             "{}",
             w[0]
@@ -1407,13 +1413,15 @@ mod tests {
         let w = ruled(0.002);
         let own = w.iter().find(|w| w.contains("reduced steps' own")).unwrap();
         assert!(own.ends_with("each step is 2.16 % off (one-step error), most of it the cubature rule's: neural over every element steps 0.20 % off from the same states (below)"), "{own}");
+        // Its steps land ten times further off than its subspace holds the frames: a larger
+        // subspace is what is left to say.
         let w = ruled(0.012);
         let own = w.iter().find(|w| w.contains("reduced steps' own")).unwrap();
-        assert!(own.contains("which a larger subspace lowers"), "{own}");
+        assert!(own.contains("a larger subspace takes in more"), "{own}");
         // No step error measured for the subspace over every element: nothing to compare.
         let w = ruled(0.0);
         let own = w.iter().find(|w| w.contains("reduced steps' own")).unwrap();
-        assert!(own.contains("which a larger subspace lowers"), "{own}");
+        assert!(own.contains("a larger subspace takes in more"), "{own}");
         // Drifting by its space–time error with a mean under 5 %, so no rule warning follows:
         // the remedy is said in place of "(below)".
         let nc = with_restart(

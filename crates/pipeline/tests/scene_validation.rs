@@ -695,8 +695,6 @@ fn every_shipped_scene_reads_and_builds() {
     assert!(built >= 1, "no shipped scene built its model: {scenes:?}");
 }
 
-/// What building the model warns of is kept for `run`'s list, first among the figures not to be
-/// trusted: a body 3 m tall of E = 10⁵ Pa, which its own weight would crush.
 /// The warnings building `scene`'s model gives (cache folder `cache`).
 fn model_warnings(scene: &Scene, cache: &Path) -> Vec<String> {
     pipeline::pipeline::Pipeline::new(scene, cache)
@@ -714,6 +712,8 @@ fn only_warning(scene: &Scene, cache: &Path, needles: &[&str]) -> String {
     w[0].clone()
 }
 
+/// What building the model warns of is kept for `run`'s list, first among the figures not to be
+/// trusted: a body 3 m tall of E = 10⁵ Pa, which its own weight would crush.
 #[test]
 fn the_models_warnings_are_kept_for_the_report() {
     let dir = scratch("model-warnings");

@@ -210,15 +210,22 @@ pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
         .filter(|t| t.iter().all(|&v| on_surface[v]))
         .count();
     (tets > 0 && thin as f64 >= THIN_SHARE * tets as f64).then(|| {
+        let share = if tets == 1 {
+            "the mesh's one tet has".to_string()
+        } else {
+            format!(
+                "{thin} of the mesh's {tets} tets ({:.0} %) have",
+                100.0 * thin as f64 / tets as f64
+            )
+        };
         format!(
-            "{thin} of the mesh's {tets} tets ({:.0} %) have all four corners on its surface: the \
+            "{share} all four corners on its surface: the \
              body is about one element thick, where linear tetrahedra bend far too stiffly (a \
              30 × 20 × 1 cm plate clamped along an edge sags 2.4 cm under its weight one cell \
              thick, 5.0 cm three cells thick, 7.9 cm four cells thick and twice as fine along \
              it; plate theory: 10.8 cm), so the full simulation, and every method measured \
              against it, is stiffer than the material; more elements across the thickness, and \
-             finer along it (a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a`), bend closer to it",
-            100.0 * thin as f64 / tets as f64
+             finer along it (a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a`), bend closer to it"
         )
     })
 }
@@ -232,7 +239,8 @@ fn tet_volume([x0, x1, x2, x3]: [Vec3; 4]) -> f64 {
 mod tests {
     use super::generate::{BoxSpec, box_mesh};
 
-    /// A plate one cell thick is said; the same plate four cells thick, and a cube, are not.
+    /// A plate one cell thick is said; the same plate four or six cells through its thickness
+    /// is not.
     #[test]
     fn a_mesh_one_element_thick_is_said() {
         let plate = |cells: [usize; 3]| {

@@ -164,9 +164,10 @@ pub fn validate_located(
     if report.flipped_tets > 0 {
         let n = report.flipped_tets;
         tracing::warn!(
-            "{}: {n} {} wound inside out (inverted at rest), flipped",
+            "{}: {n} {} wound inside out (inverted at rest) and {} reoriented",
             path.display(),
-            if n == 1 { "tet was" } else { "tets were" }
+            if n == 1 { "tet was" } else { "tets were" },
+            if n == 1 { "is" } else { "are" }
         );
     }
     if report.components > 1 {
@@ -179,8 +180,8 @@ pub fn validate_located(
     if report.unreferenced_vertices > 0 {
         let n = report.unreferenced_vertices;
         tracing::warn!(
-            "{}: {n} {} by no tet (not part of the body: {} not move, and its size and pin \
-             planes are taken without {})",
+            "{}: {n} {} by no tet (not part of the body: {} not move, and the body's size and \
+             pin planes are taken without {})",
             path.display(),
             if n == 1 {
                 "vertex is used"
