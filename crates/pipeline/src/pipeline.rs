@@ -635,6 +635,9 @@ pub struct Pipeline<'a> {
     recorded_seconds: f64,
     /// The training snapshots' PCA coefficients, once a run has needed them.
     pub(crate) training_poses: Option<std::sync::Arc<crate::coverage::TrainingPoses>>,
+    /// The elastic energy of each frame of a test trajectory's reference, by trajectory, once a
+    /// run has needed it: every reduced method's strain ratio divides by the same.
+    pub(crate) reference_energies: std::collections::HashMap<usize, Arc<Vec<f64>>>,
     /// The body's vertex counts (fewer than the mesh's when some vertex no tet uses), for
     /// [`Pipeline::body_summary`] and the cache keys.
     body: BodyCounts,
@@ -722,6 +725,7 @@ impl<'a> Pipeline<'a> {
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
             training_poses: None,
+            reference_energies: std::collections::HashMap::new(),
             body,
             buckling: std::cell::OnceCell::new(),
         })

@@ -1353,9 +1353,17 @@ pub fn measure(
         let fit = pipeline.pca(stage_progress)?;
         let states = reference_states(&fit.basis, &reference.frames);
         let h = pipeline.scene.time.step;
+        let energies = reference_energies(pipeline, m.trajectory, &model, &reference.frames);
         match last_runner.as_mut() {
             Some(runner) => (
-                subspace_errors(runner, &model, &fit.basis, &states, &reference.frames, h)?,
+                subspace_errors(
+                    runner,
+                    &model,
+                    &fit.basis,
+                    &states,
+                    (&reference.frames, &energies),
+                    h,
+                )?,
                 step_errors(method, runner, &states, &reference.frames)?,
             ),
             None => ((Vec::new(), None), Vec::new()),
@@ -1437,21 +1445,21 @@ fn reference_states(basis: &pca::PcaBasis, frames: &[Vec<f64>]) -> Vec<Vec<f64>>
 /// [`reference_states`]), which the runtime encodes (for PCA, q itself; for the autoencoder with
 /// its linear directions, the nearest point of the subspace), and the error of U q. A spring's
 /// dent, which the runtime's displacement adds outside the subspace, is left out. With it, the
-/// largest ratio of U q's elastic energy to the frame's ([`largest_strain_ratio`]) and its time,
-/// frames `time_step` apart.
+/// largest ratio of U q's elastic energy to the frame's (`reference`, [`reference_energies`];
+/// [`largest_strain_ratio`]) and its time, frames `time_step` apart.
 fn subspace_errors(
     runner: &mut Runner,
     model: &FullSpaceModel,
     basis: &pca::PcaBasis,
     states: &[Vec<f64>],
-    frames: &[Vec<f64>],
+    (frames, reference): (&[Vec<f64>], &[f64]),
     time_step: f64,
 ) -> Result<SubspaceFit> {
     let mut free = vec![0.0; basis.n()];
     let (mut u, mut r) = (vec![0.0; model.num_full()], vec![0.0; model.num_full()]);
     let mut errors = ErrorAccumulator::default();
     let mut buf = fem_core::assembly::AssemblyBuffers::default();
-    let (mut reference, mut projected) = (Vec::new(), Vec::new());
+    let mut projected = Vec::with_capacity(frames.len());
     for (j, f) in frames.iter().enumerate() {
         runner.set_state(j + 1, &states[j + 1], &states[j])?;
         let q = runner
@@ -1461,12 +1469,37 @@ fn subspace_errors(
         model.dofs.scatter(&free, &mut u);
         model.dofs.scatter(f, &mut r);
         errors.add_full(&model.mass, &u, &r);
-        reference.push(model.elastic_energy(&r, &mut buf));
         projected.push(model.elastic_energy(&u, &mut buf));
     }
-    let strain = largest_strain_ratio(&reference, &projected)
+    let strain = largest_strain_ratio(reference, &projected)
         .map(|(ratio, j)| (ratio, (j + 1) as f64 * time_step));
     Ok((errors.rel, strain))
+}
+
+/// The elastic energy of each of test trajectory `trajectory`'s reference `frames` on `model`,
+/// computed once per pipeline and shared by every reduced method's strain ratio.
+fn reference_energies(
+    pipeline: &mut Pipeline<'_>,
+    trajectory: usize,
+    model: &FullSpaceModel,
+    frames: &[Vec<f64>],
+) -> std::sync::Arc<Vec<f64>> {
+    pipeline
+        .reference_energies
+        .entry(trajectory)
+        .or_insert_with(|| {
+            let mut buf = fem_core::assembly::AssemblyBuffers::default();
+            let mut u = vec![0.0; model.num_full()];
+            let energies = frames
+                .iter()
+                .map(|f| {
+                    model.dofs.scatter(f, &mut u);
+                    model.elastic_energy(&u, &mut buf)
+                })
+                .collect();
+            std::sync::Arc::new(energies)
+        })
+        .clone()
 }
 
 /// The subspace error frame by frame, and the largest strain ratio with its time
