@@ -442,8 +442,11 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
         // Where the same subspace over every element steps at most half as far off, the rule
         // makes the steps' error, not the subspace (a nearly incompressible finger:
         // `neural-cubature` 2.16 % a step, `neural` 0.20 %).
-        let lowers = match rule_made_step_error(r, rows) {
-            Some(every) => format!(
+        let strained = r
+            .projected_strain
+            .filter(|&(x, _)| x >= STRAINED_PROJECTION);
+        let lowers = if let Some(every) = rule_made_step_error(r, rows) {
+            format!(
                 "most of it the cubature rule's: {} over every element steps {:.2} % off from \
                  the same states{}",
                 every.method,
@@ -453,39 +456,30 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
                 } else {
                     format!("; {LARGER_RULE}")
                 }
-            ),
-            None => match r
-                .projected_strain
-                .filter(|&(x, _)| x >= STRAINED_PROJECTION)
-            {
-                Some((ratio, time)) => format!(
-                    "and its subspace holds the reference only by straining it: the reference's \
-                     pose at t = {time:.2} s, put in the subspace, carries {ratio:.1} times its \
-                     elastic energy (a part turned further than a linear basis turns without \
-                     stretching, or a body giving way), which a step that lowers the energy \
-                     does not follow; training schedules that reach such poses (`[training] \
-                     schedules`, `kinds`, `offset`) or a larger subspace (`[pca]`) hold them \
-                     with less strain"
-                ),
-                None => {
-                    // A tester read "holds the test trajectory to 0.0 %" and then "each step is
-                    // 0.24 % off, which a larger subspace lowers" as a contradiction: both said.
-                    if r.step_error >= 4.0 * r.subspace_error {
-                        format!(
-                            "from states its subspace holds to {} %: the energy along what the \
-                             subspace leaves out (stiffness the mass norm hardly sees), not its \
-                             reach, sets where a step lands; a larger subspace takes in more of \
-                             that stiffness (`[pca]`, and for the neural methods \
-                             `[autoencoder] latent_dim`)",
-                            fine_pct(r.subspace_error)
-                        )
-                    } else {
-                        "which a larger subspace lowers (`[pca]`, and for the neural methods \
-                         `[autoencoder] latent_dim`)"
-                            .to_string()
-                    }
-                }
-            },
+            )
+        } else if let Some((ratio, time)) = strained {
+            format!(
+                "and its subspace holds the reference only by straining it: the reference's \
+                 pose at t = {time:.2} s, put in the subspace, carries {ratio:.1} times its \
+                 elastic energy (a part turned further than a linear basis turns without \
+                 stretching, or a body giving way), which a step that lowers the energy does \
+                 not follow; training schedules that reach such poses (`[training] schedules`, \
+                 `kinds`, `offset`) or a larger subspace (`[pca]`) hold them with less strain"
+            )
+        } else if r.step_error >= 4.0 * r.subspace_error {
+            // A tester read "holds the test trajectory to 0.0 %" and then "each step is 0.24 %
+            // off, which a larger subspace lowers" as a contradiction: both said.
+            format!(
+                "from states its subspace holds to {} %: the energy along what the subspace \
+                 leaves out (stiffness the mass norm hardly sees), not its reach, sets where a \
+                 step lands; a larger subspace takes in more of that stiffness (`[pca]`, and for \
+                 the neural methods `[autoencoder] latent_dim`)",
+                fine_pct(r.subspace_error)
+            )
+        } else {
+            "which a larger subspace lowers (`[pca]`, and for the neural methods \
+             `[autoencoder] latent_dim`)"
+                .to_string()
         };
         format!(
             "{}: the drift is mostly the reduced steps' own: {restarted}, so most of it is \
