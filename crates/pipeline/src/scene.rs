@@ -53,9 +53,8 @@ pub const UNIT_MISTAKE_SIZE: f64 = 3.0;
 
 /// What a warning of a body its weight carries away says first when the body is `size` metres
 /// across (its bounding box's diagonal) and larger than [`UNIT_MISTAKE_SIZE`]: that the mesh
-/// may not be in metres. A tester's
-/// 10 cm mushroom read as 10 m (E = 10⁶ Pa, ρgH/E = 0.1) was told only to take a modulus 56
-/// times stiffer.
+/// may not be in metres. A tester's 10 cm mushroom read as 10 m (E = 10⁶ Pa, ρgH/E = 0.1) was
+/// told only to take a modulus 56 times stiffer.
 pub fn unit_hint(size: f64) -> Option<String> {
     (size > UNIT_MISTAKE_SIZE).then(|| {
         format!(
