@@ -114,6 +114,8 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
     let handle = sim.grab(&[vertex], stiffness)?;
     let mut frame = vec![0.0f32; 3 * surface.len()];
     let (mut step_s, mut read_s) = (Vec::new(), Vec::new());
+    // The furthest the pose went beyond the training poses (None in full space).
+    let mut beyond: Option<f64> = None;
     let position = |frame: &[f32]| {
         Vec3::new(
             frame[3 * at] as f64,
@@ -123,8 +125,11 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
     };
     let mut run = |sim: &mut S, frame: &mut [f32]| -> Result<()> {
         let t = Instant::now();
-        sim.step()?;
+        let stats = sim.step()?;
         step_s.push(t.elapsed().as_secs_f64());
+        if let Some(b) = stats.beyond_training {
+            beyond = Some(beyond.map_or(b, |m| m.max(b)));
+        }
         let t = Instant::now();
         sim.surface_positions_into(frame)?;
         read_s.push(t.elapsed().as_secs_f64());
@@ -167,5 +172,16 @@ fn drag<S: Interactive>(sim: &mut S, model: &ReducedModel) -> Result<()> {
         (dragged - grabbed_at).dot(&up),
         (after - grabbed_at).norm()
     );
+    if let Some(b) = beyond {
+        println!(
+            "the pose went up to {:.0} % of its size beyond the training poses{}",
+            100.0 * b,
+            if b > latent_sim::coverage::OUTSIDE_TRAINING {
+                ", where the model extrapolates"
+            } else {
+                ""
+            }
+        );
+    }
     Ok(())
 }

@@ -90,13 +90,14 @@
 //! #             model: &model, material: &material, time: &time, basis: &basis, cubature: None,
 //! #             subspace: SubspaceSource::Linear, solver: Default::default(),
 //! #             preconditioning: Default::default(), spring_compliance: true, full_solver: Default::default(),
-//! #             rows: Rows::Used, provenance: Default::default(),
+//! #             rows: Rows::Used, provenance: Default::default(), training: None,
 //! #         }).unwrap()
 //! #     }
 //! # }
 //! ```
 
 mod config;
+pub mod coverage;
 mod dense_factor;
 pub mod model;
 mod neural;

@@ -14,6 +14,7 @@ use latent_sim::model::{MeasuredError, ModelSource, Provenance, Rows, StageKey, 
 
 use std::sync::Arc;
 
+use crate::coverage::TrainingPoses;
 use crate::pipeline::{FittedCubature, Pipeline, Progress};
 use crate::simulate::{Method, solver_for};
 use crate::stage::Stage;
@@ -168,6 +169,8 @@ pub(crate) fn reduced_model_with(
         },
         None => SubspaceSource::Linear,
     };
+    // The runtime measures each step's pose against them, as `run` measures each frame's.
+    let poses = crate::coverage::shared(pipeline, progress)?;
     let source = ModelSource {
         model,
         material,
@@ -187,6 +190,7 @@ pub(crate) fn reduced_model_with(
             stage_keys,
             errors,
         },
+        training: Some(TrainingPoses::clone(&poses)),
     };
     ReducedModel::build(source)
         .map_err(|e| anyhow::anyhow!("{}: model of {}: {e}", scene.source, method.name()))

@@ -156,6 +156,31 @@ fn run_writes_the_default_methods_model_beside_its_report() {
         })
         .unwrap();
     assert_eq!(held_out.value, row.mean_rel_error);
+    // Stepped through the runtime under the test's forces, the model says after each step how
+    // far its pose lies beyond the training poses: at its furthest, what the report says.
+    let (test, _, _) = setup(
+        &p,
+        &SimulateOptions {
+            method: Method::NeuralCubature,
+            trajectory: Trajectory::Test(0),
+            out: dir.join("replay"),
+            frames: None,
+            every: 0,
+            solver: None,
+        },
+    )
+    .unwrap();
+    let mut sim = model.simulator().unwrap();
+    for f in test.forces {
+        sim.add_force(f).unwrap();
+    }
+    let mut furthest = 0.0f64;
+    for _ in 0..row.frame_errors.len() {
+        let beyond = sim.step().unwrap().beyond_training.unwrap();
+        assert_eq!(Some(beyond), sim.beyond_training());
+        furthest = furthest.max(beyond);
+    }
+    assert_eq!(furthest, row.training_distance);
     // A reduced trajectory is timed again while its runs stay within the budget; a full-space
     // one once.
     let frames = row.frame_errors.len() as f64;

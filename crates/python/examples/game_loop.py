@@ -1,6 +1,8 @@
 """Steps a model the way a game does, one fixed step per frame, through what a player does to it,
 and prints what each part cost: step times, solver iterations, preconditioner rebuilds and
-steps that fell back to Newton.
+steps that fell back to Newton; and how far each part took the model beyond its training poses
+(`StepStats.beyond_training`: above 10 % it extrapolates, and what it shows may not be the
+body's motion).
 
     cargo xtask export                                   # out/cantilever/neural-cubature.ldm
     pip install ./crates/python
@@ -27,6 +29,10 @@ import pathlib
 import numpy as np
 
 import latent_dynamics as ld
+
+# A step's phase, wall seconds, iterations, rebuilt, Newton fallback, failed, the surface's
+# largest move (m) and how far beyond the training poses (nan in full space or when failed).
+Row = tuple[str, float, int, bool, bool, bool, float, float]
 
 
 def main() -> None:
@@ -67,7 +73,7 @@ def main() -> None:
 
     frame = np.empty((sim.surface_vertex_count, 3), dtype=np.float32)
     surface_rest = rest[sim.surface_vertices].astype(np.float32)
-    rows: list[tuple[str, float, int, bool, bool, bool, float]] = []
+    rows: list[Row] = []
 
     def step(phase: str) -> None:
         try:
@@ -76,12 +82,14 @@ def main() -> None:
             print(f"  {phase}: step at t = {sim.time:.3f} s failed: {e}")
             for handle in sim.handles():
                 sim.release(handle)
-            rows.append((phase, math.nan, 0, False, False, True, math.nan))
+            rows.append((phase, math.nan, 0, False, False, True, math.nan, math.nan))
             return
         sim.surface_positions(out=frame)
         moved = float(np.linalg.norm(frame - surface_rest, axis=1).max())
+        beyond = math.nan if s.beyond_training is None else s.beyond_training
         rows.append(
-            (phase, s.seconds, s.iterations, s.preconditioner_rebuilt, s.newton_fallback, False, moved)
+            (phase, s.seconds, s.iterations, s.preconditioner_rebuilt, s.newton_fallback, False, moved,
+             beyond)
         )
 
     def wait(seconds: float, phase: str) -> None:
@@ -165,7 +173,7 @@ def release(sim: ld.Simulator, handle: ld.Handle) -> None:
         sim.release(handle)
 
 
-def report(rows: list[tuple[str, float, int, bool, bool, bool, float]], size: float) -> None:
+def report(rows: list[Row], size: float) -> None:
     ms = np.array([1e3 * r[1] for r in rows if not r[5]])
     print(
         f"{len(rows)} steps: mean {ms.mean():.2f} ms, median {np.median(ms):.2f}, "
@@ -175,19 +183,28 @@ def report(rows: list[tuple[str, float, int, bool, bool, bool, float]], size: fl
         f"{sum(r[5] for r in rows)} failed steps; the surface moved up to "
         f"{np.nanmax([r[6] for r in rows]) / size:.2f} times the body's size"
     )
+    beyond = [r[7] for r in rows if not math.isnan(r[7])]
+    if beyond:
+        outside = sum(b > 0.1 for b in beyond)
+        print(
+            f"the pose went up to {100 * max(beyond):.0f} % beyond the training poses; "
+            f"{outside} steps more than 10 % beyond, where the model extrapolates"
+        )
     print(
         f"{'phase':18s} {'steps':>5s} {'mean ms':>8s} {'max ms':>8s} {'iterations':>10s} "
-        f"{'rebuilds':>8s} {'Newton':>6s} {'failed':>6s}"
+        f"{'rebuilds':>8s} {'Newton':>6s} {'failed':>6s} {'beyond %':>8s}"
     )
-    phases: dict[str, list[tuple[str, float, int, bool, bool, bool, float]]] = {}
+    phases: dict[str, list[Row]] = {}
     for r in rows:
         phases.setdefault(r[0], []).append(r)
     for phase, rs in phases.items():
         done = [1e3 * r[1] for r in rs if not r[5]] or [math.nan]
+        beyond = [r[7] for r in rs if not math.isnan(r[7])]
         print(
             f"{phase:18s} {len(rs):5d} {np.mean(done):8.2f} {np.max(done):8.2f} "
             f"{np.mean([r[2] for r in rs]):10.1f} {sum(r[3] for r in rs):8d} "
-            f"{sum(r[4] for r in rs):6d} {sum(r[5] for r in rs):6d}"
+            f"{sum(r[4] for r in rs):6d} {sum(r[5] for r in rs):6d} "
+            + (f"{100 * max(beyond):8.0f}" if beyond else f"{'–':>8s}")
         )
 
 

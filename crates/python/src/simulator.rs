@@ -46,6 +46,8 @@ struct State {
     seconds: f64,
     iterations: usize,
     last: Option<latent_sim::StepStats>,
+    /// The largest `beyond_training` of the steps counted (None in full space).
+    beyond_training: Option<f64>,
 }
 
 /// Tells the simulators of a process apart, so that a handle of one is refused by another.
@@ -72,6 +74,10 @@ pub struct StepStats {
     /// solver than the scene's): a slow step, in a reduced model usually a pull far beyond the
     /// training.
     newton_fallback: bool,
+    /// How far the pose the step reached lies beyond the training poses' ranges, relative to
+    /// its size (``cargo xtask run``'s "from training"): 0 among them; above 0.1 the model
+    /// extrapolates and its motion is not to be trusted as the body's. None in full space.
+    beyond_training: Option<f64>,
 }
 
 impl From<latent_sim::StepStats> for StepStats {
@@ -84,6 +90,7 @@ impl From<latent_sim::StepStats> for StepStats {
             seconds: s.seconds,
             preconditioner_rebuilt: s.preconditioner_rebuilt,
             newton_fallback: s.newton_fallback,
+            beyond_training: s.beyond_training,
         }
     }
 }
@@ -92,8 +99,13 @@ impl From<latent_sim::StepStats> for StepStats {
 impl StepStats {
     fn __repr__(&self) -> String {
         format!(
-            "StepStats(step={}, time={}, iterations={}, seconds={:.3e})",
-            self.step, self.time, self.iterations, self.seconds
+            "StepStats(step={}, time={}, iterations={}, seconds={:.3e}{})",
+            self.step,
+            self.time,
+            self.iterations,
+            self.seconds,
+            self.beyond_training
+                .map_or(String::new(), |b| format!(", beyond_training={b:.3}"))
         )
     }
 }
@@ -112,6 +124,9 @@ pub struct RunStats {
     iterations_per_step: f64,
     /// The last step's figures (None before the first step).
     last: Option<StepStats>,
+    /// The largest ``beyond_training`` of those steps: above 0.1 the model left its training
+    /// poses at least once (None in full space and before the first step).
+    beyond_training: Option<f64>,
 }
 
 #[pymethods]
@@ -443,6 +458,7 @@ impl Simulator {
                 seconds: 0.0,
                 iterations: 0,
                 last: None,
+                beyond_training: None,
             }),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             model,
@@ -493,6 +509,9 @@ impl Simulator {
                     state.seconds += stats.seconds;
                     state.iterations += stats.iterations;
                     state.last = Some(stats);
+                    state.beyond_training = stats
+                        .beyond_training
+                        .map(|b| state.beyond_training.map_or(b, |m| m.max(b)));
                     stats
                 };
                 // Calls that waited for this step go first (for at most a millisecond).
@@ -778,6 +797,7 @@ impl Simulator {
                 },
                 iterations_per_step: per(s.iterations as f64, s.timed_steps),
                 last: s.last.map(StepStats::from),
+                beyond_training: s.beyond_training,
             }
         })
     }
@@ -789,6 +809,7 @@ impl Simulator {
             s.seconds = 0.0;
             s.iterations = 0;
             s.last = None;
+            s.beyond_training = None;
         })
     }
 

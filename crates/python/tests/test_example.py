@@ -48,3 +48,7 @@ def test_game_loop_example_runs_every_phase(neural_path: pathlib.Path, full: boo
     # Every phase's steps at the model's time step add up to the summary's count.
     counts = [int(line[18:24]) for line in table]
     assert int(summary.split()[0]) == sum(counts) and all(c > 0 for c in counts)
+    # How far beyond the training poses: said for the reduced model, not in full space.
+    beyond = [line.split()[-1] for line in table]
+    assert any("beyond the training poses" in line for line in lines) != full, done.stdout
+    assert all((b == "–") == full for b in beyond), done.stdout

@@ -121,6 +121,26 @@ def test_a_dragged_tip_rises_and_falls_back(sim: ld.Simulator) -> None:
     assert sim.stats.steps == 0 and sim.stats.last is None
 
 
+def test_a_pull_far_beyond_the_training_is_said_step_by_step(model: ld.Model) -> None:
+    sim = ld.Simulator(model)
+    first = sim.step()
+    # Sagging under gravity, as every training schedule starts: among the training poses.
+    assert first.beyond_training is not None and first.beyond_training < 0.1, first
+    # The tip lifted a whole beam length: no schedule went there.
+    v = tip(sim)
+    h = sim.grab(v, 5000.0)
+    sim.move_handle(h, sim.rest_positions[v] + [0.0, 1.0, 0.0])
+    far = [sim.step().beyond_training for _ in range(10)]
+    assert max(far) > 0.1, far
+    assert "beyond_training=" in repr(sim.stats.last)
+    assert sim.stats.beyond_training == pytest.approx(max(far + [first.beyond_training]))
+    sim.reset_stats()
+    assert sim.stats.beyond_training is None
+    # Full space has no training poses to leave.
+    full = ld.Simulator(model, full_space=True)
+    assert full.step().beyond_training is None and full.stats.beyond_training is None
+
+
 def test_gravity_off_keeps_the_body_at_rest_and_reset_returns_to_rest(pca_path) -> None:
     sim = ld.Simulator(ld.Model.load(pca_path))
     rest = sim.rest_positions[sim.surface_vertices]

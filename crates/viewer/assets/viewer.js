@@ -300,7 +300,7 @@
     $('status').className = 'failed';
     // Nothing steps any more: no figures of a simulation that is gone, no controls that would
     // do nothing.
-    for (const id of ['sps', 'cost', 'its', 'rtf']) $(id).textContent = '–';
+    for (const id of ['sps', 'cost', 'its', 'rtf', 'beyond']) $(id).textContent = '–';
     for (const control of document.querySelectorAll('#hud button, #hud input, #hud select')) {
       control.disabled = true;
     }
@@ -379,8 +379,12 @@
     $('its').textContent = fixed(s.iterations_per_step, 1);
     $('rtf').textContent = `${fixed(s.real_time_factor, 2)}×`;
     $('step').textContent = `${s.step}, ${fixed(s.time, 2)} s`;
+    // Full space has no training poses (null): a dash.
+    const beyond = s.beyond_training;
+    $('beyond').textContent = Number.isFinite(beyond) ? `${(100 * beyond).toFixed(0)} %` : '–';
     $('status').textContent = s.status;
-    $('status').className = s.failure ? 'failed' : s.paused ? 'paused' : s.real_time ? '' : 'behind';
+    $('status').className = s.failure ? 'failed' : s.paused ? 'paused'
+      : !s.real_time ? 'behind' : beyond > 0.1 ? 'extrapolating' : '';
     $('pause').textContent = s.paused ? 'run' : 'pause';
     $('single').disabled = !s.paused;
     $('gravity').checked = s.gravity;

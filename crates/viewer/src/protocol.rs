@@ -157,6 +157,12 @@ pub struct State {
     pub status: String,
     /// The solver failure that stopped the simulation, until a reset or a method switch.
     pub failure: Option<String>,
+    /// How far the last step's pose lies beyond the model's training poses, relative to its
+    /// size (`latent_sim::StepStats::beyond_training`): above 0.1 the model extrapolates and
+    /// the status line says so. None in full space, before a step and for a model without
+    /// the ranges.
+    #[serde(default)]
+    pub beyond_training: Option<f64>,
     /// Connected clients and handles held.
     pub clients: usize,
     pub handles: usize,

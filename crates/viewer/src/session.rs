@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 
 use fem_core::Vec3;
 use latent_sim::Handle;
+use latent_sim::coverage::OUTSIDE_TRAINING;
 use tungstenite::Bytes;
 
 use crate::ViewerError;
@@ -109,6 +110,9 @@ pub struct Session {
     paused: bool,
     gravity: bool,
     failure: Option<String>,
+    /// The last step's distance beyond the training poses (None until a step of a reduced
+    /// model with the ranges, and after a reset or a switch).
+    beyond_training: Option<f64>,
     /// The real-time clock: step `since_anchor + 1` may start at `anchor + since_anchor·h`.
     anchor: Instant,
     since_anchor: u64,
@@ -207,6 +211,7 @@ impl Session {
             paused: false,
             gravity: true,
             failure: None,
+            beyond_training: None,
             anchor: now,
             since_anchor: 0,
             window: VecDeque::new(),
@@ -364,6 +369,14 @@ impl Session {
                  the time step is {h_ms} ms)"
             )
         };
+        let status = match self.beyond_training {
+            Some(b) if b > OUTSIDE_TRAINING && self.failure.is_none() => format!(
+                "{status}; the pose is {:.0} % beyond the training poses, where the model \
+                 extrapolates",
+                100.0 * b
+            ),
+            _ => status,
+        };
         let sim = &self.methods[self.current].simulator;
         State {
             method: self.methods[self.current].name.clone(),
@@ -382,6 +395,7 @@ impl Session {
             real_time,
             status,
             failure: self.failure.clone(),
+            beyond_training: self.beyond_training,
             clients: self.clients.len(),
             handles: self.held.len(),
         }
@@ -440,6 +454,7 @@ impl Session {
             Ok(stats) => {
                 self.window
                     .push_back((Instant::now(), stats.iterations, stats.seconds));
+                self.beyond_training = stats.beyond_training;
                 self.since_anchor += 1;
                 self.dirty = true;
             }
@@ -606,6 +621,7 @@ impl Session {
             Request::Reset {} => {
                 self.methods[self.current].simulator.reset();
                 self.failure = None;
+                self.beyond_training = None;
                 self.restart_clock();
                 self.dirty = true;
                 self.send_state();
@@ -730,6 +746,7 @@ impl Session {
         sim.set_gravity(self.gravity);
         sim.prepare_grab();
         self.failure = None;
+        self.beyond_training = None;
         self.restart_clock();
         self.dirty = true;
         self.send_state();

@@ -18,7 +18,7 @@ pub const MAGIC: &[u8; 8] = b"LATDYNm\0";
 
 /// Version of the file's layout and of the model's serialised form. Bump it when either
 /// changes, so that an older build refuses a newer file instead of misreading it.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 8 + 4 + 8 + 8 + 8;

@@ -18,6 +18,7 @@ use fem_core::optim::{LbfgsPreconditioner, SolverConfig, SolverMethod};
 use nn::Autoencoder;
 use pca::PcaBasis;
 
+use crate::coverage::TrainingPoses;
 use crate::{
     Augmented, DirectionParts, NeuralSubspace, Preconditioning, ReducedError, ReducedSpace,
     SpaceParts,
@@ -62,6 +63,10 @@ pub struct ReducedModel {
     pub cubature: Option<CubatureRule>,
     /// How latent coordinates map to the PCA coefficients.
     pub subspace: SubspaceParts,
+    /// The ranges of the training snapshots' PCA coefficients, which the runtime measures each
+    /// step's pose against ([`crate::StepStats::beyond_training`]); None for a model made
+    /// without them.
+    pub training: Option<TrainingPoses>,
 }
 
 /// The map from latent coordinates z to PCA coefficients q.
@@ -194,6 +199,8 @@ pub struct ModelSource<'a> {
     pub full_solver: SolverConfig,
     pub rows: Rows,
     pub provenance: Provenance,
+    /// The ranges of the training snapshots' coefficients on `basis`, when known.
+    pub training: Option<TrainingPoses>,
 }
 
 impl ReducedModel {
@@ -222,8 +229,13 @@ impl ReducedModel {
             full_solver,
             rows,
             provenance,
+            training,
         } = source;
         let space = ReducedSpace::new(model, basis, cubature)?;
+        if let Some(t) = &training {
+            t.check(space.k)
+                .map_err(|reason| ReducedError::InvalidModel { reason })?;
+        }
         let subspace = match subspace {
             SubspaceSource::Linear => SubspaceParts::Linear,
             SubspaceSource::Neural {
@@ -264,6 +276,7 @@ impl ReducedModel {
             space: space.parts(&keep, material),
             cubature: cubature.cloned(),
             subspace,
+            training,
         })
     }
 
@@ -365,6 +378,9 @@ impl ReducedModel {
         }
         if let Some(rule) = &self.cubature {
             rule.check_elements(nt).map_err(|e| e.to_string())?;
+        }
+        if let Some(t) = &self.training {
+            t.check(self.space.k)?;
         }
         if let SubspaceParts::Neural { autoencoder, .. } = &self.subspace
             && autoencoder.input_dim() != self.space.k

@@ -184,6 +184,7 @@ impl Interactive for FullRuntime {
             seconds: r.wall_seconds,
             preconditioner_rebuilt: r.preconditioner_factorised,
             newton_fallback: r.solver_switched,
+            beyond_training: None,
         })
     }
 

@@ -73,6 +73,12 @@ pub struct StepStats {
     /// full space, with the other solver than the scene's): a slow step, in a reduced model
     /// usually a pull far beyond what it was trained for.
     pub newton_fallback: bool,
+    /// How far the pose the step reached lies beyond the training poses' ranges, relative to
+    /// its size ([`crate::coverage::TrainingPoses::distance`], the `from training` figure of
+    /// `cargo xtask run`): 0 among them; above [`crate::coverage::OUTSIDE_TRAINING`] (0.1) the
+    /// decoder and the cubature rule extrapolate and the motion is not to be trusted as the
+    /// body's. None in full space and for a model made without the ranges.
+    pub beyond_training: Option<f64>,
 }
 
 /// Errors of the interactive simulators.

@@ -8,6 +8,7 @@ use fem_core::optim::SolverConfig;
 
 use super::handles::{self, Backend, Handles};
 use super::{Handle, Interactive, Real, RuntimeError, StepStats, Surface, buffer_length};
+use crate::coverage::TrainingPoses;
 use crate::model::{ReducedModel, SubspaceParts};
 use crate::reduced::PackedRows;
 use crate::{
@@ -75,6 +76,8 @@ pub struct ReducedRuntime {
     gravity: [f64; 3],
     gravity_enabled: bool,
     handles: Handles,
+    /// The training poses' ranges, when the model holds them.
+    training: Option<TrainingPoses>,
 }
 
 impl ReducedModel {
@@ -141,6 +144,7 @@ impl ReducedRuntime {
             gravity: model.gravity,
             gravity_enabled: true,
             handles: Handles::default(),
+            training: model.training.clone(),
         })
     }
 
@@ -189,6 +193,14 @@ impl ReducedRuntime {
     /// The PCA coefficients q of the current state.
     pub fn coefficients(&self) -> &[f64] {
         &self.sim.state().q
+    }
+
+    /// How far the current pose lies beyond the training poses' ranges, relative to its size
+    /// ([`StepStats::beyond_training`]); None when the model holds no ranges.
+    pub fn beyond_training(&self) -> Option<f64> {
+        self.training
+            .as_ref()
+            .map(|t| t.distance(&self.sim.state().q))
     }
 
     /// The reduced simulator. Its forces are the handles' (change them through this runtime).
@@ -323,6 +335,7 @@ impl Interactive for ReducedRuntime {
             seconds: r.wall_seconds,
             preconditioner_rebuilt: r.preconditioner_rebuilt,
             newton_fallback: r.newton_fallback,
+            beyond_training: self.beyond_training(),
         })
     }
 

@@ -1,6 +1,7 @@
 //! The model file: a saved and loaded model steps bit for bit as the simulator built from the
 //! stage products directly, and every damaged file is refused with the error of its damage.
 
+use latent_sim::coverage::TrainingPoses;
 use latent_sim::model::file::{HEADER_LEN, MAGIC};
 use latent_sim::model::{FORMAT_VERSION, Rows, SubspaceParts};
 use latent_sim::{
@@ -147,9 +148,54 @@ fn a_model_file_surface_faces_outward() {
 }
 
 /// A model file of the bar (PCA with cubature: small).
+#[test]
+fn a_model_with_its_training_ranges_says_how_far_each_step_leaves_them() {
+    let m = bar([6, 2, 2], -9.81);
+    let basis = snapshot_basis(&m, 8);
+    let k = basis.k();
+    let mut model = build(Kind::Pca, &m, &basis, Rows::Used);
+    let mut rest = model.simulator().unwrap();
+    assert_eq!(rest.step().unwrap().beyond_training, None);
+    // Training poses that went a little way along the first two columns only.
+    let mut poses = vec![0.0; 3 * k];
+    poses[0] = 1e-3;
+    poses[k + 1] = -1e-3;
+    model.training = Some(TrainingPoses::new(k, poses));
+    let loaded = ReducedModel::from_bytes(&model.to_bytes()).unwrap();
+    assert_eq!(loaded, model);
+    let mut sim = loaded.simulator().unwrap();
+    sim.add_force(tip_spring(&m, [0.0, 0.3, 0.1], 0.2)).unwrap();
+    let training = model.training.as_ref().unwrap();
+    for _ in 0..5 {
+        let beyond = sim.step().unwrap().beyond_training.unwrap();
+        assert_eq!(beyond, training.distance(sim.coefficients()));
+        assert_eq!(sim.beyond_training(), Some(beyond));
+    }
+    // Pulled far along every column, the pose lies mostly outside those ranges.
+    assert!(
+        sim.beyond_training().unwrap() > 0.5,
+        "{:?}",
+        sim.beyond_training()
+    );
+    // Ranges of another basis are refused, naming them.
+    model.training = Some(TrainingPoses::new(k + 1, vec![0.0; k + 1]));
+    let e = ReducedModel::from_bytes(&model.to_bytes()).unwrap_err();
+    assert!(
+        matches!(&e, ModelFormatError::Invalid { reason } if reason.contains("training ranges")),
+        "{e}"
+    );
+}
+
 fn file_bytes() -> Vec<u8> {
     let m = bar([3, 1, 1], -9.81);
-    build(Kind::PcaCubature, &m, &snapshot_basis(&m, 4), Rows::Used).to_bytes()
+    let mut model = build(Kind::PcaCubature, &m, &snapshot_basis(&m, 4), Rows::Used);
+    // Training ranges, so that mutations reach their checks and the runtime's measure too.
+    let k = model.space.k;
+    model.training = Some(TrainingPoses::new(
+        k,
+        (0..2 * k).map(|i| 1e-3 * (i as f64 - k as f64)).collect(),
+    ));
+    model.to_bytes()
 }
 
 /// `bytes` with the header's checksum recomputed (after editing the header).

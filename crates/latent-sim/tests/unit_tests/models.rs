@@ -218,6 +218,7 @@ pub fn build_with_rule(
             method: kind.name().into(),
             ..Default::default()
         },
+        training: None,
     })
     .unwrap()
 }

@@ -142,6 +142,11 @@ class StepStats:
     def newton_fallback(self) -> bool:
         """L-BFGS crawled and the step was solved on with Newton (in full space, with the
         other solver than the scene's)."""
+    @property
+    def beyond_training(self) -> Optional[float]:
+        """How far the pose the step reached lies beyond the training poses' ranges,
+        relative to its size: 0 among them; above 0.1 the model extrapolates. None in full
+        space."""
 
 @final
 class RunStats:
@@ -157,6 +162,9 @@ class RunStats:
     def iterations_per_step(self) -> float: ...
     @property
     def last(self) -> Optional[StepStats]: ...
+    @property
+    def beyond_training(self) -> Optional[float]:
+        """The largest beyond_training of those steps (None in full space or before a step)."""
 
 @final
 class Handle:

@@ -609,6 +609,7 @@ fn drive(
             "document.getElementById('status').textContent.startsWith('disconnected') \
              && document.getElementById('sps').textContent === '–' \
              && document.getElementById('cost').textContent === '–' \
+             && document.getElementById('beyond').textContent === '–' \
              && document.getElementById('pause').disabled \
              && document.getElementById('radius').disabled",
             "the page greyed out once the server stopped",

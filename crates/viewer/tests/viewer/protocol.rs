@@ -70,6 +70,53 @@ fn a_drag_pulls_the_vertex_to_the_target_and_the_body_relaxes_after_release() {
 }
 
 #[test]
+fn a_pull_beyond_the_training_poses_is_said_on_the_status_line() {
+    let server = serve(session());
+    let mut c = Client::connect(&server);
+    c.wait_until(
+        |c| {
+            c.state
+                .as_ref()
+                .is_some_and(|s| s.beyond_training == Some(0.0))
+        },
+        "pca at rest, among its training poses",
+    );
+    // The free end pulled up far more than any training schedule pulled it.
+    let (_, p) = tip();
+    let handle = c.grab(&format!(
+        r#"{{"type":"grab","point":[{},0.1,0.1],"radius":0.15}}"#,
+        p[0]
+    ));
+    c.send(&format!(
+        r#"{{"type":"move","handle":{handle},"target":[{},0.9,0.1]}}"#,
+        p[0]
+    ));
+    c.wait_until(
+        |c| {
+            c.state.as_ref().is_some_and(|s| {
+                s.beyond_training.is_some_and(|b| b > 0.1)
+                    && s.status
+                        .contains("beyond the training poses, where the model extrapolates")
+            })
+        },
+        "the status saying the pose left the training poses",
+    );
+    // Full space has no training poses.
+    c.send(r#"{"type":"method","name":"full"}"#);
+    c.wait_until(
+        |c| {
+            c.state
+                .as_ref()
+                .is_some_and(|s| s.method == "full" && s.step > 0 && s.beyond_training.is_none())
+        },
+        "full space stepping",
+    );
+    let status = &c.state.as_ref().unwrap().status;
+    assert!(!status.contains("training"), "{status}");
+    server.shutdown();
+}
+
+#[test]
 fn every_malformed_message_gets_an_error_and_the_session_steps_on() {
     let server = serve(session());
     let mut c = Client::connect(&server);
