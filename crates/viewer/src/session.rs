@@ -372,7 +372,7 @@ impl Session {
         let status = match self.beyond_training {
             Some(b) if b > OUTSIDE_TRAINING && self.failure.is_none() => format!(
                 "{status}; the pose is {:.0} % beyond the training poses, where the model \
-                 extrapolates",
+                 extrapolates (larger training pulls, `[training] offset`, reach such drags)",
                 100.0 * b
             ),
             _ => status,
