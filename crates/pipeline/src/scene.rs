@@ -12,7 +12,7 @@ use fem_core::material::MaterialConfig;
 use fem_core::mesh::NO_COMPONENT;
 use fem_core::mesh::{MeshConfig, ValidationReport};
 use fem_core::optim::SolverConfig;
-use fem_core::snapshots::{ScheduleConfig, ScheduleSection};
+use fem_core::snapshots::{GravityDirections, ScheduleConfig, ScheduleSection};
 use fem_core::{FemError, four_digits};
 use pca::PcaConfig;
 
@@ -266,6 +266,23 @@ impl Scene {
                     "got {t}, but the held-out test is solved to `[solver] tolerance` (as is every \
                      full-space run it is compared with); set that instead"
                 ),
+            });
+        }
+        if self.test.gravity == Some(GravityDirections::Any) {
+            errors.push(FemError::InvalidConfig {
+                field: "test.gravity".into(),
+                reason: "the held-out test falls along the scene's gravity (`[gravity] \
+                         acceleration`), as every method it measures does; `\"any\"` is for \
+                         `[training]`"
+                    .into(),
+            });
+        }
+        if self.training.gravity == Some(GravityDirections::Any) && !self.gravity.is_on() {
+            errors.push(FemError::InvalidConfig {
+                field: "training.gravity".into(),
+                reason: "`\"any\"` turns the scene's gravity, and the scene has none (`[gravity] \
+                         acceleration`)"
+                    .into(),
             });
         }
         let mut cub_errors = Vec::new();
@@ -1230,10 +1247,36 @@ mod tests {
                 "[training]\ntolerance = 0.0\n",
                 ["training.tolerance", "t.toml"],
             ),
+            (
+                "[test]\ngravity = \"any\"\n",
+                ["test.gravity", "[training]"],
+            ),
+            (
+                "[training]\ngravity = \"sideways\"\n",
+                ["`any`", "t.toml"],
+            ),
         ] {
             let err = with(extra).unwrap_err().to_string();
             assert!(says.iter().all(|s| err.contains(s)), "{err}");
         }
+        let s = with("[training]\ngravity = \"any\"\n").unwrap();
+        assert_eq!(s.training().gravity, GravityDirections::Any);
+        assert_eq!(s.test().gravity, GravityDirections::Scene);
+        let weightless = DEFAULT_SCENE.replace(
+            "acceleration = [0.0, -9.81, 0.0]",
+            "acceleration = [0.0, 0.0, 0.0]",
+        );
+        let err = Scene::from_str(
+            &format!("{weightless}\n[training]\ngravity = \"any\"\n"),
+            Path::new("."),
+            "t.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("training.gravity") && err.contains("has none"),
+            "{err}"
+        );
     }
 
     #[test]

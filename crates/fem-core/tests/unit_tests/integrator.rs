@@ -661,6 +661,69 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
     }
 }
 
+/// Under `gravity = "any"` the odd schedules fall along their own drawn direction at the
+/// scene's strength, the even ones along the scene's: each is the simulation of its forces
+/// under that gravity.
+#[test]
+fn every_other_schedule_falls_along_its_own_direction_under_any_gravity() {
+    use fem_core::snapshots::{GravityDirections, ScheduleConfig, generate};
+    let m = model(
+        beam([8, 2, 2]),
+        MaterialModel::StableNeoHookean,
+        2e4,
+        [0.0, -9.81, 0.0],
+        vec![],
+    );
+    let family = ScheduleConfig {
+        schedules: 4,
+        frames_per_schedule: 6,
+        tolerance: None,
+        gravity: GravityDirections::Any,
+        gravity_scale: 0.5,
+        ..ScheduleConfig::training()
+    };
+    let time = dynamic(family.frames_per_schedule);
+    let newton = solver(SolverMethod::Newton, 1e-10);
+    let set = generate(&m, &family, &time, &newton, (0, 1), &|_| {}).unwrap();
+    let probe =
+        fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)
+            .unwrap();
+    let mut turned = Vec::new();
+    for s in 0..4 {
+        let g = family.gravity_of(&m, s);
+        assert!((g.norm() - 9.81).abs() < 1e-12, "schedule {s}: {g:?}");
+        assert_eq!(g == m.gravity, s % 2 == 0, "schedule {s}: {g:?}");
+        // Drawn from the seed: the same every time.
+        assert_eq!(g, family.gravity_of(&m, s));
+        if s % 2 == 1 {
+            turned.push(g);
+        }
+        let mut with = m.clone();
+        with.forces = family.schedule(&m, &probe, s, time.step);
+        with.set_gravity(0.5 * g);
+        let mut sim = Simulator::new(with, time.clone(), newton.clone()).unwrap();
+        let mut free = vec![0.0; set.dim];
+        for f in 0..family.frames_per_schedule {
+            sim.step().unwrap();
+            sim.model.dofs.gather(&sim.state.u, &mut free);
+            let kept = set.frame(s * family.frames_per_schedule + f);
+            let diff = kept
+                .iter()
+                .zip(&free)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            assert!(diff <= 1e-9, "schedule {s} frame {f}: {diff:e}");
+        }
+    }
+    assert_ne!(turned[0], turned[1]);
+    // Along the scene's, the family is the one it was before the setting.
+    let scene = ScheduleConfig {
+        gravity: GravityDirections::Scene,
+        ..family.clone()
+    };
+    assert!((0..4).all(|s| scene.gravity_of(&m, s) == m.gravity));
+}
+
 /// A step L-BFGS cannot finish within its cap is finished by Newton from where L-BFGS stopped:
 /// the trajectory is the one Newton alone computes, and each step's iterations count both.
 #[test]
