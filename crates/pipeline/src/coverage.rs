@@ -29,7 +29,14 @@ pub fn training_poses(
     for j in 0..q.ncols() {
         flat.extend((0..k).map(|i| q[(i, j)]));
     }
-    Ok(TrainingPoses::new(k, flat))
+    let poses = TrainingPoses::new(k, flat);
+    poses.check(k).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: the training snapshots' coefficients: {e}",
+            pipeline.scene.source
+        )
+    })?;
+    Ok(poses)
 }
 
 /// [`training_poses`] of `pipeline`, computed once per pipeline.

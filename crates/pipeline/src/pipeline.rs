@@ -1276,10 +1276,15 @@ impl<'a> Pipeline<'a> {
             .filter_map(|&s| {
                 let at = snaps.schedules.iter().position(|&x| x == s)?;
                 let first = snaps.frames[..at].iter().sum();
+                // A schedule that fell along its own direction (`[training] gravity = "any"`)
+                // is run under that gravity.
+                let g = cfg.gravity_of(&self.model, s);
+                let turned = (g != self.model.gravity).then(|| (g * cfg.gravity_scale).into());
                 Some((
                     first,
                     snaps.frames[at],
                     cfg.schedule(&self.model, &probe, s, h),
+                    turned,
                 ))
             })
             .collect();
@@ -1322,14 +1327,15 @@ impl<'a> Pipeline<'a> {
     }
 
     /// `neural-cubature` with the rule `rule` on each of the training `schedules` from rest
-    /// (`(first frame, frames, forces)` of each in the snapshots): the mean over its frames of
+    /// (`(first frame, frames, forces, turned gravity)` of each in the snapshots, the last for a
+    /// schedule that fell along its own direction): the mean over its frames of
     /// ‖q − q_full‖ / ‖q_full‖, q the PCA coefficients (those of the recorded full-space frames
     /// projected on the basis); infinite when a step fails. One runtime runs them all, reset
     /// between them, so that its springs' patch compliance is factorised once.
     fn rule_errors_on_training(
         &mut self,
         rule: &Arc<FittedCubature>,
-        schedules: &[(usize, usize, Vec<fem_core::forces::ExternalForce>)],
+        schedules: &[ScheduleRun],
         done: usize,
         progress: Progress<'_>,
     ) -> Result<Vec<f64>> {
@@ -1361,10 +1367,16 @@ impl<'a> Pipeline<'a> {
         runtime.set_gravity(scale > 0.0);
         let mut errors = Vec::with_capacity(schedules.len());
         let mut q_full = vec![0.0; fit.basis.k()];
-        for (i, (first, frames, forces)) in schedules.iter().enumerate() {
+        let along_scene = runtime.gravity_acceleration();
+        for (i, (first, frames, forces, turned)) in schedules.iter().enumerate() {
             // The stage's bar counts both rules' runs (and Ctrl-C in Python stops there).
             progress(done + i, 2 * schedules.len());
             runtime.reset();
+            if let Some(g) = turned {
+                runtime.set_gravity_acceleration(*g)?;
+            } else if runtime.gravity_acceleration() != along_scene {
+                runtime.set_gravity_acceleration(along_scene)?;
+            }
             let handles = forces
                 .iter()
                 .map(|f| runtime.add_force(f.clone()))
@@ -1993,6 +2005,16 @@ pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
         .flat_map(|j| basis.column(j).iter().copied())
         .collect()
 }
+
+/// A training schedule as the rule validation runs it again: its first frame in the snapshots,
+/// its frames, its forces, and the gravity it fell with when turned (`[training] gravity =
+/// "any"`).
+type ScheduleRun = (
+    usize,
+    usize,
+    Vec<fem_core::forces::ExternalForce>,
+    Option<[f64; 3]>,
+);
 
 #[cfg(test)]
 mod tests {

@@ -277,11 +277,13 @@ impl Scene {
                     .into(),
             });
         }
-        if self.training.gravity == Some(GravityDirections::Any) && !self.gravity.is_on() {
+        if self.training.gravity == Some(GravityDirections::Any)
+            && !(self.gravity.is_on() && self.training().gravity_scale > 0.0)
+        {
             errors.push(FemError::InvalidConfig {
                 field: "training.gravity".into(),
-                reason: "`\"any\"` turns the scene's gravity, and the scene has none (`[gravity] \
-                         acceleration`)"
+                reason: "`\"any\"` turns the scene's gravity, and the training data has none \
+                         (`[gravity] acceleration`, `[training] gravity_scale`)"
                     .into(),
             });
         }
@@ -1251,10 +1253,7 @@ mod tests {
                 "[test]\ngravity = \"any\"\n",
                 ["test.gravity", "[training]"],
             ),
-            (
-                "[training]\ngravity = \"sideways\"\n",
-                ["`any`", "t.toml"],
-            ),
+            ("[training]\ngravity = \"sideways\"\n", ["`any`", "t.toml"]),
         ] {
             let err = with(extra).unwrap_err().to_string();
             assert!(says.iter().all(|s| err.contains(s)), "{err}");
@@ -1277,6 +1276,10 @@ mod tests {
             err.contains("training.gravity") && err.contains("has none"),
             "{err}"
         );
+        let err = with("[training]\ngravity = \"any\"\ngravity_scale = 0.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("gravity_scale"), "{err}");
     }
 
     #[test]

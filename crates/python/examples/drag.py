@@ -78,6 +78,11 @@ def main() -> None:
         f"{1e6 * float(np.median(read_s)):.1f} µs/frame median ({len(frame)} vertices, float32)"
     )
     print(f"height at the release {heights[steps]:.4f} m, 1 s later {heights[-1]:.4f} m")
+    if stats.beyond_training is not None:
+        print(
+            f"the pose went up to {100 * stats.beyond_training:.0f} % of its size beyond the "
+            "training poses" + (", where the model extrapolates" if stats.beyond_training > 0.1 else "")
+        )
 
     try:
         import matplotlib

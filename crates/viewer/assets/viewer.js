@@ -384,7 +384,7 @@
     $('beyond').textContent = Number.isFinite(beyond) ? `${(100 * beyond).toFixed(0)} %` : '–';
     $('status').textContent = s.status;
     $('status').className = s.failure ? 'failed' : s.paused ? 'paused'
-      : !s.real_time ? 'behind' : beyond > 0.1 ? 'extrapolating' : '';
+      : !s.real_time ? 'behind' : s.extrapolating ? 'extrapolating' : '';
     $('pause').textContent = s.paused ? 'run' : 'pause';
     $('single').disabled = !s.paused;
     $('gravity').checked = s.gravity;

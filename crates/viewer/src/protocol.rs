@@ -163,6 +163,10 @@ pub struct State {
     /// the ranges.
     #[serde(default)]
     pub beyond_training: Option<f64>,
+    /// `beyond_training` above `latent_sim::coverage::OUTSIDE_TRAINING` (0.1) and no failure:
+    /// the page shows the status line in amber.
+    #[serde(default)]
+    pub extrapolating: bool,
     /// Connected clients and handles held.
     pub clients: usize,
     pub handles: usize,

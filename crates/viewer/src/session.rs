@@ -369,12 +369,23 @@ impl Session {
                  the time step is {h_ms} ms)"
             )
         };
+        let extrapolating =
+            self.failure.is_none() && self.beyond_training.is_some_and(|b| b > OUTSIDE_TRAINING);
         let status = match self.beyond_training {
-            Some(b) if b > OUTSIDE_TRAINING && self.failure.is_none() => format!(
-                "{status}; the pose is {:.0} % beyond the training poses, where the model \
-                 extrapolates (larger training pulls, `[training] offset`, reach such drags)",
-                100.0 * b
-            ),
+            Some(b) if extrapolating => {
+                // While a drag holds the body, what reaches it; else the pose came from
+                // elsewhere (a release, gravity switched), and there is no one setting to name.
+                let remedy = if self.held.is_empty() {
+                    ""
+                } else {
+                    " (larger training pulls, `[training] offset`, reach such drags)"
+                };
+                format!(
+                    "{status}; the pose goes {:.0} % of its size beyond the training poses, \
+                     where the model extrapolates{remedy}",
+                    100.0 * b
+                )
+            }
             _ => status,
         };
         let sim = &self.methods[self.current].simulator;
@@ -396,6 +407,7 @@ impl Session {
             status,
             failure: self.failure.clone(),
             beyond_training: self.beyond_training,
+            extrapolating,
             clients: self.clients.len(),
             handles: self.held.len(),
         }

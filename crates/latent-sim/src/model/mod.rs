@@ -1,7 +1,8 @@
 //! The trained model as one self-contained value, the pipeline's last product (DESIGN §11):
 //! everything stepping and display need — rest mesh, surface, pins, material, time step,
 //! gravity, the basis rows in use with the reduced matrices of the whole basis, the decoder,
-//! the cubature rule, the linear directions, the solver settings — and where it came from.
+//! the cubature rule, the linear directions, the solver settings, the ranges of the training
+//! poses each step is measured against ([`crate::coverage`]) — and where it came from.
 //!
 //! [`ReducedModel::save`] and [`ReducedModel::load`] write and read it ([`mod@file`] has the layout
 //! and the typed errors of a damaged file); [`ReducedModel::simulator`] steps it with exactly the

@@ -54,6 +54,7 @@ mod sealed {
 
 /// What one step did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[non_exhaustive]
 pub struct StepStats {
     /// The step just taken (1 for the first) and the time it reached.
     pub step: usize,
@@ -74,8 +75,8 @@ pub struct StepStats {
     /// usually a pull far beyond what it was trained for.
     pub newton_fallback: bool,
     /// How far the pose the step reached lies beyond the training poses' ranges, relative to
-    /// its size ([`crate::coverage::TrainingPoses::distance`], the `from training` figure of
-    /// `cargo xtask run`): 0 among them; above [`crate::coverage::OUTSIDE_TRAINING`] (0.1) the
+    /// its size ([`crate::coverage::TrainingPoses::distance`]; `cargo xtask run` reports the
+    /// largest over a test as `from training`): 0 among them; above [`crate::coverage::OUTSIDE_TRAINING`] (0.1) the
     /// decoder and the cubature rule extrapolate and the motion is not to be trusted as the
     /// body's. None in full space and for a model made without the ranges.
     pub beyond_training: Option<f64>,

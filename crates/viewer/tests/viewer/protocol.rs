@@ -95,8 +95,11 @@ fn a_pull_beyond_the_training_poses_is_said_on_the_status_line() {
         |c| {
             c.state.as_ref().is_some_and(|s| {
                 s.beyond_training.is_some_and(|b| b > 0.1)
-                    && s.status
-                        .contains("beyond the training poses, where the model extrapolates")
+                    && s.extrapolating
+                    && s.status.contains(
+                        "of its size beyond the training poses, where the model extrapolates \
+                         (larger training pulls",
+                    )
             })
         },
         "the status saying the pose left the training poses",
