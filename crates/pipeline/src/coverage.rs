@@ -1,9 +1,7 @@
 //! The training poses of a pipeline's scene, for [`latent_sim::coverage`]'s measure of
-//! whether a reduced trajectory stays among them: the snapshots' PCA coefficients, computed
-//! once per pipeline and shared by every reduced method's row of a run (and written into the
-//! models `export` makes).
-
-use std::sync::Arc;
+//! whether a reduced trajectory stays among them: the ranges of the snapshots' PCA
+//! coefficients, the stage `coverage` ([`Pipeline::coverage`]), cached apart from the
+//! snapshots so that `export` and `view` read a few kilobytes instead of every snapshot.
 
 use anyhow::Result;
 
@@ -12,7 +10,7 @@ pub use latent_sim::coverage::{OUTSIDE_TRAINING, TrainingPoses};
 use crate::pipeline::{Pipeline, Progress};
 
 /// The snapshots of `pipeline`'s scene projected on its PCA basis (the stages `snapshots` and
-/// `pca`, cached), as the ranges of their coefficients.
+/// `pca`, cached), as the ranges of their coefficients: what the stage `coverage` computes.
 ///
 /// # Errors
 /// When a stage fails.
@@ -39,15 +37,13 @@ pub fn training_poses(
     Ok(poses)
 }
 
-/// [`training_poses`] of `pipeline`, computed once per pipeline.
-///
-/// # Errors
-/// When a stage fails.
-pub fn shared(pipeline: &mut Pipeline<'_>, progress: Progress<'_>) -> Result<Arc<TrainingPoses>> {
-    if let Some(p) = &pipeline.training_poses {
-        return Ok(p.clone());
+impl crate::pipeline::StageSummary for TrainingPoses {
+    fn summary(&self) -> String {
+        format!(
+            "the ranges of the {} training poses' {} PCA coefficients, which `run` measures each \
+             reduced frame against and a model file carries for its steps",
+            self.len(),
+            self.dim()
+        )
     }
-    let p = Arc::new(training_poses(pipeline, progress)?);
-    pipeline.training_poses = Some(p.clone());
-    Ok(p)
 }

@@ -170,7 +170,8 @@ pub(crate) fn reduced_model_with(
         None => SubspaceSource::Linear,
     };
     // The runtime measures each step's pose against them, as `run` measures each frame's.
-    let poses = crate::coverage::shared(pipeline, progress)?;
+    let poses = pipeline.coverage(progress)?;
+    stage_keys.push(key(Stage::Coverage, pipeline.coverage_key()));
     let source = ModelSource {
         model,
         material,

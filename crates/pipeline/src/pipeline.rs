@@ -633,8 +633,6 @@ pub struct Pipeline<'a> {
     memo: std::collections::HashMap<PathBuf, Arc<dyn std::any::Any + Send + Sync>>,
     /// Sum of the recorded stages' own seconds, to take nested stages out of a stage's time.
     recorded_seconds: f64,
-    /// The training snapshots' PCA coefficients, once a run has needed them.
-    pub(crate) training_poses: Option<std::sync::Arc<crate::coverage::TrainingPoses>>,
     /// The elastic energy of each frame of a test trajectory's reference, by trajectory, once a
     /// run has needed it: every reduced method's strain ratio divides by the same.
     pub(crate) reference_energies: std::collections::HashMap<usize, Arc<Vec<f64>>>,
@@ -724,7 +722,6 @@ impl<'a> Pipeline<'a> {
             warnings,
             memo: std::collections::HashMap::new(),
             recorded_seconds: 0.0,
-            training_poses: None,
             reference_energies: std::collections::HashMap::new(),
             body,
             buckling: std::cell::OnceCell::new(),
@@ -1778,6 +1775,27 @@ impl<'a> Pipeline<'a> {
                 pca_lost_energy: (snapshot_energy - kept).max(0.0),
             })
         })
+    }
+
+    /// Stage `coverage`: the ranges of the snapshots' PCA coefficients, which `run` measures
+    /// each reduced frame against and a model file carries for its runtime's steps.
+    ///
+    /// # Errors
+    /// When a stage it needs fails.
+    pub fn coverage(
+        &mut self,
+        progress: Progress<'_>,
+    ) -> Result<Arc<crate::coverage::TrainingPoses>> {
+        let key = self.coverage_key();
+        self.stage(Stage::Coverage, key, |p| {
+            crate::coverage::training_poses(p, progress)
+        })
+    }
+
+    pub fn coverage_key(&self) -> u64 {
+        KeyBuilder::new(Stage::Coverage)
+            .mix_key(self.pca_key())
+            .finish()
     }
 
     pub fn complement_key(&self) -> u64 {

@@ -1371,7 +1371,7 @@ pub fn measure(
     };
     let (mut training_distance, mut training_distance_time, mut training_seconds) = (0.0, 0.0, 0.0);
     if !poses.is_empty() {
-        let training = crate::coverage::shared(pipeline, stage_progress)?;
+        let training = pipeline.coverage(stage_progress)?;
         // Schedules started from the body's fall run to the test's last frame.
         let snaps = pipeline.snapshots(stage_progress)?;
         let frames = match snaps.later_start {

@@ -26,11 +26,14 @@ pub enum Stage {
     Complement,
     /// The full-space simulation of a held-out test trajectory.
     Reference,
+    /// The ranges of the snapshots' PCA coefficients ([`crate::coverage`]), kept apart so that
+    /// `export` and `view` need not load the snapshots.
+    Coverage,
 }
 
 impl Stage {
     /// Every stage.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 9] = [
         Stage::Snapshots,
         Stage::SnapshotsShard,
         Stage::Pca,
@@ -39,6 +42,7 @@ impl Stage {
         Stage::Train,
         Stage::Complement,
         Stage::Reference,
+        Stage::Coverage,
     ];
 
     /// The stage's name in artifact file names, artifact headers and cache keys.
@@ -52,6 +56,7 @@ impl Stage {
             Stage::Train => "train",
             Stage::Complement => "complement",
             Stage::Reference => "reference",
+            Stage::Coverage => "coverage",
         }
     }
 
@@ -117,6 +122,7 @@ impl Stage {
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
             // 3: with the snapshots' energy and the latent dimension.
             Stage::Complement => 3,
+            Stage::Coverage => 1,
         }
     }
 
@@ -135,6 +141,8 @@ impl Stage {
             // The complement and the full-space simulation of a held-out trajectory are
             // computed by `run`.
             Stage::Complement | Stage::Reference => "cargo xtask run",
+            // The ranges are computed by whatever needs them first.
+            Stage::Coverage => "cargo xtask export",
         }
     }
 }
@@ -187,6 +195,7 @@ mod tests {
                 ("train", 6),
                 ("complement", 3),
                 ("reference", 11),
+                ("coverage", 1),
             ]
         );
         for s in Stage::ALL {

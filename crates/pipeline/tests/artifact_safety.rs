@@ -263,6 +263,9 @@ fn every_corruption_of_every_artifact_type_is_detected() {
                 corrupt_and_load::<FittedCubature>(file, mesh, other_mesh)
             }
             Stage::Reference => corrupt_and_load::<Reference>(file, mesh, other_mesh),
+            Stage::Coverage => {
+                corrupt_and_load::<latent_sim::coverage::TrainingPoses>(file, mesh, other_mesh)
+            }
             other => panic!("unexpected artifact {other}"),
         };
         println!(
@@ -339,6 +342,7 @@ fn rebuild_commands_name_real_commands() {
         ),
         (Stage::Complement, "cargo xtask run"),
         (Stage::Reference, "cargo xtask run"),
+        (Stage::Coverage, "cargo xtask export"),
     ] {
         assert!(stage.rebuild_command().starts_with(command), "{stage}");
     }

@@ -68,16 +68,19 @@ const COMPLEMENT: Stage = Stage::Complement;
 const CUBATURE: Stage = Stage::Cubature;
 const NEURAL: Stage = Stage::CubatureNeural;
 const REFERENCE: Stage = Stage::Reference;
+const COVERAGE: Stage = Stage::Coverage;
 
 /// Every stage with an artifact.
 const ALL: &[Stage] = &[
-    SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL, REFERENCE,
+    SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL, REFERENCE, COVERAGE,
 ];
 /// What the training schedules feed: everything but the held-out reference.
-const TRAINING: &[Stage] = &[SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL];
+const TRAINING: &[Stage] = &[
+    SNAPSHOTS, PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL, COVERAGE,
+];
 /// The reference, and the rules whose held-out error is measured on it.
 const TEST: &[Stage] = &[REFERENCE, CUBATURE, NEURAL];
-const BASIS: &[Stage] = &[PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL];
+const BASIS: &[Stage] = &[PCA, TRAIN, COMPLEMENT, CUBATURE, NEURAL, COVERAGE];
 const NETWORK: &[Stage] = &[TRAIN, COMPLEMENT, NEURAL];
 const RULES: &[Stage] = &[CUBATURE, NEURAL];
 const NONE: &[Stage] = &[];
@@ -557,6 +560,7 @@ struct Artifacts {
         Option<pipeline::pipeline::RuleValidation>,
     ),
     reference: Vec<Vec<f64>>,
+    coverage: latent_sim::coverage::TrainingPoses,
 }
 
 /// Runs every stage of `scene` on `cache`; returns each stage's artifact path and whether it was
@@ -587,6 +591,7 @@ fn run_stages(scene: &Scene, cache: &Path) -> (Vec<(Stage, PathBuf, bool)>, Arti
             (c.rule, c.held_out_error, c.validation)
         },
         reference: ok!(p.reference(0, &no_progress)).frames,
+        coverage: ok!(p.coverage(&no_progress)),
     };
     let outcomes = p
         .outcomes
@@ -607,6 +612,7 @@ fn same_artifact(a: &Artifacts, b: &Artifacts, stage: Stage) -> bool {
         CUBATURE => a.cubature == b.cubature,
         NEURAL => a.neural == b.neural,
         REFERENCE => a.reference == b.reference,
+        COVERAGE => a.coverage == b.coverage,
         _ => unreachable!("{stage}"),
     }
 }

@@ -211,7 +211,14 @@ fn run_writes_the_default_methods_model_beside_its_report() {
     // The complement stage chose the model's complement directions (the scene names no count).
     assert_eq!(
         stages,
-        ["snapshots", "pca", "train", "cubature-neural", "complement"]
+        [
+            "snapshots",
+            "pca",
+            "train",
+            "cubature-neural",
+            "complement",
+            "coverage"
+        ]
     );
     // Only reduced methods have a model; without the default, the first reduced one is written.
     assert_eq!(
