@@ -59,6 +59,11 @@ fn main() -> Result<()> {
     )?;
     let mut m = model.clone();
     m.forces = training.schedule(&model, &probe, index, scene.time.step);
+    // The gravity the schedule falls with (its own under `[training] gravity = "any"`).
+    let g = training.gravity_of(&model, index);
+    if g != model.gravity {
+        m.set_gravity(g);
+    }
     m.scale_gravity(training.gravity_scale);
     let time = TimeConfig {
         frames,
