@@ -78,7 +78,7 @@ def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.
     model = ld.export_model(
         TINY, "pca", path=tmp_path / "a.ldm", cache_dir=tmp_path / "cache", on_stage=seen.append
     )
-    assert [s.name for s in seen] == ["snapshots", "pca"] and not any(s.cached for s in seen)
+    assert [s.name for s in seen] == ["snapshots", "pca", "coverage"] and not any(s.cached for s in seen)
     assert model.path.exists()
 
     called: list[str] = []
