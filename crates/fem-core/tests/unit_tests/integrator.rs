@@ -593,13 +593,7 @@ fn a_schedule_whose_solve_fails_keeps_its_earlier_frames() {
 #[test]
 fn every_fourth_schedule_starts_from_the_moving_state_given() {
     use fem_core::snapshots::{MovingStart, ScheduleConfig, generate, generate_from};
-    let m = model(
-        beam([8, 2, 2]),
-        MaterialModel::StableNeoHookean,
-        2e4,
-        [0.0, -9.81, 0.0],
-        vec![],
-    );
+    let m = falling_beam();
     // The solver's own tolerance (the family's default would loosen it to 10⁻²).
     let family = ScheduleConfig {
         schedules: 4,
@@ -628,52 +622,88 @@ fn every_fourth_schedule_starts_from_the_moving_state_given() {
     )
     .unwrap();
     let rest = generate(&m, &family, &time, &newton, (0, 1), &|_| {}).unwrap();
-    let probe =
-        fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)
-            .unwrap();
     let frames = family.frames_per_schedule;
-    let farthest = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max)
-    };
     for s in 0..4 {
-        let mut with = m.clone();
-        with.forces = family.schedule(&m, &probe, s, time.step);
-        let mut sim = Simulator::new(with, time.clone(), newton.clone()).unwrap();
         let later = s % fem_core::snapshots::LATER_EVERY == fem_core::snapshots::LATER_EVERY - 1;
-        if later {
-            sim.state.u.copy_from_slice(&start.u);
-            sim.state.v.copy_from_slice(&start.v);
-        }
-        let mut free = vec![0.0; set.dim];
-        for f in 0..frames {
-            sim.step().unwrap();
-            sim.model.dofs.gather(&sim.state.u, &mut free);
+        let again = rerun_schedule(
+            &m,
+            &family,
+            s,
+            &time,
+            &newton,
+            m.gravity,
+            later.then_some(&start),
+        );
+        for (f, free) in again.iter().enumerate() {
             let kept = set.frame(s * frames + f);
-            let from_rest = rest.frame(s * frames + f);
-            let diff = farthest(kept, &free);
+            let diff = farthest(kept, free);
             assert!(diff <= 1e-9, "schedule {s} frame {f}: {diff:e}");
-            let moved = farthest(kept, from_rest);
+            let moved = farthest(kept, rest.frame(s * frames + f));
             assert_eq!(moved > 1e-4, later, "schedule {s} frame {f}: {moved:e}");
         }
     }
+}
+
+/// The soft 8×2×2 beam of the schedule tests (stable Neo-Hookean, E = 2·10⁴ Pa) under gravity.
+fn falling_beam() -> FullSpaceModel {
+    model(
+        beam([8, 2, 2]),
+        MaterialModel::StableNeoHookean,
+        2e4,
+        [0.0, -9.81, 0.0],
+        vec![],
+    )
+}
+
+/// The largest difference of two vectors' entries.
+fn farthest(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Schedule `s` of `family` simulated again on its own, under gravity `g` and from `start`
+/// when given: its free-DOF displacement frame by frame.
+fn rerun_schedule(
+    m: &FullSpaceModel,
+    family: &fem_core::snapshots::ScheduleConfig,
+    s: usize,
+    time: &TimeConfig,
+    solver: &SolverConfig,
+    g: Vec3,
+    start: Option<&fem_core::snapshots::MovingStart>,
+) -> Vec<Vec<f64>> {
+    let probe =
+        fem_core::snapshots::StiffnessProbe::new(m, family.frames_per_schedule as f64 * time.step)
+            .unwrap();
+    let mut with = m.clone();
+    with.forces = family.schedule(m, &probe, s, time.step);
+    if g != m.gravity {
+        with.set_gravity(g);
+    }
+    let mut sim = Simulator::new(with, time.clone(), solver.clone()).unwrap();
+    if let Some(start) = start {
+        sim.state.u.copy_from_slice(&start.u);
+        sim.state.v.copy_from_slice(&start.v);
+    }
+    let mut free = vec![0.0; sim.model.dofs.num_free()];
+    (0..family.frames_per_schedule)
+        .map(|_| {
+            sim.step().unwrap();
+            sim.model.dofs.gather(&sim.state.u, &mut free);
+            free.clone()
+        })
+        .collect()
 }
 
 /// Under `gravity = "any"` schedules 1 and 2 of every four fall along their own drawn direction
 /// at the scene's strength, 0 and 3 (which may start from the body's fall) along the scene's:
 /// each is the simulation of its forces under that gravity.
 #[test]
-fn every_other_schedule_falls_along_its_own_direction_under_any_gravity() {
+fn half_the_schedules_fall_along_their_own_directions_under_any_gravity() {
     use fem_core::snapshots::{GravityDirections, ScheduleConfig, generate};
-    let m = model(
-        beam([8, 2, 2]),
-        MaterialModel::StableNeoHookean,
-        2e4,
-        [0.0, -9.81, 0.0],
-        vec![],
-    );
+    let m = falling_beam();
     let family = ScheduleConfig {
         schedules: 4,
         frames_per_schedule: 6,
@@ -685,9 +715,6 @@ fn every_other_schedule_falls_along_its_own_direction_under_any_gravity() {
     let time = dynamic(family.frames_per_schedule);
     let newton = solver(SolverMethod::Newton, 1e-10);
     let set = generate(&m, &family, &time, &newton, (0, 1), &|_| {}).unwrap();
-    let probe =
-        fem_core::snapshots::StiffnessProbe::new(&m, family.frames_per_schedule as f64 * time.step)
-            .unwrap();
     let mut turned = Vec::new();
     for s in 0..4 {
         let g = family.gravity_of(&m, s);
@@ -700,20 +727,9 @@ fn every_other_schedule_falls_along_its_own_direction_under_any_gravity() {
         if !along_scene {
             turned.push(g);
         }
-        let mut with = m.clone();
-        with.forces = family.schedule(&m, &probe, s, time.step);
-        with.set_gravity(0.5 * g);
-        let mut sim = Simulator::new(with, time.clone(), newton.clone()).unwrap();
-        let mut free = vec![0.0; set.dim];
-        for f in 0..family.frames_per_schedule {
-            sim.step().unwrap();
-            sim.model.dofs.gather(&sim.state.u, &mut free);
-            let kept = set.frame(s * family.frames_per_schedule + f);
-            let diff = kept
-                .iter()
-                .zip(&free)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0, f64::max);
+        let again = rerun_schedule(&m, &family, s, &time, &newton, 0.5 * g, None);
+        for (f, free) in again.iter().enumerate() {
+            let diff = farthest(set.frame(s * family.frames_per_schedule + f), free);
             assert!(diff <= 1e-9, "schedule {s} frame {f}: {diff:e}");
         }
     }
