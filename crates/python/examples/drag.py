@@ -78,11 +78,10 @@ def main() -> None:
         f"{1e6 * float(np.median(read_s)):.1f} µs/frame median ({len(frame)} vertices, float32)"
     )
     print(f"height at the release {heights[steps]:.4f} m, 1 s later {heights[-1]:.4f} m")
-    if stats.beyond_training is not None:
-        print(
-            f"the pose went up to {100 * stats.beyond_training:.0f} % of its size beyond the "
-            "training poses" + (", where the model extrapolates" if stats.beyond_training > 0.1 else "")
-        )
+    beyond = stats.beyond_training
+    if beyond is not None:
+        where = ", where the model extrapolates" if beyond > ld.OUTSIDE_TRAINING else ""
+        print(f"the pose went up to {100 * beyond:.0f} % of its size beyond the training poses{where}")
 
     try:
         import matplotlib

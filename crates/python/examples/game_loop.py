@@ -185,10 +185,11 @@ def report(rows: list[Row], size: float) -> None:
     )
     beyond = [r[7] for r in rows if not math.isnan(r[7])]
     if beyond:
-        outside = sum(b > 0.1 for b in beyond)
+        outside = sum(b > ld.OUTSIDE_TRAINING for b in beyond)
         print(
             f"the pose went up to {100 * max(beyond):.0f} % beyond the training poses; "
-            f"{outside} steps more than 10 % beyond, where the model extrapolates"
+            f"{outside} steps more than {100 * ld.OUTSIDE_TRAINING:.0f} % beyond, where the model "
+            "extrapolates"
         )
     print(
         f"{'phase':18s} {'steps':>5s} {'mean ms':>8s} {'max ms':>8s} {'iterations':>10s} "

@@ -41,5 +41,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     }
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MODEL_FORMAT_VERSION", latent_sim::model::FORMAT_VERSION)?;
+    m.add("OUTSIDE_TRAINING", latent_sim::coverage::OUTSIDE_TRAINING)?;
     Ok(())
 }

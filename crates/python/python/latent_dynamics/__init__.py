@@ -18,6 +18,7 @@ Every error arrives as a subclass of :class:`LatentDynamicsError` with the libra
 
 from ._native import (
     MODEL_FORMAT_VERSION,
+    OUTSIDE_TRAINING,
     Handle,
     HandleError,
     InvalidArgumentError,
@@ -41,6 +42,7 @@ from ._native import (
 
 __all__ = [
     "MODEL_FORMAT_VERSION",
+    "OUTSIDE_TRAINING",
     "Handle",
     "HandleError",
     "InvalidArgumentError",

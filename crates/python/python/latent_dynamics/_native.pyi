@@ -34,10 +34,13 @@ __all__ = [
     "InvalidArgumentError",
     "__version__",
     "MODEL_FORMAT_VERSION",
+    "OUTSIDE_TRAINING",
 ]
 
 __version__: str
 MODEL_FORMAT_VERSION: int
+#: A step's ``beyond_training`` above this (0.1): the model extrapolates there.
+OUTSIDE_TRAINING: float
 
 class LatentDynamicsError(Exception):
     """Base class of every error the latent_dynamics module raises."""
