@@ -1369,11 +1369,7 @@ impl<'a> Pipeline<'a> {
             // The stage's bar counts both rules' runs (and Ctrl-C in Python stops there).
             progress(done + i, 2 * schedules.len());
             runtime.reset();
-            if let Some(g) = turned {
-                runtime.set_gravity_acceleration(*g)?;
-            } else if runtime.gravity_acceleration() != along_scene {
-                runtime.set_gravity_acceleration(along_scene)?;
-            }
+            runtime.set_gravity_acceleration(turned.unwrap_or(along_scene))?;
             let handles = forces
                 .iter()
                 .map(|f| runtime.add_force(f.clone()))
