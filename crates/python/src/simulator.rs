@@ -76,8 +76,8 @@ pub struct StepStats {
     newton_fallback: bool,
     /// How far the pose the step reached lies beyond the training poses' ranges, relative to
     /// its size (``cargo xtask run`` reports the largest over a test as "from training"): 0
-    /// among them; above 0.1 the model
-    /// extrapolates and its motion is not to be trusted as the body's. None in full space.
+    /// among them; above ``OUTSIDE_TRAINING`` (0.1) the model extrapolates and its motion is
+    /// not to be trusted as the body's. None in full space.
     beyond_training: Option<f64>,
 }
 

@@ -76,9 +76,10 @@ pub struct StepStats {
     pub newton_fallback: bool,
     /// How far the pose the step reached lies beyond the training poses' ranges, relative to
     /// its size ([`crate::coverage::TrainingPoses::distance`]; `cargo xtask run` reports the
-    /// largest over a test as `from training`): 0 among them; above [`crate::coverage::OUTSIDE_TRAINING`] (0.1) the
-    /// decoder and the cubature rule extrapolate and the motion is not to be trusted as the
-    /// body's. None in full space and for a model made without the ranges.
+    /// largest over a test as `from training`): 0 among them; above
+    /// [`crate::coverage::OUTSIDE_TRAINING`] (0.1) the decoder and the cubature rule
+    /// extrapolate and the motion is not to be trusted as the body's. None in full space and
+    /// for a model made without the ranges.
     pub beyond_training: Option<f64>,
 }
 
