@@ -803,3 +803,39 @@ fn a_reduced_simulation_reports_its_largest_displacement_per_step() {
     let json = std::fs::read_to_string(out.join("sim/summary.json")).unwrap();
     assert!(json.contains("\"reduced_max_displacement\""), "{json}");
 }
+
+/// Under `[training] gravity = "any"` the `snapshots` line says how many schedules fell along
+/// turned gravity, computed or loaded from the cache; with the scene's gravity it says nothing
+/// of it.
+#[test]
+fn the_snapshots_line_says_how_many_schedules_fell_along_turned_gravity() {
+    let line = |name: &str, gravity: &str| {
+        let text = TINY
+            .replace(
+                "[time]",
+                "[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[time]",
+            )
+            .replace(
+                "[training]\nschedules = 4",
+                &format!("[training]\nschedules = 4\n{gravity}"),
+            );
+        let s = scene(&text);
+        let cache = scratch_dir(&format!("pipeline-turned-gravity-{name}"));
+        let lines: Vec<String> = (0..2)
+            .map(|_| {
+                let mut p = Pipeline::new(&s, &cache).unwrap();
+                p.snapshots(&no_progress).unwrap();
+                p.outcomes.last().unwrap().summary.clone()
+            })
+            .collect();
+        assert_eq!(lines[0], lines[1], "computed and loaded");
+        lines[0].clone()
+    };
+    let turned = line("any", "gravity = \"any\"");
+    assert!(
+        turned.contains("; 2 of them fell along gravity turned another way"),
+        "{turned}"
+    );
+    let scene_gravity = line("scene", "");
+    assert!(!scene_gravity.contains("turned"), "{scene_gravity}");
+}

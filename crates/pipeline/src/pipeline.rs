@@ -921,6 +921,10 @@ impl<'a> Pipeline<'a> {
         let nested = self.recorded_seconds - start.1;
         let seconds = (start.0.elapsed().as_secs_f64() - nested).max(0.0);
         self.recorded_seconds += seconds;
+        let summary = match stage {
+            Stage::Snapshots => summary + &self.turned_gravity_note(),
+            _ => summary,
+        };
         let o = StageOutcome {
             stage,
             cached,
@@ -930,6 +934,23 @@ impl<'a> Pipeline<'a> {
         };
         (self.on_stage)(&o);
         self.outcomes.push(o);
+    }
+
+    /// What the `snapshots` line adds under `[training] gravity = "any"` (the artifact, keyed
+    /// on that setting, does not hold it): how many schedules fell along turned gravity.
+    fn turned_gravity_note(&self) -> String {
+        let training = self.scene.training();
+        if training.gravity != snapshots::GravityDirections::Any {
+            return String::new();
+        }
+        let model = &self.model;
+        let turned = (0..training.schedules)
+            .filter(|&i| training.gravity_of(model, i) != model.gravity)
+            .count();
+        format!(
+            "; {turned} of them fell along gravity turned another way, a direction drawn from \
+             the seed for each (`[training] gravity = \"any\"`)"
+        )
     }
 
     /// Stage `snapshots`: every training schedule simulated in full space.
