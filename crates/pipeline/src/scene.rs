@@ -64,6 +64,11 @@ pub fn unit_hint(size: f64) -> Option<String> {
     })
 }
 
+/// [`unit_hint`] as the start of a sentence ("At 14.0 m across, …").
+pub fn unit_sentence(size: f64) -> Option<String> {
+    unit_hint(size).map(|u| format!("A{}", &u[1..]))
+}
+
 /// Densities below this (kg/m³) are lighter than any solid a soft body is made of (foams start
 /// at about 10, silica aerogel near 2): most often one written in g/cm³ (1.0 for water).
 pub const LIGHT_DENSITY: f64 = 10.0;
@@ -107,11 +112,8 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     (strain > HEAVY_BODY).then(|| {
         // The bounding box's diagonal, as the fall and buckling warnings measure a body.
         let size = extent.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let remedy = match unit_hint(size) {
-            Some(units) => format!(
-                "A{}; else a stiffer `[material] youngs_modulus`",
-                &units[1..]
-            ),
+        let remedy = match unit_sentence(size) {
+            Some(units) => format!("{units}; else a stiffer `[material] youngs_modulus`"),
             None => {
                 "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up"
                     .into()

@@ -389,8 +389,8 @@ fn fall_warning(rows: &[MethodReport]) -> Option<String> {
          trajectory error"
     };
     // The units first, whatever the body should do.
-    let stand = match crate::scene::unit_hint(b.size) {
-        Some(u) => format!("A{}. Else, if the body should stand as pinned", &u[1..]),
+    let stand = match crate::scene::unit_sentence(b.size) {
+        Some(u) => format!("{u}. Else, if the body should stand as pinned"),
         None => "If the body should stand as pinned".to_string(),
     };
     Some(format!(
