@@ -987,13 +987,16 @@ impl<'a> Pipeline<'a> {
         let mut model = model.clone();
         model.forces.clear();
         model.scale_gravity(cfg.gravity_scale);
+        let (lo, hi) = model.mesh.bounding_box();
+        let size = (hi - lo).norm();
+        let (dofs, mut full) = (model.dofs.clone(), vec![0.0; model.num_full()]);
         let (at, last) = (until - from, from.max(until - from));
         let time = TimeConfig {
             frames: last,
             ..scene.time.clone()
         };
         let mut sim = Simulator::new(model, time, cfg.solver(&scene.solver))?;
-        let (mut start, mut peak_kinetic) = (None, 0.0f64);
+        let (mut start, mut peak_kinetic, mut travel) = (None, 0.0f64, 0.0f64);
         for frame in 1..=last {
             let Ok(report) = sim.step() else {
                 // A body the solver cannot follow under its own weight alone: its schedules
@@ -1001,6 +1004,8 @@ impl<'a> Pipeline<'a> {
                 return Ok(None);
             };
             peak_kinetic = peak_kinetic.max(report.kinetic_energy);
+            dofs.scatter(&sim.state.u, &mut full);
+            travel = travel.max(fem_core::integrator::max_displacement(&full));
             if frame == from && report.kinetic_energy <= SETTLED_KINETIC * peak_kinetic {
                 // At rest when the schedules end (a stable equilibrium): it stays there.
                 return Ok(None);
@@ -1012,12 +1017,17 @@ impl<'a> Pipeline<'a> {
                 });
             }
         }
+        // How far its weight carries it: a body meant to stand that falls over is told here, a
+        // stage before `run`'s list says what would hold it up.
         let why = format!(
             "every {}th starts from the body falling under gravity alone at {:.2} s, since it \
-             still moves when they end, and runs to the test's last frame ({until}); `[training] \
-             frames_per_schedule` set starts them all at rest",
+             still moves when they end (in {:.2} s under gravity alone it moves up to {:.0} % of \
+             its bounding-box diagonal), and runs to the test's last frame ({until}); \
+             `[training] frames_per_schedule` set starts them all at rest",
             snapshots::LATER_EVERY,
-            at as f64 * scene.time.step
+            at as f64 * scene.time.step,
+            last as f64 * scene.time.step,
+            100.0 * travel / size.max(f64::MIN_POSITIVE)
         );
         Ok(start.map(|s| (s, why)))
     }
