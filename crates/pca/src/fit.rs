@@ -134,8 +134,9 @@ impl PcaBasis {
                 let wanted = energy_dimension(&sigma, rank, fraction);
                 let met = wanted <= cap;
                 let k = wanted.min(cap);
+                // Said by the fit's `met` (the pipeline's `pca` line), not as a warning of its own.
                 if !met {
-                    tracing::warn!(
+                    tracing::info!(
                         fraction,
                         needed = wanted,
                         cap,

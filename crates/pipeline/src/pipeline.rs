@@ -969,11 +969,12 @@ impl<'a> Pipeline<'a> {
     /// never reach, so a quarter of them start from the body's state under gravity alone at frame
     /// `test − training` and end at the test's last frame. Costs one full-space run, cut short
     /// once the body is at rest when the schedules end. The state, with the reason the
-    /// `snapshots` line prints.
+    /// `snapshots` line prints; beside it, what to warn of at once when that run gives way
+    /// under the body's weight ([`Pipeline::gives_way`]).
     fn later_start(
         scene: &Scene,
         model: &FullSpaceModel,
-    ) -> Result<Option<(snapshots::MovingStart, String)>, fem_core::FemError> {
+    ) -> Result<LaterStart, fem_core::FemError> {
         let cfg = scene.training();
         let until = scene.test().frames_per_schedule;
         let from = cfg.frames_per_schedule;
@@ -982,33 +983,34 @@ impl<'a> Pipeline<'a> {
             || (model.gravity * cfg.gravity_scale).norm() == 0.0
             || scene.time.quasi_static
         {
-            return Ok(None);
+            return Ok((None, None));
         }
         let mut model = model.clone();
         model.forces.clear();
         model.scale_gravity(cfg.gravity_scale);
-        let (lo, hi) = model.mesh.bounding_box();
-        let size = (hi - lo).norm();
-        let (dofs, mut full) = (model.dofs.clone(), vec![0.0; model.num_full()]);
         let (at, last) = (until - from, from.max(until - from));
         let time = TimeConfig {
             frames: last,
             ..scene.time.clone()
         };
         let mut sim = Simulator::new(model, time, cfg.solver(&scene.solver))?;
-        let (mut start, mut peak_kinetic, mut travel) = (None, 0.0f64, 0.0f64);
+        let (mut start, mut peak_kinetic, mut frames) = (None, 0.0f64, Vec::new());
+        let mut settled = false;
         for frame in 1..=last {
             let Ok(report) = sim.step() else {
                 // A body the solver cannot follow under its own weight alone: its schedules
                 // start from rest.
-                return Ok(None);
+                break;
             };
+            // The state is the full vector; `Compression` reads free DOFs, as the snapshots hold.
+            let mut free = vec![0.0; sim.model.dofs.num_free()];
+            sim.model.dofs.gather(&sim.state.u, &mut free);
+            frames.push(free);
             peak_kinetic = peak_kinetic.max(report.kinetic_energy);
-            dofs.scatter(&sim.state.u, &mut full);
-            travel = travel.max(fem_core::integrator::max_displacement(&full));
             if frame == from && report.kinetic_energy <= SETTLED_KINETIC * peak_kinetic {
                 // At rest when the schedules end (a stable equilibrium): it stays there.
-                return Ok(None);
+                settled = true;
+                break;
             }
             if frame == at {
                 start = Some(snapshots::MovingStart {
@@ -1017,8 +1019,16 @@ impl<'a> Pipeline<'a> {
                 });
             }
         }
+        let Some(c) = crate::run::Compression::of(&sim.model, &frames, scene.time.step) else {
+            return Ok((None, None));
+        };
+        let gives_way = Self::gives_way(&c);
+        if settled || frames.len() < last {
+            return Ok((None, gives_way));
+        }
         // How far its weight carries it: a body meant to stand that falls over is told here, a
         // stage before `run`'s list says what would hold it up.
+        let (lo, hi) = sim.model.mesh.bounding_box();
         let why = format!(
             "every {}th starts from the body falling under gravity alone at {:.2} s, since it \
              still moves when they end (in {:.2} s under gravity alone it moves up to {:.0} % of \
@@ -1027,9 +1037,30 @@ impl<'a> Pipeline<'a> {
             snapshots::LATER_EVERY,
             at as f64 * scene.time.step,
             last as f64 * scene.time.step,
-            100.0 * travel / size.max(f64::MIN_POSITIVE)
+            100.0 * c.travel / (hi - lo).norm().max(f64::MIN_POSITIVE)
         );
-        Ok(start.map(|s| (s, why)))
+        Ok((start.map(|s| (s, why)), gives_way))
+    }
+
+    /// What to say at once of a run under gravity alone ([`Self::later_start`]) that gives
+    /// way as `run` judges the test ([`crate::trust::COLLAPSED_SHARE`]), instead of after every
+    /// stage and method has run on it: a ring standing on a point, in soft StVK, was told after
+    /// 20 minutes.
+    fn gives_way(c: &crate::run::Compression) -> Option<String> {
+        (c.squeezed_share >= crate::trust::COLLAPSED_SHARE).then(|| {
+            format!(
+                "under gravity alone, with no other load, the full simulation squeezes {:.1} % of \
+                 the body's volume under half its rest volume by t = {:.2} s (elements inverted \
+                 in {} of its first {} frames): the body gives way under its own weight as \
+                 pinned, so the training data and the test hold a crushed body, and every method \
+                 is measured against it; {}",
+                100.0 * c.squeezed_share,
+                c.squeezed_time,
+                c.inverted_frames,
+                c.frames,
+                crate::trust::keeps_it_solid(c.inversion_safe)
+            )
+        })
     }
 
     /// `set`, or an error saying why it holds no frame at all (every schedule failed at its
@@ -1059,8 +1090,11 @@ impl<'a> Pipeline<'a> {
         let why = std::sync::Mutex::new(None);
         let (scene, model) = (self.scene, &self.model);
         let later = || {
-            Self::later_start(scene, model).map(|l| {
-                l.map(|(start, reason)| {
+            Self::later_start(scene, model).map(|(later, gives_way)| {
+                if let Some(w) = gives_way {
+                    warn_once(&format!("{}: {w}", scene.source));
+                }
+                later.map(|(start, reason)| {
                     *why.lock().unwrap_or_else(|e| e.into_inner()) = Some(reason);
                     start
                 })
@@ -2051,6 +2085,10 @@ pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
         .collect()
 }
 
+/// What the run under gravity alone finds ([`Pipeline::later_start`]): the later start with the
+/// reason the `snapshots` line gives, and what to warn of at once when the body gives way.
+type LaterStart = (Option<(snapshots::MovingStart, String)>, Option<String>);
+
 /// A training schedule as the rule validation runs it again: its first frame in the snapshots,
 /// its frames, its forces, and the gravity it fell with when turned (`[training] gravity =
 /// "any"`).
@@ -2063,7 +2101,37 @@ type ScheduleRun = (
 
 #[cfg(test)]
 mod tests {
-    use super::{pca_rule_clearly_closer, validation_schedules, whitened};
+    use super::{Pipeline, pca_rule_clearly_closer, validation_schedules, whitened};
+
+    /// A cube standing on its base under its own weight: one so soft its weight crushes it is
+    /// said at once, by the run under gravity alone that decides the later starts; a firm one
+    /// is not.
+    #[test]
+    fn a_body_its_weight_crushes_is_said_by_the_run_under_gravity_alone() {
+        let crushed = |youngs: f64| {
+            let text = format!(
+                "name = \"cube\"\n[mesh]\ngenerate = {{ kind = \"box\", size = [0.2, 0.2, 0.2], \
+                 cells = [2, 2, 2] }}\n[material]\nmodel = \"corotated\"\nyoungs_modulus = \
+                 {youngs}\npoisson_ratio = 0.4\n[[pin]]\nplane = {{ axis = \"y\", side = \
+                 \"min\" }}\n[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[time]\nstep = \
+                 0.01\n[solver]\nmethod = \"newton\"\n[test]\nframes_per_schedule = 80\n"
+            );
+            let scene = crate::scene::Scene::from_str(&text, std::path::Path::new("."), "cube")
+                .expect("a valid scene");
+            let cache = std::env::temp_dir().join(format!("gives-way-{youngs}"));
+            let p = Pipeline::new(&scene, &cache).unwrap();
+            let said = Pipeline::later_start(&scene, &p.model).unwrap().1;
+            std::fs::remove_dir_all(&cache).ok();
+            said
+        };
+        // ρgH/E = 1000 · 9.81 · 0.2 / 20 ≈ 98: flattened.
+        let soft = crushed(20.0).expect("a cube at 20 Pa is crushed by its weight");
+        assert!(
+            soft.contains("squeezes") && soft.contains("gives way under its own weight"),
+            "{soft}"
+        );
+        assert_eq!(crushed(1.0e6), None);
+    }
 
     /// The schedules run are those recorded whole and from rest, spread over the family: a
     /// schedule stopped partway and, when the set has moving starts, every fourth are left out.

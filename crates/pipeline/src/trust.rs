@@ -167,22 +167,14 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
         String::new()
     };
     let who = reference_subject(r);
-    let (why, remedy) = if c.inversion_safe {
-        (
-            "the body is too soft to carry its loads (stable Neo-Hookean resists inversion \
-             only as strongly as its stiffness)",
-            "a stiffer material (`youngs_modulus`), or lighter loads (`[gravity]`, the scene's \
-             `[[force]]`s, `[test] stiffness`, `offset`), keep it a solid",
-        )
+    let why = if c.inversion_safe {
+        "the body is too soft to carry its loads (stable Neo-Hookean resists inversion only as \
+         strongly as its stiffness)"
     } else {
-        (
-            "the material gives way there, which is past what it models as a solid (StVK \
-             softens under strong compression; linear and corotated elasticity do not resist \
-             inversion)",
-            "a stiffer material (`youngs_modulus`) resists it, and stable Neo-Hookean \
-             (`[material] model`) resists inversion",
-        )
+        "the material gives way there, which is past what it models as a solid (StVK softens \
+         under strong compression; linear and corotated elasticity do not resist inversion)"
     };
+    let remedy = keeps_it_solid(c.inversion_safe);
     Some(format!(
         "{who} squeezes {:.1} % of the body's volume under \
          half its rest volume at t = {:.2} s (its most compressed element to det F = {:.2} at \
@@ -193,6 +185,18 @@ fn collapse_warning(r: &MethodReport) -> Option<String> {
         c.volume_ratio,
         c.time
     ))
+}
+
+/// What keeps a body that gives way a solid, `inversion_safe` when its material is stable
+/// Neo-Hookean already.
+pub(crate) fn keeps_it_solid(inversion_safe: bool) -> &'static str {
+    if inversion_safe {
+        "a stiffer material (`youngs_modulus`), or lighter loads (`[gravity]`, the scene's \
+         `[[force]]`s, `[test] stiffness`, `offset`), keep it a solid"
+    } else {
+        "a stiffer material (`youngs_modulus`) resists it, and stable Neo-Hookean \
+         (`[material] model`) resists inversion"
+    }
 }
 
 /// Who a warning on the reference's compression speaks of, by the row that carries it: on a
