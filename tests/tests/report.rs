@@ -590,3 +590,59 @@ frames_per_schedule = 4
     assert_eq!(b.buckles(), None);
     assert!(pipeline::trust::assess(&rows).untrusted.is_empty());
 }
+
+/// The test's loads are said under the title and in `report.json`: the spring's vertices, their
+/// mean rest position, its stiffness, its largest target offset against the bounding-box
+/// diagonal and its span, the test model's own.
+#[test]
+fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
+    let s = scene(TINY);
+    let out = scratch_dir("report-test-forces");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let opts = RunOptions {
+        out: out.clone(),
+        every: 0,
+        methods: vec![Method::Pca],
+        trajectory: 0,
+    };
+    run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let model = p.test_model(0).unwrap();
+    assert_eq!(model.forces.len(), 1, "the default test is one drag");
+    let force = &model.forces[0];
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let written = &json["test_forces"][0];
+    assert_eq!(written["kind"], "spring");
+    assert_eq!(written["vertices"], force.vertices.len());
+    assert!(close(written["stiffness"].as_f64().unwrap(), force.stiffness));
+    for axis in 0..3 {
+        let mean = force
+            .vertices
+            .iter()
+            .map(|&v| model.mesh.vertices[v][axis])
+            .sum::<f64>()
+            / force.vertices.len() as f64;
+        assert!(close(written["centre"][axis].as_f64().unwrap(), mean), "{written}");
+    }
+    let largest = force
+        .keyframes
+        .iter()
+        .map(|k| (k[1] * k[1] + k[2] * k[2] + k[3] * k[3]).sqrt())
+        .fold(0.0, f64::max);
+    let (lo, hi) = model.mesh.bounding_box();
+    let share = written["diagonal_share"].as_f64().unwrap();
+    assert!(close(written["largest"].as_f64().unwrap(), largest), "{written}");
+    assert!(close(share, largest / (hi - lo).norm()), "{written}");
+    // The default family's offsets: 2–10 % of the diagonal.
+    assert!((0.02..=0.10 + 1e-12).contains(&share), "{written}");
+    assert_eq!(written["end"].as_f64().unwrap(), force.end);
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let line = format!(
+        "the test: a spring of {:.2e} N/m on {} vertices around (",
+        force.stiffness,
+        force.vertices.len()
+    );
+    assert!(md.contains(&line), "{md}");
+    assert!(md.contains(&format!("({:.1} % of the bounding-box diagonal)", 100.0 * share)));
+    assert!(md.contains("one draw of the test family: `cargo xtask run --trajectories 4`"));
+}

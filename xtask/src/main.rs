@@ -647,7 +647,11 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     {
         println!("{}", p.linear_directions_summary(&progress)?);
     }
-    print!("{}", pipeline::run::summary(&scene, &opts, &rows));
+    let test_forces = pipeline::run::TestForce::of(&p.test_model(opts.trajectory)?);
+    print!(
+        "{}",
+        pipeline::run::summary(&scene, &opts, &test_forces, &rows)
+    );
     Ok(())
 }
 

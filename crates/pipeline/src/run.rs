@@ -75,7 +75,115 @@ pub struct RunReport<'a> {
     /// by themselves.
     pub untrusted: Vec<String>,
     pub caveats: Vec<String>,
+    /// The test's loads: where each grabs and how far it pulls.
+    pub test_forces: &'a [TestForce],
     pub methods: &'a [MethodReport],
+}
+
+/// One load of a held-out test trajectory, as `run` describes it under its title and in
+/// `report.json` (`test_forces`): where it grabs and how far it pulls, so that a test that
+/// leaves the training poses can be told apart from its family's others.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TestForce {
+    /// `spring` or `point`.
+    pub kind: String,
+    /// How many vertices it acts on, and their mean rest position (m).
+    pub vertices: usize,
+    pub centre: [f64; 3],
+    /// Total stiffness (N/m; 0 for a point load).
+    pub stiffness: f64,
+    /// The largest target offset over its keyframes (m), or a point load's largest force (N).
+    pub largest: f64,
+    /// A spring's largest offset against the body's bounding-box diagonal.
+    pub diagonal_share: Option<f64>,
+    /// When it acts (s): from `start` until `end`.
+    pub start: f64,
+    pub end: f64,
+}
+
+impl TestForce {
+    /// The loads of `model` (a test trajectory's: [`Pipeline::test_model`]).
+    pub fn of(model: &FullSpaceModel) -> Vec<Self> {
+        let (lo, hi) = model.mesh.bounding_box();
+        let diagonal = (hi - lo).norm();
+        model
+            .forces
+            .iter()
+            .map(|f| {
+                let n = f.vertices.len().max(1) as f64;
+                let centre = f
+                    .vertices
+                    .iter()
+                    .fold(fem_core::Vec3::zeros(), |c, &v| c + model.mesh.vertices[v])
+                    / n;
+                let largest = f
+                    .keyframes
+                    .iter()
+                    .map(|k| (k[1] * k[1] + k[2] * k[2] + k[3] * k[3]).sqrt())
+                    .fold(0.0, f64::max);
+                let spring = f.kind == fem_core::forces::ForceKind::Spring;
+                Self {
+                    kind: if spring { "spring" } else { "point" }.into(),
+                    vertices: f.vertices.len(),
+                    centre: [centre.x, centre.y, centre.z],
+                    stiffness: f.stiffness,
+                    largest,
+                    diagonal_share: (spring && diagonal > 0.0).then(|| largest / diagonal),
+                    start: f.start,
+                    end: f.end,
+                }
+            })
+            .collect()
+    }
+
+    /// One line: "a spring of 1.3e3 N/m on 31 vertices around (0.10, 0.02, 0.00) m pulls its
+    /// target up to 0.061 m away (5.8 % of the bounding-box diagonal) from t = 0.00 to 0.60 s".
+    pub fn describe(&self) -> String {
+        let [x, y, z] = self.centre.map(four_digits);
+        let span = if self.end.is_finite() {
+            format!("from t = {:.2} to {:.2} s", self.start.max(0.0), self.end)
+        } else {
+            format!("from t = {:.2} s on", self.start.max(0.0))
+        };
+        match self.diagonal_share {
+            Some(share) => format!(
+                "a spring of {:.2e} N/m on {} vertices around ({x}, {y}, {z}) m pulls its target \
+                 up to {} m away ({:.1} % of the bounding-box diagonal) {span}",
+                self.stiffness,
+                self.vertices,
+                four_digits(self.largest),
+                100.0 * share
+            ),
+            None => format!(
+                "a {} load of up to {} on {} vertices around ({x}, {y}, {z}) m {span}",
+                self.kind,
+                if self.kind == "spring" {
+                    format!("{} m", four_digits(self.largest))
+                } else {
+                    format!("{} N", four_digits(self.largest))
+                },
+                self.vertices
+            ),
+        }
+    }
+}
+
+/// What `run` says of its test under the title: its loads, and that it is one draw of its
+/// family.
+fn test_lines(forces: &[TestForce]) -> String {
+    let mut s = String::new();
+    for f in forces {
+        s.push_str(&format!(
+            "the test: {}
+",
+            f.describe()
+        ));
+    }
+    s.push_str(
+        "one draw of the test family: `cargo xtask run --trajectories 4` runs four, with each \
+         method's spread\n",
+    );
+    s
 }
 
 /// One stage of [`RunReport::stages`].
@@ -819,6 +927,7 @@ pub fn run(
         None => None,
     };
     let assessment = crate::trust::assess(&rows);
+    let test_forces = TestForce::of(&pipeline.test_model(opts.trajectory)?);
     let report = RunReport {
         format: REPORT_FORMAT,
         version: REPORT_VERSION,
@@ -832,6 +941,7 @@ pub fn run(
         stages: stage_lines(&pipeline.outcomes),
         untrusted: assessment.untrusted,
         caveats: assessment.caveats,
+        test_forces: &test_forces,
         methods: &rows,
     };
     write_json(&opts.out.join("report.json"), &report)?;
@@ -853,8 +963,9 @@ pub fn run(
     crate::output::write_file(
         &opts.out.join("report.md"),
         format!(
-            "# {title}\n\nscene: {}\n\n{}",
+            "# {title}\n\nscene: {}\n\n{}\n{}",
             pipeline.scene.source,
+            test_lines(&test_forces),
             report_markdown(&rows)
         )
         .as_bytes(),
@@ -925,10 +1036,18 @@ fn heading(scene: &Scene, trajectory: usize) -> String {
     )
 }
 
-/// What `cargo xtask run` shows after the stages: the table, where a reduced step's time goes,
-/// the warnings of [`crate::trust`], and where the report, the frames and the model are.
-pub fn summary(scene: &Scene, opts: &RunOptions, rows: &[MethodReport]) -> String {
+/// What `cargo xtask run` shows after the stages: the test's loads ([`TestForce`]), the table,
+/// where a reduced step's time goes, the warnings of [`crate::trust`], and where the report, the
+/// frames and the model are.
+pub fn summary(
+    scene: &Scene,
+    opts: &RunOptions,
+    test_forces: &[TestForce],
+    rows: &[MethodReport],
+) -> String {
     let mut s = format!("\n{}\n\n", heading(scene, opts.trajectory));
+    s.push_str(&test_lines(test_forces));
+    s.push('\n');
     s.push_str(&report_markdown(rows));
     s.push_str(&format!(
         "\nreport: {} (also report.md, report.svg; errors by frame: errors.csv, errors.svg)",
