@@ -614,7 +614,10 @@ fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
     let written = &json["test_forces"][0];
     assert_eq!(written["kind"], "spring");
     assert_eq!(written["vertices"], force.vertices.len());
-    assert!(close(written["stiffness"].as_f64().unwrap(), force.stiffness));
+    assert!(close(
+        written["stiffness"].as_f64().unwrap(),
+        force.stiffness
+    ));
     for axis in 0..3 {
         let mean = force
             .vertices
@@ -622,7 +625,10 @@ fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
             .map(|&v| model.mesh.vertices[v][axis])
             .sum::<f64>()
             / force.vertices.len() as f64;
-        assert!(close(written["centre"][axis].as_f64().unwrap(), mean), "{written}");
+        assert!(
+            close(written["centre"][axis].as_f64().unwrap(), mean),
+            "{written}"
+        );
     }
     let largest = force
         .keyframes
@@ -631,7 +637,10 @@ fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
         .fold(0.0, f64::max);
     let (lo, hi) = model.mesh.bounding_box();
     let share = written["diagonal_share"].as_f64().unwrap();
-    assert!(close(written["largest"].as_f64().unwrap(), largest), "{written}");
+    assert!(
+        close(written["largest"].as_f64().unwrap(), largest),
+        "{written}"
+    );
     assert!(close(share, largest / (hi - lo).norm()), "{written}");
     // The default family's offsets: 2–10 % of the diagonal.
     assert!((0.02..=0.10 + 1e-12).contains(&share), "{written}");
@@ -643,6 +652,53 @@ fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
         force.vertices.len()
     );
     assert!(md.contains(&line), "{md}");
-    assert!(md.contains(&format!("({:.1} % of the bounding-box diagonal)", 100.0 * share)));
+    assert!(md.contains(&format!(
+        "({:.1} % of the bounding-box diagonal)",
+        100.0 * share
+    )));
     assert!(md.contains("one draw of the test family: `cargo xtask run --trajectories 4`"));
+}
+
+/// `export` says what `run` measured of the model it writes, from the run's `report.json`
+/// when that report is of the same stages: the method's error and the warnings that name it;
+/// otherwise why it was not measured.
+#[test]
+fn an_exported_model_is_told_what_the_run_measured_of_it() {
+    use latent_sim::model::Rows;
+    use pipeline::export::{run_verdict, scene_model};
+    let s = scene(TINY);
+    let out = scratch_dir("report-export-verdict");
+    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let opts = RunOptions {
+        out: out.join("run"),
+        every: 0,
+        methods: vec![Method::Full, Method::PcaCubature],
+        trajectory: 0,
+    };
+    let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let model = scene_model(&mut p, Method::PcaCubature, Rows::Used, &no_progress).unwrap();
+    let said = run_verdict(&out.join("run"), &model);
+    let error = format!(
+        "pca-cubature {:.2} % from the full trajectory",
+        100.0 * rows[1].mean_rel_error
+    );
+    assert!(
+        said.starts_with("measured by `cargo xtask run` on held-out test trajectory 0")
+            && said.contains(&error),
+        "{said}"
+    );
+    // A method the run left out, a scene changed since, and no run at all.
+    let pca = scene_model(&mut p, Method::Pca, Rows::Used, &no_progress).unwrap();
+    let said = run_verdict(&out.join("run"), &pca);
+    assert!(
+        said.starts_with("not measured: the run in") && said.contains("did not run pca"),
+        "{said}"
+    );
+    let stiffer = scene(&TINY.replace("youngs_modulus = 1.0e5", "youngs_modulus = 2.0e5"));
+    let mut q = Pipeline::new(&stiffer, &out.join("cache")).unwrap();
+    let other = scene_model(&mut q, Method::PcaCubature, Rows::Used, &no_progress).unwrap();
+    let said = run_verdict(&out.join("run"), &other);
+    assert!(said.contains("is of other stages"), "{said}");
+    let said = run_verdict(&out.join("nowhere"), &model);
+    assert!(said.starts_with("not measured: no run report in"), "{said}");
 }

@@ -692,6 +692,15 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
         "{}",
         pipeline::export::describe(&scene.name, method, &model, &path)
     );
+    // What `run` found of this model, from its report beside the model file or else in the
+    // scene's output folder.
+    let beside = path.parent().map(PathBuf::from).unwrap_or_default();
+    let out = if beside.join("report.json").is_file() {
+        beside
+    } else {
+        cx.out(&scene, &[])
+    };
+    println!("{}", pipeline::export::run_verdict(&out, &model));
     Ok(())
 }
 

@@ -248,3 +248,78 @@ pub fn scene_model(
         progress,
     )
 }
+
+/// What `cargo xtask run` measured of `model`, read from the `report.json` it wrote in `out`:
+/// the method's error on the held-out test and the figures not to be trusted that name the
+/// method, the test's full simulation or the scene, when the report is of the same stages
+/// (every stage key of the model's provenance among the report's). Otherwise, why there is no
+/// measure and the command that makes one: an exported model is the stages' output, and only
+/// `run` tests it.
+pub fn run_verdict(out: &Path, model: &ReducedModel) -> String {
+    let path = out.join("report.json");
+    let method = model.provenance.method.as_str();
+    let run = "`cargo xtask run` measures it on a held-out test and says whether to trust it";
+    let Some(report) = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+    else {
+        return format!("not measured: no run report in {} ({run})", out.display());
+    };
+    let stages = report["stages"].as_array().cloned().unwrap_or_default();
+    let same = model.provenance.stage_keys.iter().all(|k| {
+        let key = format!("{:016x}", k.key);
+        stages
+            .iter()
+            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
+    });
+    if !same {
+        return format!(
+            "not measured: {} is of other stages (the scene changed since, or another scene \
+             wrote there; {run})",
+            path.display()
+        );
+    }
+    let row = report["methods"]
+        .as_array()
+        .and_then(|rows| rows.iter().find(|r| r["method"] == method));
+    let Some(error) = row.and_then(|r| r["mean_rel_error"].as_f64()) else {
+        return format!(
+            "not measured: the run in {} did not run {method} (`cargo xtask run --methods full \
+             {method}` does)",
+            out.display()
+        );
+    };
+    let names = |line: &str| {
+        let who = line.split(':').next().unwrap_or("");
+        who.split(", ").any(|n| n == method)
+            || who == "full"
+            || who == "the scene"
+            || who.starts_with("the full-space")
+    };
+    let lines: Vec<&str> = report["untrusted"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|l| l.as_str())
+                .filter(|l| names(l))
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut s = format!(
+        "measured by `cargo xtask run` on held-out test trajectory {} ({}, written {}): {method} \
+         {:.2} % from the full trajectory",
+        report["trajectory"],
+        out.join("report.md").display(),
+        report["written"].as_str().unwrap_or("?"),
+        100.0 * error
+    );
+    if lines.is_empty() {
+        s.push_str("; nothing in that report says not to trust it");
+    } else {
+        s.push_str("; not to be trusted:");
+        for l in lines {
+            s.push_str(&format!("\n- {l}"));
+        }
+    }
+    s
+}

@@ -37,6 +37,8 @@ pub struct StageOutcome {
     /// computation had to load or compute first (each of those has its own outcome).
     pub seconds: f64,
     pub path: PathBuf,
+    /// Its cache key: what it was computed from (a model file's provenance names the same).
+    pub key: u64,
     /// What the stage chose and why, in one line (sizes, dimensions, rule sizes and errors).
     pub summary: String,
 }
@@ -895,7 +897,7 @@ impl<'a> Pipeline<'a> {
             };
             match artifact::load::<T>(&path, expect) {
                 Ok(v) => {
-                    self.record(stage, true, start, path, v.summary());
+                    self.record(stage, key, true, start, path, v.summary());
                     return Ok(v);
                 }
                 Err(e) => tracing::warn!("{}; computing the stage again", e.problem()),
@@ -905,7 +907,7 @@ impl<'a> Pipeline<'a> {
         let value = compute(self)?;
         artifact::save(&path, stage, key, self.mesh_hash, &value)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        self.record(stage, false, start, path, value.summary());
+        self.record(stage, key, false, start, path, value.summary());
         Ok(value)
     }
 
@@ -913,6 +915,7 @@ impl<'a> Pipeline<'a> {
     fn record(
         &mut self,
         stage: Stage,
+        key: u64,
         cached: bool,
         start: (Instant, f64),
         path: PathBuf,
@@ -927,6 +930,7 @@ impl<'a> Pipeline<'a> {
         };
         let o = StageOutcome {
             stage,
+            key,
             cached,
             seconds,
             path,

@@ -190,6 +190,9 @@ fn test_lines(forces: &[TestForce]) -> String {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct StageLine {
     pub stage: String,
+    /// Its cache key, 16 hexadecimal digits (a model file's provenance holds the same keys:
+    /// `export` finds the run that measured a model by them).
+    pub key: String,
     /// Loaded from the cache instead of computed.
     pub cached: bool,
     pub seconds: f64,
@@ -997,6 +1000,7 @@ fn stage_lines(outcomes: &[crate::pipeline::StageOutcome]) -> Vec<StageLine> {
     for o in outcomes {
         let line = StageLine {
             stage: o.stage.to_string(),
+            key: format!("{:016x}", o.key),
             cached: o.cached,
             seconds: o.seconds,
             summary: o.summary.clone(),
