@@ -677,7 +677,7 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     };
     let rows = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
     let model = scene_model(&mut p, Method::PcaCubature, Rows::Used, &no_progress).unwrap();
-    let said = run_verdict(&out.join("run"), &model);
+    let said = run_verdict(&out.join("run"), &model, &s);
     let error = format!(
         "pca-cubature {:.2} % from the full trajectory",
         100.0 * rows[1].mean_rel_error
@@ -689,7 +689,7 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     );
     // A method the run left out, a scene changed since, and no run at all.
     let pca = scene_model(&mut p, Method::Pca, Rows::Used, &no_progress).unwrap();
-    let said = run_verdict(&out.join("run"), &pca);
+    let said = run_verdict(&out.join("run"), &pca, &s);
     assert!(
         said.starts_with("not measured: the run in") && said.contains("did not run pca"),
         "{said}"
@@ -697,8 +697,34 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     let stiffer = scene(&TINY.replace("youngs_modulus = 1.0e5", "youngs_modulus = 2.0e5"));
     let mut q = Pipeline::new(&stiffer, &out.join("cache")).unwrap();
     let other = scene_model(&mut q, Method::PcaCubature, Rows::Used, &no_progress).unwrap();
-    let said = run_verdict(&out.join("run"), &other);
+    let said = run_verdict(&out.join("run"), &other, &stiffer);
     assert!(said.contains("is of other stages"), "{said}");
-    let said = run_verdict(&out.join("nowhere"), &model);
+    let said = run_verdict(&out.join("nowhere"), &model, &s);
     assert!(said.starts_with("not measured: no run report in"), "{said}");
+    // The same stages under other solver settings, which no stage key holds.
+    let looser = scene(&TINY.replace("[solver]\n", "[reduced]\ntolerance = 0.01\n[solver]\n"));
+    let said = run_verdict(&out.join("run"), &model, &looser);
+    assert!(
+        said.contains("was run with other `[solver]`, `[reduced]` or `[test]` settings"),
+        "{said}"
+    );
+    // The lines kept are those of the method, the test's full simulation and the scene.
+    use pipeline::export::names;
+    for line in [
+        "pca-cubature: 30 % from the full trajectory",
+        "pca, pca-cubature, neural: at t = 0.2 s their poses go",
+        "full-newton: the full-space simulation of the test squeezes",
+        "full: the full-space simulation of the test moves the body",
+        "the full-space reference squeezes 6 % of the body's volume",
+        "the scene: its own weight strains the body",
+    ] {
+        assert!(names(line, "pca-cubature"), "{line}");
+    }
+    for line in [
+        "pca: its subspace alone is 28.8 % from the test trajectory",
+        "neural-cubature: its cubature rule adds 17 percentage points",
+        "pca, neural: at t = 0.2 s their poses go",
+    ] {
+        assert!(!names(line, "pca-cubature"), "{line}");
+    }
 }

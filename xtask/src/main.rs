@@ -700,7 +700,7 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
     } else {
         cx.out(&scene, &[])
     };
-    println!("{}", pipeline::export::run_verdict(&out, &model));
+    println!("{}", pipeline::export::run_verdict(&out, &model, &scene));
     Ok(())
 }
 

@@ -251,11 +251,11 @@ pub fn scene_model(
 
 /// What `cargo xtask run` measured of `model`, read from the `report.json` it wrote in `out`:
 /// the method's error on the held-out test and the figures not to be trusted that name the
-/// method, the test's full simulation or the scene, when the report is of the same stages
-/// (every stage key of the model's provenance among the report's). Otherwise, why there is no
-/// measure and the command that makes one: an exported model is the stages' output, and only
-/// `run` tests it.
-pub fn run_verdict(out: &Path, model: &ReducedModel) -> String {
+/// method, the test's full simulation or the scene, when the report is of the same model
+/// (every stage key of the model's provenance among the report's, and the scene's `[solver]`,
+/// `[reduced]` and `[test]` as the run had them). Otherwise, why there is no measure and the
+/// command that makes one: an exported model is the stages' output, and only `run` tests it.
+pub fn run_verdict(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene) -> String {
     let path = out.join("report.json");
     let method = model.provenance.method.as_str();
     let run = "`cargo xtask run` measures it on a held-out test and says whether to trust it";
@@ -265,20 +265,6 @@ pub fn run_verdict(out: &Path, model: &ReducedModel) -> String {
     else {
         return format!("not measured: no run report in {} ({run})", out.display());
     };
-    let stages = report["stages"].as_array().cloned().unwrap_or_default();
-    let same = model.provenance.stage_keys.iter().all(|k| {
-        let key = format!("{:016x}", k.key);
-        stages
-            .iter()
-            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
-    });
-    if !same {
-        return format!(
-            "not measured: {} is of other stages (the scene changed since, or another scene \
-             wrote there; {run})",
-            path.display()
-        );
-    }
     let row = report["methods"]
         .as_array()
         .and_then(|rows| rows.iter().find(|r| r["method"] == method));
@@ -289,19 +275,39 @@ pub fn run_verdict(out: &Path, model: &ReducedModel) -> String {
             out.display()
         );
     };
-    let names = |line: &str| {
-        let who = line.split(':').next().unwrap_or("");
-        who.split(", ").any(|n| n == method)
-            || who == "full"
-            || who == "the scene"
-            || who.starts_with("the full-space")
-    };
+    let stages = report["stages"].as_array().cloned().unwrap_or_default();
+    if report.get("settings").is_none() || stages.iter().any(|s| s.get("key").is_none()) {
+        return format!(
+            "not measured: {} was written before reports named their stages' keys ({run} again)",
+            path.display()
+        );
+    }
+    let same_stages = model.provenance.stage_keys.iter().all(|k| {
+        let key = format!("{:016x}", k.key);
+        stages
+            .iter()
+            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
+    });
+    if !same_stages {
+        return format!(
+            "not measured: {} is of other stages (the scene changed since, or another scene \
+             wrote there; {run})",
+            path.display()
+        );
+    }
+    if report["settings"] != crate::run::run_settings(scene) {
+        return format!(
+            "not measured: {} was run with other `[solver]`, `[reduced]` or `[test]` settings \
+             ({run} with these)",
+            path.display()
+        );
+    }
     let lines: Vec<&str> = report["untrusted"]
         .as_array()
         .map(|a| {
             a.iter()
                 .filter_map(|l| l.as_str())
-                .filter(|l| names(l))
+                .filter(|l| names(l, method))
                 .collect()
         })
         .unwrap_or_default();
@@ -322,4 +328,15 @@ pub fn run_verdict(out: &Path, model: &ReducedModel) -> String {
         }
     }
     s
+}
+
+/// Whether a line of a run's warnings concerns `method`'s model: it names the method (alone or
+/// in a list, "pca, neural-cubature: …"), the test's full simulation (on whichever full-space
+/// row carried it, "full-newton: …", or "the full-space reference: …") or the scene.
+pub fn names(line: &str, method: &str) -> bool {
+    let who = line.split(':').next().unwrap_or("");
+    who.split(", ")
+        .any(|n| n == method || Method::ALL.iter().any(|m| m.is_full() && m.name() == n))
+        || who == "the scene"
+        || who.starts_with("the full-space")
 }

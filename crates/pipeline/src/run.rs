@@ -77,6 +77,10 @@ pub struct RunReport<'a> {
     pub caveats: Vec<String>,
     /// The test's loads: where each grabs and how far it pulls.
     pub test_forces: &'a [TestForce],
+    /// The settings a model steps with that no stage key holds ([`run_settings`]), so that
+    /// `export` tells a run of the same model from one before `[reduced]`, `[solver]` or
+    /// `[test]` changed.
+    pub settings: serde_json::Value,
     pub methods: &'a [MethodReport],
 }
 
@@ -136,7 +140,7 @@ impl TestForce {
             .collect()
     }
 
-    /// One line: "a spring of 1.3e3 N/m on 31 vertices around (0.10, 0.02, 0.00) m pulls its
+    /// One line: "a spring of 1.30e3 N/m on 31 vertices around (0.1, 0.02, 0) m pulls its
     /// target up to 0.061 m away (5.8 % of the bounding-box diagonal) from t = 0.00 to 0.60 s".
     pub fn describe(&self) -> String {
         let [x, y, z] = self.centre.map(four_digits);
@@ -168,16 +172,22 @@ impl TestForce {
     }
 }
 
+/// The scene's `[solver]`, `[reduced]` and `[test]` as `report.json` holds them (`settings`):
+/// what a reduced method's steps and its test depend on beyond the stages' cache keys.
+pub fn run_settings(scene: &Scene) -> serde_json::Value {
+    serde_json::json!({
+        "solver": scene.solver,
+        "reduced": scene.reduced,
+        "test": scene.test(),
+    })
+}
+
 /// What `run` says of its test under the title: its loads, and that it is one draw of its
 /// family.
 fn test_lines(forces: &[TestForce]) -> String {
     let mut s = String::new();
     for f in forces {
-        s.push_str(&format!(
-            "the test: {}
-",
-            f.describe()
-        ));
+        s.push_str(&format!("the test: {}\n", f.describe()));
     }
     s.push_str(
         "one draw of the test family: `cargo xtask run --trajectories 4` runs four, with each \
@@ -945,6 +955,7 @@ pub fn run(
         untrusted: assessment.untrusted,
         caveats: assessment.caveats,
         test_forces: &test_forces,
+        settings: run_settings(pipeline.scene),
         methods: &rows,
     };
     write_json(&opts.out.join("report.json"), &report)?;

@@ -23,7 +23,17 @@ pub const UNCOVERED_SUBSPACE_ERROR: f64 = 0.05;
 /// `pca-cubature` was 0.7 %) reads better on it than it is. The other judgements (a method
 /// [`UNTRUSTED_ERROR`] off, a rule that adds to it) keep the mean, which the tables show.
 fn judged_error(r: &MethodReport) -> f64 {
-    r.mean_rel_error.max(r.trajectory_error)
+    judged(r).0
+}
+
+/// [`judged_error`] and which of the two it is, for the line that gives it.
+fn judged(r: &MethodReport) -> (f64, &'static str) {
+    // As `f64::max`: a mean that is not a number gives way to the space–time error.
+    if r.trajectory_error > r.mean_rel_error || r.mean_rel_error.is_nan() {
+        (r.trajectory_error, "space–time")
+    } else {
+        (r.mean_rel_error, "on average")
+    }
 }
 
 /// Whether a reduced method drifts from the full trajectory: more than
@@ -702,14 +712,10 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             if !held {
                 // The figure that decided it, so that two methods side by side, one held and
                 // one not, read as the one threshold (a puck's 3.2 % against 3.6 % on average).
-                let (error, kind) = if r.trajectory_error > r.mean_rel_error {
-                    (r.trajectory_error, "space–time")
-                } else {
-                    (r.mean_rel_error, "on average")
-                };
+                let (error, kind) = judged(r);
                 out.push(format!(
                     "{}: at t = {:.3} s its pose goes {:.0} % of its size beyond the training \
-                     poses, so {} there, and it ends {:.1} % from the full trajectory ({kind}; \
+                     poses, so {} there, and it is {:.1} % from the full trajectory ({kind}; \
                      past {:.0} % an extrapolation is not taken as held), {what}",
                     r.method,
                     r.training_distance_time,
@@ -1600,7 +1606,7 @@ mod tests {
         // The figure that decided it, against the threshold.
         assert!(
             w[0].contains(
-                "it ends 12.0 % from the full trajectory (on average; past 5 % an \
+                "it is 12.0 % from the full trajectory (on average; past 5 % an \
                  extrapolation is not taken as held)"
             ),
             "{}",
