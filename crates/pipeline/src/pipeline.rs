@@ -348,6 +348,11 @@ impl StageSummary for Reference {
 /// from rest).
 pub const SETTLED_KINETIC: f64 = 1e-4;
 
+/// The most frames of the run under gravity alone that checks whether the body gives way under
+/// its weight where no later start applies ([`Pipeline::later_start`]): the default schedule
+/// length, so that a scene that sets longer schedules does not pay a longer check.
+pub const GIVES_WAY_CHECK_FRAMES: usize = 60;
+
 /// Training schedules the `cubature-neural` stage runs `neural-cubature` on with each candidate
 /// rule ([`RuleValidation`]): enough, spread over the family, for the spread of their
 /// differences to say what a difference is worth; the 2 × 12 runs took about 2 s on the
@@ -974,25 +979,30 @@ impl<'a> Pipeline<'a> {
     /// `test − training` and end at the test's last frame. Costs one full-space run, cut short
     /// once the body is at rest when the schedules end. The state, with the reason the
     /// `snapshots` line prints; beside it, what to warn of at once when that run gives way
-    /// under the body's weight ([`Pipeline::gives_way`]).
+    /// under the body's weight ([`Pipeline::gives_way`]). Where no later start applies (the
+    /// scene sets the schedules' length, or the test is no longer), the run still checks that,
+    /// over the schedules' length up to [`GIVES_WAY_CHECK_FRAMES`], and every schedule starts
+    /// from rest.
     fn later_start(
         scene: &Scene,
         model: &FullSpaceModel,
     ) -> Result<LaterStart, fem_core::FemError> {
         let cfg = scene.training();
-        let until = scene.test().frames_per_schedule;
-        let from = cfg.frames_per_schedule;
-        if scene.training.frames_per_schedule.is_some()
-            || until <= from
-            || (model.gravity * cfg.gravity_scale).norm() == 0.0
-            || scene.time.quasi_static
-        {
+        if (model.gravity * cfg.gravity_scale).norm() == 0.0 || scene.time.quasi_static {
             return Ok((None, None));
         }
+        let until = scene.test().frames_per_schedule;
+        let from = cfg.frames_per_schedule;
+        let later = scene.training.frames_per_schedule.is_none() && until > from;
         let mut model = model.clone();
         model.forces.clear();
         model.scale_gravity(cfg.gravity_scale);
-        let (at, last) = (until - from, from.max(until - from));
+        // Frame `at` gives the later start (0: none).
+        let (at, last) = if later {
+            (until - from, from.max(until - from))
+        } else {
+            (0, from.min(GIVES_WAY_CHECK_FRAMES))
+        };
         let time = TimeConfig {
             frames: last,
             ..scene.time.clone()
@@ -1027,7 +1037,7 @@ impl<'a> Pipeline<'a> {
             return Ok((None, None));
         };
         let gives_way = Self::gives_way(&c);
-        if settled || frames.len() < last {
+        if !later || settled || frames.len() < last {
             return Ok((None, gives_way));
         }
         // How far its weight carries it: a body meant to stand that falls over is told here, a
@@ -2112,19 +2122,21 @@ mod tests {
     /// is not.
     #[test]
     fn a_body_its_weight_crushes_is_said_by_the_run_under_gravity_alone() {
-        let crushed = |youngs: f64| {
+        let crushed = |youngs: f64, training: &str| {
             let text = format!(
                 "name = \"cube\"\n[mesh]\ngenerate = {{ kind = \"box\", size = [0.2, 0.2, 0.2], \
                  cells = [2, 2, 2] }}\n[material]\nmodel = \"corotated\"\nyoungs_modulus = \
                  {youngs}\npoisson_ratio = 0.4\n[[pin]]\nplane = {{ axis = \"y\", side = \
                  \"min\" }}\n[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[time]\nstep = \
-                 0.01\n[solver]\nmethod = \"newton\"\n[test]\nframes_per_schedule = 80\n"
+                 0.01\n[solver]\nmethod = \"newton\"\n[test]\nframes_per_schedule = 80\n\
+                 {training}"
             );
             let scene = crate::scene::Scene::from_str(&text, std::path::Path::new("."), "cube")
                 .expect("a valid scene");
             let cache = std::env::temp_dir().join(format!(
-                "latent-dynamics-gives-way-{}-{youngs}",
-                std::process::id()
+                "latent-dynamics-gives-way-{}-{youngs}-{}",
+                std::process::id(),
+                training.len()
             ));
             let p = Pipeline::new(&scene, &cache).unwrap();
             let (later, said) = Pipeline::later_start(&scene, &p.model).unwrap();
@@ -2132,14 +2144,20 @@ mod tests {
             (later.is_some(), said)
         };
         // ρgH/E = 1000 · 9.81 · 0.2 / 20 ≈ 98: flattened.
-        let (_, soft) = crushed(20.0);
+        let (_, soft) = crushed(20.0, "");
         let soft = soft.expect("a cube at 20 Pa is crushed by its weight");
         assert!(
             soft.contains("squeezes") && soft.contains("gives way under its own weight"),
             "{soft}"
         );
         // A firm cube is at rest when the schedules end: no later start, nothing to say.
-        assert_eq!(crushed(1.0e6), (false, None));
+        assert_eq!(crushed(1.0e6, ""), (false, None));
+        // Schedules of the scene's own length take no later start, and are still checked
+        // (over their 30 frames).
+        let (later, set) = crushed(20.0, "[training]\nframes_per_schedule = 30\n");
+        assert!(!later);
+        let set = set.expect("said with the schedules' length set");
+        assert!(set.contains("of its first 30 frames"), "{set}");
     }
 
     /// The schedules run are those recorded whole and from rest, spread over the family: a
