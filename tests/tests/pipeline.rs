@@ -741,8 +741,21 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
         (reaches - 60.0 * 0.02).abs() < 1e-9,
         "the schedules' end: {reaches}"
     );
-    let (_, _, set, _, _) = with("set", "youngs_modulus = 2.0e4", "frames_per_schedule = 60");
+    let (s, model, set, _, _) = with("set", "youngs_modulus = 2.0e4", "frames_per_schedule = 60");
     assert_eq!(set.later_start, None, "the scene's length");
+    // The give-way check still runs beside them, and every schedule starts from rest: the
+    // same frames as the family generated with no later start at all.
+    let from_rest = generate_from(
+        &model,
+        &s.training(),
+        &s.time,
+        &s.solver,
+        (0, 1),
+        None,
+        &|_| {},
+    )
+    .unwrap();
+    assert_eq!(set.data, from_rest.data);
 }
 
 /// A simulation that writes no frames (`every` = 0) leaves none of an earlier run's behind: no
