@@ -349,8 +349,9 @@ impl StageSummary for Reference {
 pub const SETTLED_KINETIC: f64 = 1e-4;
 
 /// The most frames of the run under gravity alone that checks whether the body gives way under
-/// its weight where no later start applies ([`Pipeline::later_start`]): the default schedule
-/// length, so that a scene that sets longer schedules does not pay a longer check.
+/// its weight where no later start applies (the scene sets its schedules' length, or the test
+/// is no longer): the default schedule length, so that longer schedules do not pay a longer
+/// check.
 pub const GIVES_WAY_CHECK_FRAMES: usize = 60;
 
 /// Training schedules the `cubature-neural` stage runs `neural-cubature` on with each candidate
