@@ -650,6 +650,11 @@ pub struct Pipeline<'a> {
     /// The buckling analysis of the scene's gravity, once a run has needed it (it depends on
     /// the model alone, not on the test trajectory).
     pub(crate) buckling: std::cell::OnceCell<Option<crate::run::Buckling>>,
+    /// The forces of each test trajectory once [`Pipeline::test_model`] has built them: each
+    /// costs a factorisation of the full step's operator (the stiffness probe), and a run asks
+    /// for them once per method.
+    test_forces:
+        std::cell::RefCell<std::collections::HashMap<usize, Vec<fem_core::forces::ExternalForce>>>,
 }
 
 impl std::fmt::Debug for Pipeline<'_> {
@@ -733,6 +738,7 @@ impl<'a> Pipeline<'a> {
             reference_energies: std::collections::HashMap::new(),
             body,
             buckling: std::cell::OnceCell::new(),
+            test_forces: Default::default(),
         })
     }
 
@@ -2051,11 +2057,21 @@ impl<'a> Pipeline<'a> {
     pub fn test_model(&self, trajectory: usize) -> Result<FullSpaceModel> {
         let cfg = self.scene.test();
         let mut model = self.model.clone();
-        let probe = StiffnessProbe::new(
-            &self.model,
-            cfg.frames_per_schedule as f64 * self.scene.time.step,
-        )?;
-        model.forces = cfg.schedule(&self.model, &probe, trajectory, self.scene.time.step);
+        let built = self.test_forces.borrow().get(&trajectory).cloned();
+        model.forces = match built {
+            Some(forces) => forces,
+            None => {
+                let probe = StiffnessProbe::new(
+                    &self.model,
+                    cfg.frames_per_schedule as f64 * self.scene.time.step,
+                )?;
+                let forces = cfg.schedule(&self.model, &probe, trajectory, self.scene.time.step);
+                self.test_forces
+                    .borrow_mut()
+                    .insert(trajectory, forces.clone());
+                forces
+            }
+        };
         model.scale_gravity(cfg.gravity_scale);
         Ok(model)
     }
