@@ -278,6 +278,12 @@ impl ScheduleConfig {
         }
     }
 
+    /// [`Self::gravity_of`] where it differs from `model`'s gravity (the schedule falls along
+    /// a turned direction), else None.
+    pub fn turned_gravity(&self, model: &FullSpaceModel, index: usize) -> Option<Vec3> {
+        Some(self.gravity_of(model, index)).filter(|g| *g != model.gravity)
+    }
+
     /// The surface vertices schedule `index` grabs on `model`'s mesh (those of its first and
     /// only force in [`schedule`](Self::schedule), without measuring the body's stiffness
     /// there), or `None` when every surface vertex is pinned.
@@ -726,7 +732,7 @@ pub fn generate_from(
         progress(*done.lock().unwrap_or_else(|e| e.into_inner()));
         let forces = config.schedule(model, &probe, s, time.step);
         let mut frames = Vec::with_capacity(config.frames_per_schedule);
-        let turned = Some(config.gravity_of(model, s)).filter(|g| *g != model.gravity);
+        let turned = config.turned_gravity(model, s);
         let r = record_schedule(
             model,
             forces,

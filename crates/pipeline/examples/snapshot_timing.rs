@@ -60,8 +60,7 @@ fn main() -> Result<()> {
     let mut m = model.clone();
     m.forces = training.schedule(&model, &probe, index, scene.time.step);
     // The gravity the schedule falls with (its own under `[training] gravity = "any"`).
-    let g = training.gravity_of(&model, index);
-    if g != model.gravity {
+    if let Some(g) = training.turned_gravity(&model, index) {
         m.set_gravity(g);
     }
     m.scale_gravity(training.gravity_scale);

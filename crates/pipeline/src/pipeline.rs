@@ -959,9 +959,8 @@ impl<'a> Pipeline<'a> {
         if training.gravity != snapshots::GravityDirections::Any {
             return String::new();
         }
-        let model = &self.model;
         let turned = (0..training.schedules)
-            .filter(|&i| training.gravity_of(model, i) != model.gravity)
+            .filter(|&i| training.turned_gravity(&self.model, i).is_some())
             .count();
         format!(
             "; {turned} of them fell along gravity turned another way, a direction drawn from \
@@ -1361,8 +1360,9 @@ impl<'a> Pipeline<'a> {
                 let first = snaps.frames[..at].iter().sum();
                 // A schedule that fell along its own direction (`[training] gravity = "any"`)
                 // is run under that gravity.
-                let g = cfg.gravity_of(&self.model, s);
-                let turned = (g != self.model.gravity).then(|| (g * cfg.gravity_scale).into());
+                let turned = cfg
+                    .turned_gravity(&self.model, s)
+                    .map(|g| (g * cfg.gravity_scale).into());
                 Some((
                     first,
                     snaps.frames[at],
