@@ -914,8 +914,13 @@ pub fn run(
             row.scene_warnings.push(w);
         }
     }
+    // A reference that gives way is said to (`trust::COLLAPSED_SHARE`), and the methods are
+    // not judged against it: restarting it from each method's state (the whole rest of the
+    // test in full space, about 30 s a method on a 1,500-vertex tire) would only say how a
+    // body that is no longer a solid amplifies a small difference.
+    let gives_way = crate::trust::reference_gives_way(&rows);
     for i in 0..rows.len() {
-        if !crate::trust::drifting(&rows[i]) {
+        if gives_way || !crate::trust::drifting(&rows[i]) {
             continue;
         }
         let frame = (SENSITIVITY_AT * rows[i].frame_errors.len() as f64) as usize;

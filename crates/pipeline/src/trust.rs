@@ -161,6 +161,15 @@ fn cubature_caveat(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
 pub const RULE_SHARE_CAVEAT: f64 = 2.0;
 pub const RULE_CAVEAT_ERROR: f64 = 0.01;
 
+/// Whether the reference's compression (on the row that carries it) squeezes
+/// [`COLLAPSED_SHARE`] of the body under half its volume: then `run` does not restart the
+/// full simulation from drifting methods' states ([`crate::run::restart`]).
+pub fn reference_gives_way(rows: &[MethodReport]) -> bool {
+    rows.iter()
+        .filter_map(|r| r.compression)
+        .any(|c| c.squeezed_share >= COLLAPSED_SHARE)
+}
+
 /// The warning of the row that carries the reference's compression (the `full` row, or the
 /// first row of a run without one) when the test trajectory squeezes a share of the body under
 /// half its volume.
@@ -344,7 +353,8 @@ fn carried_by_weight(
 /// either the full simulation gives way on the way (elements inverted in
 /// [`GIVING_WAY_FRAMES`] of the frames, too little of the body for [`COLLAPSED_SHARE`]: the
 /// L-bracket), or at least one drifting method's restart makes most of its drift
-/// ([`AMPLIFIED_SHARE`]; AutoDef's dinosaur), or it carries the body past [`BEYOND_SWING`]
+/// ([`AMPLIFIED_SHARE`]; AutoDef's dinosaur), or it squeezes [`COLLAPSED_SHARE`] of the body
+/// (a tire standing on its edge), or it carries the body past [`BEYOND_SWING`]
 /// times its size (a coil pushed through its base). The restart's own advice (a gentler pull) does
 /// not reach the cause there, and is left out of it ([`restart_warning`]): it is the body's
 /// weight, not the drag. A fall that is meant and stays a solid (the built-in cantilever drops
@@ -361,7 +371,8 @@ fn fall_warning(rows: &[MethodReport]) -> Option<String> {
     let gives_way =
         !collapsed && c.inverted_frames as f64 >= GIVING_WAY_FRAMES * c.frames.max(1) as f64;
     let through = c.travel >= BEYOND_SWING * b.size;
-    if amplified.is_empty() && !gives_way && !through {
+    // A reference that gives way gets no restarts (`run`), so it is said here by itself.
+    if amplified.is_empty() && !gives_way && !through && !collapsed {
         return None;
     }
     let pct = |x: f64| 100.0 * x;
@@ -730,7 +741,13 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         }
         if r.mean_rel_error > UNTRUSTED_ERROR {
             let dynamics_drift = r.subspace_error <= r.mean_rel_error / 4.0;
-            let why = if dynamics_drift && r.restart.is_some() {
+            let why = if dynamics_drift && reference_gives_way(rows) {
+                format!(
+                    "its subspace holds the test trajectory to {} %, and the full simulation it \
+                     is measured against gives way (above)",
+                    fine_pct(r.subspace_error)
+                )
+            } else if dynamics_drift && r.restart.is_some() {
                 format!(
                     "its subspace holds the test trajectory to {} %, so the trajectory drifts \
                      away (below)",
@@ -945,6 +962,27 @@ mod tests {
             "{}",
             reduced[0]
         );
+        // A method that drifts from a reference that gives way is sent to that warning, not
+        // told to grow its subspace; from a firm reference it is.
+        let drifting = row(Method::NeuralCubature, 0.4, 0.01);
+        assert!(reference_gives_way(&[full(0.2, 0.39, 0)]));
+        assert!(!reference_gives_way(&[full(1e-4, 0.02, 0)]));
+        let said = |reference| {
+            assess(&[reference, drifting.clone()])
+                .untrusted
+                .into_iter()
+                .find(|w| w.starts_with("neural-cubature: 40 % from the full trajectory"))
+                .unwrap_or_default()
+        };
+        let collapsed = said(full(0.2, 0.39, 0));
+        assert!(
+            collapsed.ends_with(
+                "its subspace holds the test trajectory to 1.0 %, and the full simulation it \
+                 is measured against gives way (above)"
+            ),
+            "{collapsed}"
+        );
+        assert!(said(full(1e-4, 0.02, 0)).contains("`[autoencoder] latent_dim`"));
     }
 
     /// When every reduced method is slower than full space, a caveat says so with the sizes;
@@ -1174,9 +1212,15 @@ mod tests {
         );
         assert!(!w[0].contains("if the fall is meant"), "{}", w[0]);
         assert!(!w[0].contains("drift"), "{}", w[0]);
-        // Where the collapse warning says it, only the drift is; one crushed sliver in a few
-        // frames is not a body giving way.
-        assert!(said(&[inverting(0.02)]).is_empty());
+        // Where the collapse warning says the inversions, the fall is said without them (no
+        // method is restarted on such a reference, so there is no drift to name); one crushed
+        // sliver in a few frames is not a body giving way.
+        let w = said(&[inverting(0.02)]);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("its own weight carries it"), "{}", w[0]);
+        assert!(w[0].contains("`[material] youngs_modulus` of"), "{}", w[0]);
+        assert!(!w[0].contains("it inverts elements"), "{}", w[0]);
+        assert!(!w[0].contains("drift"), "{}", w[0]);
         let sliver = MethodReport {
             compression: Some(crate::run::Compression {
                 inverted_frames: 3,
