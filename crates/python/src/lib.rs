@@ -18,6 +18,7 @@ mod interrupt;
 mod model;
 mod pipeline;
 mod simulator;
+mod warnings;
 
 use pyo3::prelude::*;
 
@@ -39,6 +40,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     for class in errors::Class::ALL {
         m.add(class.name(), class.type_object(py)?)?;
     }
+    m.add("PipelineWarning", warnings::class(py)?)?;
+    warnings::install();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MODEL_FORMAT_VERSION", latent_sim::model::FORMAT_VERSION)?;
     m.add("OUTSIDE_TRAINING", latent_sim::coverage::OUTSIDE_TRAINING)?;

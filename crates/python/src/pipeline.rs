@@ -263,57 +263,131 @@ impl Report {
     }
 }
 
-/// Calls the Python `on_stage` callback (if any) after each stage, from the thread running the
-/// pipeline; the callback's first exception is kept, to be raised when the call returns, except
-/// a `KeyboardInterrupt`, which stops the call as Ctrl-C does ([`Interrupt`]).
-struct StageCallback<'c> {
-    callback: Option<&'c Py<PyAny>>,
+/// The Python callbacks of a pipeline call, from the thread running the pipeline: `on_stage`
+/// after each stage, and `on_progress` with the stage computing (or the method running), how
+/// far it got and of how much, on its first report and then at most every
+/// [`PROGRESS_EVERY`]. Every report also checks for Ctrl-C ([`Interrupt`]). A callback's first
+/// exception is kept, to be raised when the call returns, except a `KeyboardInterrupt`, which
+/// stops the call as Ctrl-C does.
+struct Callbacks<'c> {
+    on_stage: Option<&'c Py<PyAny>>,
+    on_progress: Option<&'c Py<PyAny>>,
     failed: &'c std::sync::Mutex<Option<PyErr>>,
     interrupt: &'c Interrupt,
+    /// The stages computing, innermost last (a stage computes the earlier ones it needs), and
+    /// what `on_progress` was last told and when.
+    state: std::sync::Mutex<ProgressState>,
 }
 
-impl<'c> StageCallback<'c> {
+/// How often `on_progress` hears of the same stage or method at most.
+const PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(1);
+
+#[derive(Default)]
+struct ProgressState {
+    computing: Vec<pipeline::stage::Stage>,
+    said: Option<(String, std::time::Instant)>,
+}
+
+impl<'c> Callbacks<'c> {
     fn new(
         py: Python<'_>,
-        callback: Option<&'c Py<PyAny>>,
+        on_stage: Option<&'c Py<PyAny>>,
+        on_progress: Option<&'c Py<PyAny>>,
         failed: &'c std::sync::Mutex<Option<PyErr>>,
         interrupt: &'c Interrupt,
     ) -> PyResult<Self> {
-        if let Some(c) = callback
-            && !c.bind(py).is_callable()
-        {
-            return Err(Class::InvalidArgument.err("on_stage must be callable"));
+        for (name, c) in [("on_stage", on_stage), ("on_progress", on_progress)] {
+            if let Some(c) = c
+                && !c.bind(py).is_callable()
+            {
+                return Err(Class::InvalidArgument.err(format!("{name} must be callable")));
+            }
         }
         Ok(Self {
-            callback,
+            on_stage,
+            on_progress,
             failed,
             interrupt,
+            state: std::sync::Mutex::new(ProgressState::default()),
         })
     }
 
+    fn state(&self) -> std::sync::MutexGuard<'_, ProgressState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Calls `callback` with `args`; keeps its exception, or stops the call on a
+    /// `KeyboardInterrupt`.
+    fn call<A: for<'py> pyo3::call::PyCallArgs<'py>>(&self, callback: &Py<PyAny>, args: A) {
+        let raised = Python::attach(|py| {
+            let e = callback.call1(py, args).err()?;
+            if e.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py) {
+                return Some(e);
+            }
+            if let Ok(mut slot) = self.failed.lock() {
+                slot.get_or_insert(e);
+            }
+            None
+        });
+        if let Some(e) = raised {
+            self.interrupt.stop(e);
+        }
+    }
+
     fn install(&'c self, p: &mut Pipeline<'c>) {
-        let (callback, failed, interrupt) = (self.callback, self.failed, self.interrupt);
+        p.on_stage_start = Box::new(move |stage| self.state().computing.push(stage));
         p.on_stage = Box::new(move |o: &StageOutcome| {
-            if let Some(callback) = callback {
-                let raised = Python::attach(|py| {
-                    let e = callback.call1(py, (Stage::from(o),)).err()?;
-                    if e.is_instance_of::<pyo3::exceptions::PyKeyboardInterrupt>(py) {
-                        return Some(e);
-                    }
-                    if let Ok(mut slot) = failed.lock() {
-                        slot.get_or_insert(e);
-                    }
-                    None
-                });
-                if let Some(e) = raised {
-                    interrupt.stop(e);
+            {
+                let mut state = self.state();
+                if let Some(i) = state.computing.iter().rposition(|s| *s == o.stage) {
+                    state.computing.remove(i);
                 }
             }
-            interrupt.check();
+            if let Some(callback) = self.on_stage {
+                self.call(callback, (Stage::from(o),));
+            }
+            self.interrupt.check();
         });
     }
 
-    /// The callback's exception, if it raised one.
+    /// Stops the call here when Ctrl-C (or a callback's `KeyboardInterrupt`) asked.
+    fn check(&self) {
+        self.interrupt.check();
+    }
+
+    /// A progress report of the innermost stage computing.
+    fn stage(&self, done: usize, total: usize) {
+        let name = self.state().computing.last().map(|s| s.name().to_string());
+        match name {
+            Some(name) => self.progress(&name, done, total),
+            None => self.interrupt.check(),
+        }
+    }
+
+    /// A progress report of `what` (a stage, or a method's run), passed on to `on_progress`
+    /// on its first report and then at most every [`PROGRESS_EVERY`].
+    fn progress(&self, what: &str, done: usize, total: usize) {
+        if let Some(callback) = self.on_progress {
+            let due = {
+                let mut state = self.state();
+                let now = std::time::Instant::now();
+                let due = match &state.said {
+                    Some((last, at)) => last != what || now - *at >= PROGRESS_EVERY,
+                    None => true,
+                };
+                if due {
+                    state.said = Some((what.to_string(), now));
+                }
+                due
+            };
+            if due {
+                self.call(callback, (what, done, total));
+            }
+        }
+        self.interrupt.check();
+    }
+
+    /// The callbacks' first exception, if one raised.
     fn raised(self) -> PyResult<()> {
         match self.failed.lock().ok().and_then(|mut slot| slot.take()) {
             Some(e) => Err(e),
@@ -355,30 +429,42 @@ fn folders(scene: &Scene, out: Option<PathBuf>, cache: Option<PathBuf>) -> (Path
     (out, cache)
 }
 
+/// A pipeline call's Python callbacks, as its functions take them.
+struct Hooks {
+    on_stage: Option<Py<PyAny>>,
+    on_progress: Option<Py<PyAny>>,
+}
+
 /// Runs `body` without the GIL, stopped by Ctrl-C ([`Interrupt`]), on the pipeline of `scene`:
-/// the scene read, its folders and `on_stage` installed. `body` gets the scene, the pipeline,
-/// the output folder and the interrupt its progress reports check; the callback's exception, if
-/// it raised one, is raised when `body` is done.
+/// the scene read, its folders and the callbacks installed. `body` gets the scene, the
+/// pipeline, the output folder and the [`Callbacks`] its progress reports go to; a callback's
+/// exception, if one raised, is raised when `body` is done.
 fn with_pipeline<T: Send>(
     py: Python<'_>,
     scene: Option<PathBuf>,
     out_dir: Option<PathBuf>,
     cache_dir: Option<PathBuf>,
-    on_stage: Option<Py<PyAny>>,
-    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf, &Interrupt) -> Result<T, Failure> + Send,
+    hooks: Hooks,
+    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf, &Callbacks<'_>) -> Result<T, Failure> + Send,
 ) -> PyResult<T> {
     let failed = std::sync::Mutex::new(None);
     let interrupt = Interrupt::new();
-    let callback = StageCallback::new(py, on_stage.as_ref(), &failed, &interrupt)?;
+    let callbacks = Callbacks::new(
+        py,
+        hooks.on_stage.as_ref(),
+        hooks.on_progress.as_ref(),
+        &failed,
+        &interrupt,
+    )?;
     let value = interrupt.run(py, || -> Result<T, Failure> {
         let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
         let (out, cache) = folders(&scene, out_dir, cache_dir);
         let mut p = pipeline_of(&scene, &cache)?;
-        callback.install(&mut p);
-        body(&scene, &mut p, out, &interrupt)
+        callbacks.install(&mut p);
+        body(&scene, &mut p, out, &callbacks)
     })?;
     let value = value.map_err(Failure::into_py)?;
-    callback.raised()?;
+    callbacks.raised()?;
     Ok(value)
 }
 
@@ -389,20 +475,14 @@ fn in_run_pipeline<T: Send>(
     scene: Option<PathBuf>,
     out_dir: Option<PathBuf>,
     cache_dir: Option<PathBuf>,
-    on_stage: Option<Py<PyAny>>,
-    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf, &Interrupt) -> Result<T, Failure> + Send,
+    hooks: Hooks,
+    body: impl FnOnce(&Scene, &mut Pipeline<'_>, PathBuf, &Callbacks<'_>) -> Result<T, Failure> + Send,
 ) -> PyResult<T> {
-    with_pipeline(
-        py,
-        scene,
-        out_dir,
-        cache_dir,
-        on_stage,
-        |scene, p, out, stop| {
-            p.pca(&|_, _| stop.check()).map_err(Failure::Run)?;
-            body(scene, p, out, stop)
-        },
-    )
+    with_pipeline(py, scene, out_dir, cache_dir, hooks, |scene, p, out, cb| {
+        p.pca(&|done, total| cb.stage(done, total))
+            .map_err(Failure::Run)?;
+        body(scene, p, out, cb)
+    })
 }
 
 /// Runs the pipeline on a scene and every requested method on one held-out test trajectory, as
@@ -417,7 +497,12 @@ fn in_run_pipeline<T: Send>(
 /// ``trajectory``: the held-out test trajectory (any index: trajectory i depends only on the
 /// test's seed and i). ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
-/// raised when the run returns, except ``KeyboardInterrupt``, which stops it). Runs without the
+/// raised when the run returns, except ``KeyboardInterrupt``, which stops it).
+/// ``on_progress``: called with the stage computing or the method running, how far it got
+/// and of how much (``("snapshots", 3, 32)``), on its first report and then at most once a
+/// second; its exceptions as ``on_stage``'s. What the library warns of while it works (a
+/// body that gives way under its own weight, a mesh not in metres) arrives as a
+/// ``PipelineWarning`` through ``warnings.warn``. Runs without the
 /// GIL, on a thread of its own: Ctrl-C (``KeyboardInterrupt``) in a call from the main thread
 /// stops it at its next progress report.
 ///
@@ -425,7 +510,8 @@ fn in_run_pipeline<T: Send>(
 /// ``SolverError`` when a stage's solve fails, ``InvalidArgumentError`` for an unknown method
 /// and ``PipelineError`` otherwise.
 #[pyfunction]
-#[pyo3(signature = (scene = None, *, out_dir = None, cache_dir = None, methods = None, trajectory = 0, every = 0, on_stage = None))]
+#[pyo3(signature = (scene = None, *, out_dir = None, cache_dir = None, methods = None, trajectory = 0, every = 0, on_stage = None, on_progress = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn run_pipeline(
     py: Python<'_>,
     scene: Option<PathBuf>,
@@ -435,6 +521,7 @@ pub fn run_pipeline(
     trajectory: i64,
     every: i64,
     on_stage: Option<Py<PyAny>>,
+    on_progress: Option<Py<PyAny>>,
 ) -> PyResult<Report> {
     let methods = self::methods(methods)?;
     let (trajectory, every) = (
@@ -446,17 +533,24 @@ pub fn run_pipeline(
         scene,
         out_dir,
         cache_dir,
-        on_stage,
-        |scene, p, out, stop| {
+        Hooks {
+            on_stage,
+            on_progress,
+        },
+        |scene, p, out, cb| {
             let opts = RunOptions {
                 out: out.clone(),
                 every,
                 methods: methods.clone(),
                 trajectory,
             };
-            let rows =
-                pipeline::run::run(p, &opts, &|_, _| stop.check(), &mut |_, _, _| stop.check())
-                    .map_err(Failure::Run)?;
+            let rows = pipeline::run::run(
+                p,
+                &opts,
+                &|done, total| cb.stage(done, total),
+                &mut |what, done, total| cb.progress(what, done, total),
+            )
+            .map_err(Failure::Run)?;
             Ok(Report::of(&scene.name, &rows, &p.outcomes, out, &methods))
         },
     )
@@ -472,7 +566,7 @@ pub fn run_pipeline(
 /// (after the first, its reference). Other arguments and errors as ``run_pipeline``;
 /// ``count`` below 1 or above 64 raises ``InvalidArgumentError``.
 #[pyfunction]
-#[pyo3(signature = (scene = None, count = 4, *, out_dir = None, cache_dir = None, methods = None, every = 0, on_stage = None))]
+#[pyo3(signature = (scene = None, count = 4, *, out_dir = None, cache_dir = None, methods = None, every = 0, on_stage = None, on_progress = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn run_trajectories(
     py: Python<'_>,
@@ -483,6 +577,7 @@ pub fn run_trajectories(
     methods: Option<Vec<String>>,
     every: i64,
     on_stage: Option<Py<PyAny>>,
+    on_progress: Option<Py<PyAny>>,
 ) -> PyResult<Vec<Report>> {
     let every = non_negative("every", every)?;
     let count = usize::try_from(count)
@@ -499,9 +594,12 @@ pub fn run_trajectories(
         scene,
         out_dir,
         cache_dir,
-        on_stage,
-        |scene, p, out, stop| {
-            let quiet = |_: usize, _: usize| stop.check();
+        Hooks {
+            on_stage,
+            on_progress,
+        },
+        |scene, p, out, cb| {
+            let stage = |done: usize, total: usize| cb.stage(done, total);
             let opts = RunOptions {
                 out: out.clone(),
                 every,
@@ -516,9 +614,9 @@ pub fn run_trajectories(
                     &opts,
                     &mut runs,
                     i + 1,
-                    &quiet,
-                    &mut |_| stop.check(),
-                    &mut |_, _, _| stop.check(),
+                    &stage,
+                    &mut |_| cb.check(),
+                    &mut |what, done, total| cb.progress(what, done, total),
                 )
                 .map_err(Failure::Run)?;
                 reports.push(Report::of(
@@ -542,13 +640,14 @@ pub fn run_trajectories(
 /// method (``pca``, ``pca-cubature``, ``neural``, ``neural-cubature``). ``path``: default
 /// ``out/<scene name>/<method>.ldm``; ``cache_dir``: default ``out/<scene name>/cache``.
 /// ``all_rows``: keep every vertex's basis rows (so ``Simulator.positions`` can read the whole
-/// mesh) rather than only those in use. ``on_stage`` as for ``run_pipeline``. Runs without the
+/// mesh) rather than only those in use. ``on_stage`` and ``on_progress`` as for ``run_pipeline``. Runs without the
 /// GIL; Ctrl-C stops it as it stops ``run_pipeline``.
 ///
 /// Raises as ``run_pipeline``, ``InvalidArgumentError`` for a full-space method, and
 /// ``ModelFileError`` when the file cannot be written.
 #[pyfunction]
-#[pyo3(signature = (scene = None, method = "neural-cubature", *, path = None, cache_dir = None, all_rows = false, on_stage = None))]
+#[pyo3(signature = (scene = None, method = "neural-cubature", *, path = None, cache_dir = None, all_rows = false, on_stage = None, on_progress = None))]
+#[allow(clippy::too_many_arguments)]
 pub fn export_model(
     py: Python<'_>,
     scene: Option<PathBuf>,
@@ -557,6 +656,7 @@ pub fn export_model(
     cache_dir: Option<PathBuf>,
     all_rows: bool,
     on_stage: Option<Py<PyAny>>,
+    on_progress: Option<Py<PyAny>>,
 ) -> PyResult<Model> {
     let method = self::method(method)?;
     if method.is_full() {
@@ -567,8 +667,12 @@ pub fn export_model(
         )));
     }
     let rows = if all_rows { Rows::All } else { Rows::Used };
-    let (model, path) = with_pipeline(py, scene, None, cache_dir, on_stage, |_, p, out, stop| {
-        let progress = |_: usize, _: usize| stop.check();
+    let hooks = Hooks {
+        on_stage,
+        on_progress,
+    };
+    let (model, path) = with_pipeline(py, scene, None, cache_dir, hooks, |_, p, out, cb| {
+        let progress = |done: usize, total: usize| cb.stage(done, total);
         let model =
             pipeline::export::scene_model(p, method, rows, &progress).map_err(Failure::Run)?;
         let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));

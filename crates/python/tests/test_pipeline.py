@@ -103,6 +103,38 @@ def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.
         raise AssertionError("a callback that is not callable was accepted")
 
 
+def test_on_progress_hears_the_stages_computing_and_the_methods_running(tmp_path: pathlib.Path) -> None:
+    """on_progress gets (what, done, total) from the stages as they compute and from each
+    method's run, its first report at once; a stage loaded from the cache reports nothing."""
+    heard: list[tuple[str, int, int]] = []
+    cache = tmp_path / "cache"
+    ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=cache, methods=["full", "pca"],
+                    on_progress=lambda what, done, total: heard.append((what, done, total)))
+    names = {what for what, _, _ in heard}
+    assert {"snapshots", "pca"} <= names, heard
+    assert all(isinstance(d, int) and isinstance(t, int) and 0 <= d <= max(t, d) for _, d, t in heard)
+    assert any(t == 4 for what, _, t in heard if what == "snapshots"), heard  # its 4 schedules
+    heard.clear()
+    ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=cache, methods=["pca"],
+                    on_progress=lambda what, done, total: heard.append((what, done, total)))
+    assert "snapshots" not in {what for what, _, _ in heard}, heard
+    with pytest.raises(ld.InvalidArgumentError, match="on_progress must be callable"):
+        ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=cache, methods=["pca"], on_progress=3)
+
+
+def test_what_the_library_warns_of_arrives_as_a_python_warning(tmp_path: pathlib.Path) -> None:
+    """A WARN line of cargo xtask (here: a density no solid has) is a PipelineWarning, a
+    UserWarning the warnings filters see."""
+    text = TINY.read_text()
+    assert "density = 1000.0" in text
+    scene = tmp_path / "light.toml"
+    scene.write_text(text.replace("density = 1000.0", "density = 2.0"))
+    assert issubclass(ld.PipelineWarning, UserWarning)
+    with pytest.warns(ld.PipelineWarning, match="density") as caught:
+        ld.export_model(scene, "pca", path=tmp_path / "a.ldm", cache_dir=tmp_path / "cache")
+    assert any(str(scene.name) in str(w.message) for w in caught), [str(w.message) for w in caught]
+
+
 def test_ctrl_c_stops_a_run_at_its_next_progress_report(tmp_path: pathlib.Path) -> None:
     """Ctrl-C while the pipeline runs without the GIL raises KeyboardInterrupt at the pipeline's
     next progress report (here the next of many short training schedules), not when the stage

@@ -58,6 +58,9 @@ class SolverError(LatentDynamicsError):
 class PipelineError(LatentDynamicsError):
     """A pipeline run or export that failed (a stage's solve included)."""
 
+class PipelineWarning(UserWarning):
+    """What the library warns of while it works (cargo xtask's WARN lines), via warnings.warn."""
+
 class HandleError(LatentDynamicsError, LookupError):
     """A handle released already or of another simulator; no surface vertex within reach."""
 
@@ -362,6 +365,7 @@ def run_pipeline(
     trajectory: int = 0,
     every: int = 0,
     on_stage: Optional[Callable[[Stage], object]] = None,
+    on_progress: Optional[Callable[[str, int, int], object]] = None,
 ) -> Report:
     """cargo xtask run: the cached stages, then each method on a held-out test trajectory."""
 
@@ -374,6 +378,7 @@ def run_trajectories(
     methods: Optional[Sequence[str]] = None,
     every: int = 0,
     on_stage: Optional[Callable[[Stage], object]] = None,
+    on_progress: Optional[Callable[[str, int, int], object]] = None,
 ) -> list[Report]:
     """cargo xtask run --trajectories count: one Report per held-out test trajectory 0..count."""
 
@@ -385,5 +390,6 @@ def export_model(
     cache_dir: Optional[_Path] = None,
     all_rows: bool = False,
     on_stage: Optional[Callable[[Stage], object]] = None,
+    on_progress: Optional[Callable[[str, int, int], object]] = None,
 ) -> Model:
     """cargo xtask export: a reduced method's model as one file, returned loaded."""
