@@ -129,10 +129,16 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             let (Some(settings), Some(default_start)) = (settings, default_start) else {
                 bail!("--methods names no reduced method; the viewer needs one to build on");
             };
-            println!(
-                "{}",
-                run_accuracy(&cx.out(&scene, &["report.json"]), &scene)
-            );
+            // `run --cache C --out O` writes O/report.json; the cache's default is O/cache, so
+            // a report beside a cache given is that run's.
+            let report = args
+                .cache
+                .as_deref()
+                .and_then(std::path::Path::parent)
+                .map(|dir| dir.join("report.json"))
+                .filter(|r| r.is_file())
+                .unwrap_or_else(|| cx.out(&scene, &["report.json"]));
+            println!("{}", run_accuracy(&report, &scene));
             (settings, methods, default_start)
         }
     };
@@ -226,7 +232,7 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
 }
 
 /// What the last `run` of the scene measured, from its `report.json` (written beside the
-/// stages' default cache), or how to measure it: a person drags a model without the table
+/// stages' default cache, or beside the cache `--cache` names), or how to measure it: a person drags a model without the table
 /// otherwise.
 fn run_accuracy(report: &std::path::Path, scene: &pipeline::scene::Scene) -> String {
     // The rows are `methods` since report version 1; a bare list before.

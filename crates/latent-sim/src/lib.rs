@@ -164,7 +164,9 @@ pub enum ReducedError {
     /// exist).
     #[error(
         "vertex {vertex} has no basis rows in this model (it holds those of the surface and of the \
-         elements it evaluates; export with all rows to reach the others)"
+         elements it evaluates, as an export keeps by default): read the surface's positions, or \
+         export with every vertex's rows (`cargo xtask export --all-rows`, Python's \
+         `export_model(..., all_rows=True)`) to reach the others"
     )]
     NoBasisRows { vertex: usize },
     /// A force index past the forces there are.

@@ -192,3 +192,6 @@ def test_a_grab_of_pinned_vertices_only_is_refused(sim: ld.Simulator) -> None:
     clamped = [int(v) for v in sim.surface_vertices if rest[v, 0] < 1e-9]
     with pytest.raises(ld.InvalidArgumentError, match="all pinned"):
         sim.grab(clamped[:3], 100.0)
+    # A point load on them is refused in its own words, not a grab's.
+    with pytest.raises(ld.InvalidArgumentError, match="a spring or a load on them moves nothing"):
+        sim.add_force("point", clamped[:3], [(0.0, 0.0, 0.0, 1.0)])

@@ -57,7 +57,11 @@ impl MeshConfig {
                 if !path.is_file() {
                     errors.push(FemError::InvalidConfig {
                         field: "mesh.path".into(),
-                        reason: format!("no mesh file at {}", path.display()),
+                        reason: format!(
+                            "no mesh file at {} (a relative path is taken from the scene \
+                             file's folder)",
+                            path.display()
+                        ),
                     });
                 } else if let Err(e) = crate::io::check_format(&path) {
                     // Said beside the scene's other errors, not after them are mended.

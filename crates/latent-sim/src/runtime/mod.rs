@@ -110,10 +110,10 @@ pub enum RuntimeError {
     /// A vertex index past the mesh's vertices.
     #[error("vertex {vertex} does not exist (the mesh has {count})")]
     NoSuchVertex { vertex: usize, count: usize },
-    /// A grab of pinned vertices only.
+    /// A grab or a force on pinned vertices only.
     #[error(
-        "the vertices grabbed ({count}) are all pinned: a spring on them moves nothing; grab \
-         free vertices"
+        "the vertices given ({count}) are all pinned: a spring or a load on them moves \
+         nothing; grab free vertices or load them"
     )]
     AllPinned { count: usize },
     /// A handle on no vertex.
