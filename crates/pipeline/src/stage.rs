@@ -93,7 +93,9 @@ impl Stage {
             // 12 (and the reference's 11): L-BFGS's current-state factor turned with the body
             //     between refactorisations, and an aged one cut short after its fresh count plus
             //     a refactorisation's cost (iterates within tolerance).
-            Stage::Snapshots | Stage::SnapshotsShard => 12,
+            // 13: the training patches placed closer together near the pins
+            //     (`fem_core::snapshots::NEAR_PINS`).
+            Stage::Snapshots | Stage::SnapshotsShard => 13,
             // 9: a solve that fails partway keeps the frames before it (`stopped`).
             Stage::Reference => 11,
             // 2: the held-out error along the greedy path is stored with the rule.
@@ -187,8 +189,8 @@ mod tests {
         assert_eq!(
             found,
             [
-                ("snapshots", 12),
-                ("snapshots-shard", 12),
+                ("snapshots", 13),
+                ("snapshots-shard", 13),
                 ("pca", 4),
                 ("cubature", 6),
                 ("cubature-neural", 8),

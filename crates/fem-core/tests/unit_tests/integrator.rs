@@ -423,6 +423,48 @@ fn a_step_where_newton_crawls_is_redone_with_lbfgs() {
     );
 }
 
+/// Spread training patches lie closer together near the pins, where a grab's response is
+/// local: of 32 on a bar clamped at one end, more grab its fifth next to the clamp than a fifth
+/// as long out along it.
+#[test]
+fn spread_patches_are_denser_near_the_pins() {
+    use fem_core::snapshots::{PatchPlacement, ScheduleConfig};
+    let mesh = box_mesh(&BoxSpec {
+        size: [1.0, 0.1, 0.1],
+        cells: [40, 3, 3],
+        ..Default::default()
+    })
+    .unwrap();
+    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
+        .select(&mesh, "pin")
+        .unwrap();
+    let m = FullSpaceModel::new(
+        mesh,
+        &MaterialConfig::default(),
+        pinned,
+        Vec3::zeros(),
+        vec![],
+    )
+    .unwrap();
+    let family = ScheduleConfig {
+        patches: PatchPlacement::Spread,
+        ..ScheduleConfig::training()
+    };
+    let mut xs: Vec<f64> = (0..32)
+        .map(|i| {
+            let p = family.patch(&m, i).unwrap();
+            p.iter().map(|&v| m.mesh.vertices[v].x).sum::<f64>() / p.len() as f64
+        })
+        .collect();
+    xs.sort_by(f64::total_cmp);
+    let within = |a: f64, b: f64| xs.iter().filter(|&&x| a <= x && x < b).count();
+    let (near, out) = (within(0.0, 0.2), within(0.6, 0.8));
+    assert!(
+        near > out,
+        "{near} patches next to the clamp, {out} out along the bar: {xs:?}"
+    );
+}
+
 /// Spread training patches cover the surface: on a long bar clamped at one end, the centres of
 /// 8 schedules' patches are further apart than 8 random draws', pairwise and from the far end,
 /// and the draws of everything else (kind, stiffness, direction) are the same.
