@@ -136,7 +136,7 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 .as_deref()
                 .and_then(std::path::Path::parent)
                 .map(|dir| dir.join("report.json"))
-                .filter(|r| r.is_file())
+                .filter(|r| report_scene(r).as_deref() == Some(scene.name.as_str()))
                 .unwrap_or_else(|| cx.out(&scene, &["report.json"]));
             println!("{}", run_accuracy(&report, &scene));
             (settings, methods, default_start)
@@ -229,6 +229,13 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
                          each method against full space and says what not to trust"
             .to_string(),
     }
+}
+
+/// The scene a `report.json` is of (its `scene` field), if it reads.
+fn report_scene(report: &std::path::Path) -> Option<String> {
+    let text = std::fs::read_to_string(report).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v.get("scene")?.as_str().map(str::to_string)
 }
 
 /// What the last `run` of the scene measured, from its `report.json` (written beside the

@@ -39,7 +39,8 @@ fn judged(r: &MethodReport) -> (f64, &'static str) {
 /// Whether a reduced method drifts from the full trajectory: more than
 /// [`UNCOVERED_SUBSPACE_ERROR`] off (on average or space–time) while its subspace holds the
 /// test four times better. Then `run` starts the full simulation from the method's own state
-/// part way through ([`crate::run::restart`]), and [`assess`] says how much of the drift that
+/// part way through ([`crate::run::restart`]; not where the reference itself gives way,
+/// [`reference_gives_way`]), and [`assess`] says how much of the drift that
 /// explains.
 pub fn drifting(r: &MethodReport) -> bool {
     let error = judged_error(r);

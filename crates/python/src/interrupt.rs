@@ -20,9 +20,6 @@ use pyo3::prelude::*;
 /// and the worker's next progress report.
 const CHECK_EVERY: Duration = Duration::from_millis(50);
 
-/// The worker thread's name (its warnings name no Python frame: [`crate::warnings`]).
-pub(crate) const WORKER_NAME: &str = "latent-dynamics pipeline";
-
 /// The worker's stack, as large as a main thread's (spawned threads get 2 MiB by default).
 const WORKER_STACK: usize = 8 << 20;
 
@@ -78,7 +75,7 @@ impl Interrupt {
         let main = std::thread::current();
         let outcome = std::thread::scope(|s| {
             let worker = std::thread::Builder::new()
-                .name(WORKER_NAME.into())
+                .name("latent-dynamics pipeline".into())
                 .stack_size(WORKER_STACK)
                 .spawn_scoped(s, move || {
                     let outcome = catch_unwind(AssertUnwindSafe(work));

@@ -364,17 +364,26 @@ impl<'c> Callbacks<'c> {
         }
     }
 
+    /// A method's run reporting its frames: `on_progress` hears it as `run <method>`, apart
+    /// from the stage of the same name (`pca`).
+    fn method(&self, label: &str, done: usize, total: usize) {
+        self.progress(&format!("run {label}"), done, total);
+    }
+
     /// A progress report of `what` (a stage, or a method's run), passed on to `on_progress`
-    /// on its first report and then at most every [`PROGRESS_EVERY`].
+    /// on its first and last report (done 0, done = total) and a report of something else,
+    /// and otherwise at most every [`PROGRESS_EVERY`].
     fn progress(&self, what: &str, done: usize, total: usize) {
         if let Some(callback) = self.on_progress {
             let due = {
                 let mut state = self.state();
                 let now = std::time::Instant::now();
-                let due = match &state.said {
-                    Some((last, at)) => last != what || now - *at >= PROGRESS_EVERY,
-                    None => true,
-                };
+                let due = done == 0
+                    || done >= total
+                    || match &state.said {
+                        Some((last, at)) => last != what || now - *at >= PROGRESS_EVERY,
+                        None => true,
+                    };
                 if due {
                     state.said = Some((what.to_string(), now));
                 }
@@ -457,6 +466,8 @@ fn with_pipeline<T: Send>(
         &interrupt,
     )?;
     let value = interrupt.run(py, || -> Result<T, Failure> {
+        // Each call says its warnings, even those an earlier call said.
+        pipeline::pipeline::forget_warnings();
         let scene = self::scene(scene.as_deref()).map_err(Failure::Scene)?;
         let (out, cache) = folders(&scene, out_dir, cache_dir);
         let mut p = pipeline_of(&scene, &cache)?;
@@ -498,9 +509,11 @@ fn in_run_pipeline<T: Send>(
 /// test's seed and i). ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
 /// raised when the run returns, except ``KeyboardInterrupt``, which stops it).
-/// ``on_progress``: called with the stage computing or the method running, how far it got
-/// and of how much (``("snapshots", 3, 32)``), on its first report and then at most once a
-/// second; its exceptions as ``on_stage``'s. What the library warns of while it works (a
+/// ``on_progress``: called with the stage computing (``("snapshots", 3, 32)``) or the method
+/// running (``("run neural-cubature", 40, 100)``), how far it got and of how much, on its first
+/// and last report and at most once a second between; one call at a time, from the
+/// pipeline's threads (a slow callback slows the run); its exceptions as ``on_stage``'s. What
+/// the library warns of while it works (a
 /// body that gives way under its own weight, a mesh not in metres) arrives as a
 /// ``PipelineWarning`` through ``warnings.warn``. Runs without the
 /// GIL, on a thread of its own: Ctrl-C (``KeyboardInterrupt``) in a call from the main thread
@@ -548,7 +561,7 @@ pub fn run_pipeline(
                 p,
                 &opts,
                 &|done, total| cb.stage(done, total),
-                &mut |what, done, total| cb.progress(what, done, total),
+                &mut |what, done, total| cb.method(what, done, total),
             )
             .map_err(Failure::Run)?;
             Ok(Report::of(&scene.name, &rows, &p.outcomes, out, &methods))
@@ -616,7 +629,7 @@ pub fn run_trajectories(
                     i + 1,
                     &stage,
                     &mut |_| cb.check(),
-                    &mut |what, done, total| cb.progress(what, done, total),
+                    &mut |what, done, total| cb.method(what, done, total),
                 )
                 .map_err(Failure::Run)?;
                 reports.push(Report::of(

@@ -59,12 +59,17 @@ impl<S: tracing::Subscriber> Layer<S> for ToPython {
             let end = e.nul_position();
             CString::new(&e.into_vec()[..end]).unwrap_or_default()
         });
-        // On the pipeline's own thread there is no Python frame to name ("sys:1" otherwise):
-        // the warning names the module instead. Elsewhere (a step) it names the caller's line.
-        let worker = std::thread::current().name() == Some(crate::interrupt::WORKER_NAME);
         Python::attach(|py| {
+            // On the pipeline's threads (its worker, the snapshots' pool) there is no Python
+            // frame to name ("sys:1" otherwise): the warning names the module instead. Where
+            // there is one (a step called from Python), it names the caller's line.
+            let framed = py
+                .import("sys")
+                .and_then(|sys| sys.getattr("_getframe"))
+                .and_then(|f| f.call1((0,)))
+                .is_ok();
             let warned = class(py).and_then(|c| {
-                if worker {
+                if !framed {
                     PyErr::warn_explicit(
                         py,
                         c.as_any(),

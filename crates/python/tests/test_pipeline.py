@@ -111,7 +111,10 @@ def test_on_progress_hears_the_stages_computing_and_the_methods_running(tmp_path
     ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=cache, methods=["full", "pca"],
                     on_progress=lambda what, done, total: heard.append((what, done, total)))
     names = {what for what, _, _ in heard}
-    assert {"snapshots", "pca"} <= names, heard
+    # `full` is the test's reference, a stage computed (and then cached) like the others.
+    assert {"snapshots", "reference", "run pca"} <= names, heard
+    # Each one's first and last report: a bar fed from it finishes.
+    assert ("snapshots", 4, 4) in heard and ("run pca", 12, 12) in heard, heard
     assert all(isinstance(d, int) and isinstance(t, int) and 0 <= d <= max(t, d) for _, d, t in heard)
     assert any(t == 4 for what, _, t in heard if what == "snapshots"), heard  # its 4 schedules
     heard.clear()

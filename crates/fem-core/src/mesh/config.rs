@@ -58,9 +58,13 @@ impl MeshConfig {
                     errors.push(FemError::InvalidConfig {
                         field: "mesh.path".into(),
                         reason: format!(
-                            "no mesh file at {} (a relative path is taken from the scene \
-                             file's folder)",
-                            path.display()
+                            "no mesh file at {}{}",
+                            path.display(),
+                            if self.path.as_ref().is_some_and(|p| p.is_relative()) {
+                                " (a relative path is taken from the scene file's folder)"
+                            } else {
+                                ""
+                            }
                         ),
                     });
                 } else if let Err(e) = crate::io::check_format(&path) {

@@ -237,7 +237,8 @@ fn vertex_set<B: Backend>(b: &B, vertices: &[usize]) -> Result<Vec<usize>, Runti
     Ok(set)
 }
 
-/// A grab of pinned vertices only would move nothing: refused, as a grab of no vertex is.
+/// A grab or a load of pinned vertices only would move nothing: refused, as one of no vertex
+/// is.
 fn not_all_pinned<B: Backend>(b: &B, set: &[usize]) -> Result<(), RuntimeError> {
     if set.iter().all(|v| b.pinned().binary_search(v).is_ok()) {
         return Err(RuntimeError::AllPinned { count: set.len() });

@@ -113,7 +113,7 @@ pub enum RuntimeError {
     /// A grab or a force on pinned vertices only.
     #[error(
         "the vertices given ({count}) are all pinned: a spring or a load on them moves \
-         nothing; grab free vertices or load them"
+         nothing; grab or load free vertices"
     )]
     AllPinned { count: usize },
     /// A handle on no vertex.

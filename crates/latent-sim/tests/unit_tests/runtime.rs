@@ -377,7 +377,7 @@ fn a_vertex_no_tet_uses_cannot_be_grabbed() {
     // beside a free vertex it is taken.
     match full.grab(&[0], 10.0) {
         Err(e @ RuntimeError::AllPinned { count: 1 }) => {
-            assert!(e.to_string().contains("grab free vertices"), "{e}")
+            assert!(e.to_string().contains("grab or load free vertices"), "{e}")
         }
         other => panic!("{other:?}"),
     }
