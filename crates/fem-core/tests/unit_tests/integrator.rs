@@ -423,29 +423,34 @@ fn a_step_where_newton_crawls_is_redone_with_lbfgs() {
     );
 }
 
-/// Spread training patches lie closer together near the pins, where a grab's response is
-/// local: of 32 on a bar clamped at one end, more grab its fifth next to the clamp than a fifth
-/// as long out along it.
-#[test]
-fn spread_patches_are_denser_near_the_pins() {
-    use fem_core::snapshots::{PatchPlacement, ScheduleConfig};
+/// A 1 m bar of `cells`, 10 cm square, clamped at x = 0, without gravity.
+fn clamped_bar(cells: [usize; 3]) -> FullSpaceModel {
     let mesh = box_mesh(&BoxSpec {
         size: [1.0, 0.1, 0.1],
-        cells: [40, 3, 3],
+        cells,
         ..Default::default()
     })
     .unwrap();
     let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
         .select(&mesh, "pin")
         .unwrap();
-    let m = FullSpaceModel::new(
+    FullSpaceModel::new(
         mesh,
         &MaterialConfig::default(),
         pinned,
         Vec3::zeros(),
         vec![],
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// Spread training patches lie closer together near the pins, where a grab's response is
+/// local: of 32 on a bar clamped at one end, more grab its fifth next to the clamp than a fifth
+/// as long out along it.
+#[test]
+fn spread_patches_are_denser_near_the_pins() {
+    use fem_core::snapshots::{PatchPlacement, ScheduleConfig};
+    let m = clamped_bar([40, 3, 3]);
     let family = ScheduleConfig {
         patches: PatchPlacement::Spread,
         ..ScheduleConfig::training()
@@ -471,23 +476,7 @@ fn spread_patches_are_denser_near_the_pins() {
 #[test]
 fn spread_patches_cover_the_surface_and_change_nothing_else() {
     use fem_core::snapshots::{PatchPlacement, ScheduleConfig, StiffnessProbe};
-    let mesh = box_mesh(&BoxSpec {
-        size: [1.0, 0.1, 0.1],
-        cells: [20, 2, 2],
-        ..Default::default()
-    })
-    .unwrap();
-    let pinned = VertexSelection::plane(Axis::X, Side::Min, None)
-        .select(&mesh, "pin")
-        .unwrap();
-    let m = FullSpaceModel::new(
-        mesh,
-        &MaterialConfig::default(),
-        pinned,
-        Vec3::zeros(),
-        vec![],
-    )
-    .unwrap();
+    let m = clamped_bar([20, 2, 2]);
     let h = 0.01;
     let probe = StiffnessProbe::new(&m, 0.6).unwrap();
     let centres = |patches| -> Vec<(Vec3, f64, usize)> {
