@@ -265,8 +265,8 @@ impl Report {
 
 /// The Python callbacks of a pipeline call, from the thread running the pipeline: `on_stage`
 /// after each stage, and `on_progress` with the stage computing (or the method running), how
-/// far it got and of how much, on its first report and then at most every
-/// [`PROGRESS_EVERY`]. Every report also checks for Ctrl-C ([`Interrupt`]). A callback's first
+/// far it got and of how much, on its first and last report and at most every
+/// [`PROGRESS_EVERY`] between. Every report also checks for Ctrl-C ([`Interrupt`]). A callback's first
 /// exception is kept, to be raised when the call returns, except a `KeyboardInterrupt`, which
 /// stops the call as Ctrl-C does.
 struct Callbacks<'c> {
