@@ -1091,7 +1091,7 @@ impl<'a> Pipeline<'a> {
     /// stage and method has run on it: a tire on its edge, in soft StVK, was told after
     /// 20 minutes.
     fn gives_way(c: &crate::run::Compression) -> Option<String> {
-        (c.squeezed_share >= crate::trust::COLLAPSED_SHARE).then(|| {
+        c.gives_way().then(|| {
             format!(
                 "under gravity alone, with no other load, the full simulation squeezes {:.1} % of \
                  the body's volume under half its rest volume by t = {:.2} s (elements inverted \

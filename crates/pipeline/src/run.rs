@@ -489,6 +489,12 @@ impl Compression {
     /// An element below this det F counts as squeezed.
     pub const SQUEEZED: f64 = 0.5;
 
+    /// Whether the trajectory gives way: [`crate::trust::COLLAPSED_SHARE`] of the body squeezed
+    /// under half its volume at some frame.
+    pub fn gives_way(&self) -> bool {
+        self.squeezed_share >= crate::trust::COLLAPSED_SHARE
+    }
+
     /// A principal stretch past this (four times an element's length along one direction) is
     /// past what the test's loads do to a body that carries them. Measured on the test drag:
     /// hung from one vertex, a bunny stretched 8.5× in its 1 s and a chain link 4.1×; pinned as

@@ -168,16 +168,14 @@ pub const RULE_CAVEAT_ERROR: f64 = 0.01;
 pub fn reference_gives_way(rows: &[MethodReport]) -> bool {
     rows.iter()
         .filter_map(|r| r.compression)
-        .any(|c| c.squeezed_share >= COLLAPSED_SHARE)
+        .any(|c| c.gives_way())
 }
 
 /// The warning of the row that carries the reference's compression (the `full` row, or the
 /// first row of a run without one) when the test trajectory squeezes a share of the body under
 /// half its volume.
 fn collapse_warning(r: &MethodReport) -> Option<String> {
-    let c = r
-        .compression
-        .filter(|c| c.squeezed_share >= COLLAPSED_SHARE)?;
+    let c = r.compression.filter(crate::run::Compression::gives_way)?;
     let inverted = if c.inverted_frames > 0 {
         format!(
             ", and elements are inverted in {} of its frames",
@@ -368,7 +366,7 @@ fn fall_warning(rows: &[MethodReport]) -> Option<String> {
         .map(|r| r.method.to_string())
         .collect();
     // Said by the collapse warning already where it squeezes enough of the body.
-    let collapsed = c.squeezed_share >= COLLAPSED_SHARE;
+    let collapsed = c.gives_way();
     let gives_way =
         !collapsed && c.inverted_frames as f64 >= GIVING_WAY_FRAMES * c.frames.max(1) as f64;
     let through = c.travel >= BEYOND_SWING * b.size;
@@ -680,6 +678,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
     // Methods whose trajectory left the training poses and still held, with the advice.
     let mut held_outside: Vec<(&MethodReport, String)> = Vec::new();
     let falling = carried_by_weight(rows).is_some();
+    let reference_collapsed = reference_gives_way(rows);
     for r in rows.iter().filter(|r| !r.method.is_full()) {
         let pct = |x: f64| 100.0 * x;
         if let Some(f) = &r.failure {
@@ -742,7 +741,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         }
         if r.mean_rel_error > UNTRUSTED_ERROR {
             let dynamics_drift = r.subspace_error <= r.mean_rel_error / 4.0;
-            let why = if dynamics_drift && reference_gives_way(rows) {
+            let why = if dynamics_drift && reference_collapsed {
                 format!(
                     "its subspace holds the test trajectory to {} %, and the full simulation it \
                      is measured against gives way (above)",

@@ -52,7 +52,7 @@ impl MeshConfig {
     /// reader takes, an invalid box.
     pub fn check(&self, base_dir: &Path, errors: &mut Vec<FemError>) {
         match (&self.path, &self.generate) {
-            (Some(_), None) => {
+            (Some(given), None) => {
                 let path = self.resolved_path(base_dir).expect("path is set");
                 if !path.is_file() {
                     errors.push(FemError::InvalidConfig {
@@ -60,7 +60,7 @@ impl MeshConfig {
                         reason: format!(
                             "no mesh file at {}{}",
                             path.display(),
-                            if self.path.as_ref().is_some_and(|p| p.is_relative()) {
+                            if given.is_relative() {
                                 " (a relative path is taken from the scene file's folder)"
                             } else {
                                 ""
