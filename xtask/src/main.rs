@@ -134,7 +134,8 @@ struct SimulateArgs {
     /// method` for the reduced methods (`full-lbfgs` and `full-newton` name theirs).
     #[arg(long, value_enum)]
     solver: Option<SolverArg>,
-    /// Output folder (default: out/SCENE/METHOD).
+    /// Output folder (default: out/SCENE/simulate/METHOD, apart from the frames `run` writes
+    /// in out/SCENE/METHOD).
     #[arg(long)]
     out: Option<PathBuf>,
 }
@@ -715,6 +716,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         generated,
         trajectories,
     } = args;
+    let given = meshes.is_some();
     let dir = meshes.unwrap_or_else(|| cx.root.join("../shared/meshes"));
     let mut files: Vec<SuiteMesh> = match pipeline::suite::meshes(&dir, max_vertices) {
         Ok(files) => files.into_iter().map(SuiteMesh::File).collect(),
@@ -722,6 +724,15 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         Err(e) if generated => {
             eprintln!("warning: {e:#}; running the generated meshes only");
             Vec::new()
+        }
+        // The default folder is the development checkout's shared/ beside the repository,
+        // which a user's clone does not have.
+        Err(e) if !given => {
+            return Err(e.context(
+                "with no `--meshes DIR`, the suite reads the meshes of ../shared/meshes beside \
+                 the repository: give your folder of meshes with `--meshes DIR`, or \
+                 `--generated` for the meshes generated in code",
+            ));
         }
         Err(e) => return Err(e),
     };
@@ -865,7 +876,7 @@ fn simulate(cx: &Context, args: SimulateArgs) -> Result<()> {
     let opts = SimulateOptions {
         method,
         trajectory: test.map(Trajectory::Test).unwrap_or(Trajectory::Scene),
-        out: output_folder(out.unwrap_or_else(|| cx.out(&scene, &[method.name()])))?,
+        out: output_folder(out.unwrap_or_else(|| cx.out(&scene, &["simulate", method.name()])))?,
         frames: frames.map(|f| f as usize),
         every,
         solver: solver.map(|s| match s {

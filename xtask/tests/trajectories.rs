@@ -226,3 +226,41 @@ fn bench_says_each_stage_once() {
     let unique: std::collections::HashSet<_> = artifacts.iter().collect();
     assert_eq!(unique.len(), artifacts.len(), "{text}");
 }
+
+/// `simulate` without `--out` writes under out/SCENE/simulate/METHOD, so the frames `run`
+/// wrote in out/SCENE/METHOD stay as they were (it used to write over them, and `--every 0`
+/// removed them).
+#[test]
+fn simulate_leaves_the_frames_of_run_alone() {
+    let dir = scratch_dir("xtask-simulate-default");
+    let name = format!("simulate-default-{}", std::process::id());
+    let scene = TINY.replace("name = \"tiny\"", &format!("name = \"{name}\""));
+    let out = pipeline::project_root().join("out").join(&name);
+    let run_series = out.join("pca").join("series.pvd");
+    let args: Vec<&OsStr> = ["--every", "1", "--methods", "full,pca"]
+        .iter()
+        .map(OsStr::new)
+        .collect();
+    let (ok, text) = xtask(&dir, &scene, "run", &args);
+    assert!(ok, "{text}");
+    let before = std::fs::read(&run_series).unwrap();
+    let args: Vec<&OsStr> = ["--method", "pca", "--frames", "3", "--every", "0"]
+        .iter()
+        .map(OsStr::new)
+        .collect();
+    let (ok, text) = xtask(&dir, &scene, "simulate", &args);
+    let own = out
+        .join("simulate")
+        .join("pca")
+        .join("summary.json")
+        .exists();
+    let after = std::fs::read(&run_series).ok();
+    std::fs::remove_dir_all(&out).unwrap();
+    assert!(ok, "{text}");
+    assert!(own, "no summary in out/SCENE/simulate/pca: {text}");
+    assert_eq!(
+        after.as_ref(),
+        Some(&before),
+        "run's frames changed: {text}"
+    );
+}
