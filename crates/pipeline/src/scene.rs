@@ -504,9 +504,18 @@ impl Scene {
                 })
             })
         };
-        wider.or_else(sphere).unwrap_or_else(|| {
+        let advice = wider.or_else(sphere).unwrap_or_else(|| {
             "a pin plane's larger `tolerance`, or a `box`, holds it fixed".to_string()
-        })
+        });
+        // A tester's mesh in millimetres read as metres was told of a 5 m tolerance before the
+        // warning of its size, and a 5 m tolerance once `[mesh] scale` was set holds everything.
+        match unit_hint((hi - lo).norm()) {
+            Some(_) => format!(
+                "{advice} (metres as the mesh is read now: once `[mesh] scale` is set, scale \
+                 that length with it)"
+            ),
+            None => advice,
+        }
     }
 
     /// When the pin planes hold more than [`MANY_PINNED`] of the body's `body` vertices
@@ -1064,6 +1073,18 @@ mod tests {
         );
         let all = scene.wider_pin(&mesh, &piece, &face);
         assert!(all.starts_with("a pin plane's larger `tolerance`"), "{all}");
+        assert!(!one.contains("`[mesh] scale`"), "{one}");
+        // The same bar 1,000 times larger (a file in millimetres read as metres): the length
+        // advised is said to scale with `[mesh] scale`.
+        let big = text.replace("size = [1.0, 0.2, 0.2]", "size = [1000.0, 200.0, 200.0]");
+        let scene_mm = Scene::from_str(&big, Path::new("."), "w.toml").unwrap();
+        let mesh_mm = scene_mm.build_model().unwrap().model.mesh;
+        let one_mm = scene_mm.wider_pin(&mesh_mm, &piece, &face[..1]);
+        assert!(
+            one_mm.starts_with("pin[0]'s plane with `tolerance = 2.000e1`")
+                && one_mm.ends_with("once `[mesh] scale` is set, scale that length with it)"),
+            "{one_mm}"
+        );
         // A sphere pin at one corner: the radius that takes in four vertices off one line (the
         // corner's three neighbours at 0.2, 0.2 and 0.25 m).
         let text = text.replace(
