@@ -1066,13 +1066,13 @@ impl<'a> Pipeline<'a> {
         let Some(c) = crate::run::Compression::of(&sim.model, &frames, scene.time.step) else {
             return Ok((None, None));
         };
-        let gives_way = Self::gives_way(&c);
+        let (lo, hi) = sim.model.mesh.bounding_box();
+        let gives_way = Self::gives_way(&c).or_else(|| Self::beyond_swing(&c, (hi - lo).norm()));
         if !later || settled || frames.len() < last {
             return Ok((None, gives_way));
         }
         // How far its weight carries it: a body meant to stand that falls over is told here, a
         // stage before `run`'s list says what would hold it up.
-        let (lo, hi) = sim.model.mesh.bounding_box();
         let why = format!(
             "every {}th starts from the body falling under gravity alone at {:.2} s, since it \
              still moves when they end (in {:.2} s under gravity alone it moves up to {:.0} % of \
@@ -1103,6 +1103,31 @@ impl<'a> Pipeline<'a> {
                 c.inverted_frames,
                 c.frames,
                 crate::trust::keeps_it_solid(c.inversion_safe)
+            )
+        })
+    }
+
+    /// What to say at once of a run under gravity alone that carries the body
+    /// [`crate::trust::BEYOND_SWING`] times its bounding-box diagonal (`size`) or further, as
+    /// `run` says of a test only after every stage: a tester's soft coil spring hung from its
+    /// top stretched to 4.5 times its size, said a minute later by the `snapshots` line's
+    /// figure alone and warned of at the end of `run`.
+    fn beyond_swing(c: &crate::run::Compression, size: f64) -> Option<String> {
+        (size > 0.0 && c.travel >= crate::trust::BEYOND_SWING * size).then(|| {
+            let units =
+                crate::scene::unit_hint(size).map_or(String::new(), |u| format!("{u}; else "));
+            format!(
+                "under gravity alone, with no other load, the full simulation moves the body up \
+                 to {:.3} m by t = {:.2} s, {:.0} % of its {:.3} m bounding-box diagonal: more \
+                 than {} times its size, beyond any swing about its pins, so it stretches that \
+                 far or passes through itself or its pins (the simulation has no contact), and \
+                 the training data and the test hold that motion; {units}a stiffer material \
+                 (`[material] youngs_modulus`) or pins that hold more of it keep it up",
+                c.travel,
+                c.travel_time,
+                100.0 * c.travel / size,
+                size,
+                crate::trust::BEYOND_SWING,
             )
         })
     }
@@ -2199,6 +2224,37 @@ mod tests {
         assert!(!later);
         let set = set.expect("said with the schedules' length set");
         assert!(set.contains("of its first 30 frames"), "{set}");
+    }
+
+    /// A soft rod hung from its top that its weight stretches past twice its size under
+    /// gravity alone is said by that run, before any stage; a firm one is not.
+    #[test]
+    fn a_body_its_weight_stretches_beyond_any_swing_is_said_at_once() {
+        let hung = |youngs: f64| {
+            let text = format!(
+                "name = \"rod\"\n[mesh]\ngenerate = {{ kind = \"box\", size = [0.02, 0.2, 0.02], \
+                 cells = [1, 6, 1] }}\n[material]\nmodel = \"stable-neo-hookean\"\n\
+                 youngs_modulus = {youngs}\npoisson_ratio = 0.45\n[[pin]]\nplane = {{ axis = \
+                 \"y\", side = \"max\" }}\n[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[time]\n\
+                 step = 0.01\n[solver]\nmethod = \"newton\"\n"
+            );
+            let scene = crate::scene::Scene::from_str(&text, std::path::Path::new("."), "rod")
+                .expect("a valid scene");
+            let cache = std::env::temp_dir().join(format!(
+                "latent-dynamics-beyond-swing-{}-{youngs}",
+                std::process::id()
+            ));
+            let p = Pipeline::new(&scene, &cache).unwrap();
+            let (_, said) = Pipeline::later_start(&scene, &p.model).unwrap();
+            std::fs::remove_dir_all(&cache).ok();
+            said
+        };
+        let soft = hung(30.0).expect("a rod at 30 Pa stretches far under its weight");
+        assert!(
+            soft.contains("beyond any swing about its pins") && soft.contains("youngs_modulus"),
+            "{soft}"
+        );
+        assert_eq!(hung(1.0e6), None);
     }
 
     /// The schedules run are those recorded whole and from rest, spread over the family: a
