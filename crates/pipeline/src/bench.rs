@@ -161,6 +161,8 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
     pca_dims.retain(|&k| k <= chosen_k);
     pca_dims.sort_unstable();
     pca_dims.dedup();
+    // The scene's own `pca-cubature` is the k sweep's row at its k unless the tolerances have it.
+    let own_k_swept = pca_dims.contains(&chosen_k);
     for k in pca_dims {
         let mut s = scene.clone();
         s.pca = pca::PcaConfig {
@@ -188,7 +190,16 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
         }
     }
     for &method in &[Method::PcaCubature, Method::NeuralCubature] {
-        for &tol in &tolerances {
+        let own = match method {
+            Method::NeuralCubature => scene.cubature.for_neural().tolerance,
+            _ => scene.cubature.tolerance,
+        };
+        // The scene's own tolerance with the scene's solver runs whatever `tolerances` says,
+        // as the partner of the Newton variant below (a tester's `--tolerances 0.05` left the
+        // Newton variant at 0.02 with nothing to compare it with).
+        let own_missing =
+            !tolerances.contains(&own) && !(method == Method::PcaCubature && own_k_swept);
+        for tol in tolerances.iter().copied().chain(own_missing.then_some(own)) {
             let mut s = scene.clone();
             s.cubature.tolerance = tol;
             s.cubature.neural_tolerance = None;
@@ -201,10 +212,6 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
         }
         // Newton in the latent space (d×d Gauss–Newton) against the default L-BFGS, at the
         // scene's own tolerance for the method's rule.
-        let own = match method {
-            Method::NeuralCubature => scene.cubature.for_neural().tolerance,
-            _ => scene.cubature.tolerance,
-        };
         v.push(Variant {
             method,
             label: format!("{} tol={own} newton", method.name()),
@@ -659,6 +666,27 @@ mod tests {
         assert_eq!(own_rows(&opts), 1, "as `pca-cubature k=10`");
         opts.tolerances = vec![0.1, own];
         assert_eq!(own_rows(&opts), 1, "as `pca-cubature tol={own}`");
+        // Neither the k sweep nor the tolerances at the scene's own: the own tolerance still
+        // runs with the scene's solver for both methods, beside its Newton variant.
+        opts.tolerances = vec![0.1];
+        opts.pca_dims = vec![4];
+        let own_neural = scene.cubature.for_neural().tolerance;
+        let labels: Vec<String> = variants(&scene, 10, 10, &opts)
+            .into_iter()
+            .map(|v| v.label)
+            .collect();
+        for (method, tol) in [("pca-cubature", own), ("neural-cubature", own_neural)] {
+            for label in [
+                format!("{method} tol={tol}"),
+                format!("{method} tol={tol} newton"),
+            ] {
+                assert_eq!(
+                    labels.iter().filter(|l| **l == label).count(),
+                    1,
+                    "{label}: {labels:?}"
+                );
+            }
+        }
     }
 
     /// Without `--latent-dims` the sweep takes half, once and twice the scene's latent dimension:
