@@ -653,6 +653,10 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         "{}",
         pipeline::run::summary(&scene, &opts, &test_forces, &rows)
     );
+    // `--trajectories N` ran several draws already.
+    if count.is_none() {
+        print!("{}", pipeline::run::ONE_DRAW);
+    }
     Ok(())
 }
 

@@ -70,6 +70,8 @@ fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
     assert_ne!(several, TINY, "TINY's [test] section moved");
     let (ok, text) = run(&dir, &several, &[]);
     assert!(ok, "{text}");
+    // Having run three, it does not suggest running four as if it had run one.
+    assert!(!text.contains("one draw of the test family"), "{text}");
     let out = dir.join("out");
     let table = std::fs::read_to_string(out.join("trajectories.md")).unwrap();
     assert!(table.contains("trajectory 2"), "{table}");
@@ -95,6 +97,7 @@ fn a_scene_asking_for_several_test_trajectories_gets_them_and_any_one_runs() {
     // The plain scene (one test schedule) runs trajectory 2 by name, to the same errors.
     let (ok, text) = run(&dir, TINY, &["--trajectory", "2"]);
     assert!(ok, "{text}");
+    assert!(text.contains("one draw of the test family"), "{text}");
     assert_eq!(pca_errors(&out.join("report.json")), third);
     // Each method's run says when it ends, in a log too, where no bar is drawn.
     assert!(text.contains("       pca: 12 steps in "), "{text}");

@@ -182,19 +182,18 @@ pub fn run_settings(scene: &Scene) -> serde_json::Value {
     })
 }
 
-/// What `run` says of its test under the title: its loads, and that it is one draw of its
-/// family.
+/// What `run` says of its test under the title: its loads.
 fn test_lines(forces: &[TestForce]) -> String {
-    let mut s = String::new();
-    for f in forces {
-        s.push_str(&format!("the test: {}\n", f.describe()));
-    }
-    s.push_str(
-        "one draw of the test family: `cargo xtask run --trajectories 4` runs four, with each \
-         method's spread\n",
-    );
-    s
+    forces
+        .iter()
+        .map(|f| format!("the test: {}\n", f.describe()))
+        .collect()
 }
+
+/// That a run's test is one draw of its family, under its loads in `report.md` and after a
+/// plain run's summary (not after `--trajectories N`'s, which ran several).
+pub const ONE_DRAW: &str = "one draw of the test family: `cargo xtask run --trajectories 4` runs four, with each \
+     method's spread\n";
 
 /// One stage of [`RunReport::stages`].
 #[derive(Debug, Clone, serde::Serialize)]
@@ -988,7 +987,7 @@ pub fn run(
     crate::output::write_file(
         &opts.out.join("report.md"),
         format!(
-            "# {title}\n\nscene: {}\n\n{}\n{}",
+            "# {title}\n\nscene: {}\n\n{}{ONE_DRAW}\n{}",
             pipeline.scene.source,
             test_lines(&test_forces),
             report_markdown(&rows)
@@ -1064,7 +1063,7 @@ fn heading(scene: &Scene, trajectory: usize) -> String {
 
 /// What `cargo xtask run` shows after the stages: the test's loads ([`TestForce`]), the table,
 /// where a reduced step's time goes, the warnings of [`crate::trust`], and where the report, the
-/// frames and the model are.
+/// frames and the model are (a plain run adds [`ONE_DRAW`]).
 pub fn summary(
     scene: &Scene,
     opts: &RunOptions,
