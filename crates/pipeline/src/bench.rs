@@ -197,9 +197,8 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
         // The scene's own tolerance with the scene's solver runs whatever `tolerances` says,
         // as the partner of the Newton variant below (a tester's `--tolerances 0.05` left the
         // Newton variant at 0.02 with nothing to compare it with).
-        let own_missing =
-            !tolerances.contains(&own) && !(method == Method::PcaCubature && own_k_swept);
-        for tol in tolerances.iter().copied().chain(own_missing.then_some(own)) {
+        let own_run = tolerances.contains(&own) || (method == Method::PcaCubature && own_k_swept);
+        for tol in tolerances.iter().copied().chain((!own_run).then_some(own)) {
             let mut s = scene.clone();
             s.cubature.tolerance = tol;
             s.cubature.neural_tolerance = None;
