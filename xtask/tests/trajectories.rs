@@ -238,7 +238,16 @@ fn simulate_leaves_the_frames_of_run_alone() {
     let dir = scratch_dir("xtask-simulate-default");
     let name = format!("simulate-default-{}", std::process::id());
     let scene = TINY.replace("name = \"tiny\"", &format!("name = \"{name}\""));
+    assert_ne!(scene, TINY, "TINY's name moved");
     let out = pipeline::project_root().join("out").join(&name);
+    // The default folders are in the project's out/: removed however the test ends.
+    struct Removed<'a>(&'a Path);
+    impl Drop for Removed<'_> {
+        fn drop(&mut self) {
+            std::fs::remove_dir_all(self.0).ok();
+        }
+    }
+    let _removed = Removed(&out);
     let run_series = out.join("pca").join("series.pvd");
     let args: Vec<&OsStr> = ["--every", "1", "--methods", "full,pca"]
         .iter()
@@ -258,7 +267,6 @@ fn simulate_leaves_the_frames_of_run_alone() {
         .join("summary.json")
         .exists();
     let after = std::fs::read(&run_series).ok();
-    std::fs::remove_dir_all(&out).unwrap();
     assert!(ok, "{text}");
     assert!(own, "no summary in out/SCENE/simulate/pca: {text}");
     assert_eq!(

@@ -179,11 +179,16 @@ fn variants(scene: &Scene, chosen_k: usize, basis_k: usize, opts: &BenchOptions)
         });
         // With cubature at the scene's tolerance too, so that the reduced methods are compared at
         // equal error on speed. At the scene's own k this is the scene's own `pca-cubature`,
-        // unless the tolerance sweep below already has its tolerance.
+        // unless the tolerance sweep below already has its tolerance; its label then names the
+        // tolerance too, beside its Newton variant's.
         if k < chosen_k || !tolerances.contains(&scene.cubature.tolerance) {
             v.push(Variant {
                 method: Method::PcaCubature,
-                label: format!("pca-cubature k={k}"),
+                label: if k < chosen_k {
+                    format!("pca-cubature k={k}")
+                } else {
+                    format!("pca-cubature k={k} tol={}", scene.cubature.tolerance)
+                },
                 scene: s,
                 solver: None,
             });
@@ -641,7 +646,8 @@ mod tests {
         );
     }
 
-    /// The scene's own `pca-cubature` (its k, its tolerance) is a row, once.
+    /// The scene's own `pca-cubature` (its k, its tolerance) is a row, once, and so is each
+    /// cubature method's own tolerance with the scene's solver, beside its Newton variant.
     #[test]
     fn the_scenes_own_pca_cubature_is_a_row() {
         let scene = Scene::builtin();
@@ -662,7 +668,16 @@ mod tests {
                 })
                 .count()
         };
-        assert_eq!(own_rows(&opts), 1, "as `pca-cubature k=10`");
+        assert_eq!(own_rows(&opts), 1, "as `pca-cubature k=10 tol={own}`");
+        let labels: Vec<String> = variants(&scene, 10, 10, &opts)
+            .into_iter()
+            .map(|v| v.label)
+            .collect();
+        assert!(
+            labels.contains(&format!("pca-cubature k=10 tol={own}"))
+                && labels.contains(&"pca-cubature k=4".to_string()),
+            "{labels:?}"
+        );
         opts.tolerances = vec![0.1, own];
         assert_eq!(own_rows(&opts), 1, "as `pca-cubature tol={own}`");
         // Neither the k sweep nor the tolerances at the scene's own: the own tolerance still

@@ -1009,7 +1009,8 @@ impl<'a> Pipeline<'a> {
     /// `test − training` and end at the test's last frame. Costs one full-space run, cut short
     /// once the body is at rest when the schedules end. The state, with the reason the
     /// `snapshots` line prints; beside it, what to warn of at once when that run gives way
-    /// under the body's weight ([`Pipeline::gives_way`]). Where no later start applies (the
+    /// under the body's weight ([`Pipeline::gives_way`]) or carries it past twice its size
+    /// ([`Pipeline::beyond_swing`]). Where no later start applies (the
     /// scene sets the schedules' length, or the test is no longer), the run still checks that,
     /// over the schedules' length up to [`GIVES_WAY_CHECK_FRAMES`], and every schedule starts
     /// from rest.
@@ -1067,7 +1068,13 @@ impl<'a> Pipeline<'a> {
             return Ok((None, None));
         };
         let (lo, hi) = sim.model.mesh.bounding_box();
-        let gives_way = Self::gives_way(&c).or_else(|| Self::beyond_swing(&c, (hi - lo).norm()));
+        // Without pins the run (the scene's springs left out) falls freely: no swing to pass.
+        let pinned = !sim.model.pinned.is_empty();
+        let gives_way = Self::gives_way(&c).or_else(|| {
+            pinned
+                .then(|| Self::beyond_swing(&c, (hi - lo).norm()))
+                .flatten()
+        });
         if !later || settled || frames.len() < last {
             return Ok((None, gives_way));
         }
@@ -1118,11 +1125,11 @@ impl<'a> Pipeline<'a> {
                 crate::scene::unit_hint(size).map_or(String::new(), |u| format!("{u}; else "));
             format!(
                 "under gravity alone, with no other load, the full simulation moves the body up \
-                 to {:.3} m by t = {:.2} s, {:.0} % of its {:.3} m bounding-box diagonal: more \
+                 to {:.3} m at t = {:.2} s, {:.0} % of its {:.3} m bounding-box diagonal: more \
                  than {} times its size, beyond any swing about its pins, so it stretches that \
                  far or passes through itself or its pins (the simulation has no contact), and \
-                 the training data and the test hold that motion; {units}a stiffer material \
-                 (`[material] youngs_modulus`) or pins that hold more of it keep it up",
+                 the training data and the test hold that motion; {units}pins that hold more \
+                 of it or a stiffer material (`[material] youngs_modulus`) keep it up",
                 c.travel,
                 c.travel_time,
                 100.0 * c.travel / size,
@@ -2166,7 +2173,8 @@ pub fn basis_columns(basis: &PcaBasis) -> Vec<f64> {
 }
 
 /// What the run under gravity alone finds ([`Pipeline::later_start`]): the later start with the
-/// reason the `snapshots` line gives, and what to warn of at once when the body gives way.
+/// reason the `snapshots` line gives, and what to warn of at once when the body gives way or
+/// is carried past twice its size.
 type LaterStart = (Option<(snapshots::MovingStart, String)>, Option<String>);
 
 /// A training schedule as the rule validation runs it again: its first frame in the snapshots,
@@ -2230,13 +2238,13 @@ mod tests {
     /// gravity alone is said by that run, before any stage; a firm one is not.
     #[test]
     fn a_body_its_weight_stretches_beyond_any_swing_is_said_at_once() {
-        let hung = |youngs: f64| {
+        let hung_by = |youngs: f64, holder: &str| {
             let text = format!(
                 "name = \"rod\"\n[mesh]\ngenerate = {{ kind = \"box\", size = [0.02, 0.2, 0.02], \
                  cells = [1, 6, 1] }}\n[material]\nmodel = \"stable-neo-hookean\"\n\
-                 youngs_modulus = {youngs}\npoisson_ratio = 0.45\n[[pin]]\nplane = {{ axis = \
-                 \"y\", side = \"max\" }}\n[gravity]\nacceleration = [0.0, -9.81, 0.0]\n[time]\n\
-                 step = 0.01\n[solver]\nmethod = \"newton\"\n"
+                 youngs_modulus = {youngs}\npoisson_ratio = 0.45\n{holder}[gravity]\n\
+                 acceleration = [0.0, -9.81, 0.0]\n[time]\nstep = 0.01\n[solver]\nmethod = \
+                 \"newton\"\n"
             );
             let scene = crate::scene::Scene::from_str(&text, std::path::Path::new("."), "rod")
                 .expect("a valid scene");
@@ -2249,12 +2257,23 @@ mod tests {
             std::fs::remove_dir_all(&cache).ok();
             said
         };
+        let hung = |youngs: f64| {
+            hung_by(
+                youngs,
+                "[[pin]]\nplane = { axis = \"y\", side = \"max\" }\n",
+            )
+        };
         let soft = hung(30.0).expect("a rod at 30 Pa stretches far under its weight");
         assert!(
             soft.contains("beyond any swing about its pins") && soft.contains("youngs_modulus"),
             "{soft}"
         );
         assert_eq!(hung(1.0e6), None);
+        // Held by a spring for the whole run instead of pins: the run under gravity alone,
+        // without the scene's forces, falls freely, which no stiffer material would stop.
+        let spring = "[[force]]\nkind = \"spring\"\nselect = { plane = { axis = \"y\", side = \
+                      \"max\" } }\nstiffness = 1.0e4\nkeyframes = [[0.0, 0.0, 0.0, 0.0]]\n";
+        assert_eq!(hung_by(1.0e6, spring), None);
     }
 
     /// The schedules run are those recorded whole and from rest, spread over the family: a

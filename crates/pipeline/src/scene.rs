@@ -504,17 +504,16 @@ impl Scene {
                 })
             })
         };
-        let advice = wider.or_else(sphere).unwrap_or_else(|| {
-            "a pin plane's larger `tolerance`, or a `box`, holds it fixed".to_string()
-        });
         // A tester's mesh in millimetres read as metres was told of a 5 m tolerance before the
         // warning of its size, and a 5 m tolerance once `[mesh] scale` was set holds everything.
-        match unit_hint((hi - lo).norm()) {
-            Some(_) => format!(
-                "{advice} (metres as the mesh is read now: once `[mesh] scale` is set, scale \
-                 that length with it)"
+        let units = self.mesh.scale.is_none() && unit_hint((hi - lo).norm()).is_some();
+        match wider.or_else(sphere) {
+            Some(advice) if units => format!(
+                "{advice} (lengths in metres as the mesh is read now: if it is not in metres and \
+                 you set `[mesh] scale`, scale them, a sphere's centre too)"
             ),
-            None => advice,
+            Some(advice) => advice,
+            None => "a pin plane's larger `tolerance`, or a `box`, holds it fixed".to_string(),
         }
     }
 
@@ -1082,9 +1081,16 @@ mod tests {
         let one_mm = scene_mm.wider_pin(&mesh_mm, &piece, &face[..1]);
         assert!(
             one_mm.starts_with("pin[0]'s plane with `tolerance = 2.000e1`")
-                && one_mm.ends_with("once `[mesh] scale` is set, scale that length with it)"),
+                && one_mm.ends_with("you set `[mesh] scale`, scale them, a sphere's centre too)"),
             "{one_mm}"
         );
+        // Not where no length is advised, nor once the scene sets a scale.
+        let all_mm = scene_mm.wider_pin(&mesh_mm, &piece, &face);
+        assert!(!all_mm.contains("`[mesh] scale`"), "{all_mm}");
+        let scaled = big.replace("[[pin]]", "scale = 1.0\n[[pin]]");
+        let scene_scaled = Scene::from_str(&scaled, Path::new("."), "w.toml").unwrap();
+        let one_scaled = scene_scaled.wider_pin(&mesh_mm, &piece, &face[..1]);
+        assert!(!one_scaled.contains("`[mesh] scale`"), "{one_scaled}");
         // A sphere pin at one corner: the radius that takes in four vertices off one line (the
         // corner's three neighbours at 0.2, 0.2 and 0.25 m).
         let text = text.replace(
