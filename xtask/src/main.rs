@@ -552,7 +552,29 @@ fn log_progress(done: usize, total: usize) {
     }
 }
 
+/// Ends the command quietly, as other command-line tools end, when its output goes into a pipe
+/// closed early (`cargo xtask run | head`): `println!` panics on a broken pipe ("failed printing
+/// to stdout: Broken pipe"), since the Rust runtime ignores SIGPIPE (and restoring its default
+/// action takes `unsafe`, which the workspace forbids). Exit status 141, a shell's for a command
+/// SIGPIPE ended; every other panic as before.
+fn quiet_on_a_closed_pipe() {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        report(info);
+    }));
+}
+
 fn dispatch(cli: Cli) -> Result<()> {
+    quiet_on_a_closed_pipe();
     let cx = Context::new();
     match cli.command {
         Command::Run(args) => run(&cx, args),

@@ -275,3 +275,37 @@ fn simulate_leaves_the_frames_of_run_alone() {
         "run's frames changed: {text}"
     );
 }
+
+/// Output into a pipe closed early (`cargo xtask … | head`) ends the command quietly, as other
+/// command-line tools end, not with a panic at its next line.
+#[cfg(unix)]
+#[test]
+fn a_closed_pipe_ends_the_command_without_a_panic() {
+    use std::io::Read;
+    let dir = scratch_dir("xtask-closed-pipe");
+    let scene = dir.join("scene.toml");
+    std::fs::write(&scene, TINY).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["pipeline", "--until", "snapshots", "--scene"])
+        .arg(&scene)
+        .arg("--cache")
+        .arg(dir.join("cache"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reading end closed before the command prints its first line.
+    drop(child.stdout.take());
+    let mut stderr = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    child.wait().unwrap();
+    assert!(
+        !stderr.contains("panicked") && !stderr.contains("Broken pipe"),
+        "{stderr}"
+    );
+}
