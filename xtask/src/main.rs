@@ -719,11 +719,15 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
         "{}",
         pipeline::export::describe(&scene.name, method, &model, &path)
     );
-    // What `run` found of this model, from its report beside the model file or else in the
-    // scene's output folder.
+    // What `run` found of this model, from its report beside the model file, else beside the
+    // cache `--cache` names (`run --cache C --out O` writes O/report.json, and C's default is
+    // O/cache), else in the scene's output folder.
     let beside = path.parent().map(PathBuf::from).unwrap_or_default();
+    let by_cache = common.cache.as_deref().and_then(std::path::Path::parent);
     let out = if beside.join("report.json").is_file() {
         beside
+    } else if let Some(dir) = by_cache.filter(|d| d.join("report.json").is_file()) {
+        dir.to_path_buf()
     } else {
         cx.out(&scene, &[])
     };

@@ -116,19 +116,6 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             }
             wanted.retain(|m| !m.is_full());
             let default_start = wanted.first().map(|m| m.name().to_string());
-            let mut methods = Vec::new();
-            let mut settings = None;
-            for m in wanted {
-                let model = pipeline::export::scene_model(&mut p, m, Rows::Used, progress)?;
-                if settings.is_none() {
-                    settings = Some(Settings::for_model(&model));
-                    methods.push(viewer::Method::new(FULL, full_runtime(&model, chosen)?));
-                }
-                methods.push(viewer::Method::new(m.name(), model.simulator()?));
-            }
-            let (Some(settings), Some(default_start)) = (settings, default_start) else {
-                bail!("--methods names no reduced method; the viewer needs one to build on");
-            };
             // `run --cache C --out O` writes O/report.json; the cache's default is O/cache, so
             // a report beside a cache given is that run's.
             let report = args
@@ -138,7 +125,25 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 .map(|dir| dir.join("report.json"))
                 .filter(|r| report_scene(r).as_deref() == Some(scene.name.as_str()))
                 .unwrap_or_else(|| cx.out(&scene, &["report.json"]));
-            println!("{}", run_accuracy(&report, &scene));
+            let report_dir = report.parent().map(PathBuf::from).unwrap_or_default();
+            let mut methods = Vec::new();
+            let mut settings = None;
+            let mut measured = Vec::new();
+            for m in wanted {
+                let model = pipeline::export::scene_model(&mut p, m, Rows::Used, progress)?;
+                if settings.is_none() {
+                    settings = Some(Settings::for_model(&model));
+                    methods.push(viewer::Method::new(FULL, full_runtime(&model, chosen)?));
+                }
+                // What that run measured of this very model (its stages' keys in the report).
+                let error = pipeline::export::run_error(&report_dir, &model, &scene);
+                measured.push((m.name().to_string(), error));
+                methods.push(viewer::Method::new(m.name(), model.simulator()?));
+            }
+            let (Some(settings), Some(default_start)) = (settings, default_start) else {
+                bail!("--methods names no reduced method; the viewer needs one to build on");
+            };
+            println!("{}", run_accuracy(&report, &scene, &measured));
             (settings, methods, default_start)
         }
     };
@@ -238,94 +243,96 @@ fn report_scene(report: &std::path::Path) -> Option<String> {
     v.get("scene")?.as_str().map(str::to_string)
 }
 
-/// What the last `run` of the scene measured, from its `report.json` (written beside the
-/// stages' default cache, or beside the cache `--cache` names), or how to measure it: a person drags a model without the table
-/// otherwise.
-fn run_accuracy(report: &std::path::Path, scene: &pipeline::scene::Scene) -> String {
-    // The rows are `methods` since report version 1; a bare list before.
-    let rows: Option<Vec<serde_json::Value>> = std::fs::read_to_string(report)
-        .ok()
-        .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
-        .and_then(|v| match v {
-            serde_json::Value::Array(rows) => Some(rows),
-            mut v => match v.get_mut("methods").map(serde_json::Value::take) {
-                Some(serde_json::Value::Array(rows)) => Some(rows),
-                _ => None,
-            },
-        });
-    let measured: Vec<String> = rows
-        .iter()
-        .flatten()
-        .filter(|r| {
-            r["method"]
-                .as_str()
-                .is_some_and(|m| m != FULL && !m.starts_with("full-"))
-        })
-        .filter_map(|r| {
-            Some(format!(
-                "{} {:.2} %",
-                r["method"].as_str()?,
-                100.0 * r["mean_rel_error"].as_f64()?
-            ))
-        })
-        .collect();
-    if measured.is_empty() {
-        format!(
-            "how far each method is from full space: `cargo xtask run{}` (its report.md lists \
-             what not to trust)",
-            match &scene.source {
-                s if s.ends_with(".toml") => format!(" --scene {s}"),
-                _ => String::new(),
-            }
-        )
-    } else {
-        format!(
-            "the last `run` of this scene measured, off its held-out test: {} ({}: a scene \
-             changed since is not measured by it; its report.md lists what not to trust)",
-            measured.join(", "),
-            report.display()
-        )
+/// What the last `run` of the scene measured of the models offered (`measured`: each method
+/// with its error in `report`, None where the report is not of that model: another scene's,
+/// stages changed since, or the method not run), or how to measure it: a person drags a model
+/// without the table otherwise.
+fn run_accuracy(
+    report: &std::path::Path,
+    scene: &pipeline::scene::Scene,
+    measured: &[(String, Option<f64>)],
+) -> String {
+    let command = format!(
+        "`cargo xtask run{}`",
+        match &scene.source {
+            s if s.ends_with(".toml") => format!(" --scene {s}"),
+            _ => String::new(),
+        }
+    );
+    let (known, unknown): (Vec<_>, Vec<_>) = measured.iter().partition(|(_, e)| e.is_some());
+    if known.is_empty() {
+        let stale = if report.is_file() {
+            format!(
+                " ({} is of other stages or settings: the scene changed since)",
+                report.display()
+            )
+        } else {
+            String::new()
+        };
+        return format!(
+            "how far each method is from full space: {command}{stale}; its report.md lists what \
+             not to trust"
+        );
     }
+    let figures: Vec<String> = known
+        .iter()
+        .filter_map(|(m, e)| Some(format!("{m} {:.2} %", 100.0 * (*e)?)))
+        .collect();
+    let rest = if unknown.is_empty() {
+        String::new()
+    } else {
+        let names: Vec<&str> = unknown.iter().map(|(m, _)| m.as_str()).collect();
+        format!(
+            "; not measured there: {} ({command} measures them)",
+            names.join(", ")
+        )
+    };
+    format!(
+        "the last `run` of this scene measured these models, off its held-out test: {} ({}; its \
+         report.md lists what not to trust){rest}",
+        figures.join(", "),
+        report.display()
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Before the viewer starts it says what `run` measured for the scene, or how to measure it.
+    /// Before the viewer starts it says what `run` measured of the models it offers, or how to
+    /// measure them.
     #[test]
     fn the_viewer_says_what_run_measured_or_how_to_measure_it() {
         let scene = pipeline::scene::Scene::builtin();
         let dir = std::env::temp_dir().join(format!("view-accuracy-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let report = dir.join("report.json");
-        let none = run_accuracy(&report, &scene);
+        let offered = |errors: &[(&str, Option<f64>)]| -> Vec<(String, Option<f64>)> {
+            errors.iter().map(|(m, e)| (m.to_string(), *e)).collect()
+        };
+        let none = run_accuracy(&report, &scene, &offered(&[("pca", None)]));
         assert!(
-            none.starts_with("how far each method is from full space: `cargo xtask run`"),
+            none.starts_with("how far each method is from full space: `cargo xtask run`;"),
             "{none}"
         );
-        let rows = r#"[{"method":"full","mean_rel_error":0.0},{"method":"full-newton","mean_rel_error":1e-9},
-                {"method":"pca","mean_rel_error":0.0479},{"method":"neural-cubature","mean_rel_error":0.0709}]"#;
-        // The report as `run` writes it, and the bare list of rows it was before version 1.
-        for text in [
-            format!(r#"{{"version":1,"methods":{rows}}}"#),
-            rows.to_string(),
-        ] {
-            std::fs::write(&report, text).unwrap();
-            let some = run_accuracy(&report, &scene);
-            assert!(
-                some.starts_with(
-                    "the last `run` of this scene measured, off its held-out test: pca 4.79 %, \
-                     neural-cubature 7.09 % ("
-                ),
-                "{some}"
-            );
-        }
-        // Not a report: said as no run, never a panic.
-        for text in ["not json", "3", r#"{"methods":4}"#, "null"] {
-            std::fs::write(&report, text).unwrap();
-            assert_eq!(run_accuracy(&report, &scene), none, "{text}");
-        }
+        // A report of other stages (a scene changed since) measures none of them.
+        std::fs::write(&report, "{}").unwrap();
+        let stale = run_accuracy(&report, &scene, &offered(&[("pca", None)]));
+        assert!(stale.contains("is of other stages or settings"), "{stale}");
+        let some = run_accuracy(
+            &report,
+            &scene,
+            &offered(&[("pca", Some(0.0479)), ("neural-cubature", None)]),
+        );
+        assert!(
+            some.starts_with(
+                "the last `run` of this scene measured these models, off its held-out test: \
+                 pca 4.79 % ("
+            ) && some.ends_with(
+                "; not measured there: neural-cubature (`cargo xtask run` measures them)"
+            ),
+            "{some}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -256,52 +256,11 @@ pub fn scene_model(
 /// `[reduced]` and `[test]` as the run had them). Otherwise, why there is no measure and the
 /// command that makes one: an exported model is the stages' output, and only `run` tests it.
 pub fn run_verdict(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene) -> String {
-    let path = out.join("report.json");
+    let (report, error) = match measured(out, model, scene) {
+        Ok(m) => m,
+        Err(why) => return why,
+    };
     let method = model.provenance.method.as_str();
-    let run = "`cargo xtask run` measures it on a held-out test and says whether to trust it";
-    let Some(report) = std::fs::read(&path)
-        .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-    else {
-        return format!("not measured: no run report in {} ({run})", out.display());
-    };
-    let row = report["methods"]
-        .as_array()
-        .and_then(|rows| rows.iter().find(|r| r["method"] == method));
-    let Some(error) = row.and_then(|r| r["mean_rel_error"].as_f64()) else {
-        return format!(
-            "not measured: the run in {} did not run {method} (`cargo xtask run --methods full \
-             {method}` does)",
-            out.display()
-        );
-    };
-    let stages = report["stages"].as_array().cloned().unwrap_or_default();
-    if report.get("settings").is_none() || stages.iter().any(|s| s.get("key").is_none()) {
-        return format!(
-            "not measured: {} was written before reports named their stages' keys ({run} again)",
-            path.display()
-        );
-    }
-    let same_stages = model.provenance.stage_keys.iter().all(|k| {
-        let key = format!("{:016x}", k.key);
-        stages
-            .iter()
-            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
-    });
-    if !same_stages {
-        return format!(
-            "not measured: {} is of other stages (the scene changed since, or another scene \
-             wrote there; {run})",
-            path.display()
-        );
-    }
-    if report["settings"] != crate::run::run_settings(scene) {
-        return format!(
-            "not measured: {} was run with other `[solver]`, `[reduced]` or `[test]` settings \
-             ({run} with these)",
-            path.display()
-        );
-    }
     let lines: Vec<&str> = report["untrusted"]
         .as_array()
         .map(|a| {
@@ -328,6 +287,72 @@ pub fn run_verdict(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene
         }
     }
     s
+}
+
+/// The error `cargo xtask run` measured of `model` on its held-out test, from the `report.json`
+/// in `out`, when that report is of the same model ([`run_verdict`]'s conditions); None
+/// otherwise.
+pub fn run_error(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene) -> Option<f64> {
+    measured(out, model, scene).ok().map(|(_, error)| error)
+}
+
+/// The report in `out` and the error it gives `model`'s method when the report is of the same
+/// model; otherwise why not, and the command that measures it.
+fn measured(
+    out: &Path,
+    model: &ReducedModel,
+    scene: &crate::scene::Scene,
+) -> Result<(serde_json::Value, f64), String> {
+    let path = out.join("report.json");
+    let method = model.provenance.method.as_str();
+    let run = "`cargo xtask run` measures it on a held-out test and says whether to trust it";
+    let Some(report) = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+    else {
+        return Err(format!(
+            "not measured: no run report in {} ({run})",
+            out.display()
+        ));
+    };
+    let row = report["methods"]
+        .as_array()
+        .and_then(|rows| rows.iter().find(|r| r["method"] == method));
+    let Some(error) = row.and_then(|r| r["mean_rel_error"].as_f64()) else {
+        return Err(format!(
+            "not measured: the run in {} did not run {method} (`cargo xtask run --methods full \
+             {method}` does)",
+            out.display()
+        ));
+    };
+    let stages = report["stages"].as_array().cloned().unwrap_or_default();
+    if report.get("settings").is_none() || stages.iter().any(|s| s.get("key").is_none()) {
+        return Err(format!(
+            "not measured: {} was written before reports named their stages' keys ({run} again)",
+            path.display()
+        ));
+    }
+    let same_stages = model.provenance.stage_keys.iter().all(|k| {
+        let key = format!("{:016x}", k.key);
+        stages
+            .iter()
+            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
+    });
+    if !same_stages {
+        return Err(format!(
+            "not measured: {} is of other stages (the scene changed since, or another scene \
+             wrote there; {run})",
+            path.display()
+        ));
+    }
+    if report["settings"] != crate::run::run_settings(scene) {
+        return Err(format!(
+            "not measured: {} was run with other `[solver]`, `[reduced]` or `[test]` settings \
+             ({run} with these)",
+            path.display()
+        ));
+    }
+    Ok((report, error))
 }
 
 /// Whether a line of a run's warnings concerns `method`'s model: it names the method (alone or
