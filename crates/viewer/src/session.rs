@@ -364,10 +364,7 @@ impl Session {
         } else if real_time {
             format!("real time: {steps_per_second:.0} steps/s at h = {h_ms} ms")
         } else {
-            format!(
-                "cannot keep real time: {real_time_factor:.2}× (a step takes {step_ms:.1} ms, \
-                 the time step is {h_ms} ms)"
-            )
+            behind(real_time_factor, step_ms, h_ms)
         };
         let extrapolating =
             self.failure.is_none() && self.beyond_training.is_some_and(|b| b > OUTSIDE_TRAINING);
@@ -792,5 +789,42 @@ fn bounded(what: &str, value: f64, max: f64) -> Result<f64, String> {
             "the {what} must be positive and at most {}, got {got}",
             four_digits(max)
         ))
+    }
+}
+
+/// The status of a simulation behind the wall clock by `factor`, its steps taking `step_ms` of
+/// an `h_ms` time step: a step longer than the time step is the method's cost; a shorter one
+/// means the steps waited for a processor busy with other work (a tester's page said "a step
+/// takes 5.4 ms, the time step is 10 ms" as if the step were the cause).
+fn behind(factor: f64, step_ms: f64, h_ms: f64) -> String {
+    if step_ms < h_ms {
+        format!(
+            "cannot keep real time: {factor:.2}× (a step takes {step_ms:.1} ms of the {h_ms} ms \
+             time step: the steps wait for the processor, busy with other work)"
+        )
+    } else {
+        format!(
+            "cannot keep real time: {factor:.2}× (a step takes {step_ms:.1} ms, the time step \
+             is {h_ms} ms)"
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Behind the clock with steps shorter than the time step, the status blames the busy
+    /// processor; with longer steps, the step.
+    #[test]
+    fn behind_the_clock_says_whether_the_step_or_the_machine_is_the_cause() {
+        let busy = super::behind(0.93, 5.4, 10.0);
+        assert!(
+            busy.contains("a step takes 5.4 ms of the 10 ms time step: the steps wait"),
+            "{busy}"
+        );
+        let slow = super::behind(0.04, 134.0, 5.0);
+        assert_eq!(
+            slow,
+            "cannot keep real time: 0.04× (a step takes 134.0 ms, the time step is 5 ms)"
+        );
     }
 }
