@@ -178,11 +178,11 @@ struct SnapshotsArgs {
     /// an array job's variables give the shard: SLURM_ARRAY_TASK_ID and
     /// SLURM_ARRAY_TASK_COUNT, or a Kubernetes Indexed Job's JOB_COMPLETION_INDEX with
     /// LATENT_SHARD_COUNT (docs/cluster.md).
-    #[arg(long, value_name = "I/N")]
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
     shard: Option<String>,
     /// Combine shards 0..N into the snapshots artifact.
-    #[arg(long, allow_negative_numbers = true, value_name = "N")]
-    merge: Option<usize>,
+    #[arg(long, allow_negative_numbers = true, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    merge: Option<u64>,
 }
 
 #[derive(clap::Args)]
@@ -954,7 +954,7 @@ fn snapshots(cx: &Context, args: SnapshotsArgs) -> Result<()> {
             p.snapshot_shard(s.index, s.count, &progress)?;
         }
         (None, Some(n)) => {
-            let set = p.merge_shards(n)?;
+            let set = p.merge_shards(n as usize)?;
             let cached = p
                 .outcomes
                 .last()
@@ -1038,8 +1038,12 @@ fn pipeline_until(cx: &Context, args: PipelineArgs) -> Result<()> {
 }
 
 fn parse_shard(s: &str) -> Result<Shard> {
-    let (i, n) = s
-        .split_once('/')
-        .ok_or_else(|| anyhow::anyhow!("--shard takes I/N, e.g. 0/4; got {s}"))?;
-    Ok(Shard::new(i.trim().parse()?, n.trim().parse()?)?)
+    let wrong =
+        || anyhow::anyhow!("--shard takes I/N, two whole numbers 0 ≤ I < N, e.g. 0/4; got {s}");
+    let (i, n) = s.split_once('/').ok_or_else(wrong)?;
+    let (i, n) = (
+        i.trim().parse().map_err(|_| wrong())?,
+        n.trim().parse().map_err(|_| wrong())?,
+    );
+    Ok(Shard::new(i, n)?)
 }

@@ -193,6 +193,8 @@ fn contradicting_or_impossible_flags_name_the_flag() {
         ("simulate", &["--every", "-1"][..], "'--every <EVERY>'"),
         ("bench", &["--repeats", "0"][..], "'--repeats <REPEATS>'"),
         ("bench", &["--tolerances", "-1"][..], "(`--tolerances`)"),
+        ("snapshots", &["--merge", "0"][..], "'--merge <N>'"),
+        ("snapshots", &["--shard", "-1/3"][..], "--shard takes I/N"),
     ] {
         let args: Vec<&OsStr> = args.iter().map(OsStr::new).collect();
         let (ok, text) = xtask(&dir, TINY, command, &args);

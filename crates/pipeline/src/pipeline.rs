@@ -74,9 +74,10 @@ pub trait StageSummary {
 
 impl StageSummary for SnapshotSet {
     fn summary(&self) -> String {
+        let n = self.schedules.len();
         let mut s = format!(
-            "{} schedules × {} frames = {} training poses",
-            self.schedules.len(),
+            "{n} schedule{} × {} frames = {} training poses",
+            if n == 1 { "" } else { "s" },
             self.frames_per_schedule,
             self.num_frames()
         );
