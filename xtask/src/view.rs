@@ -263,7 +263,8 @@ fn run_accuracy(
     if known.is_empty() {
         let stale = if report.is_file() {
             format!(
-                " ({} is of other stages or settings: the scene changed since)",
+                " ({} measures none of these models: the scene changed since, or that run ran \
+                 other methods)",
                 report.display()
             )
         } else {
@@ -318,7 +319,7 @@ mod tests {
         // A report of other stages (a scene changed since) measures none of them.
         std::fs::write(&report, "{}").unwrap();
         let stale = run_accuracy(&report, &scene, &offered(&[("pca", None)]));
-        assert!(stale.contains("is of other stages or settings"), "{stale}");
+        assert!(stale.contains("measures none of these models"), "{stale}");
         let some = run_accuracy(
             &report,
             &scene,

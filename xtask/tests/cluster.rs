@@ -165,3 +165,29 @@ fn a_kubernetes_index_without_the_count_is_refused() {
         .any(|e| e.file_name().to_string_lossy().starts_with("snapshots"));
     assert!(!simulated, "nothing is simulated");
 }
+
+/// A shard alone (`--shard 0/1`, or shards not merged yet) is not the snapshots the later
+/// stages read: the whole set is simulated, and the process says why and how to merge.
+#[test]
+fn unmerged_shards_are_named_when_the_whole_set_is_simulated() {
+    let dir = scratch_dir("cluster-unmerged");
+    let scene_path = dir.join("shards.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let cache = dir.join("cache");
+    let shard = xtask(&scene_path, &cache, &[], &["--shard", "0/2"])
+        .output()
+        .unwrap();
+    assert!(shard.status.success());
+    let whole = xtask(&scene_path, &cache, &[], &[]).output().unwrap();
+    assert!(whole.status.success());
+    let err = String::from_utf8_lossy(&whole.stderr);
+    assert!(
+        err.contains("holds 1 snapshot shard file but not the merged snapshots")
+            && err.contains("--merge N"),
+        "{err}"
+    );
+    // Once merged (or simulated whole, as here), nothing more is said.
+    let again = xtask(&scene_path, &cache, &[], &[]).output().unwrap();
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(!err.contains("snapshot shard"), "{err}");
+}

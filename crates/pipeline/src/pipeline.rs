@@ -997,9 +997,33 @@ impl<'a> Pipeline<'a> {
     pub fn snapshots(&mut self, progress: Progress<'_>) -> Result<Arc<SnapshotSet>> {
         let key = self.snapshots_key();
         self.stage(Stage::Snapshots, key, |p| {
+            p.unmerged_shards();
             let set = p.simulate_shard(&p.scene.training(), (0, 1), progress)?;
             p.some_frames(set)
         })
+    }
+
+    /// Says when the cache holds snapshot shards (`cargo xtask snapshots --shard I/N`) while the
+    /// merged snapshots are about to be simulated whole: a tester's `--shard 0/1`, and a stage
+    /// run before `--merge`, simulated every schedule again without a word of the shards.
+    fn unmerged_shards(&self) {
+        let prefix = format!("{}-", Stage::SnapshotsShard.name());
+        let shards = std::fs::read_dir(&self.cache).map_or(0, |entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+                .count()
+        });
+        if shards > 0 {
+            warn_once(&format!(
+                "{}: the cache {} holds {shards} snapshot shard file{} but not the merged \
+                 snapshots: `cargo xtask snapshots --merge N` (N the shards' count) combines \
+                 them; every training schedule is simulated here instead",
+                self.scene.source,
+                self.cache.display(),
+                if shards == 1 { "" } else { "s" }
+            ));
+        }
     }
 
     /// Where every fourth training schedule starts, when not at rest: the scene leaves
