@@ -300,7 +300,7 @@
     $('status').className = 'failed';
     // Nothing steps any more: no figures of a simulation that is gone, no controls that would
     // do nothing.
-    for (const id of ['sps', 'cost', 'its', 'rtf', 'beyond']) $(id).textContent = '–';
+    for (const id of ['sps', 'cost', 'its', 'rtf', 'step', 'fps', 'beyond']) $(id).textContent = '–';
     for (const control of document.querySelectorAll('#hud button, #hud input, #hud select')) {
       control.disabled = true;
     }
@@ -516,7 +516,8 @@
     }
     const now = performance.now();
     while (frameTimes.length && now - frameTimes[0] > 1000) frameTimes.shift();
-    $('fps').textContent = frameTimes.length;
+    // Frames received over the last second, while the server is there to send them.
+    if (socket.readyState !== WebSocket.CLOSED) $('fps').textContent = frameTimes.length;
     draw();
     requestAnimationFrame(tick);
   }

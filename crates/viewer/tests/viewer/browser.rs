@@ -610,6 +610,8 @@ fn drive(
              && document.getElementById('sps').textContent === '–' \
              && document.getElementById('cost').textContent === '–' \
              && document.getElementById('beyond').textContent === '–' \
+             && document.getElementById('step').textContent === '–' \
+             && document.getElementById('fps').textContent === '–' \
              && document.getElementById('pause').disabled \
              && document.getElementById('radius').disabled",
             "the page greyed out once the server stopped",
