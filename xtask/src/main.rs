@@ -416,6 +416,18 @@ impl Context {
             .unwrap_or_else(|| self.out(scene, &["cache"]))
     }
 
+    /// The folder of the scene's last `run` report: beside the cache `--cache` names when that
+    /// folder holds a `report.json` of this scene (`run --cache C --out O` writes O/report.json,
+    /// and C's default is O/cache), else `out/SCENE`.
+    fn run_report_dir(&self, scene: &Scene, common: &Common) -> PathBuf {
+        common
+            .cache
+            .as_deref()
+            .and_then(std::path::Path::parent)
+            .filter(|dir| report_scene(&dir.join("report.json")).as_deref() == Some(&scene.name))
+            .map_or_else(|| self.out(scene, &[]), PathBuf::from)
+    }
+
     /// A pipeline for the scene, printing each stage's outcome.
     fn pipeline<'a>(&self, scene: &'a Scene, common: &Common) -> Result<Pipeline<'a>> {
         let mut p = Pipeline::new(scene, &self.cache(scene, common))?;
@@ -719,20 +731,23 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
         "{}",
         pipeline::export::describe(&scene.name, method, &model, &path)
     );
-    // What `run` found of this model, from its report beside the model file, else beside the
-    // cache `--cache` names (`run --cache C --out O` writes O/report.json, and C's default is
-    // O/cache), else in the scene's output folder.
+    // What `run` found of this model, from its report beside the model file, else where `view`
+    // looks for the scene's last run.
     let beside = path.parent().map(PathBuf::from).unwrap_or_default();
-    let by_cache = common.cache.as_deref().and_then(std::path::Path::parent);
     let out = if beside.join("report.json").is_file() {
         beside
-    } else if let Some(dir) = by_cache.filter(|d| d.join("report.json").is_file()) {
-        dir.to_path_buf()
     } else {
-        cx.out(&scene, &[])
+        cx.run_report_dir(&scene, &common)
     };
     println!("{}", pipeline::export::run_verdict(&out, &model, &scene));
     Ok(())
+}
+
+/// The scene a `report.json` is of (its `scene` field), if it reads.
+fn report_scene(report: &std::path::Path) -> Option<String> {
+    let text = std::fs::read_to_string(report).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v.get("scene")?.as_str().map(str::to_string)
 }
 
 /// `suite`: the minimal scene on every mesh of a folder, with one table.

@@ -116,16 +116,8 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             }
             wanted.retain(|m| !m.is_full());
             let default_start = wanted.first().map(|m| m.name().to_string());
-            // `run --cache C --out O` writes O/report.json; the cache's default is O/cache, so
-            // a report beside a cache given is that run's.
-            let report = args
-                .cache
-                .as_deref()
-                .and_then(std::path::Path::parent)
-                .map(|dir| dir.join("report.json"))
-                .filter(|r| report_scene(r).as_deref() == Some(scene.name.as_str()))
-                .unwrap_or_else(|| cx.out(&scene, &["report.json"]));
-            let report_dir = report.parent().map(PathBuf::from).unwrap_or_default();
+            let report_dir = cx.run_report_dir(&scene, &common);
+            let report = report_dir.join("report.json");
             let mut methods = Vec::new();
             let mut settings = None;
             let mut measured = Vec::new();
@@ -234,13 +226,6 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
                          each method against full space and says what not to trust"
             .to_string(),
     }
-}
-
-/// The scene a `report.json` is of (its `scene` field), if it reads.
-fn report_scene(report: &std::path::Path) -> Option<String> {
-    let text = std::fs::read_to_string(report).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v.get("scene")?.as_str().map(str::to_string)
 }
 
 /// What the last `run` of the scene measured of the models offered (`measured`: each method
