@@ -1226,6 +1226,17 @@ impl<'a> Pipeline<'a> {
         if count == 0 || index >= count {
             bail!("--shard {index}/{count}: need 0 ≤ index < count");
         }
+        let schedules = self.scene.training().schedules;
+        if shard_len(schedules, (index, count)) == 0 {
+            // Written all the same: a merge reads every shard 0..count.
+            warn_once(&format!(
+                "{}: shard {index}/{count} holds no schedule: the scene trains on {schedules} \
+                 schedule{}, one to each of the first {schedules} shards, so more than \
+                 {schedules} shards leave some idle (`[training] schedules` sets the count)",
+                self.scene.source,
+                if schedules == 1 { "" } else { "s" },
+            ));
+        }
         let key = KeyBuilder::new(Stage::SnapshotsShard)
             .mix_key(self.snapshots_key())
             .mix(&(index, count))

@@ -92,6 +92,11 @@ pub enum ShardError {
         step: usize,
         count: usize,
     },
+    #[error(
+        "both {SLURM_ARRAY_TASK_ID} and {JOB_COMPLETION_INDEX} are set: unset the one of the \
+         scheduler that does not run this process, or pass --shard I/N"
+    )]
+    TwoSchedulers,
 }
 
 impl Shard {
@@ -127,6 +132,9 @@ impl Shard {
         let missing = |set, missing, hint| ShardError::Missing { set, missing, hint };
         // The count that must come with the index variable `set`.
         let count_beside = |set, count, hint| number(count)?.ok_or(missing(set, count, hint));
+        if var(SLURM_ARRAY_TASK_ID).is_some() && var(JOB_COMPLETION_INDEX).is_some() {
+            return Err(ShardError::TwoSchedulers);
+        }
         if let Some(id) = number(SLURM_ARRAY_TASK_ID)? {
             let count = count_beside(SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT, SLURM_HINT)?;
             let min = number(SLURM_ARRAY_TASK_MIN)?.unwrap_or(0);
@@ -146,12 +154,18 @@ impl Shard {
             let count = count_beside(JOB_COMPLETION_INDEX, SHARD_COUNT, KUBERNETES_HINT)?;
             return Self::new(index, count).map(|s| Some((s, Scheduler::Kubernetes)));
         }
-        if var(SHARD_COUNT).is_some() {
-            return Err(missing(
-                SHARD_COUNT,
-                JOB_COMPLETION_INDEX,
-                "the count alone does not say which shard this process simulates",
-            ));
+        // A count alone does not say which shard this process simulates.
+        for (count, index) in [
+            (SHARD_COUNT, JOB_COMPLETION_INDEX),
+            (SLURM_ARRAY_TASK_COUNT, SLURM_ARRAY_TASK_ID),
+        ] {
+            if var(count).is_some() {
+                return Err(missing(
+                    count,
+                    index,
+                    "the count alone does not say which shard this process simulates",
+                ));
+            }
         }
         Ok(None)
     }
@@ -216,6 +230,9 @@ mod tests {
                 ..
             })
         ));
+        // The count alone (left in the environment of a process outside the array).
+        let err = from(&[(SLURM_ARRAY_TASK_COUNT, "8")]).unwrap_err();
+        assert!(err.to_string().contains(SLURM_ARRAY_TASK_ID), "{err}");
     }
 
     #[test]
@@ -238,14 +255,14 @@ mod tests {
                 value: "-2".into()
             })
         );
-        // Slurm's variables win where both are set.
+        // Two schedulers' indices: which one runs this process is not guessed.
         let both = [
             (JOB_COMPLETION_INDEX, "1"),
             (SHARD_COUNT, "2"),
             (SLURM_ARRAY_TASK_ID, "0"),
             (SLURM_ARRAY_TASK_COUNT, "3"),
         ];
-        assert_eq!(from(&both), Ok(shard(0, 3, Scheduler::Slurm)));
+        assert_eq!(from(&both), Err(ShardError::TwoSchedulers));
     }
 
     #[test]
