@@ -290,13 +290,25 @@
   socket.binaryType = 'arraybuffer';
   const send = (message) => { if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(message)); };
   let messageTimer = null;
+  // The server's texts quote keys and commands between backticks, as the terminal's do: shown
+  // as code, each piece set as text (never as markup). Rebuilt only when the text changes.
+  function setQuoted(element, text) {
+    if (element.dataset.text === text) return;
+    element.dataset.text = text;
+    element.replaceChildren(...text.split('`').map((piece, i) => {
+      if (i % 2 === 0) return document.createTextNode(piece);
+      const code = document.createElement('code');
+      code.textContent = piece;
+      return code;
+    }));
+  }
   function showMessage(text) {
-    $('message').textContent = text;
+    setQuoted($('message'), text);
     clearTimeout(messageTimer);
-    messageTimer = setTimeout(() => { $('message').textContent = ''; }, 5000);
+    messageTimer = setTimeout(() => setQuoted($('message'), ''), 5000);
   }
   socket.onclose = () => {
-    $('status').textContent = 'disconnected from the server (reload when it runs again)';
+    setQuoted($('status'), 'disconnected from the server (reload when it runs again)');
     $('status').className = 'failed';
     // Nothing steps any more: no figures of a simulation that is gone, no controls that would
     // do nothing.
@@ -382,7 +394,7 @@
     // Full space has no training poses (null): a dash.
     const beyond = s.beyond_training;
     $('beyond').textContent = Number.isFinite(beyond) ? `${(100 * beyond).toFixed(0)} %` : '–';
-    $('status').textContent = s.status;
+    setQuoted($('status'), s.status);
     $('status').className = s.failure ? 'failed' : s.paused ? 'paused'
       : !s.real_time ? 'behind' : s.extrapolating ? 'extrapolating' : '';
     $('pause').textContent = s.paused ? 'run' : 'pause';
@@ -522,7 +534,7 @@
     requestAnimationFrame(tick);
   }
   if (!gl) {
-    $('status').textContent = 'this browser has no WebGL2';
+    setQuoted($('status'), 'this browser has no WebGL2');
     $('status').className = 'failed';
   } else {
     setupGl();
@@ -536,6 +548,8 @@
     frameStep: () => frameStep,
     state: () => state,
     hud: () => $('hud').innerText,
+    // Shows `text` as a message from the server is shown.
+    say: (text) => showMessage(text),
     position: (i) => vertex(i),
     screenOf: (i) => project(vertex(i)),
     handle: () => (drag ? drag.handle : null),

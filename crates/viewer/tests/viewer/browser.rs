@@ -537,6 +537,22 @@ fn drive(
     if page.eval("viewerDebug.following()")? != json!(true) {
         return Err("the camera does not frame the body before anyone touched it".into());
     }
+    // The server quotes keys between backticks, as the terminal does: the page shows them as
+    // code, without the backticks, and never as markup.
+    let shown = page.eval(
+        "viewerDebug.say('larger pulls (`[training] offset`) reach `<b>such</b>` drags'); \
+         [document.getElementById('message').textContent, \
+          Array.from(document.querySelectorAll('#message code'), c => c.textContent)]",
+    )?;
+    let expected = json!([
+        "larger pulls ([training] offset) reach <b>such</b> drags",
+        ["[training] offset", "<b>such</b>"]
+    ]);
+    if shown != expected {
+        return Err(format!(
+            "a quoted message is shown as {shown}, not {expected}"
+        ));
+    }
     let candidate = page.eval("viewerDebug.grabCandidate()")?;
     let vertex = candidate["vertex"]
         .as_u64()
