@@ -191,3 +191,40 @@ fn unmerged_shards_are_named_when_the_whole_set_is_simulated() {
     let err = String::from_utf8_lossy(&again.stderr);
     assert!(!err.contains("snapshot shard"), "{err}");
 }
+
+/// More shards than schedules: a shard past them holds none, is written all the same (the merge
+/// reads every shard) and says so; the merge of them all is the unsharded set.
+#[test]
+fn a_shard_past_the_schedules_says_it_holds_none() {
+    let dir = scratch_dir("cluster-empty-shard");
+    let scene_path = dir.join("shards.toml");
+    std::fs::write(&scene_path, SCENE).unwrap();
+    let cache = dir.join("cache");
+    for index in 0..6 {
+        let out = xtask(
+            &scene_path,
+            &cache,
+            &[],
+            &["--shard", &format!("{index}/6")],
+        )
+        .output()
+        .unwrap();
+        assert!(out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(
+            err.contains("shard 5/6 holds no schedule: the scene trains on 5 schedules"),
+            index == 5,
+            "shard {index}/6: {err}"
+        );
+    }
+    let merged = xtask(&scene_path, &cache, &[], &["--merge", "6"])
+        .output()
+        .unwrap();
+    assert!(
+        merged.status.success(),
+        "{}",
+        String::from_utf8_lossy(&merged.stderr)
+    );
+    let out = String::from_utf8_lossy(&merged.stdout);
+    assert!(out.contains("merged 6 shards: 30 frames"), "{out}");
+}
