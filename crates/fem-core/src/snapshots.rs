@@ -14,7 +14,7 @@
 use std::sync::Mutex;
 
 use crate::forces::{ExternalForce, ForceKind};
-use crate::integrator::{FullSpaceModel, Simulator, TimeConfig};
+use crate::integrator::{FullSpaceModel, MAX_FRAMES, Simulator, TimeConfig};
 use crate::optim::SolverConfig;
 use crate::rng::SplitMix64;
 use crate::{FemError, Mat3, Vec3};
@@ -215,6 +215,24 @@ impl ScheduleConfig {
         }
         if self.frames_per_schedule == 0 {
             bad("frames_per_schedule", "must be at least 1".into());
+        }
+        if self.schedules > MAX_SCHEDULES {
+            bad(
+                "schedules",
+                format!(
+                    "at most {MAX_SCHEDULES} (each is a full-space simulation), got {}",
+                    self.schedules
+                ),
+            );
+        }
+        if self.frames_per_schedule > MAX_FRAMES {
+            bad(
+                "frames_per_schedule",
+                format!(
+                    "at most {MAX_FRAMES} (each is a full-space time step), got {}",
+                    self.frames_per_schedule
+                ),
+            );
         }
         if self.kinds.is_empty() {
             bad("kinds", "name at least one of pull, poke, drag".into());
@@ -490,6 +508,10 @@ fn pin_scales(mesh: &crate::TetMesh, candidates: &[usize], pinned: &[usize]) -> 
 /// 10⁶ times that (`latent_sim::MAX_SPRING_STIFFNESS`), which a test schedule over it would
 /// otherwise meet only once the methods run.
 pub const MAX_STIFFNESS_FACTOR: f64 = 1e4;
+
+/// The most schedules a family may have: a thousand times the training default, days of
+/// full-space simulation on a small mesh; a value past it is a typo.
+pub const MAX_SCHEDULES: usize = 32_000;
 
 /// The body's stiffness at a surface patch: A = K₀ + M/T² factorised once per mesh.
 pub struct StiffnessProbe {

@@ -123,7 +123,7 @@ pub use onset::{Augmented, DirectionParts};
 pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers, SpaceParts};
 pub use runtime::{
     AnyReducedSimulator, FullRuntime, Handle, Interactive, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS,
-    Real, ReducedRuntime, RuntimeError, StepStats, Surface, body_stiffness,
+    Real, ReducedRuntime, RuntimeError, StepStats, Surface, body_force, body_stiffness,
 };
 pub use simulator::{
     ActiveDent, PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,
@@ -142,6 +142,9 @@ pub enum ReducedError {
     /// A state vector given from outside does not have the subspace's length.
     #[error("a state of {got} coefficients was given to a subspace of {expected}")]
     StateShape { expected: usize, got: usize },
+    /// A state given from outside with a coefficient that is not a finite number.
+    #[error("a state was given coefficient {index} = {value}: every coefficient must be finite")]
+    StateNotFinite { index: usize, value: f64 },
     /// A cubature rule that does not fit the model.
     #[error("cubature rule: {reason}; refit the cubature stage")]
     Cubature { reason: String },

@@ -28,6 +28,13 @@ pub const DEFAULT_LATENT_DIM: usize = 6;
 /// ([`AutoencoderConfig::hidden_widths`]).
 pub const DEFAULT_HIDDEN_RANGE: [usize; 2] = [64, 200];
 
+/// The widest hidden layer a scene may ask for: fifty times the default's widest, its weights
+/// (width² of them between two such layers) still within memory.
+pub const MAX_HIDDEN_WIDTH: usize = 10_000;
+
+/// The most hidden layers a scene may ask for.
+pub const MAX_HIDDEN_LAYERS: usize = 64;
+
 /// One network, the default (left out of the serialised section, so that the stage keys of
 /// scenes that do not set it stay what they were).
 fn is_one(n: &usize) -> bool {
@@ -237,12 +244,32 @@ impl AutoencoderConfig {
             ),
             _ => {}
         }
-        if let Some(i) = self
-            .hidden
-            .as_ref()
-            .and_then(|h| h.iter().position(|&n| n == 0))
-        {
+        let hidden = self.hidden.as_deref().unwrap_or_default();
+        if let Some(i) = hidden.iter().position(|&n| n == 0) {
             bad("hidden", format!("layer {i} has width 0"));
+        }
+        if let Some((i, n)) = hidden
+            .iter()
+            .enumerate()
+            .find(|&(_, &n)| n > MAX_HIDDEN_WIDTH)
+        {
+            bad(
+                "hidden",
+                format!(
+                    "layer {i} has width {n}, above {MAX_HIDDEN_WIDTH} (a layer's weights grow \
+                     with the square of its width; the default is {} to {})",
+                    DEFAULT_HIDDEN_RANGE[0], DEFAULT_HIDDEN_RANGE[1]
+                ),
+            );
+        }
+        if hidden.len() > MAX_HIDDEN_LAYERS {
+            bad(
+                "hidden",
+                format!(
+                    "{} layers, above {MAX_HIDDEN_LAYERS} (the default is two)",
+                    hidden.len()
+                ),
+            );
         }
         if self.epochs == 0 {
             bad("epochs", "must be at least 1, got 0".into());

@@ -257,6 +257,16 @@ impl Scene {
         }
         self.material.check(&mut errors);
         self.time.check(&mut errors);
+        if self.time.frames > fem_core::integrator::MAX_FRAMES {
+            errors.push(FemError::InvalidConfig {
+                field: "time.frames".into(),
+                reason: format!(
+                    "at most {} (each is a time step every method simulates), got {}",
+                    fem_core::integrator::MAX_FRAMES,
+                    self.time.frames
+                ),
+            });
+        }
         self.solver.check(&mut errors);
         self.reduced.check(&mut errors);
         self.training().check("training", &mut errors);
@@ -667,6 +677,20 @@ impl Scene {
                         };
                         errors.push(FemError::InvalidConfig {
                             field: format!("force[{i}].stiffness"),
+                            reason: e.to_string(),
+                        });
+                    }
+                    // A point load's too: past it the first step failed its line search, a
+                    // message that named no field.
+                    let body = latent_sim::body_force(&mesh.vertices, self.material.youngs_modulus);
+                    let limit = latent_sim::MAX_POINT_LOAD * body;
+                    let load = |k: &[f64; 4]| (k[1] * k[1] + k[2] * k[2] + k[3] * k[3]).sqrt();
+                    if f.kind == ForceKind::Point
+                        && let Some(load) = f.keyframes.iter().map(load).find(|&l| l > limit)
+                    {
+                        let e = latent_sim::RuntimeError::TooLarge { load, body, limit };
+                        errors.push(FemError::InvalidConfig {
+                            field: format!("force[{i}].keyframes"),
                             reason: e.to_string(),
                         });
                     }

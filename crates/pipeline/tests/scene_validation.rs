@@ -244,6 +244,31 @@ fn out_of_range_values_are_reported_together() {
     // only once the methods run.
     let err = read_error(&(BASE.to_string() + "\n[test]\nstiffness = [0.5, 1.0e5]\n"));
     assert_names(&err, &["test.stiffness", "at most 1e4 times"]);
+    // Counts past what memory holds, refused when read (a tester's 10¹² schedules, 10¹¹ frames a
+    // schedule, 10¹² L-BFGS pairs and 10⁸-wide layers aborted the process on an allocation).
+    let text = edit("frames = 10", "frames = 100000000").replace(
+        "tolerance = 1.0e-6\n",
+        "tolerance = 1.0e-6\nlbfgs_memory = 1000000000000\n",
+    ) + "\n[training]\nschedules = 1000000000000\nframes_per_schedule = 100000000000\n\
+           \n[test]\nframes_per_schedule = 2000000\n\
+           \n[autoencoder]\nhidden = [100000000, 100000000]\n";
+    let err = read_error(&text);
+    assert_names(
+        &err,
+        &[
+            "time.frames",
+            "solver.lbfgs_memory",
+            "training.schedules",
+            "training.frames_per_schedule",
+            "test.frames_per_schedule",
+            "autoencoder.hidden",
+        ],
+    );
+    assert_eq!(
+        err.matches("\n  - ").count(),
+        6,
+        "one line per problem: {err}"
+    );
 }
 
 #[test]
@@ -312,6 +337,16 @@ fn pins_that_select_nothing_are_errors_reported_together() {
         &edit("stiffness = 200.0", "stiffness = 1.0e11"),
         Path::new("."),
     );
+    // A point load the runtime would refuse, too (a tester's 1e300 N failed its first step with
+    // a line-search message that named no field).
+    let point = |load: &str| {
+        edit("kind = \"spring\"", "kind = \"point\"")
+            .replace("stiffness = 200.0\n", "")
+            .replace("[0.3, 0.0, 0.1, 0.0]", &format!("[0.3, 0.0, {load}, 0.0]"))
+    };
+    let err = build_error(&point("1.0e300"), Path::new("."));
+    assert_names(&err, &["force[0].keyframes", "give at most 1.080e11 N"]);
+    builds(&point("1.0e11"), Path::new("."));
     // A force on pinned vertices only moves nothing.
     let on_pins = edit("center = [1.0, 0.1, 0.1]", "center = [0.0, 0.1, 0.1]");
     let err = build_error(&on_pins, Path::new("."));

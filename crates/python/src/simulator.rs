@@ -412,13 +412,33 @@ fn point3(what: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
             "{what} must be 3 numbers (x, y, z), got {}",
             other.len()
         ))),
-        None => Err(Class::InvalidArgument.err(format!(
-            "{what} must be 3 numbers (x, y, z), got {}",
-            match array {
-                Some(a) => format!("an array of shape {:?}", a.shape()),
-                None => describe(value),
-            }
-        ))),
+        None => {
+            // Three items of which one is no float (an integer too large for one, a string):
+            // that item is named, not the sequence ("got tuple" for (10**400, 0, 0)).
+            let items: Option<Vec<Bound<'_, PyAny>>> = value
+                .try_iter()
+                .ok()
+                .and_then(|items| items.collect::<PyResult<_>>().ok())
+                .filter(|items: &Vec<_>| {
+                    array.is_none()
+                        && items.len() == 3
+                        && !value.is_instance_of::<pyo3::types::PyString>()
+                });
+            let bad = items
+                .iter()
+                .flatten()
+                .enumerate()
+                .find_map(|(i, item)| item.extract::<f64>().err().map(|e| (i, item, e)));
+            let given = match (bad, array) {
+                (Some((i, item, e)), _) => {
+                    format!("{} as item {i}, which is no float ({e})", describe(item))
+                }
+                (None, Some(a)) => format!("an array of shape {:?}", a.shape()),
+                (None, None) => describe(value),
+            };
+            Err(Class::InvalidArgument
+                .err(format!("{what} must be 3 numbers (x, y, z), got {given}")))
+        }
     }
 }
 

@@ -47,6 +47,12 @@ impl TimeConfig {
     }
 }
 
+/// The most frames a scene may ask of one simulation (`[time] frames`, and a schedule's
+/// `frames_per_schedule`): a million steps, hours of simulated time at usual steps; a value
+/// past it is a typo, and its buffers would not fit in memory. (A model's runtime, which
+/// steps without end, has no such count.)
+pub const MAX_FRAMES: usize = 1_000_000;
+
 /// The `[gravity]` section of a scene.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -28,7 +28,7 @@ mod simulator;
 mod step_objective;
 mod system_matrix;
 
-pub use config::{GravityConfig, TimeConfig};
+pub use config::{GravityConfig, MAX_FRAMES, TimeConfig};
 pub use model::FullSpaceModel;
 pub use simulator::{PRECOND_MAX_AGE, RETRY_BUDGET, Simulator, State, StepReport};
 pub use system_matrix::FactoredPreconditioner;

@@ -114,6 +114,10 @@ fn default_memory() -> usize {
     8
 }
 
+/// The most correction pairs L-BFGS may keep: far past where more history stops paying (its
+/// two-loop recursion costs each pair every iteration).
+pub const MAX_LBFGS_MEMORY: usize = 1_000;
+
 impl Default for SolverConfig {
     fn default() -> Self {
         Self {
@@ -140,10 +144,15 @@ impl SolverConfig {
                 reason: "must be at least 1".into(),
             });
         }
-        if self.lbfgs_memory == 0 {
+        if !(1..=MAX_LBFGS_MEMORY).contains(&self.lbfgs_memory) {
             errors.push(FemError::InvalidConfig {
                 field: "solver.lbfgs_memory".into(),
-                reason: "must be at least 1".into(),
+                reason: format!(
+                    "must be 1 to {MAX_LBFGS_MEMORY} correction pairs (each holds two vectors \
+                     of every degree of freedom; the default is {}), got {}",
+                    default_memory(),
+                    self.lbfgs_memory
+                ),
             });
         }
     }

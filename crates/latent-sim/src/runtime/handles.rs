@@ -145,6 +145,13 @@ pub fn body_stiffness(rest: &[Vec3], youngs_modulus: f64) -> f64 {
     youngs_modulus * diagonal(rest)
 }
 
+/// The force that strains the body by its own size, E times the square of the bounding-box
+/// diagonal of `rest` (N): point loads up to [`MAX_POINT_LOAD`] times it are taken.
+pub fn body_force(rest: &[Vec3], youngs_modulus: f64) -> f64 {
+    let size = diagonal(rest);
+    youngs_modulus * size * size
+}
+
 /// The bounding-box diagonal of `rest` (m).
 fn diagonal(rest: &[Vec3]) -> f64 {
     let (lo, hi) = rest.iter().fold(
@@ -165,8 +172,7 @@ fn point_load(
     b: &impl Backend,
     values: impl IntoIterator<Item = [f64; 3]>,
 ) -> Result<(), RuntimeError> {
-    let size = diagonal(b.rest());
-    let body = b.youngs_modulus() * size * size;
+    let body = body_force(b.rest(), b.youngs_modulus());
     let limit = MAX_POINT_LOAD * body;
     for v in values {
         let load = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -351,7 +357,8 @@ pub(crate) fn add_force<B: Backend>(
     {
         return Err(ReducedError::Keyframes.into());
     }
-    if force.start.is_nan() || force.end.is_nan() || force.end < force.start {
+    // Not a number, backwards, or empty: never acting (a tester's start = end = +∞ was taken).
+    if force.start.is_nan() || force.end.is_nan() || force.end <= force.start {
         return Err(RuntimeError::ActiveSpan {
             start: force.start,
             end: force.end,

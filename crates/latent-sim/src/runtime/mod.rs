@@ -17,7 +17,7 @@ mod reduced;
 mod surface;
 
 pub use full::FullRuntime;
-pub use handles::{Handle, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS, body_stiffness};
+pub use handles::{Handle, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS, body_force, body_stiffness};
 pub use reduced::{AnyReducedSimulator, ReducedRuntime};
 pub use surface::Surface;
 
@@ -125,10 +125,11 @@ pub enum RuntimeError {
          nothing of the body moves with it: choose vertices of the body"
     )]
     NotInBody { vertex: usize },
-    /// A force whose active span is not a span: start or end not a number, or end before start.
+    /// A force whose active span is not a span: start or end not a number, or end not after
+    /// start (an empty span never acts).
     #[error(
         "a force's active span runs from `start` to `end` (s; start may be −∞ and end +∞, for \
-         always), so start ≤ end, got start = {start}, end = {end}"
+         always), so start < end, got start = {start}, end = {end}"
     )]
     ActiveSpan { start: f64, end: f64 },
     /// A force whose active span ended before the simulation's clock: it would never act.

@@ -160,7 +160,7 @@ impl ReducedRuntime {
     /// step `step`) and `q_before` ([`ReducedSimulator::set_state`]).
     ///
     /// # Errors
-    /// [`ReducedError::StateShape`].
+    /// [`ReducedError::StateShape`], [`ReducedError::StateNotFinite`].
     pub fn set_state(
         &mut self,
         step: usize,

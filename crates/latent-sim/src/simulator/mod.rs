@@ -281,7 +281,9 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// a one-step error measures, started from a reference trajectory.
     ///
     /// # Errors
-    /// [`ReducedError::StateShape`] when a vector's length is not the subspace's k.
+    /// [`ReducedError::StateShape`] when a vector's length is not the subspace's k,
+    /// [`ReducedError::StateNotFinite`] when a coefficient is not finite (the state is then
+    /// left as it was).
     pub fn set_state(
         &mut self,
         step: usize,
@@ -295,6 +297,9 @@ impl<S: Subspace> ReducedSimulator<S> {
                     expected: k,
                     got: q.len(),
                 });
+            }
+            if let Some((index, &value)) = q.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+                return Err(ReducedError::StateNotFinite { index, value });
             }
         }
         let (mut z_before, mut q_b) = (vec![0.0; d], vec![0.0; k]);

@@ -798,6 +798,18 @@ fn a_simulator_restarted_from_two_states_takes_the_same_next_step() {
             ),
             "{err}"
         );
+        // A coefficient that is not finite is refused, not carried into the next step (a
+        // tester's NaN state was taken and failed the step after with a preconditioner error).
+        let mut bad = states[1].clone();
+        bad[3] = f64::NAN;
+        let err = restarted.set_state(2, &states[2], &bad).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                latent_sim::ReducedError::StateNotFinite { index: 3, .. }
+            ),
+            "{err}"
+        );
     }
     check(&m, &space, LinearSubspace::new(k), "linear");
     check(&m, &space, NeuralSubspace::new(ae), "neural");

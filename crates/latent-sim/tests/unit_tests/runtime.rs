@@ -265,6 +265,15 @@ fn interaction_errors_are_typed() {
         }
         other => panic!("{other:?}"),
     }
+    // So is an empty span, which would never act, at infinity too (a tester's was taken).
+    for at in [0.5, f64::INFINITY] {
+        let mut empty = super::models::tip_spring(&bar([6, 2, 2], -9.81), [0.0; 3], at);
+        empty.start = at;
+        assert!(
+            matches!(full.add_force(empty), Err(RuntimeError::ActiveSpan { .. })),
+            "an empty span at {at} taken"
+        );
+    }
     // A force whose span is over by now would never act: refused, saying whose clock spans are
     // on. One that ends later is taken.
     for _ in 0..5 {
