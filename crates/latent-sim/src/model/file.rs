@@ -116,6 +116,62 @@ fn field<const N: usize>(bytes: &[u8], at: usize) -> [u8; N] {
     out
 }
 
+/// Checks the header of a model file of `len` bytes, `head` its first bytes (all of them, up
+/// to [`HEADER_LEN`]), and returns the payload's checksum: everything [`ReducedModel::from_bytes`]
+/// checks before it reads the payload, so that a file is judged by its first bytes and its
+/// length before the rest is read.
+fn check_header(head: &[u8], len: u64) -> Result<u64, ModelFormatError> {
+    let truncated = |needed: usize, what| ModelFormatError::Truncated {
+        len,
+        needed: needed as u64,
+        what,
+    };
+    // A short file is truncated if what it has is the start of a model file, foreign if not.
+    let magic_len = head.len().min(MAGIC.len());
+    if head[..magic_len] != MAGIC[..magic_len] {
+        return Err(ModelFormatError::Foreign);
+    }
+    if head.len() < 12 {
+        return Err(truncated(HEADER_LEN, "header"));
+    }
+    let version = u32::from_le_bytes(field(head, 8));
+    if version > FORMAT_VERSION {
+        return Err(ModelFormatError::NewerFormat {
+            version,
+            supported: FORMAT_VERSION,
+        });
+    }
+    if version < FORMAT_VERSION {
+        return Err(ModelFormatError::OlderFormat {
+            version,
+            supported: FORMAT_VERSION,
+        });
+    }
+    if head.len() < HEADER_LEN {
+        return Err(truncated(HEADER_LEN, "header"));
+    }
+    let payload_len = u64::from_le_bytes(field(head, 12));
+    let payload_sum = u64::from_le_bytes(field(head, 20));
+    let header_sum = u64::from_le_bytes(field(head, 28));
+    if fnv1a(&head[..28]) != header_sum {
+        return Err(ModelFormatError::HeaderCorrupted);
+    }
+    let have = len.saturating_sub(HEADER_LEN as u64);
+    if have < payload_len {
+        return Err(ModelFormatError::Truncated {
+            len,
+            needed: (HEADER_LEN as u64).saturating_add(payload_len),
+            what: "payload",
+        });
+    }
+    if have > payload_len {
+        return Err(ModelFormatError::TrailingBytes {
+            extra: have - payload_len,
+        });
+    }
+    Ok(payload_sum)
+}
+
 impl ReducedModel {
     /// The model as the bytes of a model file.
     pub fn to_bytes(&self) -> Vec<u8> {
@@ -137,56 +193,9 @@ impl ReducedModel {
     /// # Errors
     /// One [`ModelFormatError`] per way the bytes can be wrong.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelFormatError> {
-        let len = bytes.len();
-        let truncated = |needed: usize, what| ModelFormatError::Truncated {
-            len: len as u64,
-            needed: needed as u64,
-            what,
-        };
-        // A short file is truncated if what it has is the start of a model file, foreign if not.
-        let magic_len = len.min(MAGIC.len());
-        if bytes[..magic_len] != MAGIC[..magic_len] {
-            return Err(ModelFormatError::Foreign);
-        }
-        if len < 12 {
-            return Err(truncated(HEADER_LEN, "header"));
-        }
-        let version = u32::from_le_bytes(field(bytes, 8));
-        if version > FORMAT_VERSION {
-            return Err(ModelFormatError::NewerFormat {
-                version,
-                supported: FORMAT_VERSION,
-            });
-        }
-        if version < FORMAT_VERSION {
-            return Err(ModelFormatError::OlderFormat {
-                version,
-                supported: FORMAT_VERSION,
-            });
-        }
-        if len < HEADER_LEN {
-            return Err(truncated(HEADER_LEN, "header"));
-        }
-        let payload_len = u64::from_le_bytes(field(bytes, 12));
-        let payload_sum = u64::from_le_bytes(field(bytes, 20));
-        let header_sum = u64::from_le_bytes(field(bytes, 28));
-        if fnv1a(&bytes[..28]) != header_sum {
-            return Err(ModelFormatError::HeaderCorrupted);
-        }
+        let head = &bytes[..bytes.len().min(HEADER_LEN)];
+        let payload_sum = check_header(head, bytes.len() as u64)?;
         let payload = &bytes[HEADER_LEN..];
-        let have = payload.len() as u64;
-        if have < payload_len {
-            return Err(ModelFormatError::Truncated {
-                len: len as u64,
-                needed: (HEADER_LEN as u64).saturating_add(payload_len),
-                what: "payload",
-            });
-        }
-        if have > payload_len {
-            return Err(ModelFormatError::TrailingBytes {
-                extra: have - payload_len,
-            });
-        }
         if fnv1a(payload) != payload_sum {
             return Err(ModelFormatError::PayloadCorrupted);
         }
@@ -253,10 +262,32 @@ impl ReducedModel {
                 "not a regular file",
             )));
         }
-        let bytes = std::fs::read(path).map_err(read)?;
-        Self::from_bytes(&bytes).map_err(|cause| ModelFileError::Format {
+        let format = |cause| ModelFileError::Format {
             path: path.to_path_buf(),
             cause,
-        })
+        };
+        // The header first: a file that is not a model, or whose length is not the one its
+        // header announces, is refused before the rest of it is read (a 3 GiB file was read
+        // whole to be told so).
+        use std::io::Read;
+        let mut file = std::fs::File::open(path).map_err(read)?;
+        let mut head = Vec::with_capacity(HEADER_LEN);
+        (&mut file)
+            .take(HEADER_LEN as u64)
+            .read_to_end(&mut head)
+            .map_err(read)?;
+        let payload_sum = check_header(&head, meta.len()).map_err(format)?;
+        let mut payload = Vec::with_capacity(meta.len().saturating_sub(HEADER_LEN as u64) as usize);
+        file.read_to_end(&mut payload).map_err(read)?;
+        // The file changed between the two reads (a writer replaces it by renaming): judged
+        // as a whole, as from_bytes does.
+        if payload.len() as u64 + HEADER_LEN as u64 != meta.len() {
+            head.extend_from_slice(&payload);
+            return Self::from_bytes(&head).map_err(format);
+        }
+        if fnv1a(&payload) != payload_sum {
+            return Err(format(ModelFormatError::PayloadCorrupted));
+        }
+        Self::from_payload(&payload).map_err(format)
     }
 }

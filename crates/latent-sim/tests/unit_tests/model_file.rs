@@ -339,6 +339,25 @@ fn every_kind_of_damage_is_refused_with_its_own_error() {
     assert!(e.to_string().contains("damaged.ldm"), "{e}");
     // The cause is in the message, and not chained again (printed twice before).
     assert!(std::error::Error::source(&e).is_none());
+    // Judged by the header and the file's length before the rest is read: a model with 64 GiB
+    // appended (sparse), and a 64 GiB file that is not a model, are refused at once (the whole
+    // file was read first, and ran out of memory).
+    let huge = 64 << 30;
+    let file = std::fs::File::create(&path).unwrap();
+    std::io::Write::write_all(&mut &file, &bytes).unwrap();
+    file.set_len(huge).unwrap();
+    let e = ReducedModel::load(&path).unwrap_err();
+    assert_eq!(
+        e.format(),
+        Some(&ModelFormatError::TrailingBytes {
+            extra: huge - len as u64
+        }),
+        "{e}"
+    );
+    std::fs::File::create(&path).unwrap().set_len(huge).unwrap();
+    let e = ReducedModel::load(&path).unwrap_err();
+    assert_eq!(e.format(), Some(&ModelFormatError::Foreign), "{e}");
+    std::fs::remove_file(&path).unwrap();
     // Not a regular file: refused before reading (a device or a pipe may never end).
     let dir = temp_path("a-folder.ldm");
     std::fs::create_dir_all(&dir).unwrap();
