@@ -72,15 +72,24 @@ impl Head {
 }
 
 /// Whether the host named in a `Host` header (with or without port) is this machine's loopback.
+/// A malformed one (`[::1` without its bracket, a port that is not a number) is not.
 pub(crate) fn is_loopback_host(host: &str) -> bool {
-    let name = match host.strip_prefix('[') {
-        Some(rest) => rest.split(']').next().unwrap_or(""),
-        None => host.split(':').next().unwrap_or(""),
+    let (name, port) = match host.strip_prefix('[') {
+        Some(rest) => match rest.split_once(']') {
+            Some(parts) => parts,
+            None => return false,
+        },
+        None => host.split_at(host.find(':').unwrap_or(host.len())),
     };
-    name.eq_ignore_ascii_case("localhost")
-        || name
-            .parse::<std::net::IpAddr>()
-            .is_ok_and(|ip| ip.is_loopback())
+    let port_ok = port.is_empty()
+        || port
+            .strip_prefix(':')
+            .is_some_and(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()));
+    port_ok
+        && (name.eq_ignore_ascii_case("localhost")
+            || name
+                .parse::<std::net::IpAddr>()
+                .is_ok_and(|ip| ip.is_loopback()))
 }
 
 /// Answers `head` with an asset, or 404 / 405.
@@ -148,7 +157,16 @@ mod tests {
         for host in ["localhost:8080", "127.0.0.1:1", "[::1]:9", "127.0.0.1"] {
             assert!(is_loopback_host(host), "{host}");
         }
-        for host in ["evil.example:8080", "10.0.0.1:80", "", "[fe80::1]:1"] {
+        for host in [
+            "evil.example:8080",
+            "10.0.0.1:80",
+            "",
+            "[fe80::1]:1",
+            "[::1",
+            "[::1]x",
+            "localhost:",
+            "localhost:80x",
+        ] {
             assert!(!is_loopback_host(host), "{host}");
         }
     }

@@ -259,6 +259,19 @@ fn connection(mut stream: TcpStream, client: u64, ctx: &Context) {
             let _ = http::status(&mut stream, 426, "Upgrade Required", "a WebSocket\n");
             return;
         }
+        // What the handshake needs, said to the client (the handshake's own failure is only
+        // logged, and the connection closed without a reply).
+        if head.header("sec-websocket-key").is_none_or(str::is_empty)
+            || head.header("sec-websocket-version") != Some("13")
+        {
+            let _ = http::status(
+                &mut stream,
+                400,
+                "Bad Request",
+                "a WebSocket upgrade needs a Sec-WebSocket-Key and Sec-WebSocket-Version: 13\n",
+            );
+            return;
+        }
         websocket(stream, client, ctx);
     } else {
         // Consume the head before answering, so the client reads the reply, not a reset.
@@ -357,6 +370,7 @@ fn serve(
                     reason: format!("a message of {size} bytes; at most {max_size}").into(),
                 }));
                 let _ = ws.flush();
+                linger(ws.get_mut());
                 return;
             }
             Err(e) => {
@@ -386,6 +400,28 @@ fn serve(
         }
     }
 }
+
+/// After a close frame sent while the client may still be sending (the rest of a message too
+/// long to read): no more writes, and what arrives is read and dropped for up to
+/// [`LINGER`], so that the client reads the close frame. Closing with unread bytes makes the
+/// kernel reset the connection, and a reset discards the frame on its way (a tester's 2 MiB
+/// message got a reset, not code 1009).
+fn linger(stream: &mut TcpStream) {
+    let _ = stream.shutdown(std::net::Shutdown::Write);
+    let start = Instant::now();
+    let mut sink = [0u8; 16 * 1024];
+    while start.elapsed() < LINGER {
+        match std::io::Read::read(stream, &mut sink) {
+            Ok(0) => return,
+            Ok(_) => {}
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+            Err(_) => return,
+        }
+    }
+}
+
+/// How long [`linger`] reads what a client still sends after its connection was closed.
+const LINGER: Duration = Duration::from_secs(2);
 
 /// Reads one client message and queues it for the simulation; `Some` is the error reply.
 fn request(text: &str, client: u64, ctx: &Context) -> Option<Message> {

@@ -90,6 +90,8 @@ pub struct Client {
     pub frame: Option<Frame>,
     pub state: Option<State>,
     pub closed: bool,
+    /// The code of the server's close frame, when one came.
+    pub close_code: Option<u16>,
 }
 
 impl Client {
@@ -109,6 +111,7 @@ impl Client {
             frame: None,
             state: None,
             closed: false,
+            close_code: None,
         };
         let hello = c.wait_event(|e| matches!(e, Event::Hello { .. }), "hello");
         if let Event::Hello { vertex_ids, .. } = &hello {
@@ -139,8 +142,9 @@ impl Client {
                 }
                 None
             }
-            Ok(Message::Close(_)) => {
+            Ok(Message::Close(frame)) => {
                 self.closed = true;
+                self.close_code = frame.map(|f| f.code.into());
                 None
             }
             Ok(_) => None,
