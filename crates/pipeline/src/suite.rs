@@ -430,13 +430,19 @@ pub fn run_suite(
 
 /// Where `neural` stands against `linear` on the error–cost plane (mean error, mean ms per
 /// step): `ahead` when at least as good on both and better on one, `behind` the other way round,
-/// otherwise on a frontier with it, saying which way.
+/// otherwise on a frontier with it, saying which way. Errors within [`LEVEL_ERROR`] of each
+/// other are level.
 pub fn standing(neural: &MethodReport, linear: &MethodReport) -> &'static str {
     if neural.failure.is_some() || linear.failure.is_some() {
         return "—";
     }
     let faster = neural.ms_per_step.total_cmp(&linear.ms_per_step);
-    let closer = neural.mean_rel_error.total_cmp(&linear.mean_rel_error);
+    let (a, b) = (neural.mean_rel_error, linear.mean_rel_error);
+    let closer = if (a - b).abs() <= LEVEL_ERROR * a.max(b) {
+        std::cmp::Ordering::Equal
+    } else {
+        a.total_cmp(&b)
+    };
     use std::cmp::Ordering::{Equal, Greater, Less};
     match (faster, closer) {
         (Equal, Equal) => "tied",
@@ -446,6 +452,10 @@ pub fn standing(neural: &MethodReport, linear: &MethodReport) -> &'static str {
         (Greater, Less) => "frontier: more accurate, slower",
     }
 }
+
+/// Two mean errors this close, relative to the larger, are level on the error–cost plane: a
+/// tester's flag was called "more accurate" at 1.184 against 1.185 % off.
+pub const LEVEL_ERROR: f64 = 0.01;
 
 /// The suite's table: per mesh, every reduced method's mean error (its space–time error in
 /// parentheses) and speed-up, the pipeline's time from an empty cache, and where
@@ -579,6 +589,10 @@ mod tests {
         };
         let p = at(0.1, 0.02);
         assert_eq!(standing(&at(0.1, 0.02), &p), "tied");
+        // Errors within 1 % of each other are level: the step time decides.
+        assert_eq!(standing(&at(0.1, 0.02015), &p), "tied");
+        assert_eq!(standing(&at(0.2, 0.01985), &p), "behind");
+        assert_eq!(standing(&at(0.08, 0.02015), &p), "ahead");
         assert_eq!(standing(&at(0.08, 0.02), &p), "ahead");
         assert_eq!(standing(&at(0.1, 0.01), &p), "ahead");
         assert_eq!(standing(&at(0.2, 0.03), &p), "behind");
