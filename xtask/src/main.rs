@@ -628,8 +628,9 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         (None, None) if asked > 1 => Some(asked),
         _ => None,
     };
-    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &[])))?;
+    // The model first: a scene it refuses (a pin that selects nothing) leaves no empty folder.
     let mut p = cx.pipeline(&scene, &common)?;
+    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &[])))?;
     let progress = |d, t| cx.stage_progress(d, t);
     // The basis first, so that the stage lines come in order before the methods run; full space
     // alone needs neither it nor the snapshots.
@@ -876,8 +877,8 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
     } = args;
     let methods = methods_once(&methods)?;
     let scene = cx.scene(&common)?;
-    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
     let mut p = cx.pipeline(&scene, &common)?;
+    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
     let progress = |d, t| cx.stage_progress(d, t);
     // Every stage first, so the table's progress is not interleaved with training.
     for &m in &methods {

@@ -89,3 +89,30 @@ fn bench_says_which_stage_is_computing() {
     let text = xtask(&dir, &[&args[..], &[out.to_str().unwrap()]].concat());
     assert!(text.contains(" snapshots: computing\n"), "{text}");
 }
+
+/// A scene the model refuses (a pin that selects nothing) is said before any folder is made:
+/// a tester's refused scene left an empty `out/SCENE`.
+#[test]
+fn a_refused_scene_leaves_no_output_folder() {
+    let dir = scratch_dir("xtask-refused");
+    let scene = dir.join("scene.toml");
+    let plane = "plane = { axis = \"x\", side = \"min\" }";
+    assert!(TINY.contains(plane));
+    let far = TINY.replace(
+        plane,
+        "sphere = { center = [50.0, 0.0, 0.0], radius = 0.1 }",
+    );
+    std::fs::write(&scene, &far).unwrap();
+    let out = dir.join("out");
+    let run = Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(["run", "--every", "0", "--scene"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("selects no vertex"), "{err}");
+    assert!(!out.exists(), "{} was made", out.display());
+}
