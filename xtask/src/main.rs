@@ -1,6 +1,6 @@
 //! `cargo xtask …`: the pipeline's command line. Parses flags, shows progress, dispatches.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
@@ -628,9 +628,12 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         (None, None) if asked > 1 => Some(asked),
         _ => None,
     };
-    // The model first: a scene it refuses (a pin that selects nothing) leaves no empty folder.
+    // A file in the folder's place is said first; the folder is made once the model is built,
+    // so that a scene it refuses (a pin that selects nothing) leaves no empty folder.
+    let out = out.unwrap_or_else(|| cx.out(&scene, &[]));
+    check_output_folder(&out)?;
     let mut p = cx.pipeline(&scene, &common)?;
-    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &[])))?;
+    let out = output_folder(out)?;
     let progress = |d, t| cx.stage_progress(d, t);
     // The basis first, so that the stage lines come in order before the methods run; full space
     // alone needs neither it nor the snapshots.
@@ -833,9 +836,18 @@ pub(crate) fn methods_once(args: &[MethodArg]) -> Result<Vec<Method>> {
 /// `path`, created if needed, as the folder a command writes into: checked before any stage
 /// runs, so that a file in its place is said at once, not after the pipeline's minutes.
 fn output_folder(path: PathBuf) -> Result<PathBuf> {
-    pipeline::output::create_folder(&path, "`--out`", "to write the results into")?;
+    pipeline::output::create_folder(&path, OUT_NAME, OUT_PURPOSE)?;
     Ok(path)
 }
+
+/// [`output_folder`]'s check alone, before the model is built.
+fn check_output_folder(path: &Path) -> Result<()> {
+    pipeline::output::check_folder(path, OUT_NAME, OUT_PURPOSE)
+}
+
+/// How the output folder is named in errors, and what it is for.
+const OUT_NAME: &str = "`--out`";
+const OUT_PURPOSE: &str = "to write the results into";
 
 /// `bench`: every method at several sizes, timed in one process.
 fn bench(cx: &Context, args: BenchArgs) -> Result<()> {
@@ -877,8 +889,10 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
     } = args;
     let methods = methods_once(&methods)?;
     let scene = cx.scene(&common)?;
+    let out = out.unwrap_or_else(|| cx.out(&scene, &["stress"]));
+    check_output_folder(&out)?;
     let mut p = cx.pipeline(&scene, &common)?;
-    let out = output_folder(out.unwrap_or_else(|| cx.out(&scene, &["stress"])))?;
+    let out = output_folder(out)?;
     let progress = |d, t| cx.stage_progress(d, t);
     // Every stage first, so the table's progress is not interleaved with training.
     for &m in &methods {

@@ -92,10 +92,10 @@ impl ForceConfig {
             return Err(bad("keyframes", "times must not decrease".into()));
         }
         let end = self.end.unwrap_or(f64::INFINITY);
-        if !self.start.is_finite() || end.is_nan() || end < self.start {
+        if !self.start.is_finite() || end.is_nan() || end <= self.start {
             return Err(bad(
                 "end",
-                format!("needs start ≤ end, got {} and {end}", self.start),
+                format!("needs start < end, got {} and {end}", self.start),
             ));
         }
         Ok(ExternalForce {

@@ -124,6 +124,7 @@ pub use reduced::{ElasticPath, ReducedSpace, SERIAL_MAX_ELEMENTS, SpaceBuffers, 
 pub use runtime::{
     AnyReducedSimulator, FullRuntime, Handle, Interactive, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS,
     Real, ReducedRuntime, RuntimeError, StepStats, Surface, body_force, body_stiffness,
+    check_point_load,
 };
 pub use simulator::{
     ActiveDent, PRECOND_MAX_AGE, Preconditioning, ReducedEnergy, ReducedSimulator, ReducedState,

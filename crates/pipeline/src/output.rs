@@ -11,14 +11,20 @@ use fem_core::{TetMesh, Vec3};
 /// `` `--out` ``) and `purpose` what it is for. A file in its place is refused plainly, not as
 /// "File exists".
 pub fn create_folder(path: &Path, name: &str, purpose: &str) -> Result<()> {
+    check_folder(path, name, purpose)?;
+    std::fs::create_dir_all(path)
+        .with_context(|| format!("cannot create {name} {}", path.display()))
+}
+
+/// [`create_folder`]'s check alone, creating nothing: a file in the folder's place is refused.
+pub fn check_folder(path: &Path, name: &str, purpose: &str) -> Result<()> {
     if path.exists() && !path.is_dir() {
         anyhow::bail!(
             "{name} {} is a file, not a folder: give a folder {purpose}",
             path.display()
         );
     }
-    std::fs::create_dir_all(path)
-        .with_context(|| format!("cannot create {name} {}", path.display()))
+    Ok(())
 }
 
 /// Writes `bytes` to `path` atomically (its folder created if needed); an error names the file.

@@ -682,13 +682,14 @@ impl Scene {
                     }
                     // A point load's too: past it the first step failed its line search, a
                     // message that named no field.
-                    let body = latent_sim::body_force(&mesh.vertices, self.material.youngs_modulus);
-                    let limit = latent_sim::MAX_POINT_LOAD * body;
-                    let load = |k: &[f64; 4]| (k[1] * k[1] + k[2] * k[2] + k[3] * k[3]).sqrt();
+                    let loads = f.keyframes.iter().map(|k| [k[1], k[2], k[3]]);
                     if f.kind == ForceKind::Point
-                        && let Some(load) = f.keyframes.iter().map(load).find(|&l| l > limit)
+                        && let Err(e) = latent_sim::check_point_load(
+                            &mesh.vertices,
+                            self.material.youngs_modulus,
+                            loads,
+                        )
                     {
-                        let e = latent_sim::RuntimeError::TooLarge { load, body, limit };
                         errors.push(FemError::InvalidConfig {
                             field: format!("force[{i}].keyframes"),
                             reason: e.to_string(),
@@ -1014,12 +1015,13 @@ fn check_force(f: &ForceConfig, field: &str, errors: &mut Vec<FemError>) {
     if !f.start.is_finite() {
         bad("start", format!("must be finite, got {}", f.start));
     }
+    // An empty span (start = end) never acts: the runtime refuses it too.
     if let Some(end) = f.end
-        && (end.is_nan() || end < f.start)
+        && (end.is_nan() || end <= f.start)
     {
         bad(
             "end",
-            format!("needs start ≤ end, got {} and {end}", f.start),
+            format!("needs start < end, got {} and {end}", f.start),
         );
     }
 }

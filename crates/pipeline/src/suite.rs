@@ -438,7 +438,7 @@ pub fn standing(neural: &MethodReport, linear: &MethodReport) -> &'static str {
     }
     let faster = neural.ms_per_step.total_cmp(&linear.ms_per_step);
     let (a, b) = (neural.mean_rel_error, linear.mean_rel_error);
-    let closer = if (a - b).abs() <= LEVEL_ERROR * a.max(b) {
+    let closer = if level(a, b) {
         std::cmp::Ordering::Equal
     } else {
         a.total_cmp(&b)
@@ -456,6 +456,11 @@ pub fn standing(neural: &MethodReport, linear: &MethodReport) -> &'static str {
 /// Two mean errors this close, relative to the larger, are level on the error–cost plane: a
 /// tester's flag was called "more accurate" at 1.184 against 1.185 % off.
 pub const LEVEL_ERROR: f64 = 0.01;
+
+/// Whether errors `a` and `b` are level: within [`LEVEL_ERROR`] of the larger.
+pub fn level(a: f64, b: f64) -> bool {
+    (a - b).abs() <= LEVEL_ERROR * a.max(b)
+}
 
 /// The suite's table: per mesh, every reduced method's mean error (its space–time error in
 /// parentheses) and speed-up, the pipeline's time from an empty cache, and where

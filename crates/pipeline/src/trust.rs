@@ -489,6 +489,15 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
             "most of it the cubature rule's, whose trajectory the same subspace over every \
              element follows far closer (below)"
                 .to_string()
+        } else if let Some((ratio, time)) = strained {
+            format!(
+                "and its subspace holds the reference only by straining it: the reference's \
+                 pose at t = {time:.2} s, put in the subspace, carries {ratio:.1} times its \
+                 elastic energy (a part turned further than a linear basis turns without \
+                 stretching, or a body giving way), which a step that lowers the energy does \
+                 not follow; training schedules that reach such poses (`[training] schedules`, \
+                 `kinds`, `offset`) or a larger subspace (`[pca]`) hold them with less strain"
+            )
         } else if buckles {
             // A body that buckles under its own weight: a step's small error decides where its
             // shape runs, and a subspace that already holds it is not what to change (a
@@ -498,15 +507,6 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
                  holds to {} %, the steps' small errors decide where its shape runs away, so \
                  keeping the body standing, not a larger subspace, is the change to make",
                 fine_pct(r.subspace_error)
-            )
-        } else if let Some((ratio, time)) = strained {
-            format!(
-                "and its subspace holds the reference only by straining it: the reference's \
-                 pose at t = {time:.2} s, put in the subspace, carries {ratio:.1} times its \
-                 elastic energy (a part turned further than a linear basis turns without \
-                 stretching, or a body giving way), which a step that lowers the energy does \
-                 not follow; training schedules that reach such poses (`[training] schedules`, \
-                 `kinds`, `offset`) or a larger subspace (`[pca]`) hold them with less strain"
             )
         } else if r.step_error >= 4.0 * r.subspace_error {
             // A tester read "holds the test trajectory to 0.0 %" and then "each step is 0.24 %

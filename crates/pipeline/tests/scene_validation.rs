@@ -406,7 +406,11 @@ fn selection_and_force_values_are_checked_when_read() {
         ),
         (
             edit("end = 0.5", "end = -1.0"),
-            vec!["force[0].end", "start ≤ end"],
+            vec!["force[0].end", "start < end"],
+        ),
+        (
+            edit("end = 0.5", "end = 0.0"),
+            vec!["force[0].end", "start < end, got 0 and 0"],
         ),
         (
             edit("radius = 0.15", "radius = -0.15"),

@@ -405,41 +405,35 @@ fn point3(what: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 3]> {
     // (3, 1) array's size-1 rows into floats).
     let array = value.cast::<numpy::PyUntypedArray>().ok();
     let flat = array.is_none_or(|a| a.ndim() == 1);
-    let values: Option<Vec<f64>> = value.extract().ok().filter(|_| flat);
-    match values.as_deref() {
-        Some(&[x, y, z]) => Ok([x, y, z]),
-        Some(other) => Err(Class::InvalidArgument.err(format!(
-            "{what} must be 3 numbers (x, y, z), got {}",
-            other.len()
-        ))),
-        None => {
-            // Three items of which one is no float (an integer too large for one, a string):
-            // that item is named, not the sequence ("got tuple" for (10**400, 0, 0)).
-            let items: Option<Vec<Bound<'_, PyAny>>> = value
-                .try_iter()
-                .ok()
-                .and_then(|items| items.collect::<PyResult<_>>().ok())
-                .filter(|items: &Vec<_>| {
-                    array.is_none()
-                        && items.len() == 3
-                        && !value.is_instance_of::<pyo3::types::PyString>()
-                });
-            let bad = items
-                .iter()
-                .flatten()
-                .enumerate()
-                .find_map(|(i, item)| item.extract::<f64>().err().map(|e| (i, item, e)));
-            let given = match (bad, array) {
-                (Some((i, item, e)), _) => {
-                    format!("{} as item {i}, which is no float ({e})", describe(item))
-                }
-                (None, Some(a)) => format!("an array of shape {:?}", a.shape()),
-                (None, None) => describe(value),
-            };
-            Err(Class::InvalidArgument
-                .err(format!("{what} must be 3 numbers (x, y, z), got {given}")))
-        }
+    // Only a sized object of three is read: a generator may never end, and a range of 10**12
+    // was reserved whole before its length was looked at.
+    let len = value.len().ok();
+    let text = value.is_instance_of::<pyo3::types::PyString>();
+    let values: Option<Vec<f64>> = (flat && len == Some(3))
+        .then(|| value.extract().ok())
+        .flatten();
+    if let Some(&[x, y, z]) = values.as_deref() {
+        return Ok([x, y, z]);
     }
+    // Three items of which one is no float (an integer too large for one): that item is
+    // named, not the sequence ("got tuple" for (10**400, 0, 0)).
+    let items: Option<Vec<Bound<'_, PyAny>>> = (array.is_none() && len == Some(3) && !text)
+        .then(|| value.try_iter().ok()?.take(3).collect::<PyResult<_>>().ok())
+        .flatten();
+    let bad = items
+        .iter()
+        .flatten()
+        .enumerate()
+        .find_map(|(i, item)| item.extract::<f64>().err().map(|e| (i, item, e)));
+    let given = match (bad, array, len) {
+        (Some((i, item, e)), _, _) => {
+            format!("{} as item {i}, which is no float ({e})", describe(item))
+        }
+        (None, Some(a), _) => format!("an array of shape {:?}", a.shape()),
+        (None, None, Some(n)) if n != 3 && !text => n.to_string(),
+        (None, None, _) => describe(value),
+    };
+    Err(Class::InvalidArgument.err(format!("{what} must be 3 numbers (x, y, z), got {given}")))
 }
 
 fn array_n3<'py, T: Element>(py: Python<'py>, rows: Vec<[T; 3]>) -> Bound<'py, PyArray2<T>> {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import pathlib
 
@@ -158,6 +159,8 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: sim.grab_near((0.0, 0.0, 0.0), 0.0, 1.0), "radius must be positive"),
         (lambda: sim.grab_near((0.0, 0.1), 0.1, 1.0), r"point must be 3 numbers \(x, y, z\), got 2"),
         (lambda: sim.grab_near((10**400, 0.0, 0.0), 0.1, 1.0), r"got int as item 0, which is no float \(.*too large"),
+        (lambda: sim.grab_near(itertools.count(), 0.1, 1.0), r"point must be 3 numbers \(x, y, z\), got count"),
+        (lambda: sim.grab_near(range(10**12), 0.1, 1.0), r"point must be 3 numbers \(x, y, z\), got 1000000000000"),
         (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), np.zeros((3, 1))), r"got an array of shape \[3, 1\]"),
         (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), "abc"), "target must be 3 numbers"),
         (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), (0.0, math.inf, 0.0)), "target must be finite"),

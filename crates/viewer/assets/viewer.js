@@ -295,8 +295,11 @@
   function setQuoted(element, text) {
     if (element.dataset.text === text) return;
     element.dataset.text = text;
-    element.replaceChildren(...text.split('`').map((piece, i) => {
-      if (i % 2 === 0) return document.createTextNode(piece);
+    const pieces = text.split('`');
+    // A backtick without its pair (a client's own text echoed in an error) stays a backtick.
+    if (pieces.length % 2 === 0) pieces.push(`\`${pieces.pop()}`);
+    element.replaceChildren(...pieces.map((piece, i) => {
+      if (i % 2 === 0 || i === pieces.length - 1) return document.createTextNode(piece);
       const code = document.createElement('code');
       code.textContent = piece;
       return code;

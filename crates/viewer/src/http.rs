@@ -131,9 +131,20 @@ pub(crate) fn status(
     reason: &str,
     body: &str,
 ) -> std::io::Result<()> {
+    status_with(stream, code, reason, "", body)
+}
+
+/// [`status`] with `extra` header lines (each ending in CRLF).
+pub(crate) fn status_with(
+    stream: &mut TcpStream,
+    code: u16,
+    reason: &str,
+    extra: &str,
+    body: &str,
+) -> std::io::Result<()> {
     let text = format!(
         "HTTP/1.1 {code} {reason}\r\nContent-Type: text/plain; charset=utf-8\r\n\
-         Content-Length: {}\r\n{COMMON_HEADERS}\r\n{body}",
+         Content-Length: {}\r\n{extra}{COMMON_HEADERS}\r\n{body}",
         body.len()
     );
     stream.write_all(text.as_bytes())?;

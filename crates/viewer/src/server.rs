@@ -247,30 +247,41 @@ fn connection(mut stream: TcpStream, client: u64, ctx: &Context) {
         return;
     }
     if head.path == "/ws" {
+        // A refusal reads the head first, so the client reads the reply, not a reset.
+        let mut refuse = |code, reason, extra, body| {
+            let mut head_bytes = vec![0u8; bytes.len()];
+            if std::io::Read::read_exact(&mut stream, &mut head_bytes).is_ok() {
+                let _ = http::status_with(&mut stream, code, reason, extra, body);
+            }
+        };
         // A page from another site must not drive the session: same origin or no origin (a
         // script) only.
         if let Some(origin) = head.header("origin")
             && origin != format!("http://{host}")
         {
-            let _ = http::status(&mut stream, 403, "Forbidden", "cross-origin WebSocket\n");
-            return;
+            return refuse(403, "Forbidden", "", "cross-origin WebSocket\n");
         }
         if !head.is_upgrade() {
-            let _ = http::status(&mut stream, 426, "Upgrade Required", "a WebSocket\n");
-            return;
+            return refuse(426, "Upgrade Required", "", "a WebSocket\n");
         }
         // What the handshake needs, said to the client (the handshake's own failure is only
-        // logged, and the connection closed without a reply).
-        if head.header("sec-websocket-key").is_none_or(str::is_empty)
-            || head.header("sec-websocket-version") != Some("13")
-        {
-            let _ = http::status(
-                &mut stream,
+        // logged, and the connection closed without a reply); a version other than 13 gets
+        // the version this server speaks (RFC 6455, 4.4).
+        if head.header("sec-websocket-key").is_none_or(str::is_empty) {
+            return refuse(
                 400,
                 "Bad Request",
-                "a WebSocket upgrade needs a Sec-WebSocket-Key and Sec-WebSocket-Version: 13\n",
+                "",
+                "a WebSocket upgrade needs a Sec-WebSocket-Key\n",
             );
-            return;
+        }
+        if head.header("sec-websocket-version") != Some("13") {
+            return refuse(
+                426,
+                "Upgrade Required",
+                "Sec-WebSocket-Version: 13\r\n",
+                "this server speaks WebSocket version 13\n",
+            );
         }
         websocket(stream, client, ctx);
     } else {
@@ -312,8 +323,12 @@ fn websocket(stream: TcpStream, client: u64, ctx: &Context) {
     {
         return;
     }
-    serve(&mut ws, client, ctx, &inbox, &frame);
+    let unread = serve(&mut ws, client, ctx, &inbox, &frame);
     let _ = ctx.commands.send(Command::Disconnect { client });
+    // After the session has let the client go (its handles released at once).
+    if unread {
+        linger(ws.get_mut());
+    }
 }
 
 /// Whether an I/O error is a read timing out, not the connection failing.
@@ -330,14 +345,15 @@ fn error_text(request: Option<&str>, message: String) -> Message {
     Message::text(serde_json::to_string(&event).unwrap_or_default())
 }
 
-/// The connection's loop, until the client leaves, the server stops or a write fails.
+/// The connection's loop, until the client leaves, the server stops or a write fails; true
+/// when it closed on a message too long to read, whose rest the client may still be sending.
 fn serve(
     ws: &mut WebSocket<TcpStream>,
     client: u64,
     ctx: &Context,
     inbox: &mpsc::Receiver<Outgoing>,
     frame: &Mutex<Option<tungstenite::Bytes>>,
-) {
+) -> bool {
     loop {
         if ctx.stop.load(Ordering::Relaxed) {
             let _ = ws.close(Some(CloseFrame {
@@ -345,7 +361,7 @@ fn serve(
                 reason: "the server is stopping".into(),
             }));
             let _ = ws.flush();
-            return;
+            return false;
         }
         let reply = match ws.read() {
             Ok(Message::Text(text)) => request(text.as_str(), client, ctx),
@@ -356,7 +372,7 @@ fn serve(
             Ok(Message::Close(_)) => {
                 // tungstenite has queued the closing reply; send it and stop.
                 let _ = ws.flush();
-                return;
+                return false;
             }
             Ok(_) => None,
             Err(e) if timed_out(&e) => None,
@@ -370,18 +386,17 @@ fn serve(
                     reason: format!("a message of {size} bytes; at most {max_size}").into(),
                 }));
                 let _ = ws.flush();
-                linger(ws.get_mut());
-                return;
+                return true;
             }
             Err(e) => {
                 tracing::debug!("client {client}: {e}");
-                return;
+                return false;
             }
         };
         if let Some(reply) = reply
             && ws.send(reply).is_err()
         {
-            return;
+            return false;
         }
         while let Ok(out) = inbox.try_recv() {
             let message = match out {
@@ -389,14 +404,14 @@ fn serve(
                 Outgoing::Binary(b) => Message::Binary(b),
             };
             if ws.send(message).is_err() {
-                return;
+                return false;
             }
         }
         let latest = frame.lock().ok().and_then(|mut f| f.take());
         if let Some(bytes) = latest
             && ws.send(Message::Binary(bytes)).is_err()
         {
-            return;
+            return false;
         }
     }
 }

@@ -268,20 +268,30 @@ impl ReducedModel {
         };
         // The header first: a file that is not a model, or whose length is not the one its
         // header announces, is refused before the rest of it is read (a 3 GiB file was read
-        // whole to be told so).
+        // whole to be told so). The length is the open file's: a model renamed into place
+        // after the check above is read whole as itself.
         use std::io::Read;
         let mut file = std::fs::File::open(path).map_err(read)?;
+        let len = file.metadata().map_err(read)?.len();
         let mut head = Vec::with_capacity(HEADER_LEN);
         (&mut file)
             .take(HEADER_LEN as u64)
             .read_to_end(&mut head)
             .map_err(read)?;
-        let payload_sum = check_header(&head, meta.len()).map_err(format)?;
-        let mut payload = Vec::with_capacity(meta.len().saturating_sub(HEADER_LEN as u64) as usize);
-        file.read_to_end(&mut payload).map_err(read)?;
-        // The file changed between the two reads (a writer replaces it by renaming): judged
-        // as a whole, as from_bytes does.
-        if payload.len() as u64 + HEADER_LEN as u64 != meta.len() {
+        let payload_sum = check_header(&head, len).map_err(format)?;
+        // As long as the header says, and one byte more to see a file that grew meanwhile;
+        // a length this machine cannot hold is an error, not an abort.
+        let expected = len.saturating_sub(HEADER_LEN as u64);
+        let mut payload = Vec::new();
+        usize::try_from(expected)
+            .ok()
+            .and_then(|n| payload.try_reserve_exact(n).ok())
+            .ok_or_else(|| read(std::io::Error::from(std::io::ErrorKind::OutOfMemory)))?;
+        file.take(expected + 1)
+            .read_to_end(&mut payload)
+            .map_err(read)?;
+        if payload.len() as u64 != expected {
+            // Written to while read: judged as the bytes read, as from_bytes does.
             head.extend_from_slice(&payload);
             return Self::from_bytes(&head).map_err(format);
         }

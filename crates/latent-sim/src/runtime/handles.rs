@@ -172,7 +172,18 @@ fn point_load(
     b: &impl Backend,
     values: impl IntoIterator<Item = [f64; 3]>,
 ) -> Result<(), RuntimeError> {
-    let body = body_force(b.rest(), b.youngs_modulus());
+    check_point_load(b.rest(), b.youngs_modulus(), values)
+}
+
+/// [`RuntimeError::TooLarge`] for the first of `values` (a point load's forces, N) above
+/// [`MAX_POINT_LOAD`] times [`body_force`] of the body at `rest` with modulus `youngs_modulus`:
+/// what `add_force` and `set_load` check, for a scene's loads before any stage runs.
+pub fn check_point_load(
+    rest: &[Vec3],
+    youngs_modulus: f64,
+    values: impl IntoIterator<Item = [f64; 3]>,
+) -> Result<(), RuntimeError> {
+    let body = body_force(rest, youngs_modulus);
     let limit = MAX_POINT_LOAD * body;
     for v in values {
         let load = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();

@@ -17,7 +17,9 @@ mod reduced;
 mod surface;
 
 pub use full::FullRuntime;
-pub use handles::{Handle, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS, body_force, body_stiffness};
+pub use handles::{
+    Handle, MAX_POINT_LOAD, MAX_SPRING_STIFFNESS, body_force, body_stiffness, check_point_load,
+};
 pub use reduced::{AnyReducedSimulator, ReducedRuntime};
 pub use surface::Surface;
 

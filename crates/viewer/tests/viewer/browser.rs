@@ -553,6 +553,18 @@ fn drive(
             "a quoted message is shown as {shown}, not {expected}"
         ));
     }
+    // A backtick without its pair stays one (a client's own text echoed in an error).
+    let shown = page.eval(
+        "viewerDebug.say('a `b` c `d'); \
+         [document.getElementById('message').textContent, \
+          Array.from(document.querySelectorAll('#message code'), c => c.textContent)]",
+    )?;
+    let expected = json!(["a b c `d", ["b"]]);
+    if shown != expected {
+        return Err(format!(
+            "an odd backtick is shown as {shown}, not {expected}"
+        ));
+    }
     let candidate = page.eval("viewerDebug.grabCandidate()")?;
     let vertex = candidate["vertex"]
         .as_u64()
