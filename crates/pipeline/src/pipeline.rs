@@ -1187,6 +1187,16 @@ impl<'a> Pipeline<'a> {
         progress: Progress<'_>,
     ) -> Result<SnapshotSet> {
         let total = shard_len(cfg.schedules, shard);
+        // Said before the schedules' minutes, not when the last of them runs out of memory.
+        let frames = total.saturating_mul(cfg.frames_per_schedule);
+        if let Some(problem) = snapshot_memory_problem(
+            frames,
+            self.model.dofs.num_free(),
+            cfg.frames_per_schedule,
+            machine_memory(),
+        ) {
+            bail!("{}: {problem}", self.scene.source);
+        }
         // Computed beside the schedules from rest; its reason is kept for the stage's line.
         let why = std::sync::Mutex::new(None);
         let (scene, model) = (self.scene, &self.model);
@@ -2173,6 +2183,44 @@ fn shard_len(total: usize, (index, count): (usize, usize)) -> usize {
     (index..total).step_by(count.max(1)).count()
 }
 
+/// This machine's memory in bytes (Linux's `MemTotal`), or `None` where it cannot be read.
+fn machine_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// Why `frames` training frames of `dim` free coordinates cannot be held on a machine of
+/// `memory` bytes: more than half of it (the PCA stage works on a copy), with the schedules that
+/// fit at `frames_per_schedule` a schedule. A 60k-tet mesh's 36k free coordinates take 0.5 GiB
+/// over the default 32 schedules of 60 frames; 1,000 schedules (16 GiB) ran out of memory only
+/// as the last of hours of schedules ended.
+fn snapshot_memory_problem(
+    frames: usize,
+    dim: usize,
+    frames_per_schedule: usize,
+    memory: Option<u64>,
+) -> Option<String> {
+    let memory = memory?;
+    let bytes = (frames as u128) * (dim as u128) * 8;
+    let limit = u128::from(memory) / 2;
+    if bytes <= limit {
+        return None;
+    }
+    let per_schedule = (frames_per_schedule.max(1) as u128) * (dim as u128) * 8;
+    let gib = |b: u128| b as f64 / f64::from(1u32 << 30);
+    Some(format!(
+        "the training snapshots would take {:.1} GiB ({frames} frames of {dim} free \
+         coordinates), more than half of this machine's {:.1} GiB of memory (the PCA stage works \
+         on a copy): at most {} `[training] schedules` of {frames_per_schedule} frames fit, or \
+         fewer `frames_per_schedule`",
+        gib(bytes),
+        gib(u128::from(memory)),
+        limit / per_schedule.max(1)
+    ))
+}
+
 /// Largest ‖u_v − (U q̂)_v‖ over vertices v and snapshot columns, with u the snapshots.
 fn max_vertex_distance(
     basis: faer::MatRef<'_, f64>,
@@ -2225,6 +2273,30 @@ type ScheduleRun = (
 
 #[cfg(test)]
 mod tests {
+    /// Training data past half the machine's memory is refused before it is simulated, with the
+    /// schedules that fit; where the memory cannot be read nothing is said.
+    #[test]
+    fn snapshots_past_half_the_memory_are_refused_with_what_fits() {
+        let gib = 1u64 << 30;
+        // 32 schedules of 60 frames of a 60k-tet mesh's 36k free coordinates: 0.5 GiB.
+        assert_eq!(
+            super::snapshot_memory_problem(1920, 36_000, 60, Some(24 * gib)),
+            None
+        );
+        let said = super::snapshot_memory_problem(40 * 60, 36_000, 60, Some(gib)).unwrap();
+        assert!(
+            said.contains("would take 0.6 GiB (2400 frames of 36000 free coordinates)")
+                && said.contains("this machine's 1.0 GiB")
+                && said.contains("at most 31 `[training] schedules` of 60 frames fit"),
+            "{said}"
+        );
+        assert_eq!(
+            super::snapshot_memory_problem(usize::MAX, 36_000, 60, None),
+            None
+        );
+        assert!(super::machine_memory().is_none_or(|m| m > gib / 4));
+    }
+
     use super::{Pipeline, pca_rule_clearly_closer, validation_schedules, whitened};
 
     /// A cube standing on its base under its own weight: one so soft its weight crushes it is
