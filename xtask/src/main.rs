@@ -536,13 +536,18 @@ fn logging() -> bool {
 fn stage_started(stage: pipeline::stage::Stage) {
     let now = std::time::Instant::now();
     let mut computing = LOG_STAGES.lock().unwrap_or_else(|e| e.into_inner());
+    // A stage that another being computed needs says so: "pca: computing" came before
+    // "snapshots: computing" with nothing to say why (a tester read it as out of order).
+    let needed_by = computing.last().map_or(String::new(), |outer| {
+        format!(", which {} needs", outer.stage)
+    });
     computing.push(Computing {
         stage,
         started: now,
         said: now,
     });
     if logging() {
-        println!("{stage:>10}: computing");
+        println!("{stage:>10}: computing{needed_by}");
     }
 }
 
