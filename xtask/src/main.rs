@@ -423,9 +423,23 @@ impl Context {
         common
             .cache
             .as_deref()
-            .and_then(std::path::Path::parent)
+            .and_then(Path::parent)
             .filter(|dir| report_scene(&dir.join("report.json")).as_deref() == Some(&scene.name))
             .map_or_else(|| self.out(scene, &[]), PathBuf::from)
+    }
+
+    /// A pipeline for the scene and its output folder `out`: a file in the folder's place is
+    /// said first, and the folder is made once the model is built, so that a scene the model
+    /// refuses (a pin that selects nothing) leaves no empty folder.
+    fn pipeline_into<'a>(
+        &self,
+        scene: &'a Scene,
+        common: &Common,
+        out: PathBuf,
+    ) -> Result<(Pipeline<'a>, PathBuf)> {
+        pipeline::output::check_folder(&out, OUT_NAME, OUT_PURPOSE)?;
+        let p = self.pipeline(scene, common)?;
+        Ok((p, output_folder(out)?))
     }
 
     /// A pipeline for the scene, printing each stage's outcome.
@@ -633,12 +647,8 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
         (None, None) if asked > 1 => Some(asked),
         _ => None,
     };
-    // A file in the folder's place is said first; the folder is made once the model is built,
-    // so that a scene it refuses (a pin that selects nothing) leaves no empty folder.
-    let out = out.unwrap_or_else(|| cx.out(&scene, &[]));
-    check_output_folder(&out)?;
-    let mut p = cx.pipeline(&scene, &common)?;
-    let out = output_folder(out)?;
+    let (mut p, out) =
+        cx.pipeline_into(&scene, &common, out.unwrap_or_else(|| cx.out(&scene, &[])))?;
     let progress = |d, t| cx.stage_progress(d, t);
     // The basis first, so that the stage lines come in order before the methods run; full space
     // alone needs neither it nor the snapshots.
@@ -753,7 +763,7 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
 }
 
 /// The scene a `report.json` is of (its `scene` field), if it reads.
-fn report_scene(report: &std::path::Path) -> Option<String> {
+fn report_scene(report: &Path) -> Option<String> {
     let text = std::fs::read_to_string(report).ok()?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
     v.get("scene")?.as_str().map(str::to_string)
@@ -845,11 +855,6 @@ fn output_folder(path: PathBuf) -> Result<PathBuf> {
     Ok(path)
 }
 
-/// [`output_folder`]'s check alone, before the model is built.
-fn check_output_folder(path: &Path) -> Result<()> {
-    pipeline::output::check_folder(path, OUT_NAME, OUT_PURPOSE)
-}
-
 /// How the output folder is named in errors, and what it is for.
 const OUT_NAME: &str = "`--out`";
 const OUT_PURPOSE: &str = "to write the results into";
@@ -895,9 +900,7 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
     let methods = methods_once(&methods)?;
     let scene = cx.scene(&common)?;
     let out = out.unwrap_or_else(|| cx.out(&scene, &["stress"]));
-    check_output_folder(&out)?;
-    let mut p = cx.pipeline(&scene, &common)?;
-    let out = output_folder(out)?;
+    let (mut p, out) = cx.pipeline_into(&scene, &common, out)?;
     let progress = |d, t| cx.stage_progress(d, t);
     // Every stage first, so the table's progress is not interleaved with training.
     for &m in &methods {

@@ -2273,6 +2273,8 @@ type ScheduleRun = (
 
 #[cfg(test)]
 mod tests {
+    use super::{Pipeline, pca_rule_clearly_closer, validation_schedules, whitened};
+
     /// Training data past half the machine's memory is refused before it is simulated, with the
     /// schedules that fit; where the memory cannot be read nothing is said.
     #[test]
@@ -2296,8 +2298,6 @@ mod tests {
         );
         assert!(super::machine_memory().is_none_or(|m| m > gib / 4));
     }
-
-    use super::{Pipeline, pca_rule_clearly_closer, validation_schedules, whitened};
 
     /// A cube standing on its base under its own weight: one so soft its weight crushes it is
     /// said at once, by the run under gravity alone that decides the later starts; a firm one

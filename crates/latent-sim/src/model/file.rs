@@ -195,8 +195,13 @@ impl ReducedModel {
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelFormatError> {
         let head = &bytes[..bytes.len().min(HEADER_LEN)];
         let payload_sum = check_header(head, bytes.len() as u64)?;
-        let payload = &bytes[HEADER_LEN..];
-        if fnv1a(payload) != payload_sum {
+        Self::from_summed_payload(&bytes[HEADER_LEN..], payload_sum)
+    }
+
+    /// The payload whose header passed ([`check_header`]), checked against its checksum, then
+    /// decoded.
+    fn from_summed_payload(payload: &[u8], sum: u64) -> Result<Self, ModelFormatError> {
+        if fnv1a(payload) != sum {
             return Err(ModelFormatError::PayloadCorrupted);
         }
         Self::from_payload(payload)
@@ -295,9 +300,6 @@ impl ReducedModel {
             head.extend_from_slice(&payload);
             return Self::from_bytes(&head).map_err(format);
         }
-        if fnv1a(&payload) != payload_sum {
-            return Err(format(ModelFormatError::PayloadCorrupted));
-        }
-        Self::from_payload(&payload).map_err(format)
+        Self::from_summed_payload(&payload, payload_sum).map_err(format)
     }
 }
