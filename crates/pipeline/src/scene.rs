@@ -235,9 +235,14 @@ impl Scene {
     /// Parses scene text; `source` names it in errors and `base_dir` anchors relative paths.
     pub fn from_str(text: &str, base_dir: &Path, source: &str) -> Result<Self> {
         let mut scene: Scene = toml::from_str(text).map_err(|e| {
-            match e.span().and_then(|span| field_at(text, span.start)) {
-                Some(field) => anyhow::anyhow!("{source}: `{field}`: {e}"),
-                None => anyhow::anyhow!("{source}: {e}"),
+            let field = e.span().and_then(|span| field_at(text, span.start));
+            let hint = e
+                .span()
+                .and_then(|span| parse_hint(text, span.start, e.message(), field.as_deref()))
+                .map_or(String::new(), |h| format!("{h}\n"));
+            match field {
+                Some(field) => anyhow::anyhow!("{source}: `{field}`: {e}{hint}"),
+                None => anyhow::anyhow!("{source}: {e}{hint}"),
             }
         })?;
         scene.base_dir = base_dir.to_path_buf();
@@ -923,6 +928,62 @@ fn field_at(text: &str, offset: usize) -> Option<String> {
     }
     let parts: Vec<String> = section.into_iter().chain(stack).chain(last).collect();
     (!parts.is_empty()).then(|| parts.join("."))
+}
+
+/// What to write instead, for three mistakes a person makes in a scene's TOML: a key a letter
+/// or two off one the section takes, a single `[pin]` where the list `[[pin]]` is meant, and
+/// arithmetic in a value (`step = 1/60`, which TOML reads as an unquoted string).
+fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> Option<String> {
+    if let Some(rest) = message.strip_prefix("unknown field `") {
+        let (key, expected) = rest.split_once('`')?;
+        let nearest = expected
+            .split('`')
+            .skip(1)
+            .step_by(2)
+            .map(|known| (edit_distance(key, known), known))
+            .min()?;
+        return (nearest.0 <= (key.chars().count() / 3).max(1))
+            .then(|| format!("did you mean `{}`?", nearest.1));
+    }
+    if message.starts_with("invalid type: map, expected a sequence") {
+        let name = field?.rsplit('.').next()?;
+        return Some(format!(
+            "write `[[{name}]]`, with doubled brackets: each is one entry of a list, and a \
+             scene may have several"
+        ));
+    }
+    // The value from the error to the end of its line, without a comment.
+    let start = (0..=offset.min(text.len()))
+        .rev()
+        .find(|&o| text.is_char_boundary(o))?;
+    let line = text[start..].lines().next()?;
+    let value = line.split('#').next()?.trim();
+    let (a, op, b) = ['/', '*']
+        .iter()
+        .find_map(|&op| value.split_once(op).map(|(a, b)| (a, op, b)))?;
+    let (a, b): (f64, f64) = (a.trim().parse().ok()?, b.trim().parse().ok()?);
+    let result = if op == '/' { a / b } else { a * b };
+    result
+        .is_finite()
+        .then(|| format!("TOML does no arithmetic: write the number, {result} for `{value}`"))
+}
+
+/// The Levenshtein distance between two keys (insertions, deletions and substitutions).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let above = row[j + 1];
+            row[j + 1] = (above + 1)
+                .min(row[j] + 1)
+                .min(diagonal + usize::from(ca != cb));
+            diagonal = above;
+        }
+    }
+    row[b.len()]
 }
 
 /// The checks of [`VertexSelection::select`] that need no mesh, so they are reported with the

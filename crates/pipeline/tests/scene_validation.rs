@@ -148,6 +148,42 @@ fn unknown_keys_are_errors_naming_the_key_and_its_section() {
     }
 }
 
+/// Three mistakes get what to write instead: a key a letter or two off (and only then), a
+/// single `[pin]` for the list `[[pin]]`, and arithmetic in a value.
+#[test]
+fn common_mistakes_say_what_to_write() {
+    let cases = [
+        (
+            edit("youngs_modulus", "youngs_modulos"),
+            "did you mean `youngs_modulus`?",
+        ),
+        (edit("frames = 10", "frams = 10"), "did you mean `frames`?"),
+        (
+            edit("[[pin]]", "[pin]"),
+            "write `[[pin]]`, with doubled brackets",
+        ),
+        (
+            edit("[[force]]", "[force]"),
+            "write `[[force]]`, with doubled brackets",
+        ),
+        (
+            edit("step = 0.01", "step = 1/100"),
+            "write the number, 0.01 for `1/100`",
+        ),
+        (
+            edit("stiffness = 200.0", "stiffness = 2 * 100 # N/m"),
+            "write the number, 200 for `2 * 100`",
+        ),
+    ];
+    for (text, hint) in cases {
+        assert_names(&read_error(&text), &[hint]);
+    }
+    // A key far from every known one is not guessed at.
+    let err = read_error(&edit("frames = 10", "duration = 10"));
+    assert_names(&err, &["`time.duration`", "unknown field"]);
+    assert!(!err.contains("did you mean"), "{err}");
+}
+
 #[test]
 fn wrong_types_are_errors_naming_the_field_and_line() {
     let cases = [
