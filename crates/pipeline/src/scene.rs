@@ -930,11 +930,14 @@ fn field_at(text: &str, offset: usize) -> Option<String> {
     (!parts.is_empty()).then(|| parts.join("."))
 }
 
-/// What to write instead, for three mistakes a person makes in a scene's TOML: a key a letter
-/// or two off one the section takes, a single `[pin]` where the list `[[pin]]` is meant, and
-/// arithmetic in a value (`step = 1/60`, which TOML reads as an unquoted string).
+/// What to write instead, for three mistakes a person makes in a scene's TOML: a key or a
+/// name a letter or two off one the field takes, a single `[pin]` where the list `[[pin]]` is
+/// meant, and arithmetic in a value (`step = 1/60`, which TOML reads as an unquoted string).
 fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> Option<String> {
-    if let Some(rest) = message.strip_prefix("unknown field `") {
+    let unknown = ["unknown field `", "unknown variant `"]
+        .iter()
+        .find_map(|p| message.strip_prefix(p));
+    if let Some(rest) = unknown {
         let (key, expected) = rest.split_once('`')?;
         let nearest = expected
             .split('`')

@@ -148,7 +148,7 @@ fn unknown_keys_are_errors_naming_the_key_and_its_section() {
     }
 }
 
-/// Three mistakes get what to write instead: a key a letter or two off (and only then), a
+/// Three mistakes get what to write instead: a key or a name a letter or two off (and only then), a
 /// single `[pin]` for the list `[[pin]]`, and arithmetic in a value.
 #[test]
 fn common_mistakes_say_what_to_write() {
@@ -158,6 +158,10 @@ fn common_mistakes_say_what_to_write() {
             "did you mean `youngs_modulus`?",
         ),
         (edit("frames = 10", "frams = 10"), "did you mean `frames`?"),
+        (
+            edit("\"stable-neo-hookean\"", "\"stable-neohookean\""),
+            "did you mean `stable-neo-hookean`?",
+        ),
         (
             edit("[[pin]]", "[pin]"),
             "write `[[pin]]`, with doubled brackets",
