@@ -306,6 +306,13 @@ fn a_tiny_scene_runs_end_to_end() {
             "report.json lacks {key}"
         );
     }
+    // What a full-space row has no figure of is null there, a number on a reduced row.
+    assert_eq!(report["methods"][0]["method"], "full");
+    for key in pipeline::run::NOT_OF_FULL_SPACE {
+        assert!(report["methods"][0][key].is_null(), "full: {key}");
+        assert!(report["methods"][1][key].is_f64(), "{key}");
+    }
+    assert!(report["methods"][0]["mean_rel_error"].is_f64());
     assert!(out.join("report.md").is_file());
     for m in ["full", "pca", "pca-cubature", "neural", "neural-cubature"] {
         let pvd = std::fs::read_to_string(out.join(m).join("series.pvd")).unwrap();

@@ -42,12 +42,39 @@ pub struct RunOptions {
     pub trajectory: usize,
 }
 
+/// The rows as `report.json` holds them: [`NOT_OF_FULL_SPACE`] `null` on full-space rows.
+fn report_rows(rows: &[MethodReport]) -> Result<Vec<serde_json::Value>> {
+    rows.iter()
+        .map(|r| {
+            let mut row = serde_json::to_value(r)?;
+            if r.method.is_full() {
+                for key in NOT_OF_FULL_SPACE {
+                    row[key] = serde_json::Value::Null;
+                }
+            }
+            Ok(row)
+        })
+        .collect()
+}
+
 /// `report.json`'s `format`: what the file is, for a program that finds it among others.
 pub const REPORT_FORMAT: &str = "latent-dynamics run report";
 
 /// `report.json`'s `version`: raised when a field changes meaning or goes (the file was a bare
-/// list of rows before version 1).
-pub const REPORT_VERSION: u32 = 1;
+/// list of rows before version 1; in version 1 a full-space row held 0 where version 2 holds
+/// `null`, [`NOT_OF_FULL_SPACE`]).
+pub const REPORT_VERSION: u32 = 2;
+
+/// The figures of a row that measure a subspace and its training poses, which a full-space
+/// row has none of: `null` there in `report.json`, where the table prints a dash (a tester's
+/// script read the 0 they held as a perfect score).
+pub const NOT_OF_FULL_SPACE: [&str; 5] = [
+    "subspace_error",
+    "step_error",
+    "training_distance",
+    "training_distance_time",
+    "training_seconds",
+];
 
 /// `report.json`: what a run measured and of what, so that a script comparing runs needs no
 /// other file: the scene and its test, when it was run, what each stage chose, the warnings,
@@ -81,7 +108,8 @@ pub struct RunReport<'a> {
     /// `export` tells a run of the same model from one before `[reduced]`, `[solver]` or
     /// `[test]` changed.
     pub settings: serde_json::Value,
-    pub methods: &'a [MethodReport],
+    /// The rows, with `null` for what a full-space row does not have ([`NOT_OF_FULL_SPACE`]).
+    pub methods: Vec<serde_json::Value>,
 }
 
 /// One load of a held-out test trajectory, as `run` describes it under its title and in
@@ -966,7 +994,7 @@ pub fn run(
         caveats: assessment.caveats,
         test_forces: &test_forces,
         settings: run_settings(pipeline.scene),
-        methods: &rows,
+        methods: report_rows(&rows)?,
     };
     write_json(&opts.out.join("report.json"), &report)?;
     if let Some((method, mut model)) = model {

@@ -76,6 +76,11 @@ pub const CUBATURE_EXCESS: f64 = 1.25;
 /// Which of the two settings stopped the fit is on the cubature stage's line: on a twisted
 /// blade whose rule the 2 % tolerance had stopped at 197 elements, a budget of 1,000 changed
 /// nothing and a tolerance of 0.5 % took `pca-cubature` from 3.8 to 0.95 %.
+/// How to keep more PCA coefficients, named so a person can write it (a tester read `[pca]`
+/// alone and took the value from README).
+const LARGER_PCA: &str = "`[pca] explained_energy` with one 9 more than the `pca` stage's \
+                          line shows, or a larger `dimension` where the scene gives one";
+
 const LARGER_RULE: &str = "a larger rule narrows that: a smaller `[cubature] tolerance`, or a \
                            larger `max_elements` where the cubature stage's line says the \
                            element budget stopped it";
@@ -496,7 +501,8 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
                  elastic energy (a part turned further than a linear basis turns without \
                  stretching, or a body giving way), which a step that lowers the energy does \
                  not follow; training schedules that reach such poses (`[training] schedules`, \
-                 `kinds`, `offset`) or a larger subspace (`[pca]`) hold them with less strain"
+                 `kinds`, `offset`) or a larger subspace ({LARGER_PCA}) hold them with less \
+                 strain"
             )
         } else if buckles {
             // A body that buckles under its own weight: a step's small error decides where its
@@ -514,14 +520,15 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
             format!(
                 "from states its subspace holds to {} %: the energy along what the subspace \
                  leaves out (stiffness the mass norm hardly sees), not its reach, sets where a \
-                 step lands; a larger subspace takes in more of that stiffness (`[pca]`, and for \
-                 the neural methods `[autoencoder] latent_dim`)",
+                 step lands; a larger subspace takes in more of that stiffness ({LARGER_PCA}, \
+                 and for the neural methods `[autoencoder] latent_dim`)",
                 fine_pct(r.subspace_error)
             )
         } else {
-            "which a larger subspace lowers (`[pca]`, and for the neural methods \
-             `[autoencoder] latent_dim`)"
-                .to_string()
+            format!(
+                "which a larger subspace lowers ({LARGER_PCA}, and for the neural methods \
+                 `[autoencoder] latent_dim`)"
+            )
         };
         format!(
             "{}: the drift is mostly the reduced steps' own: {restarted}, so most of it is \
@@ -711,7 +718,8 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             out.push(format!(
                 "{}: its subspace alone is {:.1} % from the test trajectory, so the training \
                  data does not cover the test's motion: add schedules or the test's kinds \
-                 (`[training] schedules`, `kinds`), or keep more PCA coefficients (`[pca]`)",
+                 (`[training] schedules`, `kinds`), or keep more PCA coefficients \
+                 ({LARGER_PCA})",
                 r.method,
                 pct(r.subspace_error)
             ));
@@ -1459,7 +1467,7 @@ mod tests {
         assert!(
             w.contains("in a body that buckles under its own weight (above)")
                 && w.contains("holds to 0.1 %")
-                && !w.contains("`[pca]`"),
+                && !w.contains("[pca]"),
             "{w}"
         );
         // Without the buckling, the plain advice.
@@ -1509,7 +1517,14 @@ mod tests {
             "{}",
             w[0]
         );
-        assert!(w[0].ends_with("which a larger subspace lowers (`[pca]`, and for the neural methods `[autoencoder] latent_dim`)"), "{}", w[0]);
+        assert!(
+            w[0].ends_with(&format!(
+                "which a larger subspace lowers ({LARGER_PCA}, and for the neural methods \
+                 `[autoencoder] latent_dim`)"
+            )),
+            "{}",
+            w[0]
+        );
         assert!(!w[0].contains("from states its subspace holds"), "{}", w[0]);
         // A subspace that holds the frames ten times closer than a step lands (a tester's
         // mushroom: 0.02 % and 0.24 %) is said with both.
