@@ -76,6 +76,11 @@ pub const CUBATURE_EXCESS: f64 = 1.25;
 /// Which of the two settings stopped the fit is on the cubature stage's line: on a twisted
 /// blade whose rule the 2 % tolerance had stopped at 197 elements, a budget of 1,000 changed
 /// nothing and a tolerance of 0.5 % took `pca-cubature` from 3.8 to 0.95 %.
+/// Said between the scene's own warnings and the lines after them.
+pub const SCENE_FIRST: &str = "the lines below measure the scene as written: where a line above \
+                               names a mistake in it (its units, density or pins, a body its \
+                               weight crushes), mend that first, which changes all of them";
+
 /// How to keep more PCA coefficients, named so a person can write it (a tester read `[pca]`
 /// alone and took the value from README).
 const LARGER_PCA: &str = "`[pca] explained_energy` with one 9 more than the `pca` stage's \
@@ -696,6 +701,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         .iter()
         .flat_map(|r| r.scene_warnings.iter().map(|w| format!("the scene: {w}")))
         .collect();
+    let scene_lines = out.len();
     out.extend(rows.iter().filter_map(collapse_warning));
     out.extend(rows.iter().filter_map(stretch_warning));
     out.extend(rows.iter().filter_map(linear_warning));
@@ -803,6 +809,11 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
     }
     // Said after the methods' restarts, whose amplification it explains.
     out.extend(fall_warning(rows));
+    // A tester's mesh in millimetres read as metres was told to set `[mesh] scale`, then eight
+    // lines to add training schedules: those measure the scene as written.
+    if scene_lines > 0 && out.len() > scene_lines {
+        out.insert(scene_lines, SCENE_FIRST.to_string());
+    }
     let mut caveats: Vec<String> = slower_than_full(rows).into_iter().collect();
     caveats.extend(rows.iter().filter_map(|r| cubature_caveat(r, rows)));
     while let Some((_, what)) = held_outside.first() {
@@ -850,6 +861,34 @@ mod tests {
             }),
             ..r
         }
+    }
+
+    /// The scene's own warnings come first, then a line saying the methods' lines measure the
+    /// scene as written; with no method line after them, or no scene warning, no such line.
+    #[test]
+    fn the_scenes_warnings_come_before_the_methods_lines() {
+        let scene = |r: MethodReport| MethodReport {
+            scene_warnings: vec!["the mesh is 3.076e2 m across".into()],
+            ..r
+        };
+        let w = assess(&[
+            scene(row(Method::Full, 0.0, 0.0)),
+            row(Method::Pca, 0.25, 0.246),
+        ])
+        .untrusted;
+        assert!(w.len() > 2, "{w:?}");
+        assert!(w[0].starts_with("the scene: the mesh is"), "{w:?}");
+        assert_eq!(w[1], SCENE_FIRST);
+        assert!(w[2].starts_with("pca: "), "{w:?}");
+        let alone = assess(&[
+            scene(row(Method::Full, 0.0, 0.0)),
+            row(Method::Pca, 0.001, 0.001),
+        ])
+        .untrusted;
+        assert_eq!(alone.len(), 1, "{alone:?}");
+        let methods =
+            assess(&[row(Method::Full, 0.0, 0.0), row(Method::Pca, 0.25, 0.246)]).untrusted;
+        assert!(!methods.is_empty() && !methods.contains(&SCENE_FIRST.to_string()));
     }
 
     /// A rule that makes most of a cubature method's error under the untrusted figure is worth
