@@ -687,8 +687,27 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
             && said.contains(&error),
         "{said}"
     );
+    // The error is recorded in the model as `run` records it, once the report is of it.
+    let mut recorded = model.clone();
+    assert!(pipeline::export::record_run_error(
+        &out.join("run"),
+        &mut recorded,
+        &s
+    ));
+    let e = recorded.provenance.errors.last().unwrap();
+    assert_eq!(e.value, rows[1].mean_rel_error);
+    assert!(e.held_out && e.name.ends_with(" 0"), "{e:?}");
+    assert_eq!(
+        recorded.provenance.errors.len(),
+        model.provenance.errors.len() + 1
+    );
     // A method the run left out, a scene changed since, and no run at all.
-    let pca = scene_model(&mut p, Method::Pca, Rows::Used, &no_progress).unwrap();
+    let mut pca = scene_model(&mut p, Method::Pca, Rows::Used, &no_progress).unwrap();
+    assert!(!pipeline::export::record_run_error(
+        &out.join("run"),
+        &mut pca,
+        &s
+    ));
     let said = run_verdict(&out.join("run"), &pca, &s);
     assert!(
         said.starts_with("not measured: the run in") && said.contains("did not run pca"),

@@ -217,8 +217,8 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
         ),
         (None, Some(e)) => format!(
             "no trajectory error is recorded in the model (`cargo xtask run` records it where the \
-             method's run reached its last frame; `export` records none): {} {:.2} %, a force \
-             error, not how far the motion goes off",
+             method's run reached its last frame, and `export` the one such a run measured of the \
+             same model): {} {:.2} %, a force error, not how far the motion goes off",
             e.name,
             100.0 * e.value
         ),

@@ -289,6 +289,31 @@ pub fn run_verdict(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene
     s
 }
 
+/// Records in `model` the error `cargo xtask run` measured of it on its held-out test, as `run`
+/// records it in the model it writes, when the report in `out` is of the same model
+/// ([`run_verdict`]'s conditions) and the method's run reached its last frame, so that `view
+/// --model` and a program reading the file have it (a tester's `export` printed 3.44 % and
+/// `view` then said none was recorded). Whether it was recorded.
+pub fn record_run_error(out: &Path, model: &mut ReducedModel, scene: &crate::scene::Scene) -> bool {
+    let Ok((report, error)) = measured(out, model, scene) else {
+        return false;
+    };
+    let method = model.provenance.method.as_str();
+    let finished = report["methods"]
+        .as_array()
+        .and_then(|rows| rows.iter().find(|r| r["method"] == method))
+        .is_some_and(|r| r["failure"].is_null());
+    let Some(trajectory) = report["trajectory"].as_u64().filter(|_| finished) else {
+        return false;
+    };
+    model.provenance.errors.push(MeasuredError {
+        name: format!("{} {trajectory}", crate::run::TRAJECTORY_ERROR),
+        held_out: true,
+        value: error,
+    });
+    true
+}
+
 /// The error `cargo xtask run` measured of `model` on its held-out test, from the `report.json`
 /// in `out`, when that report is of the same model ([`run_verdict`]'s conditions); None
 /// otherwise.
