@@ -1,7 +1,7 @@
 //! `cargo xtask run`: the pipeline, then every method on the held-out test trajectory, measured
 //! against the full-space reference in one table (`report.json`, `report.md`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use fem_core::four_digits;
@@ -40,6 +40,17 @@ pub struct RunOptions {
     pub methods: Vec<Method>,
     /// Which held-out test trajectory to simulate.
     pub trajectory: usize,
+}
+
+/// A scene's source as a report names it: a file's path made absolute, so that it holds from
+/// wherever the report is read (a tester's report.md said `../scenes/dome.toml`, relative to
+/// where the command ran); the built-in scene's name as it is.
+fn scene_file(source: &str) -> String {
+    let path = Path::new(source);
+    match path.is_file().then(|| std::path::absolute(path)) {
+        Some(Ok(absolute)) => absolute.display().to_string(),
+        _ => source.to_string(),
+    }
 }
 
 /// The rows as `report.json` holds them: [`NOT_OF_FULL_SPACE`] `null` on full-space rows.
@@ -88,8 +99,8 @@ pub struct RunReport<'a> {
     /// When it was written, UTC (ISO 8601, to the second).
     pub written: String,
     pub scene: &'a str,
-    /// The scene file (`<built-in cantilever>` for the default scene).
-    pub scene_file: &'a str,
+    /// The scene file, absolute ([`scene_file`]; `<built-in cantilever>` for the default scene).
+    pub scene_file: String,
     /// The held-out test trajectory measured, its frames, and the time step (s).
     pub trajectory: usize,
     pub frames: usize,
@@ -985,7 +996,7 @@ pub fn run(
         project_version: env!("CARGO_PKG_VERSION"),
         written: crate::output::utc_now(),
         scene: &pipeline.scene.name,
-        scene_file: &pipeline.scene.source,
+        scene_file: scene_file(&pipeline.scene.source),
         trajectory: opts.trajectory,
         frames: pipeline.scene.test().frames_per_schedule,
         time_step: pipeline.scene.time.step,
@@ -1016,7 +1027,7 @@ pub fn run(
         &opts.out.join("report.md"),
         format!(
             "# {title}\n\nscene: {}\n\n{}{ONE_DRAW}\n{}",
-            pipeline.scene.source,
+            scene_file(&pipeline.scene.source),
             test_lines(&test_forces),
             report_markdown(&rows)
         )
@@ -1904,6 +1915,22 @@ pub fn markdown(rows: &[MethodReport]) -> String {
 
 #[cfg(test)]
 mod tests {
+    /// A report names a scene file by its absolute path (a relative one is taken from where the
+    /// command runs: a test runs in its crate's folder, which holds Cargo.toml), and the
+    /// built-in scene by its name.
+    #[test]
+    fn a_report_names_its_scene_file_absolutely() {
+        let here = std::env::current_dir().unwrap();
+        assert_eq!(
+            super::scene_file("Cargo.toml"),
+            here.join("Cargo.toml").display().to_string()
+        );
+        assert_eq!(
+            super::scene_file("<built-in cantilever>"),
+            "<built-in cantilever>"
+        );
+    }
+
     /// A step longer than the body's slowest swing is said, naming the step in seconds that a
     /// step in milliseconds meant; a step within it, no sag, or no gravity say nothing.
     #[test]
