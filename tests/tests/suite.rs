@@ -20,6 +20,7 @@ fn minimal_scenes(meshes: &[SuiteMesh], trajectories: usize, out: &Path) -> Vec<
         meshes,
         1e5,
         Axis::Y,
+        1.0,
         trajectories,
         out,
         &no_progress,

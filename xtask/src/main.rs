@@ -156,6 +156,11 @@ struct SuiteArgs {
     /// gravity along minus it (the generated meshes stand on y).
     #[arg(long, value_enum, default_value_t = AxisArg::Y)]
     up: AxisArg,
+    /// The folder's mesh files in other units than metres: their coordinates times this are
+    /// metres (0.001 for millimetres, 0.01 for centimetres), as each scene's `[mesh] scale`.
+    /// The generated meshes are in metres.
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1.0, value_parser = positive_scale)]
+    scale: f64,
     /// Output folder (default: out/suite).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -453,6 +458,17 @@ impl Context {
 }
 
 /// A Young's modulus from the command line: a positive, finite number of pascals.
+fn positive_scale(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        Ok(_) => Err(format!(
+            "a scale is a positive number, the metres in one of the files' units (0.001 for \
+             millimetres), got {text}"
+        )),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
 fn positive_pascals(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
@@ -777,6 +793,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         max_vertices,
         youngs_modulus,
         up,
+        scale,
         out,
         generated,
         trajectories,
@@ -825,6 +842,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         &files,
         youngs_modulus,
         up.into(),
+        scale,
         trajectories as usize,
         &out,
         &progress,

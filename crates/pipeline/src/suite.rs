@@ -77,16 +77,23 @@ impl SuiteMesh {
     }
 
     /// The scene's `[mesh]` keys.
-    fn section(&self) -> String {
+    /// The `[mesh]` section's keys; a file's coordinates times `scale` are metres.
+    fn section(&self, scale: f64) -> String {
         match self {
             // Absolute, so that the scene file the suite writes beside its results reads it.
-            SuiteMesh::File(path) => format!(
-                "path = {:?}",
-                std::path::absolute(path)
-                    .unwrap_or_else(|_| path.clone())
-                    .display()
-                    .to_string()
-            ),
+            SuiteMesh::File(path) => {
+                format!(
+                    "path = {:?}",
+                    std::path::absolute(path)
+                        .unwrap_or_else(|_| path.clone())
+                        .display()
+                        .to_string()
+                ) + &if scale == 1.0 {
+                    String::new()
+                } else {
+                    format!("\nscale = {scale:?}")
+                }
+            }
             SuiteMesh::Box {
                 kind, size, cells, ..
             } => format!(
@@ -150,17 +157,19 @@ pub fn generated() -> Vec<SuiteMesh> {
     ]
 }
 
-/// The minimal scene of a mesh file: its material, Young's modulus `youngs_modulus`, the bottom
-/// [`PIN_FRACTION`] of its height along `up` pinned, gravity along −`up`, h = 0.01 s; every
-/// other section at its default.
+/// The minimal scene of a mesh file whose coordinates times `scale` are metres (`[mesh]
+/// scale`): its material, Young's modulus `youngs_modulus`, the bottom [`PIN_FRACTION`] of its
+/// height along `up` pinned, gravity along −`up`, h = 0.01 s; every other section at its
+/// default.
 pub fn minimal_scene(
     mesh: &Path,
     material: MaterialModel,
     youngs_modulus: f64,
     up: Axis,
+    scale: f64,
 ) -> Result<Scene> {
     let mesh = SuiteMesh::File(mesh.to_path_buf());
-    minimal_scene_of(&mesh.read()?, &mesh, material, youngs_modulus, up)
+    minimal_scene_of(&mesh.read()?, &mesh, material, youngs_modulus, up, scale)
 }
 
 fn read(mesh: &Path) -> Result<(TetMesh, fem_core::mesh::ValidationReport)> {
@@ -174,8 +183,9 @@ fn minimal_scene_of(
     material: MaterialModel,
     youngs_modulus: f64,
     up: Axis,
+    scale: f64,
 ) -> Result<Scene> {
-    let text = minimal_scene_text(m, mesh, material, youngs_modulus, up)?;
+    let text = minimal_scene_text(m, mesh, material, youngs_modulus, up, scale)?;
     parse_minimal_scene(&text, mesh)
 }
 
@@ -194,7 +204,13 @@ fn minimal_scene_text(
     material: MaterialModel,
     youngs_modulus: f64,
     up: Axis,
+    scale: f64,
 ) -> Result<String> {
+    // The generated shapes are in metres whatever the files' unit.
+    let scale = match mesh {
+        SuiteMesh::File(_) => scale,
+        _ => 1.0,
+    };
     let (lo, hi) = m.bounding_box();
     let model = serde_json::to_value(material)?;
     let model = model.as_str().unwrap_or("stable-neo-hookean");
@@ -212,9 +228,10 @@ fn minimal_scene_text(
         gravity[1],
         gravity[2],
         name = format!("{}-{model}", mesh.name()),
-        section = mesh.section(),
+        section = mesh.section(scale),
         axis = ["x", "y", "z"][a],
-        tol = PIN_FRACTION * (hi[a] - lo[a]),
+        // The pin selects after the scale, in metres.
+        tol = PIN_FRACTION * (hi[a] - lo[a]) * scale,
     );
     Ok(text)
 }
@@ -315,7 +332,8 @@ impl StageHooks<'static> {
 }
 
 /// Runs the minimal scene of each mesh (material `MATERIALS[i % 5]`; a mesh file standing on
-/// `up`, the generated shapes on y) from an empty cache under `out/<scene>/`, returning one row
+/// `up` with its coordinates times `scale` in metres, the generated shapes on y in metres) from
+/// an empty cache under `out/<scene>/`, returning one row
 /// a mesh; a scene whose pipeline fails gets a row saying why.
 /// With `trajectories` above 1 every method also runs on test trajectories 1..`trajectories`
 /// (after the pipeline's time is taken), and the row holds their spread.
@@ -323,6 +341,7 @@ pub fn run_suite(
     meshes: &[SuiteMesh],
     youngs_modulus: f64,
     up: Axis,
+    scale: f64,
     trajectories: usize,
     out: &Path,
     progress: Progress<'_>,
@@ -356,8 +375,8 @@ pub fn run_suite(
             SuiteMesh::File(_) => up,
             _ => Axis::Y,
         };
-        let text =
-            minimal_scene_text(&m, mesh, MATERIALS[i % MATERIALS.len()], youngs_modulus, up)?;
+        let material = MATERIALS[i % MATERIALS.len()];
+        let text = minimal_scene_text(&m, mesh, material, youngs_modulus, up, scale)?;
         let scene = parse_minimal_scene(&text, mesh)?;
         on_mesh(&scene.name);
         let dir = out.join(&scene.name);
@@ -749,16 +768,28 @@ mod tests {
         // results' folder), and parses.
         let mesh = SuiteMesh::File(PathBuf::from("beam.mesh"));
         let (m, _) = fem_core::io::read_mesh(&dir.join("beam.mesh")).unwrap();
-        let text = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y).unwrap();
+        let text = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y, 1.0).unwrap();
         let absolute = std::path::absolute("beam.mesh").unwrap();
         assert!(
             text.contains(&format!("path = {:?}", absolute.display().to_string())),
             "{text}"
         );
         let mesh = SuiteMesh::File(dir.join("beam.mesh"));
-        let text = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y).unwrap();
+        let text = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y, 1.0).unwrap();
         let scene = parse_minimal_scene(&text, &mesh).unwrap();
         assert_eq!(scene.name, "beam-stable-neo-hookean");
+        // A folder of meshes in millimetres: the scene scales the mesh, its pin plane the same
+        // bottom layer of vertices, now in metres.
+        let mm = minimal_scene_text(&m, &mesh, MATERIALS[0], 1e5, Axis::Y, 1e-3).unwrap();
+        assert!(mm.contains("\nscale = 0.001\n"), "{mm}");
+        let pinned = |text: &str| {
+            let scene = parse_minimal_scene(text, &mesh).unwrap();
+            let model = scene.build_model().unwrap().model;
+            (model.pinned.len(), model.mesh.bounding_box().1[1])
+        };
+        let ((metres, top), (millimetres, top_mm)) = (pinned(&text), pinned(&mm));
+        assert_eq!(metres, millimetres);
+        assert!((top_mm - 1e-3 * top).abs() <= 1e-12 * top, "{top} {top_mm}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -776,7 +807,7 @@ mod tests {
         assert_eq!(sizes, [(3321, 15360), (11475, 58800), (6532, 30078)]);
         let bar = &generated()[1];
         let scene =
-            minimal_scene_of(&bar.read().unwrap(), bar, MATERIALS[1], 1e5, Axis::Y).unwrap();
+            minimal_scene_of(&bar.read().unwrap(), bar, MATERIALS[1], 1e5, Axis::Y, 1.0).unwrap();
         assert_eq!(scene.name, "bar-60k-neo-hookean");
         let model = scene.build_model().unwrap().model;
         assert_eq!(model.mesh.num_tets(), 58800);
@@ -784,8 +815,15 @@ mod tests {
         assert_eq!(model.pinned.len(), 51 * 15);
         // The figure stands on the bottom layer of its trunk's disc.
         let figure = &generated()[2];
-        let scene =
-            minimal_scene_of(&figure.read().unwrap(), figure, MATERIALS[3], 1e5, Axis::Y).unwrap();
+        let scene = minimal_scene_of(
+            &figure.read().unwrap(),
+            figure,
+            MATERIALS[3],
+            1e5,
+            Axis::Y,
+            1.0,
+        )
+        .unwrap();
         assert_eq!(scene.name, "figure-30k-stvk");
         let model = scene.build_model().unwrap().model;
         let base = model.mesh.vertices.iter().filter(|v| v.y == 0.0).count();
@@ -803,7 +841,7 @@ mod tests {
             cells: [2, 2, 10],
         };
         let scene =
-            minimal_scene_of(&bar.read().unwrap(), &bar, MATERIALS[0], 1e5, Axis::Z).unwrap();
+            minimal_scene_of(&bar.read().unwrap(), &bar, MATERIALS[0], 1e5, Axis::Z, 1.0).unwrap();
         assert_eq!(scene.gravity.acceleration, [0.0, 0.0, -9.81]);
         let model = scene.build_model().unwrap().model;
         let base = model.mesh.vertices.iter().filter(|v| v.z == 0.0).count();
