@@ -22,14 +22,38 @@ pub mod suite;
 pub mod trajectories;
 pub mod trust;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-/// The workspace root (two levels above this crate's manifest directory, `crates/pipeline`).
+/// The workspace root (two levels above this crate's manifest directory, `crates/pipeline`,
+/// where it was built), or the current folder when that holds no workspace any more (a binary
+/// copied to another machine, or its build tree gone): `out/` is then made where it runs, not
+/// at a path of the build.
 pub fn project_root() -> PathBuf {
-    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    root_or_here(Path::new(env!("CARGO_MANIFEST_DIR")))
+}
+
+/// Two levels above `manifest` when a `Cargo.toml` is there, else `.`.
+fn root_or_here(manifest: &Path) -> PathBuf {
     manifest
         .ancestors()
         .nth(2)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("."))
+        .filter(|root| root.join("Cargo.toml").is_file())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    /// The workspace this crate is built in is the root; a manifest path whose workspace is
+    /// gone gives the current folder.
+    #[test]
+    fn the_root_is_the_workspace_while_it_exists() {
+        let root = super::root_or_here(Path::new(env!("CARGO_MANIFEST_DIR")));
+        assert!(root.join("crates/pipeline/Cargo.toml").is_file(), "{root:?}");
+        assert_eq!(
+            super::root_or_here(Path::new("/nonexistent/ws/crates/pipeline")),
+            Path::new(".")
+        );
+    }
 }
