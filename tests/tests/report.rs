@@ -696,7 +696,16 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     ));
     let e = recorded.provenance.errors.last().unwrap();
     assert_eq!(e.value, rows[1].mean_rel_error);
-    assert!(e.held_out && e.name.ends_with(" 0"), "{e:?}");
+    assert_eq!(e.name, format!("{} 0", pipeline::run::TRAJECTORY_ERROR));
+    assert!(e.held_out);
+    let count = recorded.provenance.errors.len();
+    // Recorded again, it is still one.
+    assert!(pipeline::export::record_run_error(
+        &out.join("run"),
+        &mut recorded,
+        &s
+    ));
+    assert_eq!(recorded.provenance.errors.len(), count);
     assert_eq!(
         recorded.provenance.errors.len(),
         model.provenance.errors.len() + 1

@@ -205,9 +205,10 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
 /// What a model file says of its accuracy: the held-out error `run` measured, or that none was.
 fn model_accuracy(errors: &[MeasuredError]) -> String {
     let held_out = || errors.iter().filter(|e| e.held_out);
-    // `run` records the trajectory's displacement error; `export` only the cubature rule's
-    // force error on the test poses, which is no measure of how far the motion goes off
-    // (5.3 % for a rule whose trajectory `run` measures 0.20 % off).
+    // `run` records the trajectory's displacement error, and `export` the one a report of the
+    // same model gives; without one, an exported model has only the cubature rule's force
+    // error on the test poses, which is no measure of how far the motion goes off (5.3 % for
+    // a rule whose trajectory `run` measures 0.20 % off).
     let trajectory = held_out().find(|e| e.name.starts_with(TRAJECTORY_ERROR));
     match (trajectory, held_out().next()) {
         (Some(e), _) => format!(

@@ -261,15 +261,19 @@ pub fn run_verdict(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene
         Err(why) => return why,
     };
     let method = model.provenance.method.as_str();
-    let lines: Vec<&str> = report["untrusted"]
+    let mut lines: Vec<&str> = report["untrusted"]
         .as_array()
         .map(|a| {
             a.iter()
                 .filter_map(|l| l.as_str())
-                .filter(|l| names(l, method))
+                .filter(|l| names(l, method) || *l == crate::trust::SCENE_FIRST)
                 .collect()
         })
         .unwrap_or_default();
+    // The line between the scene's warnings and the rest, where some of the rest is kept.
+    if lines.last() == Some(&crate::trust::SCENE_FIRST) {
+        lines.pop();
+    }
     let mut s = format!(
         "measured by `cargo xtask run` on held-out test trajectory {} ({}, written {}): {method} \
          {:.2} % from the full trajectory",
@@ -306,6 +310,12 @@ pub fn record_run_error(out: &Path, model: &mut ReducedModel, scene: &crate::sce
     let Some(trajectory) = report["trajectory"].as_u64().filter(|_| finished) else {
         return false;
     };
+    // One trajectory error, the one of this report.
+    let name = crate::run::TRAJECTORY_ERROR;
+    model
+        .provenance
+        .errors
+        .retain(|e| !e.name.starts_with(name));
     model.provenance.errors.push(MeasuredError {
         name: format!("{} {trajectory}", crate::run::TRAJECTORY_ERROR),
         held_out: true,

@@ -50,7 +50,10 @@ mod tests {
     #[test]
     fn the_root_is_the_workspace_while_it_exists() {
         let root = super::root_or_here(Path::new(env!("CARGO_MANIFEST_DIR")));
-        assert!(root.join("crates/pipeline/Cargo.toml").is_file(), "{root:?}");
+        assert!(
+            root.join("crates/pipeline/Cargo.toml").is_file(),
+            "{root:?}"
+        );
         assert_eq!(
             super::root_or_here(Path::new("/nonexistent/ws/crates/pipeline")),
             Path::new(".")

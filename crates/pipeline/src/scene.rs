@@ -945,11 +945,15 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
             .step_by(2)
             .map(|known| (edit_distance(key, known), known))
             .min()?;
-        return (nearest.0 <= (key.chars().count() / 3).max(1))
+        // A slip of a letter or two, not another word (`gravity_directions` is not
+        // `onset_directions`).
+        return (nearest.0 <= (key.chars().count() / 3).clamp(1, 2))
             .then(|| format!("did you mean `{}`?", nearest.1));
     }
     if message.starts_with("invalid type: map, expected a sequence") {
-        let name = field?.rsplit('.').next()?;
+        // Only the scene's lists of tables, `[pin]` and `[force]`: a map for `pin.plane` or
+        // `indices` is no `[[plane]]` or `[[indices]]`.
+        let name = field.filter(|f| ["pin", "force"].contains(f))?;
         return Some(format!(
             "write `[[{name}]]`, with doubled brackets: each is one entry of a list, and a \
              scene may have several"
@@ -971,22 +975,31 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
         .then(|| format!("TOML does no arithmetic: write the number, {result} for `{value}`"))
 }
 
-/// The Levenshtein distance between two keys (insertions, deletions and substitutions).
+/// The distance between two keys in slips of the hand: letters inserted, left out, mistyped
+/// or two neighbours swapped (`lbgfs`), case aside (`LBFGS`); optimal string alignment.
 fn edit_distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut row: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut diagonal = row[0];
-        row[0] = i + 1;
-        for (j, &cb) in b.iter().enumerate() {
-            let above = row[j + 1];
-            row[j + 1] = (above + 1)
-                .min(row[j] + 1)
-                .min(diagonal + usize::from(ca != cb));
-            diagonal = above;
+    let a: Vec<char> = a.chars().flat_map(char::to_lowercase).collect();
+    let b: Vec<char> = b.chars().flat_map(char::to_lowercase).collect();
+    // d[i][j]: the distance between a[..i] and b[..j].
+    let mut d = vec![vec![0usize; b.len() + 1]; a.len() + 1];
+    for (i, row) in d.iter_mut().enumerate() {
+        row[0] = i;
+    }
+    for j in 0..=b.len() {
+        d[0][j] = j;
+    }
+    for i in 1..=a.len() {
+        for j in 1..=b.len() {
+            let mut best = (d[i - 1][j] + 1)
+                .min(d[i][j - 1] + 1)
+                .min(d[i - 1][j - 1] + usize::from(a[i - 1] != b[j - 1]));
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                best = best.min(d[i - 2][j - 2] + 1);
+            }
+            d[i][j] = best;
         }
     }
-    row[b.len()]
+    d[a.len()][b.len()]
 }
 
 /// The checks of [`VertexSelection::select`] that need no mesh, so they are reported with the

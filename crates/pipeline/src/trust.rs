@@ -72,20 +72,22 @@ pub const COLLAPSED_SHARE: f64 = 0.01;
 /// drags 17 → 11 %, at 1.8 times the cost of a step.
 pub const CUBATURE_EXCESS: f64 = 1.25;
 
-/// The remedy for a cubature rule that makes a method's error, in every warning that names it.
-/// Which of the two settings stopped the fit is on the cubature stage's line: on a twisted
-/// blade whose rule the 2 % tolerance had stopped at 197 elements, a budget of 1,000 changed
-/// nothing and a tolerance of 0.5 % took `pca-cubature` from 3.8 to 0.95 %.
 /// Said between the scene's own warnings and the lines after them.
 pub const SCENE_FIRST: &str = "the lines below measure the scene as written: where a line above \
                                names a mistake in it (its units, density or pins, a body its \
                                weight crushes), mend that first, which changes all of them";
 
 /// How to keep more PCA coefficients, named so a person can write it (a tester read `[pca]`
-/// alone and took the value from README).
-const LARGER_PCA: &str = "`[pca] explained_energy` with one 9 more than the `pca` stage's \
-                          line shows, or a larger `dimension` where the scene gives one";
+/// alone and took the value from README), for whichever of the three rules the scene uses.
+const LARGER_PCA: &str = "in `[pca]`, one 9 more in `explained_energy`, a smaller \
+                          `max_vertex_error` or a larger `dimension`, whichever rule the `pca` \
+                          stage's line names, and a larger `max_dimension` where that line says \
+                          it stopped the basis";
 
+/// The remedy for a cubature rule that makes a method's error, in every warning that names it.
+/// Which of the two settings stopped the fit is on the cubature stage's line: on a twisted
+/// blade whose rule the 2 % tolerance had stopped at 197 elements, a budget of 1,000 changed
+/// nothing and a tolerance of 0.5 % took `pca-cubature` from 3.8 to 0.95 %.
 const LARGER_RULE: &str = "a larger rule narrows that: a smaller `[cubature] tolerance`, or a \
                            larger `max_elements` where the cubature stage's line says the \
                            element budget stopped it";

@@ -182,10 +182,26 @@ fn common_mistakes_say_what_to_write() {
     for (text, hint) in cases {
         assert_names(&read_error(&text), &[hint]);
     }
-    // A key far from every known one is not guessed at.
-    let err = read_error(&edit("frames = 10", "duration = 10"));
-    assert_names(&err, &["`time.duration`", "unknown field"]);
-    assert!(!err.contains("did you mean"), "{err}");
+    // Swapped letters and another case are slips too.
+    assert_names(
+        &read_error(&edit("method = \"newton\"", "method = \"NEWTNO\"")),
+        &["did you mean `newton`?"],
+    );
+    // A key far from every known one is not guessed at, nor one that is another word.
+    for (from, to, field) in [
+        ("frames = 10", "duration = 10", "`time.duration`"),
+        ("frames = 10", "keyframes = 10", "`time.keyframes`"),
+    ] {
+        let err = read_error(&edit(from, to));
+        assert_names(&err, &[field, "unknown field"]);
+        assert!(!err.contains("did you mean"), "{err}");
+    }
+    // A table where a list is meant inside a pin is not told to be a list of tables.
+    let err = read_error(&edit(
+        "plane = { axis = \"x\", side = \"min\", tolerance = 1.0e-6 }",
+        "indices = { a = 1 }",
+    ));
+    assert!(!err.contains("doubled brackets"), "{err}");
 }
 
 #[test]

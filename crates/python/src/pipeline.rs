@@ -137,15 +137,16 @@ pub struct MethodRow {
     max_vertex_error: f64,
     /// Mean solver iterations per step.
     iterations: f64,
-    /// Mean relative error of the reference's best representation in the method's subspace.
-    subspace_error: f64,
-    /// Mean relative error of one step started from the reference.
-    step_error: f64,
+    /// Mean relative error of the reference's best representation in the method's subspace
+    /// (None for full space, which has no subspace).
+    subspace_error: Option<f64>,
+    /// Mean relative error of one step started from the reference (None for full space).
+    step_error: Option<f64>,
     /// How far the method's trajectory left the training data: the largest part of a pose
-    /// outside the training snapshots' coefficient ranges, relative to the pose (0 for full
-    /// space; above 0.1 ``warnings`` says so), and the time (s) it happened.
-    training_distance: f64,
-    training_distance_time: f64,
+    /// outside the training snapshots' coefficient ranges, relative to the pose (above 0.1
+    /// ``warnings`` says so), and the time (s) it happened (None for full space).
+    training_distance: Option<f64>,
+    training_distance_time: Option<f64>,
     /// Steps that started again from the last state, not solvable from their extrapolated
     /// start (0 for full space).
     step_restarts: usize,
@@ -157,6 +158,7 @@ pub struct MethodRow {
 
 impl From<&MethodReport> for MethodRow {
     fn from(r: &MethodReport) -> Self {
+        let reduced = |x: f64| (!r.method.is_full()).then_some(x);
         Self {
             method: r.method.name().to_string(),
             dimension: r.dim,
@@ -173,10 +175,11 @@ impl From<&MethodReport> for MethodRow {
             trajectory_error: r.trajectory_error,
             max_vertex_error: r.max_vertex_error,
             iterations: r.iterations,
-            subspace_error: r.subspace_error,
-            step_error: r.step_error,
-            training_distance: r.training_distance,
-            training_distance_time: r.training_distance_time,
+            // As report.json holds them: what full space has none of is None, not 0.
+            subspace_error: reduced(r.subspace_error),
+            step_error: reduced(r.step_error),
+            training_distance: reduced(r.training_distance),
+            training_distance_time: reduced(r.training_distance_time),
             step_restarts: r.step_restarts,
             frame_errors: r.frame_errors.clone(),
             failure: r.failure.clone(),
@@ -686,9 +689,18 @@ pub fn export_model(
     };
     let (model, path) = with_pipeline(py, scene, None, cache_dir, hooks, |_, p, out, cb| {
         let progress = |done: usize, total: usize| cb.stage(done, total);
-        let model =
+        let mut model =
             pipeline::export::scene_model(p, method, rows, &progress).map_err(Failure::Run)?;
         let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));
+        // What `run` measured of this model, recorded as `cargo xtask export` records it: from
+        // the report beside the file, else the scene's output folder's.
+        let beside = path.parent().map(PathBuf::from).unwrap_or_default();
+        let report = if beside.join("report.json").is_file() {
+            beside
+        } else {
+            out.clone()
+        };
+        pipeline::export::record_run_error(&report, &mut model, p.scene);
         model
             .save(&path)
             .map_err(|e| Failure::Run(anyhow::Error::new(e)))?;

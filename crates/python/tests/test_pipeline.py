@@ -27,7 +27,7 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     for s in report.stages:
         assert s.path.exists() and s.summary and s.seconds >= 0
     written = json.loads((out / "report.json").read_text())
-    assert written["format"] == "latent-dynamics run report" and written["version"] == 1
+    assert written["format"] == "latent-dynamics run report" and written["version"] == 2
     assert written["scene"] == "tiny" and written["trajectory"] == 0
     assert [s["stage"] for s in written["stages"]] == [s.name for s in report.stages]
     assert [r["method"] for r in written["methods"]] == methods
@@ -38,8 +38,11 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
         assert row.mean_rel_error == raw["mean_rel_error"]
         assert row.trajectory_error == raw["trajectory_error"] >= 0.0
         assert row.frame_errors == raw["frame_errors"]
-        assert row.training_distance == raw["training_distance"] >= 0.0
-        assert row.training_distance_time == raw["training_distance_time"]
+        # What full space has none of is null in report.json and None here.
+        for key in ["subspace_error", "step_error", "training_distance", "training_distance_time"]:
+            assert getattr(row, key) == raw[key]
+            assert (raw[key] is None) == (row.method == "full"), (row.method, key)
+        assert row.method == "full" or row.training_distance >= 0.0
         assert row.step_restarts == raw["step_restarts"] >= 0
         assert row.failure is None
     full = report.row("full")
