@@ -317,7 +317,7 @@ pub fn record_run_error(out: &Path, model: &mut ReducedModel, scene: &crate::sce
         .errors
         .retain(|e| !e.name.starts_with(name));
     model.provenance.errors.push(MeasuredError {
-        name: format!("{} {trajectory}", crate::run::TRAJECTORY_ERROR),
+        name: format!("{name} {trajectory}"),
         held_out: true,
         value: error,
     });

@@ -99,7 +99,7 @@ pub struct RunReport<'a> {
     /// When it was written, UTC (ISO 8601, to the second).
     pub written: String,
     pub scene: &'a str,
-    /// The scene file, absolute ([`scene_file`]; `<built-in cantilever>` for the default scene).
+    /// The scene file by its absolute path (`<built-in cantilever>` for the default scene).
     pub scene_file: String,
     /// The held-out test trajectory measured, its frames, and the time step (s).
     pub trajectory: usize,

@@ -939,6 +939,11 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
         .find_map(|p| message.strip_prefix(p));
     if let Some(rest) = unknown {
         let (key, expected) = rest.split_once('`')?;
+        // A key of a word's length, not a pasted paragraph (the distance costs its length
+        // times each known key's).
+        if key.chars().count() > 64 {
+            return None;
+        }
         let nearest = expected
             .split('`')
             .skip(1)

@@ -527,13 +527,13 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
             format!(
                 "from states its subspace holds to {} %: the energy along what the subspace \
                  leaves out (stiffness the mass norm hardly sees), not its reach, sets where a \
-                 step lands; a larger subspace takes in more of that stiffness ({LARGER_PCA}, \
-                 and for the neural methods `[autoencoder] latent_dim`)",
+                 step lands; a larger subspace takes in more of that stiffness ({LARGER_PCA}; \
+                 for the neural methods also `[autoencoder] latent_dim`)",
                 fine_pct(r.subspace_error)
             )
         } else {
             format!(
-                "which a larger subspace lowers ({LARGER_PCA}, and for the neural methods \
+                "which a larger subspace lowers ({LARGER_PCA}; for the neural methods also \
                  `[autoencoder] latent_dim`)"
             )
         };
@@ -1560,7 +1560,7 @@ mod tests {
         );
         assert!(
             w[0].ends_with(&format!(
-                "which a larger subspace lowers ({LARGER_PCA}, and for the neural methods \
+                "which a larger subspace lowers ({LARGER_PCA}; for the neural methods also \
                  `[autoencoder] latent_dim`)"
             )),
             "{}",
