@@ -763,12 +763,7 @@ fn export(cx: &Context, args: ExportArgs) -> Result<()> {
     let mut model = pipeline::export::scene_model(&mut p, method, rows, &progress)?;
     // What `run` found of this model, from its report beside the model file, else where `view`
     // looks for the scene's last run: recorded in the file, as `run` records it, and said.
-    let beside = path.parent().map(PathBuf::from).unwrap_or_default();
-    let out = if beside.join("report.json").is_file() {
-        beside
-    } else {
-        cx.run_report_dir(&scene, &common)
-    };
+    let out = pipeline::export::report_dir(&path, cx.run_report_dir(&scene, &common));
     pipeline::export::record_run_error(&out, &mut model, &scene);
     model.save(&path)?;
     println!(

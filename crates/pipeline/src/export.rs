@@ -293,6 +293,17 @@ pub fn run_verdict(out: &Path, model: &ReducedModel, scene: &crate::scene::Scene
     s
 }
 
+/// The folder of the run report that speaks for the model file at `path`: the file's own folder
+/// when a `report.json` is there, else `otherwise` (the scene's output folder).
+pub fn report_dir(path: &Path, otherwise: PathBuf) -> PathBuf {
+    let beside = path.parent().map(PathBuf::from).unwrap_or_default();
+    if beside.join("report.json").is_file() {
+        beside
+    } else {
+        otherwise
+    }
+}
+
 /// Records in `model` the error `cargo xtask run` measured of it on its held-out test, as `run`
 /// records it in the model it writes, when the report in `out` is of the same model
 /// ([`run_verdict`]'s conditions) and the method's run reached its last frame, so that `view

@@ -694,12 +694,7 @@ pub fn export_model(
         let path = path.unwrap_or_else(|| pipeline::export::model_path(&out, method));
         // What `run` measured of this model, recorded as `cargo xtask export` records it: from
         // the report beside the file, else the scene's output folder's.
-        let beside = path.parent().map(PathBuf::from).unwrap_or_default();
-        let report = if beside.join("report.json").is_file() {
-            beside
-        } else {
-            out.clone()
-        };
+        let report = pipeline::export::report_dir(&path, out.clone());
         pipeline::export::record_run_error(&report, &mut model, p.scene);
         model
             .save(&path)
