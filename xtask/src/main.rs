@@ -666,9 +666,11 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     let (mut p, out) =
         cx.pipeline_into(&scene, &common, out.unwrap_or_else(|| cx.out(&scene, &[])))?;
     let progress = |d, t| cx.stage_progress(d, t);
-    // The basis first, so that the stage lines come in order before the methods run; full space
-    // alone needs neither it nor the snapshots.
+    // The training data and the basis first, so that the stage lines come in order before the
+    // methods run (a cached basis loads without its snapshots, which the run then needs for its
+    // training distances); full space alone needs neither.
     if methods.iter().any(|m| !m.is_full()) {
+        p.snapshots(&progress)?;
         p.pca(&progress)?;
     }
     let opts = RunOptions {

@@ -964,17 +964,36 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
              scene may have several"
         ));
     }
-    // The value from the error to the end of its line, without a comment.
+    // The first `/` or `*` from the error to the end of its line, without a comment: TOML points
+    // at the value (`step = 1/60`) or, inside an array, at the operator (`[0.0, -9.81/6, 0.0]`).
     let start = (0..=offset.min(text.len()))
         .rev()
         .find(|&o| text.is_char_boundary(o))?;
-    let line = text[start..].lines().next()?;
-    let value = line.split('#').next()?.trim();
-    let (a, op, b) = ['/', '*']
-        .iter()
-        .find_map(|&op| value.split_once(op).map(|(a, b)| (a, op, b)))?;
-    let (a, b): (f64, f64) = (a.trim().parse().ok()?, b.trim().parse().ok()?);
-    let result = if op == '/' { a / b } else { a * b };
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next()?;
+    let code = line.split('#').next()?;
+    let from = (start - line_start).min(code.len());
+    let op_at = from + code[from..].find(['/', '*'])?;
+    // The numbers on either side of it (ASCII, so byte offsets are characters).
+    let number = |c: char| c.is_ascii_digit() || ".eE+-_".contains(c);
+    let left = code[..op_at].trim_end();
+    let a_from = left.rfind(|c: char| !number(c)).map_or(0, |i| {
+        i + left[i..].chars().next().map_or(1, char::len_utf8)
+    });
+    let right = &code[op_at + 1..];
+    let b_from = op_at + 1 + (right.len() - right.trim_start().len());
+    let b_to = b_from
+        + code[b_from..]
+            .find(|c: char| !number(c))
+            .unwrap_or(code.len() - b_from);
+    let parse = |s: &str| s.replace('_', "").parse::<f64>().ok();
+    let (a, b) = (parse(&left[a_from..])?, parse(&code[b_from..b_to])?);
+    let result = if code[op_at..].starts_with('/') {
+        a / b
+    } else {
+        a * b
+    };
+    let value = &code[a_from..b_to];
     result
         .is_finite()
         .then(|| format!("TOML does no arithmetic: write the number, {result} for `{value}`"))

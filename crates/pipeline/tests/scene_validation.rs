@@ -178,6 +178,14 @@ fn common_mistakes_say_what_to_write() {
             edit("stiffness = 200.0", "stiffness = 2 * 100 # N/m"),
             "write the number, 200 for `2 * 100`",
         ),
+        (
+            edit("[0.0, -9.81, 0.0]", "[0.0, -9.81/6, 0.0]"),
+            "write the number, -1.635 for `-9.81/6`",
+        ),
+        (
+            edit("[0.0, -9.81, 0.0]", "[0.0, 0.0, -9.81 / 6]"),
+            "write the number, -1.635 for `-9.81 / 6`",
+        ),
     ];
     for (text, hint) in cases {
         assert_names(&read_error(&text), &[hint]);
