@@ -132,6 +132,10 @@ pub use simulator::{
 };
 pub use subspace::{LinearSubspace, Subspace};
 
+/// The largest step count [`ReducedSimulator::set_state`] takes: 2⁵³, where the time `step · h`
+/// is still an exact multiple of h.
+pub const MAX_STATE_STEP: usize = 1 << 53;
+
 /// Errors of the reduced integrators.
 #[derive(Debug, thiserror::Error)]
 pub enum ReducedError {
@@ -146,6 +150,12 @@ pub enum ReducedError {
     /// A state given from outside with a coefficient that is not a finite number.
     #[error("a state was given coefficient {index} = {value}: every coefficient must be finite")]
     StateNotFinite { index: usize, value: f64 },
+    /// A state given from outside at a step count past [`MAX_STATE_STEP`].
+    #[error(
+        "a state was given step {step}: at most {MAX_STATE_STEP} (2⁵³, past which the time \
+         step · h is not exact and the steps' count overflows)"
+    )]
+    StateStep { step: usize },
     /// A cubature rule that does not fit the model.
     #[error("cubature rule: {reason}; refit the cubature stage")]
     Cubature { reason: String },

@@ -160,7 +160,8 @@ impl ReducedRuntime {
     /// step `step`) and `q_before` ([`ReducedSimulator::set_state`]).
     ///
     /// # Errors
-    /// [`ReducedError::StateShape`], [`ReducedError::StateNotFinite`].
+    /// [`ReducedError::StateShape`], [`ReducedError::StateNotFinite`],
+    /// [`ReducedError::StateStep`].
     pub fn set_state(
         &mut self,
         step: usize,

@@ -282,14 +282,18 @@ impl<S: Subspace> ReducedSimulator<S> {
     ///
     /// # Errors
     /// [`ReducedError::StateShape`] when a vector's length is not the subspace's k,
-    /// [`ReducedError::StateNotFinite`] when a coefficient is not finite (the state is then
-    /// left as it was).
+    /// [`ReducedError::StateNotFinite`] when a coefficient is not finite,
+    /// [`ReducedError::StateStep`] for a step past [`MAX_STATE_STEP`](crate::MAX_STATE_STEP)
+    /// (the state is then left as it was).
     pub fn set_state(
         &mut self,
         step: usize,
         q_now: &[f64],
         q_before: &[f64],
     ) -> Result<(), ReducedError> {
+        if step > crate::MAX_STATE_STEP {
+            return Err(ReducedError::StateStep { step });
+        }
         let (k, d) = (self.space.k, self.subspace.latent_dim());
         for q in [q_now, q_before] {
             if q.len() != k {

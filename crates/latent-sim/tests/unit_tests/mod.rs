@@ -810,6 +810,18 @@ fn a_simulator_restarted_from_two_states_takes_the_same_next_step() {
             ),
             "{err}"
         );
+        // A step count whose next step would overflow is refused (a debug build panicked).
+        let err = restarted
+            .set_state(usize::MAX, &states[2], &states[1])
+            .unwrap_err();
+        assert!(
+            matches!(err, latent_sim::ReducedError::StateStep { .. }),
+            "{err}"
+        );
+        restarted
+            .set_state(latent_sim::MAX_STATE_STEP, &states[2], &states[1])
+            .unwrap();
+        restarted.step().unwrap();
     }
     check(&m, &space, LinearSubspace::new(k), "linear");
     check(&m, &space, NeuralSubspace::new(ae), "neural");
