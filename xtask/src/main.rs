@@ -35,8 +35,8 @@ struct Common {
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Artifact cache folder, shared by every command on the scene (default: out/SCENE/cache
-    /// in the project's folder, SCENE the scene's name, whatever --out says or where the
-    /// command runs from).
+    /// in the project's folder, SCENE the scene's name, whatever --out says; outside the
+    /// project, in the folder the command runs from).
     #[arg(long)]
     cache: Option<PathBuf>,
 }
@@ -376,7 +376,7 @@ impl Context {
         let stage_bar = bar(0, "stage");
         stage_bar.set_draw_target(ProgressDrawTarget::hidden());
         Self {
-            root: pipeline::project_root(),
+            root: pipeline::output_root(),
             stage_bar,
         }
     }
@@ -398,7 +398,8 @@ impl Context {
         }
     }
 
-    /// `out/SCENE/PARTS…` under the project root.
+    /// `out/SCENE/PARTS…` under the project root (or the folder the command runs from, outside
+    /// it: [`pipeline::output_root`]).
     fn out(&self, scene: &Scene, parts: &[&str]) -> PathBuf {
         parts
             .iter()

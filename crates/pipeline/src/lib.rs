@@ -41,9 +41,39 @@ fn root_or_here(manifest: &Path) -> PathBuf {
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
 }
 
+/// Where the command line's default output folders (`out/…`) go: the project's folder
+/// ([`project_root`]) when the command runs inside it (`cargo xtask` from any of its folders),
+/// else the folder it runs from (a built binary copied or called from elsewhere).
+pub fn output_root() -> PathBuf {
+    let here = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
+    root_for(&project_root(), &here)
+}
+
+/// `root` when `here` lies inside it (both as the file system resolves them), else `here`.
+fn root_for(root: &Path, here: &Path) -> PathBuf {
+    let resolved = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    if resolved(here).starts_with(resolved(root)) {
+        root.to_path_buf()
+    } else {
+        here.to_path_buf()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::path::Path;
+
+    /// Inside the project (its root or a folder below) the outputs go to the project; outside
+    /// it, where the command runs.
+    #[test]
+    fn outputs_go_to_the_project_only_from_inside_it() {
+        let root = super::project_root();
+        let inside = root.join("crates");
+        assert_eq!(super::root_for(&root, &inside), root);
+        assert_eq!(super::root_for(&root, &root), root);
+        let outside = std::env::temp_dir();
+        assert_eq!(super::root_for(&root, &outside), outside);
+    }
 
     /// The workspace this crate is built in is the root; a manifest path whose workspace is
     /// gone gives the current folder.
