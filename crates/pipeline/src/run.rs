@@ -47,7 +47,8 @@ pub struct RunOptions {
 /// where the command ran); the built-in scene's name as it is.
 fn scene_file(source: &str) -> String {
     let path = Path::new(source);
-    match path.is_file().then(|| std::path::absolute(path)) {
+    // Resolved, so that `myapp/../scene/x.toml` reads `scene/x.toml`.
+    match path.is_file().then(|| std::fs::canonicalize(path)) {
         Some(Ok(absolute)) => absolute.display().to_string(),
         _ => source.to_string(),
     }

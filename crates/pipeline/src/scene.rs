@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use fem_core::TetMesh;
 use fem_core::constraints::VertexSelection;
 use fem_core::forces::{ForceConfig, ForceKind};
@@ -213,8 +213,17 @@ impl Scene {
                 }
             );
         }
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read scene file {}", path.display()))?;
+        // The cause in the message itself: a program printing `{e}` showed only "cannot read".
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            let why = if e.kind() == std::io::ErrorKind::InvalidData {
+                "it is not text: a scene is a TOML file (a model file, `.ldm`, is loaded by \
+                 `ReducedModel::load` or `view --model`)"
+                    .to_string()
+            } else {
+                e.to_string()
+            };
+            anyhow::anyhow!("cannot read scene file {}: {why}", path.display())
+        })?;
         let base = path
             .parent()
             .filter(|p| !p.as_os_str().is_empty())

@@ -878,3 +878,25 @@ fn the_models_warnings_are_kept_for_the_report() {
     let w = model_warnings(&part, &dir.join("e"));
     assert!(w.is_empty(), "{w:?}");
 }
+
+/// A scene file that cannot be read says why in the message itself (a program printing `{e}`
+/// saw only "cannot read"), and a model file given as a scene is named as one.
+#[test]
+fn unreadable_scene_files_say_why() {
+    let dir = std::env::temp_dir().join(format!("scene-unreadable-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let missing = Scene::from_file(&dir.join("missing.toml")).unwrap_err();
+    assert!(
+        missing.to_string().contains("cannot read scene file")
+            && missing.to_string().contains("os error"),
+        "{missing}"
+    );
+    let binary = dir.join("model.ldm");
+    std::fs::write(&binary, [0x4c, 0x44, 0xff, 0xfe, 0x00, 0x80]).unwrap();
+    let err = Scene::from_file(&binary).unwrap_err().to_string();
+    assert!(
+        err.contains("it is not text") && err.contains("ReducedModel::load"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -294,16 +294,22 @@ pub(crate) fn grab_near<B: Backend>(
     let p = Vec3::from(point);
     // Not a per-frame path: a copy keeps the borrows simple.
     let u = b.surface_displacements().to_vec();
-    let (mut set, mut mean_u) = (Vec::new(), Vec3::zeros());
+    let (mut set, mut mean_u, mut nearest) = (Vec::new(), Vec3::zeros(), f64::INFINITY);
     for (&v, uv) in b.surface().vertices().iter().zip(u.chunks_exact(3)) {
         let uv = Vec3::new(uv[0], uv[1], uv[2]);
-        if (b.rest()[v] + uv - p).norm_squared() <= radius * radius {
+        let squared = (b.rest()[v] + uv - p).norm_squared();
+        nearest = nearest.min(squared);
+        if squared <= radius * radius {
             set.push(v);
             mean_u += uv;
         }
     }
     if set.is_empty() {
-        return Err(RuntimeError::NothingInReach { point, radius });
+        return Err(RuntimeError::NothingInReach {
+            point,
+            radius,
+            nearest: nearest.sqrt(),
+        });
     }
     not_all_pinned(b, &set)?;
     let mean_u = mean_u / set.len() as f64;

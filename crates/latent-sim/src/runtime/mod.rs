@@ -99,23 +99,29 @@ pub enum RuntimeError {
     /// Another simulator's handle.
     #[error("handle {0} belongs to another simulator, not to this one")]
     ForeignHandle(Handle),
-    /// No surface vertex within the radius of the point, where the surface is now (deformed).
+    /// No surface vertex within the radius of the point, where the surface is now (deformed);
+    /// `nearest` is the distance to the nearest one.
     #[error(
         "no surface vertex within {} of ({}, {}, {}) where the surface is now (deformed, not at \
-         rest): a larger radius, or a point nearer the body",
+         rest); the nearest is {} away: a larger radius, or a point nearer the body",
         four_digits(*radius),
         four_digits(point[0]),
         four_digits(point[1]),
-        four_digits(point[2])
+        four_digits(point[2]),
+        four_digits(*nearest)
     )]
-    NothingInReach { point: [f64; 3], radius: f64 },
+    NothingInReach {
+        point: [f64; 3],
+        radius: f64,
+        nearest: f64,
+    },
     /// A vertex index past the mesh's vertices.
     #[error("vertex {vertex} does not exist (the mesh has {count})")]
     NoSuchVertex { vertex: usize, count: usize },
     /// A grab or a force on pinned vertices only.
     #[error(
-        "the vertices given ({count}) are all pinned: a spring or a load on them moves \
-         nothing; grab or load free vertices"
+        "the vertices given or found near the point ({count}) are all pinned: a spring or a \
+         load on them moves nothing; grab or load free vertices"
     )]
     AllPinned { count: usize },
     /// A handle on no vertex.
