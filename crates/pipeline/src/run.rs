@@ -401,8 +401,8 @@ impl Buckling {
     /// the dinosaur's test amplifies its errors for other reasons.
     pub const VALID_SAG: f64 = 0.05;
 
-    /// The analysis of `model` (None without gravity or pins, for the linear material, and
-    /// when K₀ cannot be factorised, which is logged).
+    /// The analysis of `model` (None without gravity or pins, and when K₀ cannot be
+    /// factorised, which is logged; for the linear material the sag alone).
     pub fn of(model: &FullSpaceModel) -> Option<Self> {
         let b = match fem_core::stability::gravity_buckling(model) {
             Ok(b) => b?,
