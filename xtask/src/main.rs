@@ -797,7 +797,7 @@ fn suite(cx: &Context, args: SuiteArgs) -> Result<()> {
         trajectories,
     } = args;
     let given = meshes.is_some();
-    let dir = meshes.unwrap_or_else(|| cx.root.join("../shared/meshes"));
+    let dir = meshes.unwrap_or_else(|| pipeline::project_root().join("../shared/meshes"));
     let mut files: Vec<SuiteMesh> = match pipeline::suite::meshes(&dir, max_vertices) {
         Ok(files) => files.into_iter().map(SuiteMesh::File).collect(),
         // The generated bars run without the folder.

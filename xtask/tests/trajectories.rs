@@ -241,8 +241,9 @@ fn simulate_leaves_the_frames_of_run_alone() {
     let name = format!("simulate-default-{}", std::process::id());
     let scene = TINY.replace("name = \"tiny\"", &format!("name = \"{name}\""));
     assert_ne!(scene, TINY, "TINY's name moved");
-    let out = pipeline::project_root().join("out").join(&name);
-    // The default folders are in the project's out/: removed however the test ends.
+    // The default folders are in out/ where the command runs (the project, or the copy whose
+    // tests reuse its build): removed however the test ends.
+    let out = pipeline::output_root().join("out").join(&name);
     struct Removed<'a>(&'a Path);
     impl Drop for Removed<'_> {
         fn drop(&mut self) {

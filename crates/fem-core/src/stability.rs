@@ -11,10 +11,12 @@
 //! is in tension and has no positive μ.
 //!
 //! The linear material has no geometric stiffness (its strain is linear in the displacement), so
-//! nothing of this applies to it.
+//! a linear simulation does not buckle; the estimate, made at rest where every material has the
+//! same K₀ and stresses, says what the body would do under a nonlinear material of the same
+//! modulus, which is what a user who is told to switch needs.
 
 use crate::integrator::{FullSpaceModel, NewtonParts};
-use crate::material::{AnyMaterial, Material};
+use crate::material::Material;
 use crate::step_norm::rest_stiffness;
 use crate::{FemError, Mat3, with_material};
 
@@ -41,10 +43,9 @@ pub struct GravityBuckling {
 }
 
 /// The linearised buckling load of `model`'s gravity (see the module docs). `None` without
-/// gravity or pins (nothing holds the body against its weight). For the linear material only
-/// the sag: a linear body does not buckle, yet how far its weight carries it (and the modulus
-/// that would keep it up) is what a user who switches to a nonlinear material needs to know
-/// first (a tester's linear snowman moved 1.4 times its size with nothing said of its modulus).
+/// gravity or pins (nothing holds the body against its weight). For the linear material it is
+/// the load of the same body under a nonlinear material of its modulus (a tester's linear
+/// snowman moved 1.4 times its size with nothing said of the modulus that keeps it up).
 ///
 /// # Errors
 /// [`FemError`] when K₀ cannot be factorised.
@@ -59,13 +60,6 @@ pub fn gravity_buckling(model: &FullSpaceModel) -> Result<Option<GravityBuckling
         full,
         stress,
     } = Prestress::of(model)?;
-    if matches!(model.material, AnyMaterial::Linear(_)) {
-        return Ok(Some(GravityBuckling {
-            load_factor: None,
-            converged: true,
-            sag: crate::integrator::max_displacement(&full),
-        }));
-    }
     let geometric = Geometric {
         model,
         stress: &stress,

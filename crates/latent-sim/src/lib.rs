@@ -153,7 +153,7 @@ pub enum ReducedError {
     /// A state given from outside at a step count past [`MAX_STATE_STEP`].
     #[error(
         "a state was given step {step}: at most {MAX_STATE_STEP} (2⁵³, past which the time \
-         step · h is not exact and the steps' count overflows)"
+         step · h is no longer an exact multiple of h)"
     )]
     StateStep { step: usize },
     /// A cubature rule that does not fit the model.

@@ -374,7 +374,9 @@ pub struct MethodReport {
 /// load of gravity at rest ([`fem_core::stability`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Buckling {
-    /// Gravity times this buckles the body; None when no load along gravity does (it hangs).
+    /// Gravity times this buckles the body; None when no load along gravity does (it hangs),
+    /// and for the linear material, which does not buckle (its `standing_modulus` is a
+    /// nonlinear material's).
     pub load_factor: Option<f64>,
     /// The largest displacement of the linear response to gravity at rest (m).
     pub sag: f64,
@@ -402,7 +404,9 @@ impl Buckling {
     pub const VALID_SAG: f64 = 0.05;
 
     /// The analysis of `model` (None without gravity or pins, and when K₀ cannot be
-    /// factorised, which is logged; for the linear material the sag alone).
+    /// factorised, which is logged). Under the linear material no load factor, since it does
+    /// not buckle, but the moduli of the same body under a nonlinear material, which the
+    /// warnings that name one tell a linear body's user to switch to.
     pub fn of(model: &FullSpaceModel) -> Option<Self> {
         let b = match fem_core::stability::gravity_buckling(model) {
             Ok(b) => b?,
@@ -414,8 +418,9 @@ impl Buckling {
         let (lo, hi) = model.mesh.bounding_box();
         let size = (hi - lo).norm();
         let standing_modulus = b.load_factor.map(|l| model.youngs_modulus / l);
+        let linear = matches!(model.material, fem_core::material::AnyMaterial::Linear(_));
         Some(Self {
-            load_factor: b.load_factor,
+            load_factor: b.load_factor.filter(|_| !linear),
             sag: b.sag,
             size,
             standing_modulus,

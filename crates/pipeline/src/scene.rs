@@ -215,12 +215,17 @@ impl Scene {
         }
         // The cause in the message itself: a program printing `{e}` showed only "cannot read".
         let text = std::fs::read_to_string(path).map_err(|e| {
-            let why = if e.kind() == std::io::ErrorKind::InvalidData {
-                "it is not text: a scene is a TOML file (a model file, `.ldm`, is loaded by \
-                 `ReducedModel::load` or `view --model`)"
+            let model = std::fs::read(path)
+                .is_ok_and(|b| b.starts_with(latent_sim::model::file::MAGIC))
+                || path.extension().is_some_and(|x| x == "ldm");
+            let why = if e.kind() != std::io::ErrorKind::InvalidData {
+                e.to_string()
+            } else if model {
+                "it is a model file, not a scene (a model file is loaded by \
+                 `ReducedModel::load`, Python's `Model.load` or `view --model`)"
                     .to_string()
             } else {
-                e.to_string()
+                "it is not UTF-8 text: save the scene (TOML) as UTF-8".to_string()
             };
             anyhow::anyhow!("cannot read scene file {}: {why}", path.display())
         })?;

@@ -85,10 +85,9 @@ pub const SCENE_FIRST: &str = "the lines below measure the scene as written: whe
 const LARGER_PCA: &str = "in `[pca]`, one 9 more in `explained_energy`, a smaller \
                           `max_vertex_error` or a larger `dimension`, whichever rule the `pca` \
                           stage's line names, and a larger `max_dimension` where that line says \
-                          it stopped the basis; a larger basis needs larger cubature rules, so \
-                          where the cubature stage's line says the element budget stopped it, \
-                          the cubature methods can lose what `pca` gains unless \
-                          `[cubature] max_elements` grows too, at a dearer step";
+                          it stopped the basis (where a cubature stage's line says the element \
+                          budget stopped its rule, the cubature methods can lose what `pca` \
+                          gains unless `[cubature] max_elements` grows too, at a dearer step)";
 
 /// The remedy for a cubature rule that makes a method's error, in every warning that names it.
 /// Which of the two settings stopped the fit is on the cubature stage's line: on a twisted

@@ -891,12 +891,19 @@ fn unreadable_scene_files_say_why() {
             && missing.to_string().contains("os error"),
         "{missing}"
     );
-    let binary = dir.join("model.ldm");
-    std::fs::write(&binary, [0x4c, 0x44, 0xff, 0xfe, 0x00, 0x80]).unwrap();
-    let err = Scene::from_file(&binary).unwrap_err().to_string();
+    let model = dir.join("part.model");
+    let mut bytes = b"LATDYNm\0".to_vec();
+    bytes.extend([0xff, 0xfe, 0x00, 0x80]);
+    std::fs::write(&model, bytes).unwrap();
+    let err = Scene::from_file(&model).unwrap_err().to_string();
     assert!(
-        err.contains("it is not text") && err.contains("ReducedModel::load"),
+        err.contains("it is a model file") && err.contains("ReducedModel::load"),
         "{err}"
     );
+    // A scene saved as UTF-16 (PowerShell's `>`) is told to be saved as UTF-8.
+    let utf16 = dir.join("scene.toml");
+    std::fs::write(&utf16, [0xff, 0xfe, b'n', 0, b'a', 0]).unwrap();
+    let err = Scene::from_file(&utf16).unwrap_err().to_string();
+    assert!(err.contains("save the scene (TOML) as UTF-8"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }

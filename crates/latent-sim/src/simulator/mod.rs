@@ -283,8 +283,8 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// # Errors
     /// [`ReducedError::StateShape`] when a vector's length is not the subspace's k,
     /// [`ReducedError::StateNotFinite`] when a coefficient is not finite,
-    /// [`ReducedError::StateStep`] for a step past [`MAX_STATE_STEP`](crate::MAX_STATE_STEP)
-    /// (the state is then left as it was).
+    /// [`ReducedError::StateStep`] for a step past [`MAX_STATE_STEP`](crate::MAX_STATE_STEP);
+    /// on any of these the state is left as it was.
     pub fn set_state(
         &mut self,
         step: usize,
