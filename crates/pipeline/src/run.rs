@@ -418,7 +418,7 @@ impl Buckling {
         let (lo, hi) = model.mesh.bounding_box();
         let size = (hi - lo).norm();
         let standing_modulus = b.load_factor.map(|l| model.youngs_modulus / l);
-        let linear = matches!(model.material, fem_core::material::AnyMaterial::Linear(_));
+        let linear = model.material.is_linear();
         Some(Self {
             load_factor: b.load_factor.filter(|_| !linear),
             sag: b.sag,
@@ -561,7 +561,7 @@ impl Compression {
             .collect();
         let total: f64 = rest.iter().sum();
         // Only the linear material leaves out the strain that `linear_strain` measures.
-        let linear = matches!(model.material, fem_core::material::AnyMaterial::Linear(_));
+        let linear = model.material.is_linear();
         let (mut u, mut ratios) = (vec![0.0; model.num_full()], Vec::new());
         let mut out: Option<Self> = None;
         for (k, f) in frames.iter().enumerate() {

@@ -214,20 +214,19 @@ impl Scene {
             );
         }
         // The cause in the message itself: a program printing `{e}` showed only "cannot read".
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            let model = std::fs::read(path)
-                .is_ok_and(|b| b.starts_with(latent_sim::model::file::MAGIC))
+        let cannot = |why: &dyn std::fmt::Display| {
+            anyhow::anyhow!("cannot read scene file {}: {why}", path.display())
+        };
+        let bytes = std::fs::read(path).map_err(|e| cannot(&e))?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            let model = e.as_bytes().starts_with(latent_sim::model::file::MAGIC)
                 || path.extension().is_some_and(|x| x == "ldm");
-            let why = if e.kind() != std::io::ErrorKind::InvalidData {
-                e.to_string()
-            } else if model {
+            cannot(&if model {
                 "it is a model file, not a scene (a model file is loaded by \
                  `ReducedModel::load`, Python's `Model.load` or `view --model`)"
-                    .to_string()
             } else {
-                "it is not UTF-8 text: save the scene (TOML) as UTF-8".to_string()
-            };
-            anyhow::anyhow!("cannot read scene file {}: {why}", path.display())
+                "it is not UTF-8 text: save the scene (TOML) as UTF-8"
+            })
         })?;
         let base = path
             .parent()

@@ -3,7 +3,7 @@
 //! growing diagonal shift when only semidefinite; and that factor as L-BFGS's preconditioner.
 
 use super::FullSpaceModel;
-use crate::material::{AnyMaterial, signed_svd};
+use crate::material::signed_svd;
 use crate::optim::Preconditioner;
 use crate::sparse::{HessianPattern, NO_SLOT};
 use crate::sparse_cholesky::SparseCholesky;
@@ -182,7 +182,7 @@ impl BodyRotation {
     /// free DOFs are whole vertices (three in a row, as [`crate::constraints::DofMap`] frees
     /// them) and there are at least three of them.
     pub(crate) fn new(model: &FullSpaceModel) -> Option<Self> {
-        if matches!(model.material, AnyMaterial::Linear(_)) {
+        if model.material.is_linear() {
             return None;
         }
         let free = &model.dofs.free;

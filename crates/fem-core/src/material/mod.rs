@@ -213,6 +213,12 @@ macro_rules! with_material {
 }
 
 impl AnyMaterial {
+    /// Linear elasticity: its energy is quadratic in the displacement, so it neither turns with
+    /// the body nor buckles.
+    pub fn is_linear(&self) -> bool {
+        matches!(self, AnyMaterial::Linear(_))
+    }
+
     pub fn name(&self) -> &'static str {
         fn name_of<M: Material>(_: &M) -> &'static str {
             M::NAME
