@@ -70,6 +70,13 @@ impl std::fmt::Display for StageOutcome {
 /// One line saying what a stage's artifact holds and why, for [`StageOutcome::summary`].
 pub trait StageSummary {
     fn summary(&self) -> String;
+
+    /// The line for `scene`, where what the scene asks of the artifact changes it (the
+    /// complement directions it takes); [`StageSummary::summary`] otherwise.
+    fn summary_in(&self, scene: &Scene) -> String {
+        let _ = scene;
+        self.summary()
+    }
 }
 
 impl StageSummary for SnapshotSet {
@@ -313,15 +320,24 @@ impl StageSummary for TrainedModel {
 impl StageSummary for Complement {
     fn summary(&self) -> String {
         let c = self.default_count();
-        format!(
-            "{} directions of what the autoencoder misses; the neural methods take the leading \
-             {c} (unless `[reduced] complement_directions` says): of the snapshots' energy the \
-             autoencoder misses {:.2e} without them and {:.2e} with them, the PCA basis {:.2e}",
-            self.singular_values.len(),
-            self.missed_with(0),
-            self.missed_with(c),
-            self.pca_lost_energy / self.snapshot_energy.max(f64::MIN_POSITIVE)
+        self.line(
+            c,
+            &format!("the leading {c} (unless `[reduced] complement_directions` says)"),
         )
+    }
+
+    fn summary_in(&self, scene: &Scene) -> String {
+        match scene.reduced.complement_directions {
+            // Beyond the residuals' count `complement_count` stops with its own error.
+            Some(c) if c <= self.singular_values.len() => self.line(
+                c,
+                &format!(
+                    "the leading {c} (`[reduced] complement_directions`; the default would be {})",
+                    self.default_count()
+                ),
+            ),
+            _ => self.summary(),
+        }
     }
 }
 
@@ -534,6 +550,19 @@ impl Complement {
     pub fn missed_with(&self, count: usize) -> f64 {
         let tails = self.tails();
         tails[count.min(tails.len() - 1)] / self.snapshot_energy.max(f64::MIN_POSITIVE)
+    }
+
+    /// The stage's line when the neural methods take `count` directions, `taken` saying which.
+    fn line(&self, count: usize, taken: &str) -> String {
+        format!(
+            "{} directions of what the autoencoder misses; the neural methods take {taken}: of \
+             the snapshots' energy the autoencoder misses {:.2e} without them and {:.2e} with \
+             them, the PCA basis {:.2e}",
+            self.singular_values.len(),
+            self.missed_with(0),
+            self.missed_with(count),
+            self.pca_lost_energy / self.snapshot_energy.max(f64::MIN_POSITIVE)
+        )
     }
 }
 
@@ -934,7 +963,8 @@ impl<'a> Pipeline<'a> {
             };
             match artifact::load::<T>(&path, expect) {
                 Ok(v) => {
-                    self.record(stage, key, true, start, path, v.summary());
+                    let summary = v.summary_in(&self.scene);
+                    self.record(stage, key, true, start, path, summary);
                     return Ok(v);
                 }
                 Err(e) => tracing::warn!("{}; computing the stage again", e.problem()),
@@ -944,7 +974,8 @@ impl<'a> Pipeline<'a> {
         let value = compute(self)?;
         artifact::save(&path, stage, key, self.mesh_hash, &value)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        self.record(stage, key, false, start, path, value.summary());
+        let summary = value.summary_in(&self.scene);
+        self.record(stage, key, false, start, path, summary);
         Ok(value)
     }
 
@@ -2297,6 +2328,43 @@ mod tests {
             None
         );
         assert!(super::machine_memory().is_none_or(|m| m > gib / 4));
+    }
+
+    /// The complement stage's line names the count the neural methods take: the scene's when it
+    /// sets one, with the default beside it, else the default.
+    #[test]
+    fn the_complement_line_names_the_count_taken() {
+        use super::{Complement, StageSummary};
+        let c = Complement {
+            k: 4,
+            latent_dim: 1,
+            directions: vec![0.0; 16],
+            singular_values: vec![3.0, 1.0, 1e-3, 1e-9],
+            snapshot_energy: 100.0,
+            pca_lost_energy: 1e-5,
+        };
+        assert_eq!(c.default_count(), 2);
+        let scene_with = |line: &str| {
+            let text = format!(
+                "name = \"bar\"\n[mesh]\ngenerate = {{ kind = \"box\", size = [0.4, 0.1, \
+                 0.1], cells = [4, 1, 1] }}\n[material]\nmodel = \"corotated\"\n\
+                 youngs_modulus = 1e5\npoisson_ratio = 0.4\n[[pin]]\nplane = {{ axis = \"x\", \
+                 side = \"min\" }}\n[reduced]\n{line}"
+            );
+            crate::scene::Scene::from_str(&text, std::path::Path::new("."), "bar").unwrap()
+        };
+        let default = c.summary_in(&scene_with(""));
+        assert!(
+            default.contains("take the leading 2 (unless `[reduced] complement_directions` says)"),
+            "{default}"
+        );
+        let set = c.summary_in(&scene_with("complement_directions = 1\n"));
+        assert!(
+            set.contains(
+                "take the leading 1 (`[reduced] complement_directions`; the default would be 2)"
+            ) && set.contains("misses 1.00e-1 without them and 1.00e-2 with them"),
+            "{set}"
+        );
     }
 
     /// A cube standing on its base under its own weight: one so soft its weight crushes it is
