@@ -943,9 +943,10 @@ fn field_at(text: &str, offset: usize) -> Option<String> {
     (!parts.is_empty()).then(|| parts.join("."))
 }
 
-/// What to write instead, for three mistakes a person makes in a scene's TOML: a key or a
-/// name a letter or two off one the field takes, a single `[pin]` where the list `[[pin]]` is
-/// meant, and arithmetic in a value (`step = 1/60`, which TOML reads as an unquoted string).
+/// What to write instead, for mistakes a person makes in a scene's TOML: a key or a name a
+/// letter or two off one the field takes, a single `[pin]` where the list `[[pin]]` is meant,
+/// a Unicode minus or a decimal comma pasted from a document, and arithmetic in a value
+/// (`step = 1/60`, which TOML reads as an unquoted string).
 fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> Option<String> {
     let unknown = ["unknown field `", "unknown variant `"]
         .iter()
@@ -977,35 +978,72 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
              scene may have several"
         ));
     }
-    // The first `/` or `*` from the error to the end of its line, without a comment: TOML points
-    // at the value (`step = 1/60`) or, inside an array, at the operator (`[0.0, -9.81/6, 0.0]`).
     let start = (0..=offset.min(text.len()))
         .rev()
         .find(|&o| text.is_char_boundary(o))?;
     let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
     let line = text[line_start..].lines().next()?;
     let code = line.split('#').next()?;
+    // A minus sign TOML does not read: a Unicode minus or dash pasted from a document.
+    if let Some(c) = code
+        .chars()
+        .find(|c| ['\u{2212}', '\u{2013}', '\u{2014}'].contains(c))
+    {
+        return Some(format!(
+            "write `-`, the ASCII minus, where `{c}` (U+{:04X}) stands: TOML reads no other \
+             character as a sign",
+            u32::from(c)
+        ));
+    }
+    // A decimal comma (`poisson_ratio = 0,4`) outside an array, where a comma separates numbers.
+    let value = code.split_once('=').map(|(_, v)| v.trim());
+    if let Some((whole, fraction)) = value.and_then(|v| v.split_once(','))
+        && !whole.is_empty()
+        && whole
+            .trim_start_matches('-')
+            .chars()
+            .all(|c| c.is_ascii_digit())
+        && !fraction.is_empty()
+        && fraction.chars().all(|c| c.is_ascii_digit())
+    {
+        return Some(format!(
+            "write `{whole}.{fraction}`: TOML's decimal point is a dot, never a comma"
+        ));
+    }
+    // The first `/` or `*` from the error to the end of its line, without a comment: TOML points
+    // at the value (`step = 1/60`) or, inside an array, at the operator (`[0.0, -9.81/6, 0.0]`),
+    // and the operators after it (`1/60/2`), left to right.
     let from = (start - line_start).min(code.len());
-    let op_at = from + code[from..].find(['/', '*'])?;
+    let mut op_at = from + code[from..].find(['/', '*'])?;
     // The numbers on either side of it (ASCII, so byte offsets are characters).
     let number = |c: char| c.is_ascii_digit() || ".eE+-_".contains(c);
+    let parse = |s: &str| s.replace('_', "").parse::<f64>().ok();
     let left = code[..op_at].trim_end();
     let a_from = left.rfind(|c: char| !number(c)).map_or(0, |i| {
         i + left[i..].chars().next().map_or(1, char::len_utf8)
     });
-    let right = &code[op_at + 1..];
-    let b_from = op_at + 1 + (right.len() - right.trim_start().len());
-    let b_to = b_from
-        + code[b_from..]
-            .find(|c: char| !number(c))
-            .unwrap_or(code.len() - b_from);
-    let parse = |s: &str| s.replace('_', "").parse::<f64>().ok();
-    let (a, b) = (parse(&left[a_from..])?, parse(&code[b_from..b_to])?);
-    let result = if code[op_at..].starts_with('/') {
-        a / b
-    } else {
-        a * b
-    };
+    let mut result = parse(&left[a_from..])?;
+    let mut b_to;
+    loop {
+        let right = &code[op_at + 1..];
+        let b_from = op_at + 1 + (right.len() - right.trim_start().len());
+        b_to = b_from
+            + code[b_from..]
+                .find(|c: char| !number(c))
+                .unwrap_or(code.len() - b_from);
+        let b = parse(&code[b_from..b_to])?;
+        result = if code[op_at..].starts_with('/') {
+            result / b
+        } else {
+            result * b
+        };
+        let rest = &code[b_to..];
+        let next = b_to + (rest.len() - rest.trim_start().len());
+        match code[next..].chars().next() {
+            Some('/' | '*') => op_at = next,
+            _ => break,
+        }
+    }
     let value = &code[a_from..b_to];
     result
         .is_finite()

@@ -148,8 +148,9 @@ fn unknown_keys_are_errors_naming_the_key_and_its_section() {
     }
 }
 
-/// Three mistakes get what to write instead: a key or a name a letter or two off (and only then), a
-/// single `[pin]` for the list `[[pin]]`, and arithmetic in a value.
+/// Common mistakes get what to write instead: a key or a name a letter or two off (and only
+/// then), a single `[pin]` for the list `[[pin]]`, a Unicode minus, a decimal comma, and
+/// arithmetic in a value, operators in a chain too.
 #[test]
 fn common_mistakes_say_what_to_write() {
     let cases = [
@@ -185,6 +186,22 @@ fn common_mistakes_say_what_to_write() {
         (
             edit("[0.0, -9.81, 0.0]", "[0.0, 0.0, -9.81 / 6]"),
             "write the number, -1.635 for `-9.81 / 6`",
+        ),
+        (
+            edit("step = 0.01", "step = 1/50/2"),
+            "write the number, 0.01 for `1/50/2`",
+        ),
+        (
+            edit("stiffness = 200.0", "stiffness = 4 * 100 / 2"),
+            "write the number, 200 for `4 * 100 / 2`",
+        ),
+        (
+            edit("[0.0, -9.81, 0.0]", "[0.0, \u{2212}9.81, 0.0]"),
+            "write `-`, the ASCII minus, where `\u{2212}` (U+2212) stands",
+        ),
+        (
+            edit("poisson_ratio = 0.4", "poisson_ratio = 0,4"),
+            "write `0.4`: TOML's decimal point is a dot",
         ),
     ];
     for (text, hint) in cases {
