@@ -963,7 +963,7 @@ impl<'a> Pipeline<'a> {
             };
             match artifact::load::<T>(&path, expect) {
                 Ok(v) => {
-                    let summary = v.summary_in(&self.scene);
+                    let summary = v.summary_in(self.scene);
                     self.record(stage, key, true, start, path, summary);
                     return Ok(v);
                 }
@@ -974,7 +974,7 @@ impl<'a> Pipeline<'a> {
         let value = compute(self)?;
         artifact::save(&path, stage, key, self.mesh_hash, &value)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        let summary = value.summary_in(&self.scene);
+        let summary = value.summary_in(self.scene);
         self.record(stage, key, false, start, path, summary);
         Ok(value)
     }

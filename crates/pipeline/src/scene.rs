@@ -247,17 +247,7 @@ impl Scene {
 
     /// Parses scene text; `source` names it in errors and `base_dir` anchors relative paths.
     pub fn from_str(text: &str, base_dir: &Path, source: &str) -> Result<Self> {
-        let mut scene: Scene = toml::from_str(text).map_err(|e| {
-            let field = e.span().and_then(|span| field_at(text, span.start));
-            let hint = e
-                .span()
-                .and_then(|span| parse_hint(text, span.start, e.message(), field.as_deref()))
-                .map_or(String::new(), |h| format!("{h}\n"));
-            match field {
-                Some(field) => anyhow::anyhow!("{source}: `{field}`: {e}{hint}"),
-                None => anyhow::anyhow!("{source}: {e}{hint}"),
-            }
-        })?;
+        let mut scene = read_toml(text, source)?;
         scene.base_dir = base_dir.to_path_buf();
         scene.source = source.to_string();
         scene.check()?;
@@ -864,6 +854,120 @@ fn collinear(points: &[fem_core::Vec3]) -> bool {
     points.iter().all(|p| {
         let r = p - a;
         (r - axis * r.dot(&axis)).norm() <= 1e-6 * extent
+    })
+}
+
+/// Most unknown keys reported at once: the reading goes on past one by blanking it.
+const MAX_UNKNOWN_KEYS_SAID: usize = 8;
+
+/// Reads a scene's TOML; each error names its field and what to write where it can. An unknown
+/// key (a typo) does not hide the ones after it: the reading goes on with the key read as the
+/// one it was a slip for, or set aside, until another kind of error, so a scene with three
+/// typos hears of all three at once.
+fn read_toml(text: &str, source: &str) -> Result<Scene> {
+    let mut read = text.to_string();
+    let mut said = Vec::new();
+    loop {
+        let e = match toml::from_str::<Scene>(&read) {
+            Ok(scene) if said.is_empty() => return Ok(scene),
+            Ok(_) => break,
+            Err(e) => e,
+        };
+        // A field missing once a key is set aside was the key's, and a key read as another
+        // that the scene gives too is a duplicate of the reading's making.
+        if !said.is_empty()
+            && (e.message().starts_with("missing field")
+                || toml::de::DeTable::parse(&read).is_err())
+        {
+            break;
+        }
+        let field = e.span().and_then(|span| field_at(&read, span.start));
+        let hint = e
+            .span()
+            .and_then(|span| parse_hint(&read, span.start, e.message(), field.as_deref()));
+        // Said in the order of the file, not of the reading.
+        let line = e
+            .span()
+            .map_or(usize::MAX, |span| read[..span.start].matches('\n').count());
+        said.push((
+            line,
+            format!(
+                "{source}: {}{e}{}",
+                field.map_or(String::new(), |f| format!("`{f}`: ")),
+                hint.as_ref().map_or(String::new(), |h| format!("{h}\n"))
+            ),
+        ));
+        let Some(span) = e
+            .span()
+            .filter(|_| e.message().starts_with("unknown field `"))
+            .filter(|_| said.len() < MAX_UNKNOWN_KEYS_SAID)
+        else {
+            break;
+        };
+        // The key read as the one it was near, else the entry set aside; spaces keep every later
+        // byte where it was, so spans and lines stay the user's.
+        let meant = hint
+            .as_deref()
+            .and_then(|h| h.strip_prefix("did you mean `")?.strip_suffix("`?"));
+        match (meant, entry_at(&read, span.start)) {
+            (Some(key), _) => read.replace_range(span, key),
+            (None, Some(range)) => {
+                let blank: String = read[range.clone()]
+                    .chars()
+                    .map(|c| if c == '\n' || c == '\r' { c } else { ' ' })
+                    .collect();
+                read.replace_range(range, &blank);
+            }
+            (None, None) => break,
+        }
+    }
+    said.sort_by_key(|(line, _)| *line);
+    let said: Vec<String> = said.into_iter().map(|(_, text)| text).collect();
+    bail!("{}", said.join("\n"))
+}
+
+/// The bytes of the `key = value` entry whose key starts at byte `key_at` of a TOML text, with
+/// the comma that joins it to its neighbours inside an inline table or array; None for a
+/// table's header (`[unknown]`), whose keys run on to the next header.
+fn entry_at(text: &str, key_at: usize) -> Option<std::ops::Range<usize>> {
+    fn find(
+        table: &toml::de::DeTable<'_>,
+        text: &str,
+        at: usize,
+    ) -> Option<std::ops::Range<usize>> {
+        table.iter().find_map(|(key, value)| {
+            let (k, v) = (key.span(), value.span());
+            if k.start == at {
+                let inline = !matches!(value.get_ref(), toml::de::DeValue::Table(_))
+                    || text.get(v.clone()).is_some_and(|t| t.starts_with('{'));
+                return inline.then_some(k.start..v.end);
+            }
+            within(value.get_ref(), text, at)
+        })
+    }
+    fn within(
+        value: &toml::de::DeValue<'_>,
+        text: &str,
+        at: usize,
+    ) -> Option<std::ops::Range<usize>> {
+        match value {
+            toml::de::DeValue::Table(t) => find(t, text, at),
+            toml::de::DeValue::Array(a) => a.iter().find_map(|v| within(v.get_ref(), text, at)),
+            _ => None,
+        }
+    }
+    let root = toml::de::DeTable::parse(text).ok()?;
+    let range = find(root.get_ref(), text, key_at)?;
+    let after = &text[range.end..];
+    let gap = after.len() - after.trim_start_matches([' ', '\t']).len();
+    if after[gap..].starts_with(',') {
+        return Some(range.start..range.end + gap + 1);
+    }
+    let before = text[..range.start].trim_end();
+    Some(if before.ends_with(',') {
+        before.len() - 1..range.end
+    } else {
+        range
     })
 }
 

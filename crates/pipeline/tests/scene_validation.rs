@@ -229,6 +229,58 @@ fn common_mistakes_say_what_to_write() {
     assert!(!err.contains("doubled brackets"), "{err}");
 }
 
+/// A scene with several typos hears of each at once, inline tables' keys among them, with the
+/// line of each and what to write; the reading stops at the first error of another kind, and a
+/// field missing because a typo was set aside is not said.
+#[test]
+fn every_typo_is_said_at_once() {
+    let text = edit("youngs_modulus", "youngs_modulos")
+        .replacen("frames = 10", "frams = 10", 1)
+        .replacen("radius = 0.15", "radus = 0.15", 1)
+        .replacen("tolerance = 1.0e-6 }", "tolerence = 1.0e-6 }", 1);
+    let err = read_error(&text);
+    assert_names(
+        &err,
+        &[
+            "`material.youngs_modulos`",
+            "did you mean `youngs_modulus`?",
+            "`pin[0].plane.tolerence`",
+            "did you mean `tolerance`?",
+            "`time.frams`",
+            "did you mean `frames`?",
+            "`force[0].select.sphere.radus`",
+            "did you mean `radius`?",
+        ],
+    );
+    // In the order of the file, each with its line.
+    let at = |needle: &str| {
+        err.find(needle)
+            .unwrap_or_else(|| panic!("{needle}: {err}"))
+    };
+    assert!(
+        at("line 8,") < at("line 13,")
+            && at("line 13,") < at("line 20,")
+            && at("line 20,") < at("line 28,"),
+        "{err}"
+    );
+    assert!(!err.contains("missing field"), "{err}");
+    // A wrong type met after a typo is said too, and ends the reading.
+    let err = read_error(&edit("radius = 0.15", "radus = 0.15").replacen(
+        "stiffness = 200.0",
+        "stiffness = \"x\"",
+        1,
+    ));
+    assert_names(
+        &err,
+        &["`force[0].select.sphere.radus`", "`force[0].stiffness`"],
+    );
+    // A key read as the one it was a slip for, where that one is given too, is not the user's
+    // duplicate.
+    let err = read_error(&edit("frames = 10", "frames = 10\nframs = 20"));
+    assert_names(&err, &["`time.frams`", "did you mean `frames`?"]);
+    assert!(!err.contains("duplicate"), "{err}");
+}
+
 #[test]
 fn wrong_types_are_errors_naming_the_field_and_line() {
     let cases = [
