@@ -189,7 +189,7 @@ fn merged_shards_equal_the_unsharded_snapshots() {
 fn a_tiny_scene_runs_end_to_end() {
     let s = scene(TINY);
     let out = scratch_dir("pipeline-run");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let opts = RunOptions {
         out: out.clone(),
         every: 4,
@@ -333,7 +333,7 @@ fn onset_directions_reach_the_neural_methods() {
     );
     let s = scene(&text);
     let out = scratch_dir("pipeline-onset");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let rows = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);
     for r in &rows {
         assert_eq!(r.dim, 4, "{r:?}");
@@ -375,7 +375,7 @@ fn onset_directions_reach_the_neural_methods() {
 fn linear_directions_default_to_the_counts_chosen() {
     let s = scene(TINY);
     let out = scratch_dir("pipeline-linear-defaults");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     assert_eq!(p.onset_directions(), latent_sim::DEFAULT_ONSET_DIRECTIONS);
     let c = p.complement(&no_progress).unwrap();
     let count = c.default_count();
@@ -427,7 +427,7 @@ fn linear_directions_default_to_the_counts_chosen() {
         "{TINY}[reduced]\nonset_directions = {}\ncomplement_directions = {count}\n",
         latent_sim::DEFAULT_ONSET_DIRECTIONS
     ));
-    let mut p = Pipeline::new(&written, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&written, out.join("cache")).unwrap();
     let named = run_methods(&mut p, &out, &[Method::Neural, Method::NeuralCubature]);
     for (a, b) in chosen.iter().zip(&named) {
         assert_eq!((a.dim, &a.frame_errors), (b.dim, &b.frame_errors));
@@ -435,7 +435,7 @@ fn linear_directions_default_to_the_counts_chosen() {
     let weightless = scene(&format!(
         "{TINY}[gravity]\nacceleration = [0.0, 0.0, 0.0]\n"
     ));
-    let p = Pipeline::new(&weightless, &out.join("cache")).unwrap();
+    let p = Pipeline::new(&weightless, out.join("cache")).unwrap();
     assert_eq!(p.onset_directions(), 0);
 }
 
@@ -452,7 +452,7 @@ fn complement_directions_complete_the_autoencoder() {
     let text = format!("{tiny}[reduced]\ncomplement_directions = 2\nonset_directions = 0\n");
     let s = scene(&text);
     let out = scratch_dir("pipeline-complement");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let c = p.complement(&no_progress).unwrap();
     let (k, r) = (c.k, c.singular_values.len());
     assert_eq!((k, r), (6, 6), "k = 6 coefficients, 32 snapshots");
@@ -492,7 +492,7 @@ fn complement_directions_complete_the_autoencoder() {
     let plain = scene(&format!(
         "{TINY}[reduced]\ncomplement_directions = 0\nonset_directions = 0\n"
     ));
-    let mut p0 = Pipeline::new(&plain, &out.join("cache")).unwrap();
+    let mut p0 = Pipeline::new(&plain, out.join("cache")).unwrap();
     let without = run_methods(&mut p0, &out, &[Method::Neural]);
     let (with, without) = (&with[0], &without[0]);
     assert!(
@@ -508,7 +508,7 @@ fn complement_directions_complete_the_autoencoder() {
     );
 
     let too_many = scene(&format!("{tiny}[reduced]\ncomplement_directions = 7\n"));
-    let mut p = Pipeline::new(&too_many, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&too_many, out.join("cache")).unwrap();
     let err = p.complement_columns(&no_progress).unwrap_err().to_string();
     assert!(
         err.contains("tiny.toml") && err.contains("reduced.complement_directions = 7"),
@@ -528,7 +528,7 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
         .replace("epochs = 150\n", "")
         .replace("hidden = [16, 16]\n", "");
     let s = scene(&defaulted);
-    let mut p = Pipeline::new(&s, &scratch_dir("pipeline-latent-default")).unwrap();
+    let mut p = Pipeline::new(&s, scratch_dir("pipeline-latent-default")).unwrap();
     let trained = p.train(&no_progress).unwrap();
     assert_eq!((trained.pca_k, trained.latent_dim), (5, 5));
     assert_eq!(pipeline::pipeline::default_latent_dim(5), 5);
@@ -571,7 +571,7 @@ fn the_latent_dimension_defaults_from_the_pca_dimension_and_never_exceeds_it() {
         .replace("latent_dim = 2", "latent_dim = 8")
         .replace("dimension = 6", "dimension = 6\ngravity_directions = 0");
     let s = scene(&too_wide);
-    let mut p = Pipeline::new(&s, &scratch_dir("pipeline-latent-too-wide")).unwrap();
+    let mut p = Pipeline::new(&s, scratch_dir("pipeline-latent-too-wide")).unwrap();
     let e = p.train(&no_progress).unwrap_err().to_string();
     assert!(
         e.contains("`autoencoder.latent_dim` = 8") && e.contains("at most 6"),
@@ -772,7 +772,7 @@ fn some_schedules_start_later_when_the_body_moves_on_under_gravity() {
 fn a_run_without_frames_leaves_no_frames_behind() {
     let s = scene(TINY);
     let out = scratch_dir("pipeline-no-frames");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let simulate = |p: &mut Pipeline<'_>, every: usize| {
         let opts = pipeline::simulate::SimulateOptions {
             method: Method::Full,
@@ -815,7 +815,7 @@ fn a_run_without_frames_leaves_no_frames_behind() {
 fn a_reduced_simulation_reports_its_largest_displacement_per_step() {
     let s = scene(TINY);
     let out = scratch_dir("pipeline-reduced-displacement");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let opts = pipeline::simulate::SimulateOptions {
         method: Method::Pca,
         trajectory: pipeline::simulate::Trajectory::Test(0),

@@ -78,7 +78,7 @@ fn assert_each_stage_completes(what: &str, calls: &[(usize, usize)]) -> Vec<usiz
 #[test]
 fn snapshot_stages_count_every_schedule() {
     let s = scene(&tiny());
-    let mut p = Pipeline::new(&s, &scratch_dir("progress-snapshots")).unwrap();
+    let mut p = Pipeline::new(&s, scratch_dir("progress-snapshots")).unwrap();
     // Schedules run in parallel; the count still arrives in order, ending at the total.
     let rec = Recorder::default();
     p.snapshots(&|d, t| rec.record(d, t)).unwrap();
@@ -91,7 +91,7 @@ fn snapshot_stages_count_every_schedule() {
 #[test]
 fn the_reference_counts_every_frame() {
     let s = scene(&tiny());
-    let mut p = Pipeline::new(&s, &scratch_dir("progress-reference")).unwrap();
+    let mut p = Pipeline::new(&s, scratch_dir("progress-reference")).unwrap();
     let rec = Recorder::default();
     p.reference(0, &|d, t| rec.record(d, t)).unwrap();
     assert_counts_to("reference", &rec.calls(), 12);
@@ -112,7 +112,7 @@ fn training_ends_at_its_total_even_when_it_stops_early() {
     ] {
         let text = tiny().replace("epochs = 150\n", settings);
         let s = scene(&text);
-        let mut p = Pipeline::new(&s, &scratch_dir(&format!("progress-train-{case}"))).unwrap();
+        let mut p = Pipeline::new(&s, scratch_dir(&format!("progress-train-{case}"))).unwrap();
         p.pca(&no_progress).unwrap();
         let rec = Recorder::default();
         let trained = p.train(&|d, t| rec.record(d, t)).unwrap();
@@ -140,7 +140,7 @@ fn training_ends_at_its_total_even_when_it_stops_early() {
 fn run_counts_every_step_of_every_method() {
     let s = scene(&tiny());
     let out = scratch_dir("progress-run");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let methods = [
         Method::Full,
         Method::Pca,
@@ -184,7 +184,7 @@ fn run_counts_every_step_of_every_method() {
 fn simulate_counts_every_step() {
     let s = scene(&tiny());
     let out = scratch_dir("progress-simulate");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     for (method, trajectory, frames) in [
         (Method::Full, Trajectory::Scene, 10),
         (Method::Neural, Trajectory::Test(0), 12),
@@ -215,7 +215,7 @@ fn simulate_counts_every_step() {
 #[test]
 fn stress_reports_every_method_under_every_condition() {
     let s = scene(&tiny());
-    let mut p = Pipeline::new(&s, &scratch_dir("progress-stress")).unwrap();
+    let mut p = Pipeline::new(&s, scratch_dir("progress-stress")).unwrap();
     let methods = [Method::Full, Method::Pca, Method::NeuralCubature];
     let conditions = [
         Condition::Base,

@@ -15,7 +15,7 @@ use tests::{TINY, no_progress, scene, scratch_dir};
 
 /// Runs `methods` on test trajectory 0 of `s`, writing every frame to `out`.
 fn run_all_frames(s: &Scene, out: &Path, methods: &[Method]) -> Vec<MethodReport> {
-    let mut p = Pipeline::new(s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(s, out.join("cache")).unwrap();
     let opts = RunOptions {
         out: out.to_path_buf(),
         every: 1,
@@ -209,7 +209,7 @@ fn error_columns_match_the_written_frames() {
 fn speedups_and_rates_follow_from_the_reported_times() {
     let s = scene(TINY);
     let out = scratch_dir("report-speedups");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let other_full = match s.solver.method {
         fem_core::optim::SolverMethod::Newton => Method::FullLbfgs,
         fem_core::optim::SolverMethod::Lbfgs => Method::FullNewton,
@@ -256,7 +256,7 @@ fn speedups_and_rates_follow_from_the_reported_times() {
     }
     // A later run loads the reference, timed then: `full` runs again for its time, with the
     // reference's frames (no error) and iterations.
-    let mut later = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut later = Pipeline::new(&s, out.join("cache")).unwrap();
     let again = run(
         &mut later,
         &RunOptions {
@@ -486,7 +486,7 @@ fn compression_is_reported_without_a_full_row() {
     let out = scratch_dir("report-compression");
     let s = scene(TINY);
     let with_full = run_all_frames(&s, &out.join("with"), &[Method::Full, Method::Pca]);
-    let mut p = Pipeline::new(&s, &out.join("with").join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("with").join("cache")).unwrap();
     let mut without = |methods: Vec<Method>| {
         let opts = RunOptions {
             out: out.join("without"),
@@ -541,7 +541,7 @@ frames_per_schedule = 4
     };
     let out = scratch_dir("report-buckling");
     let soft = plate(2.0e4);
-    let mut p = Pipeline::new(&soft, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&soft, out.join("cache")).unwrap();
     let opts = RunOptions {
         out: out.clone(),
         every: 0,
@@ -574,7 +574,7 @@ frames_per_schedule = 4
     );
     let stiff = plate(2.0 * standing);
     let out = scratch_dir("report-standing");
-    let mut p = Pipeline::new(&stiff, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&stiff, out.join("cache")).unwrap();
     let rows = run(
         &mut p,
         &RunOptions {
@@ -598,7 +598,7 @@ frames_per_schedule = 4
 fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
     let s = scene(TINY);
     let out = scratch_dir("report-test-forces");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let opts = RunOptions {
         out: out.clone(),
         every: 0,
@@ -668,7 +668,7 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     use pipeline::export::{run_verdict, scene_model};
     let s = scene(TINY);
     let out = scratch_dir("report-export-verdict");
-    let mut p = Pipeline::new(&s, &out.join("cache")).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
     let opts = RunOptions {
         out: out.join("run"),
         every: 0,
@@ -723,7 +723,7 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
         "{said}"
     );
     let stiffer = scene(&TINY.replace("youngs_modulus = 1.0e5", "youngs_modulus = 2.0e5"));
-    let mut q = Pipeline::new(&stiffer, &out.join("cache")).unwrap();
+    let mut q = Pipeline::new(&stiffer, out.join("cache")).unwrap();
     let other = scene_model(&mut q, Method::PcaCubature, Rows::Used, &no_progress).unwrap();
     let said = run_verdict(&out.join("run"), &other, &stiffer);
     assert!(said.contains("is of other stages"), "{said}");

@@ -50,7 +50,7 @@ fn run(scene: &Scene, name: &str) -> SimulationResult {
         every: 0,
         solver: None,
     };
-    let mut pipeline = Pipeline::new(scene, &out.join("cache")).unwrap();
+    let mut pipeline = Pipeline::new(scene, out.join("cache")).unwrap();
     simulate(&mut pipeline, &opts, &|_, _| {}, &mut |_, _| {}).unwrap()
 }
 

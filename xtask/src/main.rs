@@ -450,7 +450,7 @@ impl Context {
 
     /// A pipeline for the scene, printing each stage's outcome.
     fn pipeline<'a>(&self, scene: &'a Scene, common: &Common) -> Result<Pipeline<'a>> {
-        let mut p = Pipeline::new(scene, &self.cache(scene, common))?;
+        let mut p = Pipeline::new(scene, self.cache(scene, common))?;
         println!("{}", p.body_summary());
         p.on_stage = Box::new(print_stage);
         p.on_stage_start = Box::new(stage_started);

@@ -102,7 +102,7 @@ fn array_jobs_shard_by_their_variables_and_merge_to_the_unsharded_snapshots() {
     let scene_path = dir.join("shards.toml");
     std::fs::write(&scene_path, SCENE).unwrap();
     let scene = Scene::from_file(&scene_path).unwrap();
-    let whole = Pipeline::new(&scene, &dir.join("unsharded"))
+    let whole = Pipeline::new(&scene, dir.join("unsharded"))
         .unwrap()
         .snapshots(&|_, _| {})
         .unwrap();

@@ -40,7 +40,7 @@ fn run() -> Result<()> {
     };
     let full = args.iter().any(|a| a == "--full");
     let start = Instant::now();
-    let model = ReducedModel::load(path.as_ref())?;
+    let model = ReducedModel::load(path)?;
     let load_ms = start.elapsed().as_secs_f64() * 1e3;
     let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
     let p = &model.provenance;

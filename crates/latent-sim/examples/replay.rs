@@ -46,7 +46,7 @@ fn run() -> Result<()> {
         eprintln!("usage: replay MODEL SCRIPT [--full]");
         std::process::exit(2);
     };
-    let model = ReducedModel::load(model.as_ref())?;
+    let model = ReducedModel::load(model)?;
     let script = std::fs::read_to_string(script)
         .map_err(|e| format!("cannot read the script {script}: {e}"))?;
     if args.iter().any(|a| a == "--full") {

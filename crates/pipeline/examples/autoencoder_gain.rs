@@ -75,7 +75,7 @@ fn main() -> Result<()> {
              [--train-schedules N]"
         );
     }
-    let mut scene = Scene::from_file(&PathBuf::from(&args[0]))?;
+    let mut scene = Scene::from_file(PathBuf::from(&args[0]))?;
     let ae = &mut scene.autoencoder;
     ae.epochs = epochs.unwrap_or(ae.epochs);
     ae.patience = patience.unwrap_or(ae.patience);
@@ -85,7 +85,7 @@ fn main() -> Result<()> {
     // The scene's keys as overridden, checked as the train stage checks them.
     ae.validate()
         .map_err(|e| anyhow::anyhow!("{}: {e}", args[0]))?;
-    let mut p = Pipeline::new(&scene, &PathBuf::from(&args[1]))?;
+    let mut p = Pipeline::new(&scene, PathBuf::from(&args[1]))?;
     let quiet = |_: usize, _: usize| {};
     let snaps = p.snapshots(&quiet)?;
     let fit = p.pca(&quiet)?;

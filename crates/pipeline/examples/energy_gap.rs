@@ -19,7 +19,7 @@ fn main() -> Result<()> {
     let Some(path) = args.first() else {
         bail!("usage: energy_gap SCENE [CACHE]");
     };
-    let scene = Scene::from_file(&PathBuf::from(path))?;
+    let scene = Scene::from_file(PathBuf::from(path))?;
     let cache = args.get(1).map(PathBuf::from).unwrap_or_else(|| {
         pipeline::project_root()
             .join("out")

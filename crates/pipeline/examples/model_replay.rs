@@ -36,7 +36,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let scene = match args.first().map(String::as_str) {
         None | Some("builtin") => Scene::builtin(),
-        Some(path) => Scene::from_file(path.as_ref())?,
+        Some(path) => Scene::from_file(path)?,
     };
     let method = match args.get(1) {
         Some(name) => serde_json::from_value::<Method>(serde_json::Value::String(name.clone()))
@@ -91,7 +91,7 @@ fn main() -> Result<()> {
     );
 
     // The runner `run` steps the method with, and the loaded model, on the test trajectory.
-    let mut p = Pipeline::new(&scene, &folder.join("cache"))?;
+    let mut p = Pipeline::new(&scene, folder.join("cache"))?;
     let quiet = |_: usize, _: usize| {};
     let opts = SimulateOptions {
         method,

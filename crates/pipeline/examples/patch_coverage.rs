@@ -22,12 +22,12 @@ fn main() -> Result<()> {
     if args.len() < 2 {
         bail!("usage: patch_coverage SCENE CACHE [P]");
     }
-    let scene = Scene::from_file(&PathBuf::from(&args[0]))?;
+    let scene = Scene::from_file(PathBuf::from(&args[0]))?;
     let patches: usize = match args.get(2) {
         Some(a) => a.parse().context("P")?,
         None => 48,
     };
-    let mut p = Pipeline::new(&scene, &PathBuf::from(&args[1]))?;
+    let mut p = Pipeline::new(&scene, PathBuf::from(&args[1]))?;
     let none = |_: usize, _: usize| {};
     let snaps = p.snapshots(&none)?;
     let fit = p.pca(&none)?;

@@ -20,7 +20,7 @@ fn main() -> Result<()> {
     let Some(path) = args.first() else {
         bail!("usage: perturb SCENE.toml [FRAME] [EPS] [CACHE]");
     };
-    let scene = Scene::from_file(path.as_ref())?;
+    let scene = Scene::from_file(path)?;
     let frame: usize = (args.get(1).map(|a| a.parse()).transpose())
         .context("FRAME")?
         .unwrap_or(30);

@@ -30,8 +30,8 @@ fn main() -> Result<()> {
     if args.len() < 3 {
         bail!("usage: projection_energy SCENE CACHE FRAME [FRAME ...] (frames from 1)");
     }
-    let scene = Scene::from_file(&PathBuf::from(&args[0]))?;
-    let mut p = Pipeline::new(&scene, &PathBuf::from(&args[1]))?;
+    let scene = Scene::from_file(PathBuf::from(&args[0]))?;
+    let mut p = Pipeline::new(&scene, PathBuf::from(&args[1]))?;
     let quiet = |_: usize, _: usize| {};
     let fit = p.pca(&quiet)?;
     let reference = p.reference(0, &quiet)?;

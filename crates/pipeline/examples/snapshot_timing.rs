@@ -24,7 +24,7 @@ fn main() -> Result<()> {
             "usage: snapshot_timing SCENE SCHEDULE FRAMES newton|lbfgs [current-state|rest] [tolerance]"
         );
     }
-    let scene = Scene::from_file(&PathBuf::from(&args[0]))?;
+    let scene = Scene::from_file(PathBuf::from(&args[0]))?;
     let index: usize = args[1].parse().context("SCHEDULE")?;
     let frames: usize = args[2].parse().context("FRAMES")?;
     // The snapshot stage's solver: the scene's, at the training data's tolerance.

@@ -20,11 +20,11 @@ fn main() -> Result<()> {
     if args.len() < 2 {
         bail!("usage: test_drags SCENE CACHE [TRAJECTORIES]");
     }
-    let mut scene = Scene::from_file(&PathBuf::from(&args[0]))?;
+    let mut scene = Scene::from_file(PathBuf::from(&args[0]))?;
     if let Some(n) = args.get(2) {
         scene.raise_test_trajectories(n.parse().context("TRAJECTORIES")?);
     }
-    let p = Pipeline::new(&scene, &PathBuf::from(&args[1]))?;
+    let p = Pipeline::new(&scene, PathBuf::from(&args[1]))?;
     let x = &p.model.mesh.vertices;
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
     for v in x {

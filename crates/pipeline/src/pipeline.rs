@@ -725,7 +725,8 @@ pub fn forget_warnings() {
 
 impl<'a> Pipeline<'a> {
     /// Builds the scene's model; `cache` is the folder for artifacts.
-    pub fn new(scene: &'a Scene, cache: &Path) -> Result<Self> {
+    pub fn new(scene: &'a Scene, cache: impl AsRef<Path>) -> Result<Self> {
+        let cache = cache.as_ref();
         let built = scene.build_model()?;
         let model = built.model;
         let body = BodyCounts {

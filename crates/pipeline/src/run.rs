@@ -1025,7 +1025,7 @@ pub fn run(
                 value: row.mean_rel_error,
             });
         }
-        model.save(&crate::export::model_path(&opts.out, method))?;
+        model.save(crate::export::model_path(&opts.out, method))?;
     }
     // What was run, above the table: report.md alone says which scene and test it measured.
     let title = heading(pipeline.scene, opts.trajectory);

@@ -198,7 +198,8 @@ pub use latent_sim::ReducedSolverConfig;
 
 impl Scene {
     /// Reads and checks a scene file.
-    pub fn from_file(path: &Path) -> Result<Self> {
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
         if fem_core::io::names_a_mesh(path) {
             let name = path.file_name().unwrap_or_default().to_string_lossy();
             bail!(

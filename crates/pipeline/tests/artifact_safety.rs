@@ -238,7 +238,7 @@ fn every_corruption_of_every_artifact_type_is_detected() {
         "other.toml",
     )
     .unwrap();
-    let other_mesh = Pipeline::new(&other_scene, &scratch("other"))
+    let other_mesh = Pipeline::new(&other_scene, scratch("other"))
         .unwrap()
         .mesh_hash;
     assert_ne!(mesh, other_mesh);

@@ -51,7 +51,7 @@ fn no_progress(_: usize, _: usize) {}
 fn a_model_loaded_from_its_file_replays_the_runners_trajectory_bit_for_bit() {
     let scene = Scene::from_str(TINY, Path::new("."), "tiny.toml").unwrap();
     let dir = scratch("replay");
-    let mut p = Pipeline::new(&scene, &dir.join("cache")).unwrap();
+    let mut p = Pipeline::new(&scene, dir.join("cache")).unwrap();
     for method in [
         Method::Pca,
         Method::PcaCubature,
@@ -128,7 +128,7 @@ fn a_model_loaded_from_its_file_replays_the_runners_trajectory_bit_for_bit() {
 fn run_writes_the_default_methods_model_beside_its_report() {
     let scene = Scene::from_str(TINY, Path::new("."), "tiny.toml").unwrap();
     let dir = scratch("run");
-    let mut p = Pipeline::new(&scene, &dir.join("cache")).unwrap();
+    let mut p = Pipeline::new(&scene, dir.join("cache")).unwrap();
     let opts = RunOptions {
         out: dir.join("out"),
         every: 0,
@@ -140,7 +140,7 @@ fn run_writes_the_default_methods_model_beside_its_report() {
         export::run_method(&opts.methods),
         Some(export::DEFAULT_METHOD)
     );
-    let model = ReducedModel::load(&model_path(&opts.out, Method::NeuralCubature)).unwrap();
+    let model = ReducedModel::load(model_path(&opts.out, Method::NeuralCubature)).unwrap();
     assert!(opts.out.join("report.json").exists());
     assert_eq!(model.provenance.scene, "export");
     let row = rows

@@ -34,7 +34,7 @@ epochs = 20
 "#;
 
 fn pipeline_of<'a>(scene: &'a Scene, name: &str) -> Pipeline<'a> {
-    Pipeline::new(scene, &scratch(name)).unwrap()
+    Pipeline::new(scene, scratch(name)).unwrap()
 }
 
 #[test]

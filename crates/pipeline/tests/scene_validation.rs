@@ -740,7 +740,7 @@ fn the_body_line_counts_the_vertices_each_pin_holds() {
     );
     assert_eq!(built.pin_vertices, [4, 2]);
     assert_eq!(built.held_vertices, 5);
-    let p = pipeline::pipeline::Pipeline::new(&scene, &dir.join("cache")).unwrap();
+    let p = pipeline::pipeline::Pipeline::new(&scene, dir.join("cache")).unwrap();
     assert_eq!(
         p.body_summary(),
         format!(
@@ -954,7 +954,7 @@ fn the_models_warnings_are_kept_for_the_report() {
 fn unreadable_scene_files_say_why() {
     let dir = std::env::temp_dir().join(format!("scene-unreadable-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let missing = Scene::from_file(&dir.join("missing.toml")).unwrap_err();
+    let missing = Scene::from_file(dir.join("missing.toml")).unwrap_err();
     assert!(
         missing.to_string().contains("cannot read scene file")
             && missing.to_string().contains("os error"),

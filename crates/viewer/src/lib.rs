@@ -13,7 +13,7 @@
 //! use latent_sim::{FullRuntime, ReducedModel};
 //! use viewer::{Method, Server, Session, Settings};
 //!
-//! let model = ReducedModel::load("out/cantilever/neural-cubature.ldm".as_ref())?;
+//! let model = ReducedModel::load("out/cantilever/neural-cubature.ldm")?;
 //! let methods = vec![
 //!     Method::new("neural-cubature", model.simulator()?),
 //!     Method::new("full", FullRuntime::from_model(&model)?),

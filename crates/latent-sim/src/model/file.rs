@@ -241,7 +241,8 @@ impl ReducedModel {
     ///
     /// # Errors
     /// [`ModelFileError::Write`].
-    pub fn save(&self, path: &Path) -> Result<(), ModelFileError> {
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<(), ModelFileError> {
+        let path = path.as_ref();
         fem_core::io::write_atomic(path, &self.to_bytes()).map_err(|cause| ModelFileError::Write {
             path: path.to_path_buf(),
             cause,
@@ -253,7 +254,8 @@ impl ReducedModel {
     /// # Errors
     /// [`ModelFileError::Read`], or [`ModelFileError::Format`] with what is wrong with the
     /// content (truncated, corrupted, foreign, newer, …).
-    pub fn load(path: &Path) -> Result<Self, ModelFileError> {
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ModelFileError> {
+        let path = path.as_ref();
         let read = |cause| ModelFileError::Read {
             path: path.to_path_buf(),
             cause,
