@@ -883,9 +883,10 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
             break;
         }
         let field = e.span().and_then(|span| field_at(&read, span.start));
-        let hint = e
-            .span()
-            .and_then(|span| parse_hint(&read, span.start, e.message(), field.as_deref()));
+        let hint = e.span().and_then(|span| {
+            let hint = parse_hint(&read, span.start, e.message(), field.as_deref())?;
+            Some(counted(&read, span.start, hint, field.as_deref()))
+        });
         // Said in the order of the file, not of the reading.
         let line = e
             .span()
@@ -925,6 +926,42 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
     said.sort_by_key(|(line, _)| *line);
     let said: Vec<String> = said.into_iter().map(|(_, text)| text).collect();
     bail!("{}", said.join("\n"))
+}
+
+/// An arithmetic hint ([`parse_hint`]) for a field that counts (`frames = 10/3`), whose
+/// number is no count: the scene read again with the number in its place says whether the field
+/// takes a whole number. Any other hint as it is.
+fn counted(text: &str, at: usize, hint: String, field: Option<&str>) -> String {
+    let said = hint
+        .strip_prefix("TOML does no arithmetic: write the number, ")
+        .and_then(|rest| rest.strip_suffix('`')?.split_once(" for `"));
+    let Some((number, value)) = said else {
+        return hint;
+    };
+    let line_start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+    let place = text[line_start..].find(value).map(|i| line_start + i);
+    let (Ok(x), Some(place)) = (number.parse::<f64>(), place) else {
+        return hint;
+    };
+    if x.fract() == 0.0 {
+        return hint;
+    }
+    let mut tried = text.to_string();
+    tried.replace_range(place..place + value.len(), number);
+    match toml::from_str::<Scene>(&tried) {
+        Err(e)
+            if e.message().starts_with("invalid type: floating point")
+                && e.span().is_some_and(|s| s.start == place) =>
+        {
+            format!(
+                "TOML does no arithmetic, and {} takes a whole number: `{value}` is {x}; write \
+                 {}",
+                field.map_or("this field".to_string(), |f| format!("`{f}`")),
+                x.round()
+            )
+        }
+        _ => hint,
+    }
 }
 
 /// The bytes of the `key = value` entry whose key starts at byte `key_at` of a TOML text, with

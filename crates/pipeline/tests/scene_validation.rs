@@ -192,6 +192,15 @@ fn common_mistakes_say_what_to_write() {
             "write the number, 0.01 for `1/50/2`",
         ),
         (
+            edit("frames = 10", "frames = 10/3"),
+            "TOML does no arithmetic, and `time.frames` takes a whole number: `10/3` is \
+             3.3333333333333335; write 3",
+        ),
+        (
+            edit("frames = 10", "frames = 100/4"),
+            "write the number, 25 for `100/4`",
+        ),
+        (
             edit("stiffness = 200.0", "stiffness = 4 * 100 / 2"),
             "write the number, 200 for `4 * 100 / 2`",
         ),
