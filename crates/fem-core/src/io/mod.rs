@@ -1,4 +1,4 @@
-//! Mesh readers (MEDIT `.mesh`, Gmsh `.msh` 2.2 ASCII and 4.1, legacy VTK, TetGen `.node` /
+//! Mesh readers (MEDIT `.mesh`, Gmsh `.msh` 2.2 ASCII and 4.1, legacy VTK ASCII and binary, TetGen `.node` /
 //! `.ele`) and writers (VTU frames with point data `displacement`, `.pvd` series) for ParaView.
 
 pub mod gmsh;
@@ -60,6 +60,10 @@ pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<(TetMesh, ValidationRepor
                 gmsh::parse_bytes(bytes, path)?,
                 Box::new(|t| gmsh::tet_line(bytes, t)),
             ),
+            // A binary file's lines are not the tets'.
+            Format::Vtk if vtk::is_binary(bytes) => {
+                (vtk::parse_bytes(bytes, path)?, Box::new(|_| None))
+            }
             Format::Vtk => (
                 vtk::parse(&text(), path)?,
                 Box::new(move |t| vtk::tet_line(&text(), t)),
@@ -141,7 +145,7 @@ pub fn names_a_mesh(path: &Path) -> bool {
 
 /// What to do with a file of extension `ext` that no reader takes.
 fn unsupported_hint(ext: Option<&str>) -> String {
-    const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, legacy VTK .vtk and TetGen .node/.ele";
+    const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, legacy VTK .vtk (ASCII or binary) and TetGen .node/.ele";
     match ext {
         Some(e) if SURFACE_FORMATS.contains(&e) => format!(
             "a surface mesh: the simulation needs a tetrahedral (volume) mesh. Tetrahedralize it \
@@ -152,7 +156,7 @@ fn unsupported_hint(ext: Option<&str>) -> String {
         ),
         Some("vtu") => format!(
             "a VTK XML file, which is not read: save it as legacy VTK from ParaView (File > Save \
-             Data, type .vtk, ASCII) or convert it (`meshio convert FILE out.vtk`) ({READ})"
+             Data, type .vtk) or convert it (`meshio convert FILE out.vtk`) ({READ})"
         ),
         Some("meshb") => format!(
             "binary MEDIT, which is not read: write ASCII .mesh instead (e.g. `meshio convert \

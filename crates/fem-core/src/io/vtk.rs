@@ -8,9 +8,13 @@
 //!
 //! then `CELL_TYPES n`. Only cells of type 10 (`VTK_TETRA`) are kept; other cell types are
 //! ignored. `FIELD` and `METADATA` blocks are skipped, and reading stops at `POINT_DATA` or
-//! `CELL_DATA` (attribute data is not needed). Values may wrap lines freely. `BINARY` files and
-//! other dataset types are rejected. Indices are already 0-based. Errors are
-//! [`MeshError::Parse`] with the 1-based line; the mesh is not validated here.
+//! `CELL_DATA` (attribute data is not needed). Values may wrap lines freely. Indices are already
+//! 0-based. Other dataset types are rejected. Errors are [`MeshError::Parse`] with the 1-based
+//! line; the mesh is not validated here.
+//!
+//! `BINARY` files (meshio's and VTK's default) hold the same blocks with each array as
+//! big-endian values after its header line; [`parse_bytes`] reads them as the ASCII file they
+//! stand for, their errors without a line (0) past the header.
 
 use std::path::Path;
 
@@ -27,6 +31,230 @@ pub fn read(path: &Path) -> Result<TetMesh, MeshError> {
         source,
     })?;
     parse(&String::from_utf8_lossy(&bytes), path)
+}
+
+/// Parses a legacy VTK file, ASCII or `BINARY`; `path` only names the source in errors.
+pub fn parse_bytes(bytes: &[u8], path: &Path) -> Result<TetMesh, MeshError> {
+    if is_binary(bytes) {
+        parse(&binary_as_ascii(bytes, path)?, path)
+    } else {
+        parse(&String::from_utf8_lossy(bytes), path)
+    }
+}
+
+/// Whether a legacy VTK file says `BINARY` on its third line.
+pub(crate) fn is_binary(bytes: &[u8]) -> bool {
+    bytes.split(|&b| b == b'\n').nth(2).is_some_and(|l| {
+        String::from_utf8_lossy(l)
+            .trim()
+            .eq_ignore_ascii_case("BINARY")
+    })
+}
+
+/// The ASCII file a `BINARY` legacy VTK file stands for: its header and block lines as they
+/// are, each binary array (big-endian, `size` bytes a value) written out as numbers on one line.
+/// Reading stops at the attribute data, which the mesh does not need.
+fn binary_as_ascii(bytes: &[u8], path: &Path) -> Result<String, MeshError> {
+    let mut r = BinaryReader {
+        bytes,
+        at: 0,
+        line: 0,
+        path,
+    };
+    let mut out = String::new();
+    for _ in 0..2 {
+        out += &r.raw_line()?;
+        out.push('\n');
+    }
+    r.raw_line()?;
+    out += "ASCII\n";
+    while let Some(line) = r.line()? {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let keyword = words[0].to_ascii_uppercase();
+        out += &line;
+        out.push('\n');
+        let at_line = r.line;
+        let count = |i: usize| {
+            words
+                .get(i)
+                .and_then(|w| w.parse::<usize>().ok())
+                .filter(|&n| n <= MAX_ENTITIES.saturating_mul(16))
+                .ok_or_else(|| MeshError::Parse {
+                    path: path.to_path_buf(),
+                    line: at_line,
+                    reason: format!(
+                        "expected counts after {keyword}, found '{}'",
+                        snippet(&line)
+                    ),
+                })
+        };
+        match keyword.as_str() {
+            "DATASET" => {}
+            "POINTS" => {
+                let n = count(1)?;
+                let ty = words.get(2).copied().unwrap_or_default();
+                r.values(n.saturating_mul(3), ty, &mut out)?;
+            }
+            "CELLS" => {
+                let (n, size) = (count(1)?, count(2)?);
+                let next = r.peek_line();
+                if next
+                    .trim_start()
+                    .to_ascii_uppercase()
+                    .starts_with("OFFSETS")
+                {
+                    for (block, values) in [("OFFSETS", n), ("CONNECTIVITY", size)] {
+                        let header = r.line()?.unwrap_or_default();
+                        let ty = header.split_whitespace().nth(1).unwrap_or_default();
+                        if !header.trim_start().to_ascii_uppercase().starts_with(block) {
+                            return Err(
+                                r.error(format!("expected {block}, found '{}'", snippet(&header)))
+                            );
+                        }
+                        out += &header;
+                        out.push('\n');
+                        r.values(values, ty, &mut out)?;
+                    }
+                } else {
+                    r.values(size, "int", &mut out)?;
+                }
+            }
+            "CELL_TYPES" => r.values(count(1)?, "int", &mut out)?,
+            "FIELD" => {
+                // Arrays of `name components tuples type`, read past.
+                let mut skipped = String::new();
+                for _ in 0..count(2)? {
+                    let header = r.line()?.unwrap_or_default();
+                    let w: Vec<&str> = header.split_whitespace().collect();
+                    let n = w.get(1).zip(w.get(2)).and_then(|(a, b)| {
+                        a.parse::<usize>()
+                            .ok()?
+                            .checked_mul(b.parse::<usize>().ok()?)
+                    });
+                    let Some(n) = n else {
+                        return Err(r.error(format!(
+                            "expected a FIELD array's `name components tuples type`, found '{}'",
+                            snippet(&header)
+                        )));
+                    };
+                    r.values(n, w.get(3).copied().unwrap_or_default(), &mut skipped)?;
+                    skipped.clear();
+                }
+                out.truncate(out.len() - line.len() - 1);
+            }
+            "METADATA" => {
+                // Text lines up to a blank one.
+                out.truncate(out.len() - line.len() - 1);
+                while r.raw_line().is_ok_and(|l| !l.trim().is_empty()) {}
+            }
+            // The attribute data: the mesh is complete.
+            _ => break,
+        }
+    }
+    Ok(out)
+}
+
+/// Lines and big-endian arrays of a `BINARY` legacy VTK file.
+struct BinaryReader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+    /// Lines read as text so far.
+    line: usize,
+    path: &'a Path,
+}
+
+impl BinaryReader<'_> {
+    fn error(&self, reason: impl Into<String>) -> MeshError {
+        MeshError::Parse {
+            path: self.path.to_path_buf(),
+            line: self.line,
+            reason: reason.into(),
+        }
+    }
+
+    /// The next line, whatever it holds; an error at the end of the file.
+    fn raw_line(&mut self) -> Result<String, MeshError> {
+        if self.at >= self.bytes.len() {
+            return Err(self.error("unexpected end of file: expected the header (truncated file?)"));
+        }
+        let rest = &self.bytes[self.at..];
+        let end = rest.iter().position(|&b| b == b'\n').unwrap_or(rest.len());
+        self.at += (end + 1).min(rest.len());
+        self.line += 1;
+        Ok(String::from_utf8_lossy(&rest[..end])
+            .trim_end_matches('\r')
+            .to_string())
+    }
+
+    /// The next line that is not blank, None at the end of the file.
+    fn line(&mut self) -> Result<Option<String>, MeshError> {
+        while self.at < self.bytes.len() {
+            let line = self.raw_line()?;
+            if !line.trim().is_empty() {
+                return Ok(Some(line));
+            }
+        }
+        Ok(None)
+    }
+
+    /// The next line that is not blank, left to be read.
+    fn peek_line(&mut self) -> String {
+        let (at, line) = (self.at, self.line);
+        let next = self.line().ok().flatten().unwrap_or_default();
+        (self.at, self.line) = (at, line);
+        next
+    }
+
+    /// `n` big-endian values of the legacy type `ty`, written to `out` as numbers on one line;
+    /// the line break after the array is read past.
+    fn values(&mut self, n: usize, ty: &str, out: &mut String) -> Result<(), MeshError> {
+        use std::fmt::Write;
+        let ty = ty.to_ascii_lowercase();
+        let size = match ty.as_str() {
+            "char" | "unsigned_char" | "bit" => 1,
+            "short" | "unsigned_short" => 2,
+            "int" | "unsigned_int" | "float" | "vtktypeint32" | "vtktypeuint32" => 4,
+            "long" | "unsigned_long" | "double" | "vtktypeint64" | "vtktypeuint64" => 8,
+            _ => {
+                return Err(self.error(format!(
+                    "expected the data type of a binary array (float, double, int, vtktypeint64, …), found '{}'",
+                    snippet(&ty)
+                )));
+            }
+        };
+        let needed = n
+            .checked_mul(size)
+            .filter(|&b| b <= self.bytes.len() - self.at);
+        let Some(needed) = needed else {
+            return Err(self.error(format!(
+                "the binary array after this line needs {n} values of {size} bytes, but the file \
+                 has {} bytes left (truncated file?)",
+                self.bytes.len() - self.at
+            )));
+        };
+        out.reserve(n * 12);
+        for chunk in self.bytes[self.at..self.at + needed].chunks_exact(size) {
+            let mut be = [0u8; 8];
+            be[8 - size..].copy_from_slice(chunk);
+            let bits = u64::from_be_bytes(be);
+            // The value's top bit moved to the top, for the signed types' sign.
+            let shift = 64 - 8 * size as u32;
+            let _ = match ty.as_str() {
+                "float" => write!(out, "{} ", f64::from(f32::from_bits(bits as u32))),
+                "double" => write!(out, "{} ", f64::from_bits(bits)),
+                "char" | "short" | "int" | "long" | "vtktypeint32" | "vtktypeint64" => {
+                    write!(out, "{} ", ((bits << shift) as i64) >> shift)
+                }
+                _ => write!(out, "{bits} "),
+            };
+        }
+        out.push('\n');
+        self.at += needed;
+        if self.bytes.get(self.at) == Some(&b'\n') {
+            self.at += 1;
+        }
+        Ok(())
+    }
 }
 
 /// Parses the text of a legacy VTK file; `path` only names the source in errors.
@@ -374,7 +602,8 @@ impl<'a> Parser<'a> {
         if t.text.eq_ignore_ascii_case("BINARY") {
             return Err(self.error(
                 t.line,
-                "binary legacy VTK files are not supported: save as ASCII",
+                "a binary legacy VTK file is read from its bytes (`parse_bytes`, `read_mesh`), \
+                 not as text",
             ));
         }
         if !t.text.eq_ignore_ascii_case("ASCII") {
@@ -659,6 +888,108 @@ mod tests {
         }
     }
 
+    /// `LEGACY` and `V51` as `BINARY` files: every array big-endian after its header line (a
+    /// cell type 10 holds a newline byte), attribute data after the cells.
+    fn binary_files() -> [Vec<u8>; 2] {
+        fn be<T: Copy>(values: &[T], bytes: impl Fn(T) -> Vec<u8>) -> Vec<u8> {
+            let mut out: Vec<u8> = values.iter().flat_map(|&v| bytes(v)).collect();
+            out.push(b'\n');
+            out
+        }
+        let f64s = |v: &[f64]| be(v, |x| x.to_be_bytes().to_vec());
+        let f32s = |v: &[f32]| be(v, |x| x.to_be_bytes().to_vec());
+        let i32s = |v: &[i32]| be(v, |x| x.to_be_bytes().to_vec());
+        let i64s = |v: &[i64]| be(v, |x| x.to_be_bytes().to_vec());
+        let points = [0., 0., 0., 1., 0., 0., 0., 1., 0., 0., 0., 1., 9., 9., 9.];
+        let text = |t: &str| t.as_bytes().to_vec();
+        let legacy = [
+            text("# vtk DataFile Version 4.2\nsome title\nBINARY\nDATASET UNSTRUCTURED_GRID\n"),
+            text("POINTS 5 double\n"),
+            f64s(&points),
+            text("CELLS 2 9\n"),
+            i32s(&[4, 0, 1, 2, 3, 3, 0, 1, 4]),
+            text("CELL_TYPES 2\n"),
+            i32s(&[10, 5]),
+            text("POINT_DATA 5\nSCALARS s double 1\nLOOKUP_TABLE default\n"),
+            f64s(&[1., 2., 3., 4., 5.]),
+        ]
+        .concat();
+        let points: Vec<f32> = points.iter().map(|&x| x as f32).collect();
+        let v51 = [
+            text("# vtk DataFile Version 5.1\nvtk output\nBINARY\nDATASET UNSTRUCTURED_GRID\n"),
+            text("FIELD FieldData 1\nTIME 1 1 double\n"),
+            f64s(&[0.5]),
+            text("POINTS 5 float\n"),
+            f32s(&points),
+            text("METADATA\nINFORMATION 0\n\n"),
+            text("CELLS 3 7\nOFFSETS vtktypeint64\n"),
+            i64s(&[0, 3, 7]),
+            text("CONNECTIVITY vtktypeint64\n"),
+            i64s(&[0, 1, 4, 0, 1, 2, 3]),
+            text("CELL_TYPES 2\n"),
+            i32s(&[5, 10]),
+            text("CELL_DATA 2\nFIELD FieldData 1\nid 1 2 int\n"),
+            i32s(&[7, 8]),
+        ]
+        .concat();
+        [legacy, v51]
+    }
+
+    /// A `BINARY` file reads as the ASCII file it stands for, in both cell layouts.
+    #[test]
+    fn binary_files_read_as_their_ascii_twins() {
+        let [legacy, v51] = binary_files();
+        let path = Path::new("b.vtk");
+        for (bytes, ascii) in [(legacy, LEGACY), (v51, V51)] {
+            assert!(is_binary(&bytes));
+            let mesh = parse_bytes(&bytes, path).unwrap();
+            let twin = parse_str(ascii).unwrap();
+            assert_eq!(mesh.vertices, twin.vertices);
+            assert_eq!(mesh.tets, twin.tets);
+        }
+        // Negative indices are said as they are, not as huge unsigned ones.
+        let [legacy, _] = binary_files();
+        let at = legacy
+            .windows(8)
+            .position(|w| w == [0, 0, 0, 4, 0, 0, 0, 0])
+            .unwrap();
+        let mut bad = legacy.clone();
+        bad[at + 4..at + 8].copy_from_slice(&(-2i32).to_be_bytes());
+        match parse_bytes(&bad, path) {
+            Err(MeshError::Parse { reason, .. }) => assert!(reason.contains("'-2'"), "{reason}"),
+            other => panic!("expected a parse error, got {other:?}"),
+        }
+    }
+
+    /// A binary file cut short or holding an unknown data type is an error saying so.
+    #[test]
+    fn broken_binary_files_say_what_is_wrong() {
+        let [legacy, v51] = binary_files();
+        let path = Path::new("b.vtk");
+        let reason = |bytes: &[u8]| match parse_bytes(bytes, path) {
+            Err(MeshError::Parse { reason, .. }) => reason,
+            other => panic!("expected a parse error, got {other:?}"),
+        };
+        let cut = legacy.windows(6).position(|w| w == b"POINTS").unwrap() + 40;
+        assert!(
+            reason(&legacy[..cut]).contains("truncated"),
+            "{}",
+            reason(&legacy[..cut])
+        );
+        let text = String::from_utf8_lossy(&v51).replace("POINTS 5 float", "POINTS 5 quad");
+        let bytes: Vec<u8> = v51
+            .windows(14)
+            .position(|w| w == b"POINTS 5 float")
+            .map(|at| [&v51[..at], b"POINTS 5 quads", &v51[at + 14..]].concat())
+            .unwrap();
+        assert!(text.contains("quad"));
+        assert!(
+            reason(&bytes).contains("found 'quads'"),
+            "{}",
+            reason(&bytes)
+        );
+    }
+
     #[test]
     fn reads_legacy_cells_keeping_only_tetrahedra() {
         let mesh = parse_str(LEGACY).unwrap();
@@ -827,6 +1158,25 @@ mod tests {
                 for base in [LEGACY, V51] {
                     let _ = parse_str(&mutate(base, &edits));
                     if let Ok(mesh) = parse_str(&mutate(base, &digits)) {
+                        prop_assert!(mesh.tets.iter().flatten().all(|&i| i < mesh.vertices.len()));
+                    }
+                }
+            }
+
+            /// Binary files cut anywhere or with any bytes changed are read or refused, never a
+            /// panic, and what is read indexes its own points.
+            #[test]
+            fn mutated_binary_files_never_panic(
+                cut in any::<usize>(),
+                edits in prop::collection::vec((any::<usize>(), any::<u8>()), 1..6),
+            ) {
+                for mut bytes in binary_files() {
+                    let _ = parse_bytes(&bytes[..cut % (bytes.len() + 1)], Path::new("b.vtk"));
+                    let n = bytes.len();
+                    for &(at, b) in &edits {
+                        bytes[at % n] = b;
+                    }
+                    if let Ok(mesh) = parse_bytes(&bytes, Path::new("b.vtk")) {
                         prop_assert!(mesh.tets.iter().flatten().all(|&i| i < mesh.vertices.len()));
                     }
                 }
