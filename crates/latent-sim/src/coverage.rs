@@ -72,7 +72,8 @@ impl TrainingPoses {
         self.lo.len()
     }
 
-    /// The part of pose `q` outside the training coefficients' ranges, relative to ‖q‖ (to
+    /// The part of pose `q` outside the training coefficients' ranges, each widened to hold the
+    /// rest pose's 0, relative to ‖q‖ (to
     /// [`SMALL_POSE`] times the largest training pose when q is smaller): 0 inside them;
     /// infinite when there are no training poses.
     ///
@@ -91,7 +92,9 @@ impl TrainingPoses {
         let outside = q
             .iter()
             .zip(self.lo.iter().zip(&self.hi))
-            .map(|(&v, (&l, &h))| (v - v.clamp(l, h)).powi(2))
+            // The rest pose, where every schedule starts, is among the training poses whether
+            // or not a snapshot was taken there (a body at rest read 14 % beyond them).
+            .map(|(&v, (&l, &h))| (v - v.clamp(l.min(0.0), h.max(0.0))).powi(2))
             .sum::<f64>()
             .sqrt();
         let size = norm(q).max(SMALL_POSE * self.largest);
@@ -154,6 +157,12 @@ mod tests {
         assert!((t.distance(&[0.0, -1.5]) - 1.0).abs() < 1e-15);
         // A tiny pose is measured against 0.1 × 2: (0, −0.01) is 0.01 outside.
         assert!((t.distance(&[0.0, -0.01]) - 0.05).abs() < 1e-15);
+        // The rest pose counts among the training poses, and so do blends of it with them:
+        // poses (1, 1) and (2, 3) hold (0, 0) and (0.5, 2), not (0, 4).
+        let sagged = TrainingPoses::new(2, vec![1.0, 1.0, 2.0, 3.0]);
+        assert_eq!(sagged.distance(&[0.0, 0.0]), 0.0);
+        assert_eq!(sagged.distance(&[0.5, 2.0]), 0.0);
+        assert!((sagged.distance(&[0.0, 4.0]) - 0.25).abs() < 1e-15);
         let none = TrainingPoses::new(2, Vec::new());
         assert!(none.distance(&[1.0, 0.0]).is_infinite());
         assert!(none.check(2).unwrap_err().contains("no pose"), "{none:?}");
