@@ -85,6 +85,14 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
     let chosen = args.method.map(Method::from);
     let (settings, mut methods, default_start) = match &args.model {
         Some(path) => {
+            if !path.exists() {
+                bail!(
+                    "{}: no such model file: `cargo xtask run` writes neural-cubature's beside \
+                     its report (out/SCENE/neural-cubature.ldm), `cargo xtask export --method M` \
+                     any method's; or view the scene itself with --scene",
+                    path.display()
+                );
+            }
             let model = ReducedModel::load(path).context("cannot load the model")?;
             let name = model.provenance.method.clone();
             println!(
@@ -135,7 +143,8 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             let (Some(settings), Some(default_start)) = (settings, default_start) else {
                 bail!("--methods names no reduced method; the viewer needs one to build on");
             };
-            println!("{}", run_accuracy(&report, &scene, &measured));
+            let cache = common.cache.as_deref();
+            println!("{}", run_accuracy(&report, &scene, cache, &measured));
             (settings, methods, default_start)
         }
     };
@@ -236,14 +245,17 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
 fn run_accuracy(
     report: &std::path::Path,
     scene: &pipeline::scene::Scene,
+    cache: Option<&std::path::Path>,
     measured: &[(String, Option<f64>)],
 ) -> String {
+    // The viewer's own cache, so that the run reuses the stages it trained.
     let command = format!(
-        "`cargo xtask run{}`",
+        "`cargo xtask run{}{}`",
         match &scene.source {
             s if s.ends_with(".toml") => format!(" --scene {s}"),
             _ => String::new(),
-        }
+        },
+        cache.map_or(String::new(), |c| format!(" --cache {}", c.display()))
     );
     let (known, unknown): (Vec<_>, Vec<_>) = measured.iter().partition(|(_, e)| e.is_some());
     if known.is_empty() {
@@ -297,18 +309,30 @@ mod tests {
         let offered = |errors: &[(&str, Option<f64>)]| -> Vec<(String, Option<f64>)> {
             errors.iter().map(|(m, e)| (m.to_string(), *e)).collect()
         };
-        let none = run_accuracy(&report, &scene, &offered(&[("pca", None)]));
+        let none = run_accuracy(&report, &scene, None, &offered(&[("pca", None)]));
         assert!(
             none.starts_with("how far each method is from full space: `cargo xtask run`;"),
             "{none}"
         );
+        // A cache of the viewer's own is the run's too.
+        let cached = run_accuracy(
+            &report,
+            &scene,
+            Some(std::path::Path::new("c/cache")),
+            &offered(&[("pca", None)]),
+        );
+        assert!(
+            cached.contains("`cargo xtask run --cache c/cache`;"),
+            "{cached}"
+        );
         // A report of other stages (a scene changed since) measures none of them.
         std::fs::write(&report, "{}").unwrap();
-        let stale = run_accuracy(&report, &scene, &offered(&[("pca", None)]));
+        let stale = run_accuracy(&report, &scene, None, &offered(&[("pca", None)]));
         assert!(stale.contains("measures none of these models"), "{stale}");
         let some = run_accuracy(
             &report,
             &scene,
+            None,
             &offered(&[("pca", Some(0.0479)), ("neural-cubature", None)]),
         );
         assert!(

@@ -56,7 +56,8 @@ fn up_from_gravity(gravity: [f64; 3]) -> [f64; 3] {
     let g = fem_core::Vec3::from(gravity);
     let n = g.norm();
     if n.is_finite() && n > 0.0 {
-        (-g / n).into()
+        // + 0 turns −0 into 0, which a page reads as written (`[-0.0, 1.0, -0.0]` puzzled one).
+        (-g / n).map(|c| c + 0.0).into()
     } else {
         crate::protocol::Y_UP
     }
@@ -86,5 +87,18 @@ impl Settings {
             max_fps: 120.0,
             up: up_from_gravity(model.gravity),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Up is against gravity, written without negative zeros; without gravity, y.
+    #[test]
+    fn up_is_against_gravity() {
+        let up = super::up_from_gravity([0.0, -9.81, 0.0]);
+        assert_eq!(up, [0.0, 1.0, 0.0]);
+        assert!(up.iter().all(|c| c.is_sign_positive()), "{up:?}");
+        assert_eq!(super::up_from_gravity([0.0, 0.0, 2.0]), [0.0, 0.0, -1.0]);
+        assert_eq!(super::up_from_gravity([0.0; 3]), crate::protocol::Y_UP);
     }
 }
