@@ -566,7 +566,9 @@ impl Simulator {
     }
 
     /// Grabs the surface vertices within ``radius`` of ``point`` (where they are now) with a
-    /// spring of total stiffness ``stiffness`` (N/m), its target at ``point``.
+    /// spring of total stiffness ``stiffness`` (N/m), its target at ``point``: it holds them
+    /// where they are until ``move_handle`` moves the target, which pulls each vertex by the
+    /// target's offset from ``point`` (a point far from the body is no pull toward it).
     ///
     /// Raises ``HandleError`` when no surface vertex is in reach and ``InvalidArgumentError``
     /// for a point that is not finite, a radius or stiffness that is not positive, a stiffness
@@ -777,9 +779,9 @@ impl Simulator {
         self.with(py, |s| each!(&mut s.runtime, r => r.reset()))
     }
 
-    /// Does now the work the first grab would do in its step (a reduced model factorises the
-    /// full step's operator at rest once: about 0.1 s on the default bar), so that a loop's
-    /// first grab does not stall a frame. Nothing in full space, or when done already.
+    /// Does now the work the first grab would do in the grab call (a reduced model factorises
+    /// the full step's operator at rest once: about 0.1 s on the default bar), so that a
+    /// loop's first grab does not stall a frame. Nothing in full space, or when done already.
     fn prepare_grab(&self, py: Python<'_>) -> PyResult<()> {
         self.with(py, |s| each!(&mut s.runtime, r => r.prepare_grab()))
     }

@@ -61,7 +61,7 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     assert model.method == "neural-cubature"
     assert any("test trajectory" in name for name, held_out, _ in model.errors if held_out)
     # Every stage is cached now: the same run loads them all.
-    again = ld.run_pipeline(TINY, out_dir=out, cache_dir=cache, methods=["pca"])
+    again = ld.run_pipeline(TINY, out_dir=out, cache_dir=cache, methods="pca")  # one name, as a list
     assert again.stages and all(s.cached for s in again.stages)
     assert again.row("pca").mean_rel_error == report.row("pca").mean_rel_error
     # No full-space solver ran beside it, so there is no speed-up to give.
@@ -93,11 +93,11 @@ def test_on_stage_sees_each_stage_and_its_exception_is_raised(tmp_path: pathlib.
     try:
         ld.run_pipeline(TINY, out_dir=tmp_path, cache_dir=tmp_path / "cache", methods=["pca"], on_stage=fail)
     except RuntimeError as e:
-        # The first exception; the run itself went on to the end.
-        assert len(called) > 1 and str(e) == f"stop at {called[0]}"
+        # The exception stops the run at once: no later stage, no report.
+        assert len(called) == 1 and str(e) == f"stop at {called[0]}"
     else:
         raise AssertionError("the callback's exception was not raised")
-    assert (tmp_path / "report.json").exists()
+    assert not (tmp_path / "report.json").exists()
     try:
         ld.run_pipeline(TINY, out_dir=tmp_path, methods=["pca"], on_stage=42)
     except ld.InvalidArgumentError as e:

@@ -32,6 +32,7 @@ __all__ = [
     "PipelineError",
     "HandleError",
     "InvalidArgumentError",
+    "PipelineWarning",
     "__version__",
     "MODEL_FORMAT_VERSION",
     "OUTSIDE_TRAINING",
@@ -186,7 +187,9 @@ class Simulator:
     def grab(self, vertices: _Vertices, stiffness: float) -> Handle:
         """A spring of total stiffness (N/m) on mesh vertices, its target at their centroid."""
     def grab_near(self, point: _Point, radius: float, stiffness: float) -> Handle:
-        """A spring on the surface vertices within radius of point, its target at point."""
+        """A spring on the surface vertices within radius of point, its target at point: it
+        holds them where they are until move_handle moves the target, which pulls each vertex
+        by the target's offset from point (a point far from the body is no pull toward it)."""
     def add_force(
         self,
         kind: str,
@@ -200,8 +203,11 @@ class Simulator:
         load ("point", the keyframed total force) on mesh vertices, as a scene's [[force]].
         Keyframe times, start and end are on the simulation's clock (`time`), not counted
         from the call."""
-    def move_handle(self, handle: Handle, target: _Point) -> None: ...
-    def release(self, handle: Handle) -> None: ...
+    def move_handle(self, handle: Handle, target: _Point) -> None:
+        """Moves a handle's target to target: its vertices are pulled toward where they were
+        grabbed, moved by target minus the grab point."""
+    def release(self, handle: Handle) -> None:
+        """Lets go of a handle."""
     def handle_target(self, handle: Handle) -> Tuple[float, float, float]:
         """A spring handle's target now."""
     def set_load(self, handle: Handle, force: _Point) -> None:
@@ -228,9 +234,9 @@ class Simulator:
     def reset(self) -> None:
         """Back to rest at time 0; handles and gravity stay."""
     def prepare_grab(self) -> None:
-        """Does now the work the first grab would do in its step (a reduced model factorises
-        the full step's operator at rest once, about 0.1 s on the default bar), so that a
-        loop's first grab does not stall a frame."""
+        """Does now the work the first grab would do in the grab call (a reduced model
+        factorises the full step's operator at rest once, about 0.1 s on the default bar), so
+        that a loop's first grab does not stall a frame."""
     @property
     def time(self) -> float: ...
     @property
@@ -361,7 +367,7 @@ def run_pipeline(
     *,
     out_dir: Optional[_Path] = None,
     cache_dir: Optional[_Path] = None,
-    methods: Optional[Sequence[str]] = None,
+    methods: Optional[Union[str, Sequence[str]]] = None,
     trajectory: int = 0,
     every: int = 0,
     on_stage: Optional[Callable[[Stage], object]] = None,
@@ -375,7 +381,7 @@ def run_trajectories(
     *,
     out_dir: Optional[_Path] = None,
     cache_dir: Optional[_Path] = None,
-    methods: Optional[Sequence[str]] = None,
+    methods: Optional[Union[str, Sequence[str]]] = None,
     every: int = 0,
     on_stage: Optional[Callable[[Stage], object]] = None,
     on_progress: Optional[Callable[[str, int, int], object]] = None,
