@@ -59,7 +59,7 @@ enum Command {
     /// Simulate a scene with one method and write frames ParaView opens.
     Simulate(SimulateArgs),
     /// The mesh suite: a minimal scene (mesh, material, bottom pinned, gravity, time step) on
-    /// every mesh file of a folder (.mesh, .msh, .vtk, TetGen .node/.ele), each run from an
+    /// every mesh file of a folder (.mesh, .msh, .vtk, .vtu, TetGen .node/.ele), each run from an
     /// empty cache; one table of every method's error and speed-up and the pipeline's time.
     Suite(SuiteArgs),
     /// Stage `snapshots`: simulate the training schedules.

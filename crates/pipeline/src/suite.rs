@@ -266,7 +266,7 @@ pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
     }
     if files.is_empty() {
         anyhow::bail!(
-            "no mesh files to run in {} (.mesh, .msh, .vtk or TetGen .node/.ele)",
+            "no mesh files to run in {} (.mesh, .msh, .vtk, .vtu or TetGen .node/.ele)",
             dir.display()
         );
     }

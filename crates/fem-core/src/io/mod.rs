@@ -1,4 +1,5 @@
-//! Mesh readers (MEDIT `.mesh`, Gmsh `.msh` 2.2 ASCII and 4.1, legacy VTK ASCII and binary, TetGen `.node` /
+//! Mesh readers (MEDIT `.mesh`, Gmsh `.msh` 2.2 ASCII and 4.1, legacy VTK ASCII and binary, VTK
+//! XML `.vtu`, TetGen `.node` /
 //! `.ele`) and writers (VTU frames with point data `displacement`, `.pvd` series) for ParaView.
 
 pub mod gmsh;
@@ -6,6 +7,7 @@ pub mod medit;
 pub mod tetgen;
 pub mod vtk;
 pub mod vtu;
+pub mod vtu_reader;
 
 use std::path::Path;
 
@@ -68,6 +70,7 @@ pub fn parse_mesh(bytes: &[u8], path: &Path) -> Result<(TetMesh, ValidationRepor
                 vtk::parse(&text(), path)?,
                 Box::new(move |t| vtk::tet_line(&text(), t)),
             ),
+            Format::Vtu => (vtu_reader::parse(bytes, path)?, Box::new(|_| None)),
             Format::TetGen => {
                 return Err(MeshError::Invalid {
                     path: path.to_path_buf(),
@@ -86,6 +89,7 @@ enum Format {
     Medit,
     Gmsh,
     Vtk,
+    Vtu,
     TetGen,
 }
 
@@ -98,6 +102,7 @@ fn format_of(path: &Path) -> Result<Format, MeshError> {
         Some("mesh") => Ok(Format::Medit),
         Some("msh") => Ok(Format::Gmsh),
         Some("vtk") => Ok(Format::Vtk),
+        Some("vtu") => Ok(Format::Vtu),
         Some("node" | "ele") => Ok(Format::TetGen),
         ext => Err(MeshError::UnsupportedFormat {
             path: path.to_path_buf(),
@@ -128,7 +133,7 @@ pub fn is_mesh_file(path: &Path) -> bool {
 const SURFACE_FORMATS: [&str; 6] = ["obj", "stl", "off", "ply", "poly", "smesh"];
 
 /// Volume mesh formats no reader takes, each with its conversion in [`unsupported_hint`].
-const UNREAD_VOLUME_FORMATS: [&str; 2] = ["vtu", "meshb"];
+const UNREAD_VOLUME_FORMATS: [&str; 1] = ["meshb"];
 
 /// Whether `path`'s extension names a mesh format, read or not: to tell a mesh file given
 /// where something else goes (a scene) from that other file.
@@ -145,7 +150,8 @@ pub fn names_a_mesh(path: &Path) -> bool {
 
 /// What to do with a file of extension `ext` that no reader takes.
 fn unsupported_hint(ext: Option<&str>) -> String {
-    const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, legacy VTK .vtk (ASCII or binary) and TetGen .node/.ele";
+    const READ: &str = "this reads MEDIT .mesh, Gmsh .msh, VTK .vtk (legacy, ASCII or binary) and \
+                        .vtu (XML) and TetGen .node/.ele";
     match ext {
         Some(e) if SURFACE_FORMATS.contains(&e) => format!(
             "a surface mesh: the simulation needs a tetrahedral (volume) mesh. Tetrahedralize it \
@@ -153,10 +159,6 @@ fn unsupported_hint(ext: Option<&str>) -> String {
              .ply, .stl, .poly and .smesh) or fTetWild (`FloatTetwild_bin -i FILE -o \
              out.msh`; it reads .obj, .off, .stl and .ply), then set [mesh] path to the result \
              ({READ})"
-        ),
-        Some("vtu") => format!(
-            "a VTK XML file, which is not read: save it as legacy VTK from ParaView (File > Save \
-             Data, type .vtk) or convert it (`meshio convert FILE out.vtk`) ({READ})"
         ),
         Some("meshb") => format!(
             "binary MEDIT, which is not read: write ASCII .mesh instead (e.g. `meshio convert \

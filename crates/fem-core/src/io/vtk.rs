@@ -826,7 +826,7 @@ impl<'a> Parser<'a> {
 }
 
 /// The name of a VTK cell type that a file without tetrahedra most often holds instead.
-fn cell_name(t: u64) -> Option<&'static str> {
+pub(super) fn cell_name(t: u64) -> Option<&'static str> {
     Some(match t {
         1 => "vertex",
         3 => "line",
@@ -844,7 +844,7 @@ fn cell_name(t: u64) -> Option<&'static str> {
 }
 
 /// What to do about a file whose cells hold no linear tetrahedron, by what it holds.
-fn missing_tets_remedy(types: &[u64]) -> &'static str {
+pub(super) fn missing_tets_remedy(types: &[u64]) -> &'static str {
     const LOWER_DIMENSIONS: [u64; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
     if types.contains(&24) || types.contains(&71) {
         "; quadratic and Lagrange tetrahedra are not read: export first-order (4-point) tetrahedra, e.g. \
