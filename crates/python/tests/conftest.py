@@ -13,6 +13,14 @@ DATA = pathlib.Path(__file__).parent / "data"
 TINY = DATA / "tiny.toml"
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    # The tiny scene is one element thick on purpose (it is fast), and every pipeline call on it
+    # says so; the tests that look for warnings catch them with pytest.warns all the same.
+    config.addinivalue_line(
+        "filterwarnings", "ignore:.*about one element thick:latent_dynamics.PipelineWarning"
+    )
+
+
 @pytest.fixture(scope="session")
 def workdir(tmp_path_factory: pytest.TempPathFactory) -> pathlib.Path:
     return tmp_path_factory.mktemp("latent-dynamics")
