@@ -316,6 +316,12 @@ fn is_float32(py: Python<'_>, dtype: &Bound<'_, PyAny>) -> PyResult<bool> {
         Ok(true)
     } else if descr.is_equiv_to(&numpy::dtype::<f64>(py)) {
         Ok(false)
+    } else if descr.kind() == b'f' && matches!(descr.itemsize(), 4 | 8) {
+        // A float32 or float64 that is not the machine's own: the other byte order (`>f8`).
+        Err(Class::InvalidArgument.err(format!(
+            "dtype {descr} is in the other byte order: give float32 or float64 in the machine's \
+             own (e.g. numpy.float64)"
+        )))
     } else {
         Err(Class::InvalidArgument.err(format!("dtype must be float32 or float64, got {descr}")))
     }
@@ -369,6 +375,15 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
                  numpy.flatnonzero(mask)"
                     .to_string(),
             );
+        }
+        if let Ok(a) = vertices.cast::<numpy::PyUntypedArray>()
+            && a.ndim() != 1
+        {
+            return bad(format!(
+                "vertices must be a 1-D array of indices, got shape {:?} (flatten it, e.g. \
+                 array.ravel())",
+                a.shape()
+            ));
         }
         // A string iterates over its characters, which are no list of vertices.
         let items = vertices

@@ -169,6 +169,8 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: sim.positions(out=[[0.0] * 3] * n), "numpy array"),
         (lambda: sim.surface_positions(np.int32), "float32 or float64"),
         (lambda: sim.surface_positions("no such dtype"), "dtype"),
+        (lambda: sim.surface_positions(">f8"), "other byte order"),
+        (lambda: sim.grab(np.array([[0, 1], [2, 3]]), 1.0), "1-D array"),
         (lambda: sim.surface_positions(out=np.empty((m + 1, 3))), "expected"),
         (lambda: ld.run_pipeline(TINY, methods=["nerual"]), "unknown method"),
         (lambda: ld.run_pipeline(TINY, methods=[]), "at least one"),
