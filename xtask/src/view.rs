@@ -102,6 +102,11 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 model.mesh.num_vertices()
             );
             println!("{}", model_accuracy(&model.provenance.errors));
+            // `run` writes its models beside its report.
+            let report = path.with_file_name("report.md");
+            if report.is_file() {
+                println!("the report beside it: {}", report.display());
+            }
             let methods = vec![
                 viewer::Method::new(name.clone(), model.simulator()?),
                 viewer::Method::new(FULL, full_runtime(&model, chosen)?),
@@ -120,6 +125,7 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
                 && !m.is_full()
                 && !wanted.contains(&m)
             {
+                println!("--method {m} is not among --methods: offered first beside them");
                 wanted.insert(0, m);
             }
             wanted.retain(|m| !m.is_full());
