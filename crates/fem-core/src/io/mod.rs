@@ -184,6 +184,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
+    // A file where a folder of the path should be: "File exists" from create_dir_all said
+    // nothing of which.
+    if let Some(file) = dir.ancestors().find(|a| a.is_file()) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::NotADirectory,
+            format!("{} is a file, not a folder", file.display()),
+        ));
+    }
     std::fs::create_dir_all(dir)?;
     let name = path
         .file_name()
@@ -245,4 +253,25 @@ pub fn remove_stale_temporaries(
         }
     }
     Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    /// A file where a folder of the path should be is named, not "File exists".
+    #[test]
+    fn a_file_in_the_way_of_a_folder_is_named() {
+        let dir = std::env::temp_dir().join(format!("write-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("scene.toml");
+        std::fs::write(&file, "x").unwrap();
+        let err = super::write_atomic(&file.join("sub").join("a.ldm"), b"y").unwrap_err();
+        assert_eq!(err.kind(), std::io::ErrorKind::NotADirectory);
+        assert!(
+            err.to_string()
+                .contains("scene.toml is a file, not a folder"),
+            "{err}"
+        );
+        super::write_atomic(&dir.join("sub").join("a.ldm"), b"y").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }
