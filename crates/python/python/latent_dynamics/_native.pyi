@@ -181,7 +181,11 @@ class Handle:
 class Simulator:
     """A model stepping, reduced or (full_space=True) in full space on its mesh."""
 
-    def __new__(cls, model: Model, full_space: bool = False) -> Simulator: ...
+    def __new__(cls, model: Model, full_space: bool = False) -> Simulator:
+        """A simulator of model at rest, gravity on, no handle: reduced (the model's latent
+        space, its solver settings), or in full space on the model's mesh when full_space.
+        Raises SolverError when a reduced matrix cannot be factorised and LatentDynamicsError
+        when the model is inconsistent."""
     def step(self) -> StepStats:
         """One time step, without the GIL; raises SolverError (state kept) when it fails."""
     def grab(self, vertices: _Vertices, stiffness: float) -> Handle:
@@ -223,7 +227,9 @@ class Simulator:
         to roll back to. A handle made on either after the copy is unknown to the other."""
     def __copy__(self) -> Simulator: ...
     def __deepcopy__(self, memo: object) -> Simulator: ...
-    def set_gravity(self, enabled: bool) -> None: ...
+    def set_gravity(self, enabled: bool) -> None:
+        """Turns gravity on (its acceleration, the model's unless set_gravity_acceleration
+        changed it) or off."""
     @property
     def gravity(self) -> bool: ...
     def set_gravity_acceleration(self, g: _Point) -> None:
@@ -243,7 +249,8 @@ class Simulator:
     def steps(self) -> int: ...
     @property
     def stats(self) -> RunStats: ...
-    def reset_stats(self) -> None: ...
+    def reset_stats(self) -> None:
+        """Starts the figures of stats afresh."""
     def positions(
         self, out: Optional[npt.NDArray[np.float64]] = None
     ) -> npt.NDArray[np.float64]:
@@ -360,7 +367,8 @@ class Report:
     def out_dir(self) -> pathlib.Path: ...
     @property
     def model_path(self) -> Optional[pathlib.Path]: ...
-    def row(self, method: str) -> MethodRow: ...
+    def row(self, method: str) -> MethodRow:
+        """The row of method; raises InvalidArgumentError when it did not run."""
 
 def run_pipeline(
     scene: Optional[_Path] = None,
