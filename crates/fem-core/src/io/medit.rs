@@ -255,6 +255,8 @@ impl<'a> Parser<'a> {
         let mut vertices: Option<Vec<Vec3>> = None;
         let mut tets: Vec<[usize; 4]> = Vec::new();
         let mut saw_tetrahedra = false;
+        // Volume elements beside the tetrahedra (`12 Hexahedra`), which would be left out.
+        let mut other_volumes: Vec<String> = Vec::new();
         // Lines of tets read before the Vertices section, checked once the vertex count is known.
         let mut unchecked: Vec<(usize, usize)> = Vec::new();
 
@@ -339,7 +341,12 @@ impl<'a> Parser<'a> {
                     }
                 }
                 "end" => break,
-                other => self.skip_section(other, tok)?,
+                other => {
+                    let n = self.skip_section(other, tok)?;
+                    if matches!(other, "hexahedra" | "prisms" | "pyramids") && n > 0 {
+                        other_volumes.push(format!("{n} {}", tok.text));
+                    }
+                }
             }
         }
 
@@ -353,6 +360,12 @@ impl<'a> Parser<'a> {
             return Err(self.error(
                 self.tokens.last_line(),
                 "no Tetrahedra section found: a tetrahedral volume mesh is needed",
+            ));
+        }
+        if !tets.is_empty() && !other_volumes.is_empty() {
+            return Err(self.error(
+                self.tokens.last_line(),
+                super::other_volumes_problem(&other_volumes.join(", "), tets.len()),
             ));
         }
         for (t, line) in unchecked {
@@ -397,7 +410,8 @@ impl<'a> Parser<'a> {
 
     /// Skips a section this reader does not keep: by its count when the entry width is known,
     /// otherwise up to the next keyword.
-    fn skip_section(&mut self, keyword: &str, tok: Token<'a>) -> Result<(), MeshError> {
+    /// Returns the section's entry count (0 for an unknown section).
+    fn skip_section(&mut self, keyword: &str, tok: Token<'a>) -> Result<usize, MeshError> {
         let name = tok.text;
         let Some(width) = entry_width(keyword) else {
             tracing::debug!(
@@ -408,7 +422,7 @@ impl<'a> Parser<'a> {
             while self.tokens.peek().is_some_and(|t| !is_keyword(t.text)) {
                 self.tokens.next();
             }
-            return Ok(());
+            return Ok(0);
         };
         let n = self.read_count(name)?;
         for k in 0..n {
@@ -426,7 +440,7 @@ impl<'a> Parser<'a> {
                 }
             }
         }
-        Ok(())
+        Ok(n)
     }
 }
 
@@ -454,6 +468,18 @@ mod tests {
             Err(MeshError::Parse { line, reason, .. }) => (line, reason),
             other => panic!("expected a parse error, got {other:?}"),
         }
+    }
+
+    /// Hexahedra beside the tetrahedra are refused, not dropped; an empty section is no matter.
+    #[test]
+    fn other_volume_elements_beside_tetrahedra_are_refused() {
+        let hexed = CUBE_CORNER.replace("End", "Hexahedra\n1\n1 2 3 4 1 2 3 4 0\nEnd");
+        let (_, reason) = parse_error(&hexed);
+        assert!(
+            reason.contains("1 Hexahedra beside its 1 tetrahedra"),
+            "{reason}"
+        );
+        assert!(parse_str(&CUBE_CORNER.replace("End", "Prisms\n0\nEnd")).is_ok());
     }
 
     #[test]

@@ -129,11 +129,23 @@ pub fn is_mesh_file(path: &Path) -> bool {
     format_of(path).is_ok() && !node
 }
 
+/// What a reader says of a file that holds other volume elements (`held`: "560 hexahedra") beside
+/// its `tets` tetrahedra: read alone, the tetrahedra would be the body without those parts (a
+/// tester's half-hexahedral grid was simulated half as wide, said by nothing but its unused
+/// vertices).
+pub(crate) fn other_volumes_problem(held: &str, tets: usize) -> String {
+    format!(
+        "the file holds {held} beside its {tets} tetrahedra: only tetrahedra are simulated, so \
+         the body would lose those parts; mesh it with tetrahedra only (gmsh: no `Recombine`, \
+         `Mesh.SubdivisionAlgorithm = 0`; TetGen and fTetWild write tetrahedra only)"
+    )
+}
+
 /// Surface mesh formats, which no reader takes (the simulation needs tetrahedra).
 const SURFACE_FORMATS: [&str; 6] = ["obj", "stl", "off", "ply", "poly", "smesh"];
 
 /// Volume mesh formats no reader takes, each with its conversion in [`unsupported_hint`].
-const UNREAD_VOLUME_FORMATS: [&str; 1] = ["meshb"];
+const UNREAD_VOLUME_FORMATS: [&str; 3] = ["meshb", "vtm", "pvtu"];
 
 /// Whether `path`'s extension names a mesh format, read or not: to tell a mesh file given
 /// where something else goes (a scene) from that other file.
@@ -159,6 +171,10 @@ fn unsupported_hint(ext: Option<&str>) -> String {
              .ply, .stl, .poly and .smesh) or fTetWild (`FloatTetwild_bin -i FILE -o \
              out.msh`; it reads .obj, .off, .stl and .ply), then set [mesh] path to the result \
              ({READ})"
+        ),
+        Some("vtm" | "pvtu") => format!(
+            "a VTK multiblock or parallel file, whose pieces are other files: merge them into \
+             one .vtu (ParaView: Filters > Merge Blocks, then File > Save Data) ({READ})"
         ),
         Some("meshb") => format!(
             "binary MEDIT, which is not read: write ASCII .mesh instead (e.g. `meshio convert \

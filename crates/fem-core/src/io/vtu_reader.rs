@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::MAX_ENTITIES;
-use super::vtk::{cell_name, missing_tets_remedy};
+use super::vtk::{cell_name, missing_tets_remedy, other_volumes};
 use crate::{MeshError, TetMesh, Vec3};
 
 /// Reads the `.vtu` file at `path` (not validated).
@@ -212,6 +212,9 @@ impl Reader<'_> {
                 missing_tets_remedy(&types)
             )));
         }
+        if let Some(held) = other_volumes(&ignored) {
+            return Err(self.error(super::other_volumes_problem(&held, tets.len())));
+        }
         Ok(TetMesh { vertices, tets })
     }
 
@@ -342,10 +345,19 @@ impl Reader<'_> {
                  Int64, UInt8 to UInt64)"
             )));
         };
+        // The bytes the array may hold: `n` values, or for the connectivity, whose count
+        // only its offsets give, as many as any array may.
+        let cap = if n == usize::MAX {
+            16 * MAX_ENTITIES
+        } else {
+            n
+        }
+        .saturating_mul(size);
         let format = array.attributes.get("format").map_or("", String::as_str);
         let values = match format {
             "ascii" => {
-                let text = String::from_utf8_lossy(&markup[array.content.clone()]);
+                let text = without_elements(&markup[array.content.clone()]);
+                let text = String::from_utf8_lossy(&text);
                 text.split_whitespace()
                     .map(|t| {
                         t.parse::<f64>().map_err(|_| {
@@ -355,8 +367,8 @@ impl Reader<'_> {
                     .collect::<Result<Vec<_>, _>>()?
             }
             "binary" => {
-                let text = &markup[array.content.clone()];
-                let data = self.block(text, true, layout, &name)?;
+                let text = without_elements(&markup[array.content.clone()]);
+                let data = self.block(&text, true, layout, &name, cap)?;
                 self.numbers(&data, ty, size, layout, &name)?
             }
             "appended" => {
@@ -380,7 +392,7 @@ impl Reader<'_> {
                              (truncated file?)"
                         ))
                     })?;
-                let data = self.block(&self.bytes[at..], appended.base64, layout, &name)?;
+                let data = self.block(&self.bytes[at..], appended.base64, layout, &name, cap)?;
                 self.numbers(&data, ty, size, layout, &name)?
             }
             other => {
@@ -405,17 +417,20 @@ impl Reader<'_> {
     }
 
     /// The bytes of one binary array starting at `data`'s first byte: its header (a byte count,
-    /// or for compressed data the block count, block size, last block's size and each block's
-    /// compressed size), then its bytes. base64 data encodes a compressed array's header apart
-    /// from its blocks, an uncompressed one's with its bytes.
+    /// or for compressed data the block count, block size, last block's size, 0 when full, and
+    /// each block's compressed size), then its bytes; at most `cap` of them. base64 data encodes
+    /// a compressed array's header apart from its blocks; an uncompressed one's header with its
+    /// bytes (VTK, meshio) or apart from them (other writers), both read.
     fn block(
         &self,
         data: &[u8],
         base64: bool,
         layout: Layout,
         name: &str,
+        cap: usize,
     ) -> Result<Vec<u8>, MeshError> {
         let broken = |what: &str| self.error(format!("DataArray {name}: {what}"));
+        let cut = || broken("its data is cut short (truncated file?) or not base64");
         // base64 text counts its characters without the line breaks a writer may put in.
         let stripped: Vec<u8>;
         let data = if base64 {
@@ -440,50 +455,64 @@ impl Reader<'_> {
                 usize::try_from(u64::from_be_bytes(v)).ok()
             }
         };
-        let limit = 16 * MAX_ENTITIES * 8;
+        // base64 characters of `bytes` bytes, None past any file.
+        let chars = |bytes: usize| {
+            bytes
+                .checked_add(2)
+                .map(|b| b / 3)
+                .and_then(|q| q.checked_mul(4))
+        };
         if !layout.compressed {
-            let (header, rest): (Vec<u8>, Vec<u8>) = if base64 {
-                // Header and bytes in one base64 stream: decode the header's quantum first.
-                let head = decode_base64(data, h.div_ceil(3) * 4)
-                    .ok_or_else(|| broken("its base64 text is cut short or not base64"))?;
+            let header_chars = h.div_ceil(3) * 4;
+            let (len, body): (usize, std::borrow::Cow<'_, [u8]>) = if base64 {
+                let head = decode_base64(data, header_chars).ok_or_else(cut)?;
                 let len = read_header(&head, 0)
-                    .filter(|&l| l <= limit)
-                    .ok_or_else(|| broken("its byte count is missing or too large"))?;
-                let all = decode_base64(data, (h + len).div_ceil(3) * 4).ok_or_else(|| {
-                    broken("its base64 text is cut short or not base64 (truncated file?)")
-                })?;
-                (all[..h].to_vec(), all[h..].to_vec())
+                    .filter(|&l| l <= cap)
+                    .ok_or_else(|| broken("its byte count is missing or larger than it can be"))?;
+                // A header encoded apart ends in padding (`…==`) with the bytes' text after it;
+                // else it runs on into the bytes.
+                if data.get(header_chars - 1) == Some(&b'=') && data.len() > header_chars {
+                    let all = decode_base64(&data[header_chars..], chars(len).ok_or_else(cut)?)
+                        .ok_or_else(cut)?;
+                    (len, std::borrow::Cow::Owned(all))
+                } else {
+                    let all =
+                        decode_base64(data, chars(h + len).ok_or_else(cut)?).ok_or_else(cut)?;
+                    (len, std::borrow::Cow::Owned(all[h..].to_vec()))
+                }
             } else {
-                (
-                    data[..h.min(data.len())].to_vec(),
-                    data[h.min(data.len())..].to_vec(),
-                )
+                let len = read_header(data, 0)
+                    .filter(|&l| l <= cap)
+                    .ok_or_else(|| broken("its byte count is missing or larger than it can be"))?;
+                (len, std::borrow::Cow::Borrowed(&data[h..]))
             };
-            let len = read_header(&header, 0)
-                .filter(|&l| l <= limit)
-                .ok_or_else(|| broken("its byte count is missing or too large"))?;
-            return rest
-                .get(..len)
-                .map(<[u8]>::to_vec)
-                .ok_or_else(|| broken("its data is cut short (truncated file?)"));
+            return body.get(..len).map(<[u8]>::to_vec).ok_or_else(cut);
         }
         // Compressed: [blocks, block size, last block's size, compressed sizes…].
         let first = if base64 {
-            decode_base64(data, (3 * h).div_ceil(3) * 4)
+            decode_base64(data, 4 * h)
         } else {
             data.get(..3 * h).map(<[u8]>::to_vec)
         }
         .ok_or_else(|| broken("its compression header is cut short (truncated file?)"))?;
-        let blocks = read_header(&first, 0)
-            .filter(|&b| b <= limit / 1024 + 1)
-            .ok_or_else(|| broken("its block count is missing or too large"))?;
+        let (blocks, block_size, last) = (
+            read_header(&first, 0),
+            read_header(&first, 1).unwrap_or(0),
+            read_header(&first, 2).unwrap_or(0),
+        );
+        // Every block but the last is full: the blocks hold at most `cap` bytes.
+        let blocks = blocks
+            .filter(|&b| b <= data.len() && (b <= 1 || (b - 1).saturating_mul(block_size) <= cap))
+            .ok_or_else(|| broken("its block count is missing or larger than it can be"))?;
         let header_len = (3 + blocks) * h;
-        let (header, mut rest) = if base64 {
-            let encoded = header_len.div_ceil(3) * 4;
+        let (header, rest): (Vec<u8>, std::borrow::Cow<'_, [u8]>) = if base64 {
+            let encoded = chars(header_len).ok_or_else(cut)?;
             let header = decode_base64(data, encoded)
                 .ok_or_else(|| broken("its compression header is cut short"))?;
-            let body = data.get(encoded..).unwrap_or_default();
-            (header, std::borrow::Cow::Owned(body.to_vec()))
+            (
+                header,
+                std::borrow::Cow::Borrowed(data.get(encoded..).unwrap_or_default()),
+            )
         } else {
             let header = data
                 .get(..header_len)
@@ -495,38 +524,37 @@ impl Reader<'_> {
             .map(|i| read_header(&header, 3 + i))
             .collect::<Option<_>>()
             .ok_or_else(|| broken("its compressed block sizes are cut short"))?;
-        let total: usize = sizes
+        let total = sizes
             .iter()
             .try_fold(0usize, |a, &s| a.checked_add(s))
-            .unwrap_or(usize::MAX);
-        if base64 {
-            let decoded = decode_base64(&rest, total.div_ceil(3) * 4)
-                .ok_or_else(|| broken("its compressed blocks are cut short (truncated file?)"))?;
-            rest = std::borrow::Cow::Owned(decoded);
-        }
-        let (block_size, last) = (
-            read_header(&header, 1).unwrap_or(0),
-            read_header(&header, 2).unwrap_or(0),
-        );
+            .filter(|&t| t <= rest.len())
+            .ok_or_else(cut)?;
+        let rest = if base64 {
+            std::borrow::Cow::Owned(
+                decode_base64(&rest, chars(total).ok_or_else(cut)?).ok_or_else(cut)?,
+            )
+        } else {
+            rest
+        };
         let mut out = Vec::new();
         let mut at = 0usize;
         for (i, &size) in sizes.iter().enumerate() {
-            let chunk = at
-                .checked_add(size)
-                .and_then(|end| rest.get(at..end))
-                .ok_or_else(|| broken("its compressed blocks are cut short (truncated file?)"))?;
+            let chunk = rest.get(at..at + size).ok_or_else(cut)?;
             let expect = if i + 1 == blocks && last > 0 {
                 last
             } else {
                 block_size
             };
-            let block =
-                miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(chunk, expect.min(limit))
-                    .map_err(|_| broken(&format!("block {i} does not decompress (zlib)")))?;
-            out.extend_from_slice(&block);
-            if out.len() > limit {
-                return Err(broken("it decompresses past the size limit"));
+            if out.len().saturating_add(expect) > cap {
+                return Err(broken("it holds more bytes than the <Piece> needs"));
             }
+            let block = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(chunk, expect)
+                .ok()
+                .filter(|b| b.len() == expect)
+                .ok_or_else(|| {
+                    broken(&format!("block {i} does not decompress to its size (zlib)"))
+                })?;
+            out.extend_from_slice(&block);
             at += size;
         }
         Ok(out)
@@ -571,6 +599,36 @@ impl Reader<'_> {
             })
             .collect())
     }
+}
+
+/// A DataArray's content without the elements VTK puts beside its values (`<InformationKey
+/// name="L2_NORM_RANGE" …><Value index="0">0</Value>…</InformationKey>`, whose numbers are not
+/// the array's): the text outside every element.
+fn without_elements(content: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(content.len());
+    let mut at = 0;
+    while let Some(open) = find(content, b"<", at) {
+        out.extend_from_slice(&content[at..open]);
+        let name_end = content[open + 1..]
+            .iter()
+            .position(|c| c.is_ascii_whitespace() || *c == b'>' || *c == b'/')
+            .map_or(content.len(), |i| open + 1 + i);
+        let name = &content[open + 1..name_end];
+        let Some(close) = find(content, b">", open) else {
+            return out;
+        };
+        at = if content[close - 1] == b'/' || name.is_empty() {
+            close + 1
+        } else {
+            let end_tag = [b"</", name, b">"].concat();
+            match find(content, &end_tag, close + 1) {
+                Some(end) => end + end_tag.len(),
+                None => return out,
+            }
+        };
+    }
+    out.extend_from_slice(&content[at..]);
+    out
 }
 
 /// Bytes of a value of a DataArray's `type`.
@@ -775,6 +833,26 @@ mod tests {
             .map(|i| ("format=\"ascii\"".into(), numbers(i)))
             .collect();
         expect_mesh(&file("byte_order=\"LittleEndian\"", &ascii, b""));
+        // VTK's own ascii files put an element of numbers beside the values, before or after.
+        let key = "<InformationKey name=\"L2_NORM_RANGE\" location=\"vtkDataArray\" \
+                   length=\"2\">\n<Value index=\"0\">\n0\n</Value>\n<Value index=\"1\">\n1.7\n\
+                   </Value>\n</InformationKey>";
+        let mut keyed = ascii.clone();
+        keyed[0].1 = format!("{}\n{key}\n", keyed[0].1);
+        keyed[1].1 = format!("{key}\n{}", keyed[1].1);
+        expect_mesh(&file("", &keyed, b""));
+        // A header base64-encoded apart from the bytes, as some writers do.
+        let apart: Vec<(String, String)> = a
+            .iter()
+            .map(|(_, _, bytes)| {
+                let head = (bytes.len() as u32).to_le_bytes();
+                (
+                    "format=\"binary\"".into(),
+                    format!("{}{}", encode_base64(&head), encode_base64(bytes)),
+                )
+            })
+            .collect();
+        expect_mesh(&file("", &apart, b""));
         // Inline base64, header and bytes in one stream, UInt32 and UInt64 headers.
         for (header, attr) in [(4usize, "UInt32"), (8, "UInt64")] {
             let binary: Vec<(String, String)> = a
@@ -857,6 +935,45 @@ mod tests {
         for (a, b) in read.vertices.iter().zip(&mesh.vertices) {
             assert!((a - b).norm() < 1e-12, "{a} against {b}");
         }
+    }
+
+    /// Block counts and sizes a file cannot back are refused, not multiplied past any size.
+    #[test]
+    fn huge_header_values_are_refused() {
+        for head in [
+            [1u64, u64::MAX, 0, u64::MAX],
+            [u64::MAX, 1, 1, 1],
+            [2, 16, 8, u64::MAX / 2],
+        ] {
+            let header: Vec<u8> = head.iter().flat_map(|v| v.to_le_bytes()).collect();
+            let bodies: Vec<(String, String)> = (0..4)
+                .map(|_| ("format=\"binary\"".into(), encode_base64(&header) + "AAAA"))
+                .collect();
+            let reason = error(&file(
+                "header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\"",
+                &bodies,
+                b"",
+            ));
+            assert!(reason.starts_with("DataArray \"Points\":"), "{reason}");
+        }
+    }
+
+    /// Hexahedra beside the tetrahedra are refused, not dropped.
+    #[test]
+    fn other_volume_cells_beside_tetrahedra_are_refused() {
+        let body = |v: &str| ("format=\"ascii\"".to_string(), v.to_string());
+        let points = POINTS.map(|x| x.to_string()).join(" ");
+        let bodies = [
+            body(&points),
+            body("0 1 2 3 0 1 2 3 4 0 1 2"),
+            body("4 12"),
+            body("10 12"),
+        ];
+        let reason = error(&file("", &bodies, b""));
+        assert!(
+            reason.contains("1 of type 12, hexahedron beside its 1 tetrahedra"),
+            "{reason}"
+        );
     }
 
     #[test]

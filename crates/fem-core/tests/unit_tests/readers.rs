@@ -577,8 +577,8 @@ fn a_surface_mesh_is_refused_with_what_to_do() {
             && e.contains("[mesh] path"),
         "{e}"
     );
-    let e = fem_core::io::read_mesh(Path::new("frame.vtu"))
+    let e = fem_core::io::read_mesh(Path::new("frame.meshb"))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("legacy VTK"), "{e}");
+    assert!(e.contains("binary MEDIT") && e.contains("out.mesh"), "{e}");
 }

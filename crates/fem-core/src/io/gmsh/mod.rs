@@ -259,6 +259,27 @@ fn finish(
             ),
         ));
     }
+    // Hexahedra, prisms, pyramids and higher-order tetrahedra of every order Gmsh writes.
+    let volumes: Vec<String> = kinds
+        .iter()
+        .filter(|(t, _)| {
+            matches!(
+                t,
+                5 | 6 | 7 | 11 | 12 | 13 | 14 | 17 | 18 | 19 | 29..=35 | 71..=79 | 92 | 93
+            )
+        })
+        .map(|&(t, n)| match element_name(t) {
+            Some(name) => format!("{n} of type {t} ({name})"),
+            None => format!("{n} of type {t}"),
+        })
+        .collect();
+    if !volumes.is_empty() {
+        return Err(parse_error(
+            path,
+            line,
+            super::other_volumes_problem(&volumes.join(", "), tets.len()),
+        ));
+    }
     if !summary.is_empty() {
         tracing::debug!(
             "{}: ignored non-tetrahedral elements: {summary}",
@@ -292,6 +313,20 @@ mod tests {
             Err(MeshError::Parse { line, reason, .. }) => (line, reason),
             other => panic!("expected a parse error, got {other:?}"),
         }
+    }
+
+    /// A hexahedron beside the tetrahedra is refused, not dropped.
+    #[test]
+    fn other_volume_elements_beside_tetrahedra_are_refused() {
+        let hexed = V22.replace(
+            "$Elements\n3\n",
+            "$Elements\n4\n9 5 2 1 1 10 20 30 40 50 10 20 30\n",
+        );
+        let (_, reason) = parse_error(hexed.as_bytes());
+        assert!(
+            reason.contains("1 of type 5 (8-node hexahedron) beside its 1 tetrahedra"),
+            "{reason}"
+        );
     }
 
     /// The V41 mesh written as MSH 4.1 binary (little-endian, 8-byte size_t).
