@@ -261,7 +261,15 @@ fn run_accuracy(
             s if s.ends_with(".toml") => format!(" --scene {s}"),
             _ => String::new(),
         },
-        cache.map_or(String::new(), |c| format!(" --cache {}", c.display()))
+        cache.map_or(String::new(), |c| {
+            // Quoted where a shell would split it.
+            let c = c.display().to_string();
+            if c.contains(char::is_whitespace) {
+                format!(" --cache \"{c}\"")
+            } else {
+                format!(" --cache {c}")
+            }
+        })
     );
     let (known, unknown): (Vec<_>, Vec<_>) = measured.iter().partition(|(_, e)| e.is_some());
     if known.is_empty() {

@@ -3,7 +3,8 @@
 //! The autoencoder and the cubature rules were fitted on the training snapshots' PCA
 //! coefficients; a reduced trajectory that goes where no snapshot went makes them extrapolate,
 //! and nothing in its own figures says so. A pose q is inside the training data when each of its
-//! coefficients lies within the range the snapshots' coefficients span: the decoder and the
+//! coefficients lies within the range the snapshots' coefficients span, widened to hold the
+//! rest pose's 0 (where every schedule starts): the decoder and the
 //! rules interpolate between training poses (a test pose is often a blend of them, far from
 //! each one), they extrapolate beyond them. Its distance to the data is the part outside those
 //! ranges, relative to the pose's size, ‖q − clamp(q, lo, hi)‖ / ‖q‖; coefficients of a
@@ -157,8 +158,9 @@ mod tests {
         assert!((t.distance(&[0.0, -1.5]) - 1.0).abs() < 1e-15);
         // A tiny pose is measured against 0.1 × 2: (0, −0.01) is 0.01 outside.
         assert!((t.distance(&[0.0, -0.01]) - 0.05).abs() < 1e-15);
-        // The rest pose counts among the training poses, and so do blends of it with them:
-        // poses (1, 1) and (2, 3) hold (0, 0) and (0.5, 2), not (0, 4).
+        // The rest pose counts among the training poses: each range widened to hold 0, so
+        // poses (1, 1) and (2, 3) give the box [0, 2] × [0, 3], which holds (0, 0) and (0.5, 2),
+        // not (0, 4).
         let sagged = TrainingPoses::new(2, vec![1.0, 1.0, 2.0, 3.0]);
         assert_eq!(sagged.distance(&[0.0, 0.0]), 0.0);
         assert_eq!(sagged.distance(&[0.5, 2.0]), 0.0);

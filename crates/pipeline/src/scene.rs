@@ -868,6 +868,9 @@ const MAX_UNKNOWN_KEYS_SAID: usize = 8;
 fn read_toml(text: &str, source: &str) -> Result<Scene> {
     let mut read = text.to_string();
     let mut said = Vec::new();
+    // Whether an entry was set aside (blanked), which may leave a field missing.
+    let mut blanked = false;
+    let mut more = false;
     loop {
         let e = match toml::from_str::<Scene>(&read) {
             Ok(scene) if said.is_empty() => return Ok(scene),
@@ -877,7 +880,7 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
         // A field missing once a key is set aside was the key's, and a key read as another
         // that the scene gives too is a duplicate of the reading's making.
         if !said.is_empty()
-            && (e.message().starts_with("missing field")
+            && ((blanked && e.message().starts_with("missing field"))
                 || toml::de::DeTable::parse(&read).is_err())
         {
             break;
@@ -902,18 +905,24 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
         let Some(span) = e
             .span()
             .filter(|_| e.message().starts_with("unknown field `"))
-            .filter(|_| said.len() < MAX_UNKNOWN_KEYS_SAID)
         else {
             break;
         };
-        // The key read as the one it was near, else the entry set aside; spaces keep every later
-        // byte where it was, so spans and lines stay the user's.
+        if said.len() == MAX_UNKNOWN_KEYS_SAID {
+            more = true;
+            break;
+        }
+        // The key read as the one it was near, else the entry set aside. Spaces keep every
+        // later byte where it was; a key read as another of a different length shifts the
+        // rest of its line, whose later errors (two typos in one inline table) then show the
+        // key as read and a column off by the difference.
         let meant = hint
             .as_deref()
             .and_then(|h| h.strip_prefix("did you mean `")?.strip_suffix("`?"));
         match (meant, entry_at(&read, span.start)) {
             (Some(key), _) => read.replace_range(span, key),
             (None, Some(range)) => {
+                blanked = true;
                 let blank: String = read[range.clone()]
                     .chars()
                     .map(|c| if c == '\n' || c == '\r' { c } else { ' ' })
@@ -924,7 +933,12 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
         }
     }
     said.sort_by_key(|(line, _)| *line);
-    let said: Vec<String> = said.into_iter().map(|(_, text)| text).collect();
+    let mut said: Vec<String> = said.into_iter().map(|(_, text)| text).collect();
+    if more {
+        said.push(format!(
+            "{source}: and more: the reading stops at {MAX_UNKNOWN_KEYS_SAID} unknown keys"
+        ));
+    }
     bail!("{}", said.join("\n"))
 }
 
@@ -953,11 +967,12 @@ fn counted(text: &str, at: usize, hint: String, field: Option<&str>) -> String {
             if e.message().starts_with("invalid type: floating point")
                 && e.span().is_some_and(|s| s.start == place) =>
         {
+            // The nearest count, at least 1 (`1/3` is no 0 frames).
+            let nearest = x.round().max(1.0);
             format!(
                 "TOML does no arithmetic, and {} takes a whole number: `{value}` is {x}; write \
-                 {}",
+                 a whole number such as {nearest}",
                 field.map_or("this field".to_string(), |f| format!("`{f}`")),
-                x.round()
             )
         }
         _ => hint,
@@ -1148,8 +1163,14 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
         && !fraction.is_empty()
         && fraction.chars().all(|c| c.is_ascii_digit())
     {
+        // Three digits after the comma may be thousands (`frames = 1,000`).
+        let thousands = if fraction.len() == 3 {
+            format!(", or `{whole}{fraction}` if the comma separates thousands")
+        } else {
+            String::new()
+        };
         return Some(format!(
-            "write `{whole}.{fraction}`: TOML's decimal point is a dot, never a comma"
+            "write `{whole}.{fraction}`: TOML's decimal point is a dot, never a comma{thousands}"
         ));
     }
     // The first `/` or `*` from the error to the end of its line, without a comment: TOML points

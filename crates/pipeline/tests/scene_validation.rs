@@ -194,7 +194,7 @@ fn common_mistakes_say_what_to_write() {
         (
             edit("frames = 10", "frames = 10/3"),
             "TOML does no arithmetic, and `time.frames` takes a whole number: `10/3` is \
-             3.3333333333333335; write 3",
+             3.3333333333333335; write a whole number such as 3",
         ),
         (
             edit("frames = 10", "frames = 100/4"),
@@ -211,6 +211,11 @@ fn common_mistakes_say_what_to_write() {
         (
             edit("poisson_ratio = 0.4", "poisson_ratio = 0,4"),
             "write `0.4`: TOML's decimal point is a dot",
+        ),
+        (
+            edit("frames = 10", "frames = 1,000"),
+            "write `1.000`: TOML's decimal point is a dot, never a comma, or `1000` if the comma \
+             separates thousands",
         ),
     ];
     for (text, hint) in cases {
@@ -283,6 +288,17 @@ fn every_typo_is_said_at_once() {
         &err,
         &["`force[0].select.sphere.radus`", "`force[0].stiffness`"],
     );
+    // Past eight, the list says there may be more.
+    let many: String = (0..9).map(|i| format!("unrelated_{i} = 1\n")).collect();
+    let err = read_error(&edit("frames = 10\n", &format!("frames = 10\n{many}")));
+    assert_names(
+        &err,
+        &[
+            "`time.unrelated_7`",
+            "and more: the reading stops at 8 unknown keys",
+        ],
+    );
+    assert!(!err.contains("unrelated_8"), "{err}");
     // A key read as the one it was a slip for, where that one is given too, is not the user's
     // duplicate.
     let err = read_error(&edit("frames = 10", "frames = 10\nframs = 20"));

@@ -393,13 +393,30 @@ fn methods(names: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<Method>> {
         None => None,
         Some(one) if one.is_instance_of::<pyo3::types::PyString>() => Some(vec![one.extract()?]),
         Some(many) => Some(many.extract().map_err(|_| {
-            Class::InvalidArgument.err(format!(
-                "methods must be a list of method names (e.g. [\"full\", \"neural-cubature\"]), \
-                 got {}",
-                many.get_type()
+            let type_of = |o: &Bound<'_, PyAny>| {
+                o.get_type()
                     .name()
                     .map_or_else(|_| "another type".to_string(), |n| n.to_string())
-            ))
+            };
+            // A list with something else than a name in it: that item, else the whole.
+            let item = many.try_iter().ok().and_then(|items| {
+                items.enumerate().find_map(|(i, item)| {
+                    let item = item.ok()?;
+                    (!item.is_instance_of::<pyo3::types::PyString>()).then(|| {
+                        format!(
+                            "methods[{i}] must be a method name (a str), got {}",
+                            type_of(&item)
+                        )
+                    })
+                })
+            });
+            Class::InvalidArgument.err(item.unwrap_or_else(|| {
+                format!(
+                    "methods must be a list of method names (e.g. [\"full\", \
+                     \"neural-cubature\"]) or one name, got {}",
+                    type_of(many)
+                )
+            }))
         })?),
     };
     match names {
@@ -496,7 +513,8 @@ fn in_run_pipeline<T: Send>(
 ///
 /// ``scene``: a scene file (TOML), or None for the built-in default scene. ``out_dir``:
 /// default ``out/<scene name>``; ``cache_dir``: default ``out_dir/cache`` (run from the
-/// checkout's root, both are ``cargo xtask``'s). ``methods``: names, default every method.
+/// checkout's root, both are ``cargo xtask``'s). ``methods``: a list of names or one name,
+/// default every method.
 /// ``trajectory``: the held-out test trajectory (any index: trajectory i depends only on the
 /// test's seed and i). ``every``: write every K-th frame as ParaView files (0: none). ``on_stage``: called with
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is

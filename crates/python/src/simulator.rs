@@ -379,10 +379,11 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
         if let Ok(a) = vertices.cast::<numpy::PyUntypedArray>()
             && a.ndim() != 1
         {
+            let shape: Vec<String> = a.shape().iter().map(usize::to_string).collect();
             return bad(format!(
-                "vertices must be a 1-D array of indices, got shape {:?} (flatten it, e.g. \
+                "vertices must be a 1-D array of indices, got shape ({}) (flatten it, e.g. \
                  array.ravel())",
-                a.shape()
+                shape.join(", ")
             ));
         }
         // A string iterates over its characters, which are no list of vertices.

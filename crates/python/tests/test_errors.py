@@ -176,6 +176,7 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: ld.run_pipeline(TINY, methods=[]), "at least one"),
         (lambda: ld.run_pipeline(TINY, methods=["pca", "pca"]), "names pca twice"),
         (lambda: ld.run_pipeline(TINY, methods=3), "a list of method names"),
+        (lambda: ld.run_pipeline(TINY, methods=["pca", 3]), r"methods\[1\] must be a method name \(a str\), got int"),
         (lambda: ld.run_pipeline(TINY, trajectory=-1), "trajectory must be 0 or more"),
         (lambda: ld.run_pipeline(TINY, every=-1), "every must be 0 or more"),
         (lambda: ld.run_trajectories(TINY, 2, every=-1), "every must be 0 or more"),

@@ -61,7 +61,7 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     assert model.method == "neural-cubature"
     assert any("test trajectory" in name for name, held_out, _ in model.errors if held_out)
     # Every stage is cached now: the same run loads them all.
-    again = ld.run_pipeline(TINY, out_dir=out, cache_dir=cache, methods="pca")  # one name, as a list
+    again = ld.run_pipeline(TINY, out_dir=out, cache_dir=cache, methods="pca")  # one name, as ["pca"]
     assert again.stages and all(s.cached for s in again.stages)
     assert again.row("pca").mean_rel_error == report.row("pca").mean_rel_error
     # No full-space solver ran beside it, so there is no speed-up to give.
