@@ -1141,11 +1141,13 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
     let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
     let line = text[line_start..].lines().next()?;
     let code = line.split('#').next()?;
-    // A minus sign TOML does not read: a Unicode minus or dash pasted from a document.
-    if let Some(c) = code
-        .chars()
-        .find(|c| ['\u{2212}', '\u{2013}', '\u{2014}'].contains(c))
-    {
+    // A minus sign TOML does not read: a Unicode minus or dash pasted from a document, outside
+    // a quoted string (where a dash is text).
+    let mut quoted = false;
+    if let Some(c) = code.chars().find(|&c| {
+        quoted ^= c == '"';
+        !quoted && ['\u{2212}', '\u{2013}', '\u{2014}'].contains(&c)
+    }) {
         return Some(format!(
             "write `-`, the ASCII minus, where `{c}` (U+{:04X}) stands: TOML reads no other \
              character as a sign",

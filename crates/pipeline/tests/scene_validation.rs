@@ -221,6 +221,9 @@ fn common_mistakes_say_what_to_write() {
     for (text, hint) in cases {
         assert_names(&read_error(&text), &[hint]);
     }
+    // A dash inside a quoted name is text, not a minus to mend.
+    let err = read_error(&edit("name = \"beam\"", "name = \"beam \u{2013} two\" 2"));
+    assert!(!err.contains("ASCII minus"), "{err}");
     // Swapped letters and another case are slips too.
     assert_names(
         &read_error(&edit("method = \"newton\"", "method = \"NEWTNO\"")),

@@ -315,6 +315,16 @@ mod tests {
         }
     }
 
+    /// A 2.2 file saved with `Mesh.SaveParametric` says so.
+    #[test]
+    fn parametric_nodes_are_named() {
+        let parametric = V22
+            .replace("$Nodes\n", "$ParametricNodes\n")
+            .replace("$EndNodes", "$EndParametricNodes");
+        let (_, reason) = parse_error(parametric.as_bytes());
+        assert!(reason.contains("without Mesh.SaveParametric"), "{reason}");
+    }
+
     /// A hexahedron beside the tetrahedra is refused, not dropped.
     #[test]
     fn other_volume_elements_beside_tetrahedra_are_refused() {

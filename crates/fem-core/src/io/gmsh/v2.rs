@@ -86,6 +86,8 @@ pub(super) fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
     let mut nodes: Option<(Vec<Vec3>, HashMap<u64, usize>)> = None;
     let mut tets: Option<Vec<[usize; 4]>> = None;
     let mut ignored = Skipped::new();
+    // Gmsh's `Mesh.SaveParametric` writes the nodes as `$ParametricNodes`.
+    let mut parametric = false;
     while let Some((line, header)) = reader.next_nonblank() {
         match header {
             "$Nodes" => {
@@ -96,7 +98,15 @@ pub(super) fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
             }
             "$Elements" => {
                 let Some((_, index)) = &nodes else {
-                    return Err(reader.error(line, "$Elements comes before $Nodes"));
+                    return Err(reader.error(
+                        line,
+                        if parametric {
+                            "the nodes are in $ParametricNodes, which is not read: save the mesh \
+                             again without Mesh.SaveParametric"
+                        } else {
+                            "$Elements comes before $Nodes"
+                        },
+                    ));
                 };
                 if tets.is_some() {
                     return Err(reader.error(line, "a second $Elements section"));
@@ -105,6 +115,7 @@ pub(super) fn parse(text: &str, path: &Path) -> Result<TetMesh, MeshError> {
             }
             _ => match header.strip_prefix('$') {
                 Some(name) if !name.starts_with("End") && !name.is_empty() => {
+                    parametric |= name == "ParametricNodes";
                     let end = format!("$End{name}");
                     loop {
                         match reader.next_nonblank() {
