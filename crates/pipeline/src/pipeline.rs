@@ -365,9 +365,9 @@ impl StageSummary for Reference {
 /// from rest).
 pub const SETTLED_KINETIC: f64 = 1e-4;
 
-/// A body whose centre of mass lies this fraction of its height or more above its pins' centre,
-/// against gravity, stands on them ([`Pipeline::falls_over`]); one hung from them or held at a
-/// side does not.
+/// A body whose centre of mass lies this fraction of its height or more above its pins'
+/// centre, against gravity, stands on them (the `snapshots` line says when it falls over); one
+/// hung from them or held at a side does not.
 pub const STANDS_ABOVE: f64 = 0.25;
 
 /// A body standing on its pins that its weight alone moves this fraction of its bounding-box
