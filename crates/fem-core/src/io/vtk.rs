@@ -801,32 +801,10 @@ impl<'a> Parser<'a> {
             })?;
             tets.push(tet);
         }
-        let summary = ignored
-            .iter()
-            .map(|(&t, k)| match cell_name(t) {
-                Some(name) => format!("{k} of type {t}, {name}"),
-                None => format!("{k} of type {t}"),
-            })
-            .collect::<Vec<_>>()
-            .join("; ");
-        if tets.is_empty() {
-            let types: Vec<u64> = ignored.keys().copied().collect();
-            return Err(self.error(
-                line,
-                format!(
-                    "no tetrahedra (VTK cell type 10) among the {n} cells{}{}",
-                    if summary.is_empty() {
-                        String::new()
-                    } else {
-                        format!(" ({summary})")
-                    },
-                    missing_tets_remedy(&types)
-                ),
-            ));
+        if let Some(problem) = cells_problem(&ignored, tets.len(), n) {
+            return Err(self.error(line, problem));
         }
-        if let Some(held) = other_volumes(&ignored) {
-            return Err(self.error(line, super::other_volumes_problem(&held, tets.len())));
-        }
+        let summary = said(&ignored, |_| true);
         if !summary.is_empty() {
             tracing::debug!(
                 "{}: ignored non-tetrahedral cells: {summary}",
@@ -837,24 +815,52 @@ impl<'a> Parser<'a> {
     }
 }
 
-/// The volume cells other than linear tetrahedra among `ignored` (type → count), said as
-/// "560 of type 12, hexahedron", or None: voxels, hexahedra, wedges, pyramids, pentagonal and
-/// hexagonal prisms, polyhedra, and the quadratic, bi- and triquadratic, Lagrange and Bézier
-/// volume cells.
-pub(super) fn other_volumes(ignored: &std::collections::BTreeMap<u64, usize>) -> Option<String> {
-    let held: Vec<String> = ignored
+/// The cells of `ignored` (type → count) whose type `keep` takes, said as "560 of type 12,
+/// hexahedron; 3 of type 5, triangle".
+fn said(ignored: &std::collections::BTreeMap<u64, usize>, keep: impl Fn(u64) -> bool) -> String {
+    ignored
         .iter()
-        .filter(|(t, _)| matches!(t, 11..=17 | 24..=27 | 29 | 31..=33 | 42 | 71..=74 | 78..=82))
+        .filter(|(t, _)| keep(**t))
         .map(|(&t, k)| match cell_name(t) {
             Some(name) => format!("{k} of type {t}, {name}"),
             None => format!("{k} of type {t}"),
         })
-        .collect();
-    (!held.is_empty()).then(|| held.join("; "))
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// What is wrong with a file's `cells` cells, `tets` of them linear tetrahedra and `ignored`
+/// the others (type → count): no tetrahedron at all (what it holds, and what to do), or other
+/// volume cells beside them (voxels, hexahedra, wedges, pyramids, pentagonal and hexagonal
+/// prisms, polyhedra, and the quadratic, bi- and triquadratic, Lagrange and Bézier volume
+/// cells), which read alone the body would lose. None where the tetrahedra are the body.
+pub(super) fn cells_problem(
+    ignored: &std::collections::BTreeMap<u64, usize>,
+    tets: usize,
+    cells: usize,
+) -> Option<String> {
+    if tets == 0 {
+        let summary = said(ignored, |_| true);
+        let types: Vec<u64> = ignored.keys().copied().collect();
+        return Some(format!(
+            "no tetrahedra (VTK cell type 10) among the {cells} cells{}{}",
+            if summary.is_empty() {
+                String::new()
+            } else {
+                format!(" ({summary})")
+            },
+            missing_tets_remedy(&types)
+        ));
+    }
+    let others = said(
+        ignored,
+        |t| matches!(t, 11..=17 | 24..=27 | 29 | 31..=33 | 42 | 71..=74 | 78..=82),
+    );
+    (!others.is_empty()).then(|| super::other_volumes_problem(&others, tets))
 }
 
 /// The name of a VTK cell type that a file without tetrahedra most often holds instead.
-pub(super) fn cell_name(t: u64) -> Option<&'static str> {
+fn cell_name(t: u64) -> Option<&'static str> {
     Some(match t {
         1 => "vertex",
         3 => "line",
@@ -872,7 +878,7 @@ pub(super) fn cell_name(t: u64) -> Option<&'static str> {
 }
 
 /// What to do about a file whose cells hold no linear tetrahedron, by what it holds.
-pub(super) fn missing_tets_remedy(types: &[u64]) -> &'static str {
+fn missing_tets_remedy(types: &[u64]) -> &'static str {
     const LOWER_DIMENSIONS: [u64; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
     if types.contains(&24) || types.contains(&71) {
         "; quadratic and Lagrange tetrahedra are not read: export first-order (4-point) tetrahedra, e.g. \

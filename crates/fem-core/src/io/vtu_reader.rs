@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::MAX_ENTITIES;
-use super::vtk::{cell_name, missing_tets_remedy, other_volumes};
+use super::vtk::cells_problem;
 use crate::{MeshError, TetMesh, Vec3};
 
 /// Reads the `.vtu` file at `path` (not validated).
@@ -192,28 +192,8 @@ impl Reader<'_> {
             }
             start = end;
         }
-        if tets.is_empty() {
-            let summary = ignored
-                .iter()
-                .map(|(&t, k)| match cell_name(t) {
-                    Some(name) => format!("{k} of type {t}, {name}"),
-                    None => format!("{k} of type {t}"),
-                })
-                .collect::<Vec<_>>()
-                .join("; ");
-            let types: Vec<u64> = ignored.keys().copied().collect();
-            return Err(self.error(format!(
-                "no tetrahedra (VTK cell type 10) among the {num_cells} cells{}{}",
-                if summary.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({summary})")
-                },
-                missing_tets_remedy(&types)
-            )));
-        }
-        if let Some(held) = other_volumes(&ignored) {
-            return Err(self.error(super::other_volumes_problem(&held, tets.len())));
+        if let Some(problem) = cells_problem(&ignored, tets.len(), num_cells) {
+            return Err(self.error(problem));
         }
         Ok(TetMesh { vertices, tets })
     }

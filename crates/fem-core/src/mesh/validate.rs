@@ -137,6 +137,17 @@ pub fn validate_located(
         if v < 0.0 {
             mesh.tets[t].swap(2, 3);
             report.flipped_tets += 1;
+            // Its volume computed again in the new order: one lost in the round-off of far
+            // coordinates (5·10⁷ beside 1) can come out of the swap without a sign.
+            let w = mesh.signed_volume(t);
+            if w <= 0.0 {
+                return Err(invalid(format!(
+                    "{}, on vertices {}, is degenerate: its volume ({v:.3e}, then {w:.3e} turned \
+                     the other way) is lost in the round-off of its coordinates",
+                    tet(t),
+                    vertices_of(&mesh.tets[t])
+                )));
+            }
         }
     }
     // Two tets on the same four vertices overlap: their mass and stiffness would count twice.
