@@ -7,6 +7,8 @@
 //!   written here in every format and of the real meshes in `shared/` when present; each prints
 //!   how many malformed inputs it tried and how they ended.
 //! - `props`: the same property under proptest (with shrinking to a minimal failing edit list).
+//! - `binary_formats`: seeded mutations of legacy VTK `BINARY` and `.vtu` (zlib-compressed
+//!   inline base64, appended raw) files, 2,000 each.
 //! - `defects`: degenerate, duplicate, inverted, repeated-vertex and disconnected tets,
 //!   unreferenced vertices, NaN/inf/overflowing coordinates, out-of-range indices and huge counts,
 //!   written in every format and read through `read_mesh` from real files.
@@ -18,6 +20,7 @@
 //! Longer runs: `cargo test -p fem-core --release --test fuzz_readers -- --ignored --nocapture`
 //! (`FUZZ_SECONDS` per reader, default 60); coverage-guided fuzzing: `scripts/fuzz.sh`.
 
+mod binary_formats;
 mod check;
 mod mutate;
 mod tetgen;
