@@ -589,6 +589,16 @@ fn without_elements(content: &[u8]) -> Vec<u8> {
     let mut at = 0;
     while let Some(open) = find(content, b"<", at) {
         out.extend_from_slice(&content[at..open]);
+        // A comment runs to `-->`, whatever it holds.
+        if content[open..].starts_with(b"<!--") {
+            match find(content, b"-->", open + 4) {
+                Some(end) => {
+                    at = end + 3;
+                    continue;
+                }
+                None => return out,
+            }
+        }
         let name_end = content[open + 1..]
             .iter()
             .position(|c| c.is_ascii_whitespace() || *c == b'>' || *c == b'/')
@@ -820,6 +830,7 @@ mod tests {
         let mut keyed = ascii.clone();
         keyed[0].1 = format!("{}\n{key}\n", keyed[0].1);
         keyed[1].1 = format!("{key}\n{}", keyed[1].1);
+        keyed[2].1 = format!("<!-- offsets, <ends> of cells -->{}", keyed[2].1);
         expect_mesh(&file("", &keyed, b""));
         // A header base64-encoded apart from the bytes, as some writers do.
         let apart: Vec<(String, String)> = a
