@@ -886,10 +886,9 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
             break;
         }
         let field = e.span().and_then(|span| field_at(&read, span.start));
-        let hint = e.span().and_then(|span| {
-            let hint = parse_hint(&read, span.start, e.message(), field.as_deref())?;
-            Some(counted(&read, span.start, hint, field.as_deref()))
-        });
+        let hint = e
+            .span()
+            .and_then(|span| parse_hint(&read, span.start, e.message(), field.as_deref()));
         // Said in the order of the file, not of the reading.
         let line = e
             .span()
@@ -898,8 +897,12 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
             line,
             format!(
                 "{source}: {}{e}{}",
-                field.map_or(String::new(), |f| format!("`{f}`: ")),
-                hint.as_ref().map_or(String::new(), |h| format!("{h}\n"))
+                field.as_ref().map_or(String::new(), |f| format!("`{f}`: ")),
+                match (&hint, e.span()) {
+                    (Some(h), Some(span)) =>
+                        format!("{}\n", h.said(&read, span.start, field.as_deref())),
+                    _ => String::new(),
+                }
             ),
         ));
         let Some(span) = e
@@ -916,9 +919,10 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
         // later byte where it was; a key read as another of a different length shifts the
         // rest of its line, whose later errors (two typos in one inline table) then show the
         // key as read and a column off by the difference.
-        let meant = hint
-            .as_deref()
-            .and_then(|h| h.strip_prefix("did you mean `")?.strip_suffix("`?"));
+        let meant = match &hint {
+            Some(Hint::Meant(key)) => Some(key.as_str()),
+            _ => None,
+        };
         match (meant, entry_at(&read, span.start)) {
             (Some(key), _) => read.replace_range(span, key),
             (None, Some(range)) => {
@@ -942,40 +946,51 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
     bail!("{}", said.join("\n"))
 }
 
-/// An arithmetic hint ([`parse_hint`]) for a field that counts (`frames = 10/3`), whose
-/// number is no count: the scene read again with the number in its place says whether the field
-/// takes a whole number. Any other hint as it is.
-fn counted(text: &str, at: usize, hint: String, field: Option<&str>) -> String {
-    let said = hint
-        .strip_prefix("TOML does no arithmetic: write the number, ")
-        .and_then(|rest| rest.strip_suffix('`')?.split_once(" for `"));
-    let Some((number, value)) = said else {
-        return hint;
-    };
-    let line_start = text[..at].rfind('\n').map_or(0, |i| i + 1);
-    let place = text[line_start..].find(value).map(|i| line_start + i);
-    let (Ok(x), Some(place)) = (number.parse::<f64>(), place) else {
-        return hint;
-    };
-    if x.fract() == 0.0 {
-        return hint;
-    }
-    let mut tried = text.to_string();
-    tried.replace_range(place..place + value.len(), number);
-    match toml::from_str::<Scene>(&tried) {
-        Err(e)
-            if e.message().starts_with("invalid type: floating point")
-                && e.span().is_some_and(|s| s.start == place) =>
-        {
-            // The nearest count, at least 1 (`1/3` is no 0 frames).
-            let nearest = x.round().max(1.0);
-            format!(
-                "TOML does no arithmetic, and {} takes a whole number: `{value}` is {x}; write \
-                 a whole number such as {nearest}",
-                field.map_or("this field".to_string(), |f| format!("`{f}`")),
-            )
+/// What [`parse_hint`] found to write instead of a scene's mistake.
+enum Hint {
+    /// A key or a name a letter or two off this one the field takes.
+    Meant(String),
+    /// Arithmetic (`value`, as written) whose number is `result`.
+    Arithmetic { value: String, result: f64 },
+    /// Any other advice, in words.
+    Said(String),
+}
+
+impl Hint {
+    /// The hint in words, for an error at byte `at` of the scene `text` in `field`. Arithmetic
+    /// in a field that counts (`frames = 10/3`) whose number is no count says so: the scene
+    /// read again with the number in its place tells whether the field takes a whole number.
+    fn said(&self, text: &str, at: usize, field: Option<&str>) -> String {
+        let (value, x) = match self {
+            Hint::Meant(key) => return format!("did you mean `{key}`?"),
+            Hint::Said(words) => return words.clone(),
+            Hint::Arithmetic { value, result } => (value.as_str(), *result),
+        };
+        let plain = format!("TOML does no arithmetic: write the number, {x} for `{value}`");
+        let line_start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+        let Some(place) = text[line_start..].find(value).map(|i| line_start + i) else {
+            return plain;
+        };
+        if x.fract() == 0.0 {
+            return plain;
         }
-        _ => hint,
+        let mut tried = text.to_string();
+        tried.replace_range(place..place + value.len(), &x.to_string());
+        match toml::from_str::<Scene>(&tried) {
+            Err(e)
+                if e.message().starts_with("invalid type: floating point")
+                    && e.span().is_some_and(|s| s.start == place) =>
+            {
+                // The nearest count, at least 1 (`1/3` is no 0 frames).
+                let nearest = x.round().max(1.0);
+                format!(
+                    "TOML does no arithmetic, and {} takes a whole number: `{value}` is {x}; \
+                     write a whole number such as {nearest}",
+                    field.map_or("this field".to_string(), |f| format!("`{f}`")),
+                )
+            }
+            _ => plain,
+        }
     }
 }
 
@@ -1104,7 +1119,7 @@ fn field_at(text: &str, offset: usize) -> Option<String> {
 /// letter or two off one the field takes, a single `[pin]` where the list `[[pin]]` is meant,
 /// a Unicode minus or a decimal comma pasted from a document, and arithmetic in a value
 /// (`step = 1/60`, which TOML reads as an unquoted string).
-fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> Option<String> {
+fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> Option<Hint> {
     let unknown = ["unknown field `", "unknown variant `"]
         .iter()
         .find_map(|p| message.strip_prefix(p));
@@ -1124,16 +1139,16 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
         // A slip of a letter or two, not another word (`gravity_directions` is not
         // `onset_directions`).
         return (nearest.0 <= (key.chars().count() / 3).clamp(1, 2))
-            .then(|| format!("did you mean `{}`?", nearest.1));
+            .then(|| Hint::Meant(nearest.1.to_string()));
     }
     if message.starts_with("invalid type: map, expected a sequence") {
         // Only the scene's lists of tables, `[pin]` and `[force]`: a map for `pin.plane` or
         // `indices` is no `[[plane]]` or `[[indices]]`.
         let name = field.filter(|f| ["pin", "force"].contains(f))?;
-        return Some(format!(
+        return Some(Hint::Said(format!(
             "write `[[{name}]]`, with doubled brackets: each is one entry of a list, and a \
              scene may have several"
-        ));
+        )));
     }
     let start = (0..=offset.min(text.len()))
         .rev()
@@ -1148,11 +1163,11 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
         quoted ^= c == '"';
         !quoted && ['\u{2212}', '\u{2013}', '\u{2014}'].contains(&c)
     }) {
-        return Some(format!(
+        return Some(Hint::Said(format!(
             "write `-`, the ASCII minus, where `{c}` (U+{:04X}) stands: TOML reads no other \
              character as a sign",
             u32::from(c)
-        ));
+        )));
     }
     // A decimal comma (`poisson_ratio = 0,4`) outside an array, where a comma separates numbers.
     let value = code.split_once('=').map(|(_, v)| v.trim());
@@ -1171,9 +1186,9 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
         } else {
             String::new()
         };
-        return Some(format!(
+        return Some(Hint::Said(format!(
             "write `{whole}.{fraction}`: TOML's decimal point is a dot, never a comma{thousands}"
-        ));
+        )));
     }
     // The first `/` or `*` from the error to the end of its line, without a comment: TOML points
     // at the value (`step = 1/60`) or, inside an array, at the operator (`[0.0, -9.81/6, 0.0]`),
@@ -1209,10 +1224,10 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
             _ => break,
         }
     }
-    let value = &code[a_from..b_to];
-    result
-        .is_finite()
-        .then(|| format!("TOML does no arithmetic: write the number, {result} for `{value}`"))
+    result.is_finite().then(|| Hint::Arithmetic {
+        value: code[a_from..b_to].to_string(),
+        result,
+    })
 }
 
 /// The distance between two keys in slips of the hand: letters inserted, left out, mistyped
