@@ -1202,25 +1202,22 @@ impl<'a> Pipeline<'a> {
         }
         let up = -model.gravity / g;
         let height = |v: usize| model.mesh.vertices[v].dot(&up);
-        // Each vertex weighed by its share of the weight (M g along gravity).
-        let (mut weight, mut moment) = (0.0, 0.0);
-        for v in 0..model.mesh.num_vertices() {
-            let w = -(0..3)
-                .map(|k| model.gravity_load[3 * v + k] * up[k])
-                .sum::<f64>();
-            weight += w;
-            moment += w * height(v);
-        }
-        let pins = model.pinned.iter().map(|&v| height(v)).sum::<f64>() / model.pinned.len() as f64;
-        let (lo, hi) = model
-            .mesh
-            .vertices
+        // The centre of mass's height, each vertex weighed by its lumped mass.
+        let masses = &model.mass.lumped;
+        let mass: f64 = masses.iter().sum();
+        let centre = masses
             .iter()
-            .map(|x| x.dot(&up))
+            .enumerate()
+            .map(|(v, m)| m * height(v))
+            .sum::<f64>()
+            / mass;
+        let pins = model.pinned.iter().map(|&v| height(v)).sum::<f64>() / model.pinned.len() as f64;
+        let (lo, hi) = (0..model.mesh.num_vertices())
+            .map(height)
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), y| {
                 (l.min(y), h.max(y))
             });
-        weight > 0.0 && moment / weight - pins >= STANDS_ABOVE * (hi - lo)
+        mass > 0.0 && centre - pins >= STANDS_ABOVE * (hi - lo)
     }
 
     /// What to say at once of a run under gravity alone that carries the body
