@@ -129,6 +129,27 @@ pub fn is_mesh_file(path: &Path) -> bool {
     format_of(path).is_ok() && !node
 }
 
+/// The bits of a binary number of 1 to 8 bytes in either byte order, zero-extended to 64: the
+/// values and headers of binary VTK and `.vtu` files.
+pub(crate) fn widened(bytes: &[u8], little_endian: bool) -> u64 {
+    let mut v = [0u8; 8];
+    let n = bytes.len();
+    if little_endian {
+        v[..n].copy_from_slice(bytes);
+        u64::from_le_bytes(v)
+    } else {
+        v[8 - n..].copy_from_slice(bytes);
+        u64::from_be_bytes(v)
+    }
+}
+
+/// The `bits` of a signed integer of `size` bytes ([`widened`]), its sign carried to 64.
+pub(crate) fn sign_extended(bits: u64, size: usize) -> i64 {
+    // The value's top bit moved to the top, then shifted back with the sign.
+    let shift = 64 - 8 * size as u32;
+    ((bits << shift) as i64) >> shift
+}
+
 /// What a reader says of a file that holds other volume elements (`held`: "560 hexahedra") beside
 /// its `tets` tetrahedra: read alone, the tetrahedra would be the body without those parts (a
 /// tester's half-hexahedral grid was simulated half as wide, said by nothing but its unused

@@ -243,16 +243,12 @@ impl BinaryReader<'_> {
         };
         out.reserve(n * 12);
         for chunk in self.bytes[self.at..self.at + needed].chunks_exact(size) {
-            let mut be = [0u8; 8];
-            be[8 - size..].copy_from_slice(chunk);
-            let bits = u64::from_be_bytes(be);
-            // The value's top bit moved to the top, for the signed types' sign.
-            let shift = 64 - 8 * size as u32;
+            let bits = super::widened(chunk, false);
             let _ = match ty.as_str() {
                 "float" => write!(out, "{} ", f64::from(f32::from_bits(bits as u32))),
                 "double" => write!(out, "{} ", f64::from_bits(bits)),
                 "char" | "short" | "int" | "long" | "vtktypeint32" | "vtktypeint64" => {
-                    write!(out, "{} ", ((bits << shift) as i64) >> shift)
+                    write!(out, "{} ", super::sign_extended(bits, size))
                 }
                 _ => write!(out, "{bits} "),
             };

@@ -426,14 +426,7 @@ impl Reader<'_> {
         let h = layout.header;
         let read_header = |bytes: &[u8], i: usize| -> Option<usize> {
             let b = bytes.get(i * h..(i + 1) * h)?;
-            let mut v = [0u8; 8];
-            if layout.little_endian {
-                v[..h].copy_from_slice(b);
-                usize::try_from(u64::from_le_bytes(v)).ok()
-            } else {
-                v[8 - h..].copy_from_slice(b);
-                usize::try_from(u64::from_be_bytes(v)).ok()
-            }
+            usize::try_from(super::widened(b, layout.little_endian)).ok()
         };
         // base64 characters of `bytes` bytes, None past any file.
         let chars = |bytes: usize| {
@@ -558,22 +551,11 @@ impl Reader<'_> {
         Ok(data
             .chunks_exact(size)
             .map(|b| {
-                let mut v = [0u8; 8];
-                let bits = if layout.little_endian {
-                    v[..size].copy_from_slice(b);
-                    u64::from_le_bytes(v)
-                } else {
-                    v[8 - size..].copy_from_slice(b);
-                    u64::from_be_bytes(v)
-                };
-                // The sign bit moved to the top, for the signed types.
-                let shift = 64 - 8 * size as u32;
+                let bits = super::widened(b, layout.little_endian);
                 match ty {
                     "Float32" => f64::from(f32::from_bits(bits as u32)),
                     "Float64" => f64::from_bits(bits),
-                    "Int8" | "Int16" | "Int32" | "Int64" => {
-                        (((bits << shift) as i64) >> shift) as f64
-                    }
+                    "Int8" | "Int16" | "Int32" | "Int64" => super::sign_extended(bits, size) as f64,
                     _ => bits as f64,
                 }
             })
