@@ -393,11 +393,6 @@ fn methods(names: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<Method>> {
         None => None,
         Some(one) if one.is_instance_of::<pyo3::types::PyString>() => Some(vec![one.extract()?]),
         Some(many) => Some(many.extract().map_err(|_| {
-            let type_of = |o: &Bound<'_, PyAny>| {
-                o.get_type()
-                    .name()
-                    .map_or_else(|_| "another type".to_string(), |n| n.to_string())
-            };
             // A list with something else than a name in it: that item, else the whole.
             let item = many.try_iter().ok().and_then(|items| {
                 items.enumerate().find_map(|(i, item)| {
@@ -405,7 +400,7 @@ fn methods(names: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<Method>> {
                     (!item.is_instance_of::<pyo3::types::PyString>()).then(|| {
                         format!(
                             "methods[{i}] must be a method name (a str), got {}",
-                            type_of(&item)
+                            crate::simulator::describe(&item)
                         )
                     })
                 })
@@ -414,7 +409,7 @@ fn methods(names: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<Method>> {
                 format!(
                     "methods must be a list of method names (e.g. [\"full\", \
                      \"neural-cubature\"]) or one name, got {}",
-                    type_of(many)
+                    crate::simulator::describe(many)
                 )
             }))
         })?),

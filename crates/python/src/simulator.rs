@@ -294,7 +294,7 @@ fn poisoned() -> PyErr {
 }
 
 /// A Python object's type and, for an array, its dtype and dimensions, for messages.
-fn describe(obj: &Bound<'_, PyAny>) -> String {
+pub(crate) fn describe(obj: &Bound<'_, PyAny>) -> String {
     if let Ok(a) = obj.cast::<numpy::PyUntypedArray>() {
         format!("an array of {} with {} dimension(s)", a.dtype(), a.ndim())
     } else {
