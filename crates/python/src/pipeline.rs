@@ -252,7 +252,11 @@ impl Report {
             .find(|r| r.method == method)
             .cloned()
             .ok_or_else(|| {
-                Class::InvalidArgument.err(format!("no row for method {method:?} in this report"))
+                let ran: Vec<&str> = self.rows.iter().map(|r| r.method.as_str()).collect();
+                Class::InvalidArgument.err(format!(
+                    "no row for method {method:?} in this report; its rows are {}",
+                    ran.join(", ")
+                ))
             })
     }
 

@@ -66,6 +66,9 @@ def test_run_reports_every_method_and_reuses_the_cache(tmp_path: pathlib.Path) -
     assert again.row("pca").mean_rel_error == report.row("pca").mean_rel_error
     # No full-space solver ran beside it, so there is no speed-up to give.
     assert again.row("pca").speedup is None and report.row("pca").speedup > 0
+    # A method that did not run is named with the ones that did.
+    with pytest.raises(ld.InvalidArgumentError, match='"neural" in this report; its rows are pca'):
+        again.row("neural")
 
 
 def test_export_writes_a_model_that_loads(tmp_path: pathlib.Path, cache_dir) -> None:

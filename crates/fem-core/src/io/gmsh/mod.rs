@@ -325,6 +325,31 @@ mod tests {
         assert!(reason.contains("without Mesh.SaveParametric"), "{reason}");
     }
 
+    /// One file of a mesh gmsh split over several is refused; a file with every partition, or
+    /// whose `$PartitionedEntities` cannot be read, is read as it is.
+    #[test]
+    fn one_file_of_a_split_mesh_is_refused() {
+        let partitioned = |volume_1_in: &str| {
+            V41.replace(
+                "$Nodes\n",
+                &format!(
+                    "$PartitionedEntities\n2\n0\n0 0 0 2\n\
+                     1 3 1 {volume_1_in} 0 0 0 1 1 1 0 0\n\
+                     2 3 1 1 2 0 0 0 1 1 1 0 0\n$EndPartitionedEntities\n$Nodes\n"
+                ),
+            )
+        };
+        let (line, reason) = parse_error(partitioned("1 1").as_bytes());
+        assert_eq!(line, 5, "{reason}"); // the number of partitions
+        assert!(
+            reason.contains("holds partition 1 of the 2 gmsh split the mesh into"),
+            "{reason}"
+        );
+        for whole in [partitioned("2 1 2"), partitioned("1 x")] {
+            assert_eq!(parse_str(&whole).expect(&whole).tets.len(), 1);
+        }
+    }
+
     /// A hexahedron beside the tetrahedra is refused, not dropped.
     #[test]
     fn other_volume_elements_beside_tetrahedra_are_refused() {

@@ -2,8 +2,10 @@
 //! `$Elements` are read block by block with one [`Cursor`] over text tokens or raw values, keeping
 //! `Tet4` blocks and skipping the rest. Other sections (`$Entities`, `$PhysicalNames`, …) are not
 //! read, so damage there goes unnoticed: of 30,000 randomly damaged files, those `mshio` refused
-//! for it alone are now read, and every file it read gives the same mesh. Parametric nodes
-//! (`SaveParametric`) are not supported.
+//! for it alone are now read, and every file it read gives the same mesh. The one exception,
+//! `$PartitionedEntities`, is read where it can be, only to refuse one file of a mesh gmsh
+//! split over several (`Mesh.PartitionSplitMeshFiles`), which would otherwise be read as the
+//! whole body. Parametric nodes (`SaveParametric`) are not supported.
 //!
 //! Every count is checked against the section's header and [`MAX_ENTITIES`] before anything is
 //! reserved for it, coordinates must be finite, and errors carry the 1-based line of the value at
@@ -278,8 +280,82 @@ pub(super) fn parse(bytes: &[u8], path: &Path, format: &MeshFormat) -> Result<Te
     let (vertices, index) = read_nodes(cursor(nodes_at))?;
     let elements_at = find_section(bytes, format.body, b"$Elements")
         .ok_or_else(|| parse_error(path, end_line, "no $Elements section"))?;
-    let (tets, ignored) = read_elements(cursor(elements_at), &index)?;
-    finish(vertices, tets, &ignored, path, end_line)
+    let elements = read_elements(cursor(elements_at), &index)?;
+    if let Some(at) = find_section(bytes, format.body, b"$PartitionedEntities")
+        && let Some((total, held)) = partitions_of(&mut cursor(at), &elements.volumes)
+        && !held.is_empty()
+        && held.len() < total
+    {
+        let held: Vec<String> = held.iter().map(i64::to_string).collect();
+        return Err(cursor(at).error(
+            at,
+            format!(
+                "this file holds partition{} {} of the {total} gmsh split the mesh into, a part \
+                 of the body: save it unpartitioned, or with every partition in one file \
+                 (Mesh.PartitionSplitMeshFiles = 0)",
+                if held.len() == 1 { "" } else { "s" },
+                held.join(", ")
+            ),
+        ));
+    }
+    finish(vertices, elements.tets, &elements.ignored, path, end_line)
+}
+
+/// From `$PartitionedEntities`: how many partitions the mesh was split into, and the partitions
+/// the volume entities in `volumes` (those holding this file's tets) belong to. `None` when the
+/// section cannot be read or does not name one of them: it is not needed to read the mesh, so
+/// its damage is no error, only no check.
+fn partitions_of(
+    c: &mut Cursor<'_>,
+    volumes: &[i64],
+) -> Option<(usize, std::collections::BTreeSet<i64>)> {
+    let what = &String::new;
+    let total = c.usize_count(what).ok()?;
+    let ghosts = c.usize_count(what).ok()?;
+    for _ in 0..ghosts {
+        c.int(what).ok()?;
+        c.int(what).ok()?;
+    }
+    let mut counts = [0usize; 4];
+    for n in &mut counts {
+        *n = c.usize_count(what).ok()?;
+    }
+    let mut of_volume = HashMap::new();
+    for (dim, &n) in counts.iter().enumerate() {
+        for _ in 0..n {
+            let tag = c.int(what).ok()?;
+            c.int(what).ok()?; // parent's dimension
+            c.int(what).ok()?; // parent's tag
+            let in_partitions = c.usize_count(what).ok()?;
+            let mut partitions = Vec::new();
+            for _ in 0..in_partitions {
+                partitions.push(c.int(what).ok()?);
+            }
+            // A point's coordinates, else a bounding box.
+            for _ in 0..if dim == 0 { 3 } else { 6 } {
+                c.double(what).ok()?;
+            }
+            let physical = c.usize_count(what).ok()?;
+            for _ in 0..physical {
+                c.int(what).ok()?;
+            }
+            if dim > 0 {
+                let bounding = c.usize_count(what).ok()?;
+                for _ in 0..bounding {
+                    c.int(what).ok()?;
+                }
+            }
+            if dim == 3 {
+                of_volume.insert(tag, partitions);
+            }
+        }
+    }
+    c.end_tag("$EndPartitionedEntities").ok()?;
+    let mut held = std::collections::BTreeSet::new();
+    for tag in volumes {
+        held.extend(of_volume.get(tag)?);
+    }
+    Some((total, held))
 }
 
 /// The smallest and largest tag of a `$Nodes` or `$Elements` header: tag 0 is reserved, and the
@@ -458,12 +534,18 @@ fn nodes_per_element(element_type: i64) -> Option<Result<usize, ()>> {
     }))
 }
 
-/// `$Elements`: the 4-node tetrahedra (node indices from `index`) and how many elements of each
-/// other type were skipped.
-fn read_elements(
-    mut c: Cursor<'_>,
-    index: &HashMap<u64, usize>,
-) -> Result<(Vec<[usize; 4]>, Skipped), MeshError> {
+/// What [`read_elements`] reads of `$Elements`.
+struct Elements {
+    /// The 4-node tetrahedra, node indices from `read_elements`' `index`.
+    tets: Vec<[usize; 4]>,
+    /// How many elements of each other type were skipped.
+    ignored: Skipped,
+    /// The tags of the volume entities the tetrahedra belong to.
+    volumes: Vec<i64>,
+}
+
+/// `$Elements`, with node tags mapped to indices by `index`.
+fn read_elements(mut c: Cursor<'_>, index: &HashMap<u64, usize>) -> Result<Elements, MeshError> {
     let num_blocks = c.usize_count(&|| "the number of element blocks in $Elements".into())?;
     let header = c.pos;
     let total = c.usize_count(&|| "the number of elements in $Elements".into())?;
@@ -474,9 +556,10 @@ fn read_elements(
     let mut tets = Vec::new();
     let mut ignored = Skipped::new();
     let mut seen = 0usize;
+    let mut volumes = Vec::new();
     for b in 1..=num_blocks {
-        c.int(&|| format!("the entity dimension of element block {b}"))?;
-        c.int(&|| format!("the entity tag of element block {b}"))?;
+        let dimension = c.int(&|| format!("the entity dimension of element block {b}"))?;
+        let entity = c.int(&|| format!("the entity tag of element block {b}"))?;
         let type_at = c.pos;
         let element_type = c.int(&|| format!("the element type of element block {b}"))?;
         let count_at = c.pos;
@@ -515,6 +598,9 @@ fn read_elements(
             }
             continue;
         }
+        if dimension == 3 && n > 0 {
+            volumes.push(entity);
+        }
         // Never reserve more than the rest of the file could hold.
         tets.reserve(n.min((c.bytes.len() - c.pos) / 8));
         for k in 1..=n {
@@ -542,7 +628,11 @@ fn read_elements(
         ));
     }
     c.end_tag("$EndElements")?;
-    Ok((tets, ignored))
+    Ok(Elements {
+        tets,
+        ignored,
+        volumes,
+    })
 }
 
 /// 1-based line of the `t`-th 4-node tetrahedron (0-based, in file order) of a text file that
