@@ -29,7 +29,26 @@ pub fn read_mesh(path: &Path) -> Result<(TetMesh, ValidationReport), MeshError> 
     };
     if let Format::TetGen = format_of(path)? {
         let (node, ele) = tetgen::pair_paths(path);
-        return parse_tetgen(&read(&node)?, &node, &read(&ele)?, &ele);
+        // The file named is there and its other half is not: say what the other half is.
+        let half = |other: &Path| {
+            read(other).map_err(|e| match e {
+                MeshError::Io { path: at, source }
+                    if source.kind() == std::io::ErrorKind::NotFound && path.is_file() =>
+                {
+                    let reason = format!(
+                        "no such file: a TetGen mesh is two files, and {} needs it beside it \
+                         (TetGen writes both)",
+                        path.display()
+                    );
+                    MeshError::Io {
+                        path: at,
+                        source: std::io::Error::new(source.kind(), reason),
+                    }
+                }
+                other => other,
+            })
+        };
+        return parse_tetgen(&half(&node)?, &node, &half(&ele)?, &ele);
     }
     parse_mesh(&read(path)?, path)
 }
@@ -309,6 +328,24 @@ mod tests {
             "{err}"
         );
         super::write_atomic(&dir.join("sub").join("a.ldm"), b"y").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A TetGen `.node` without its `.ele` says what is missing, and a missing `.node` named
+    /// alone is the system's error.
+    #[test]
+    fn a_tetgen_half_alone_names_the_other() {
+        let dir = std::env::temp_dir().join(format!("tetgen-half-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let node = dir.join("part.1.node");
+        std::fs::write(&node, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n").unwrap();
+        let err = super::read_mesh(&node).unwrap_err().to_string();
+        assert!(err.contains("part.1.ele: no such file: a TetGen mesh is two files, and"));
+        assert!(err.contains("part.1.node needs it beside it"), "{err}");
+        let err = super::read_mesh(&dir.join("other.node"))
+            .unwrap_err()
+            .to_string();
+        assert!(!err.contains("two files"), "{err}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }
