@@ -35,6 +35,13 @@ pub const MAX_HIDDEN_WIDTH: usize = 10_000;
 /// The most hidden layers a scene may ask for.
 pub const MAX_HIDDEN_LAYERS: usize = 64;
 
+/// The most epochs a training may run: far past any network here needs (the defaults stop
+/// within a few thousand), and small enough that a report per epoch is a few megabytes.
+pub const MAX_EPOCHS: usize = 1_000_000;
+
+/// The most networks one training may train from different seeds.
+pub const MAX_RESTARTS: usize = 100;
+
 /// One network, the default (left out of the serialised section, so that the stage keys of
 /// scenes that do not set it stay what they were).
 fn is_one(n: &usize) -> bool {
@@ -271,8 +278,14 @@ impl AutoencoderConfig {
                 ),
             );
         }
-        if self.epochs == 0 {
-            bad("epochs", "must be at least 1, got 0".into());
+        if !(1..=MAX_EPOCHS).contains(&self.epochs) {
+            bad(
+                "epochs",
+                format!(
+                    "must be 1 to {MAX_EPOCHS}, got {} (`patience` stops a training early)",
+                    self.epochs
+                ),
+            );
         }
         if self.batch_size == 0 {
             bad("batch_size", "must be at least 1, got 0".into());
@@ -305,8 +318,11 @@ impl AutoencoderConfig {
         if !(0.0..1.0).contains(&f) {
             bad("validation_fraction", format!("must be in [0, 1), got {f}"));
         }
-        if self.restarts == 0 {
-            bad("restarts", "must be at least 1, got 0".into());
+        if !(1..=MAX_RESTARTS).contains(&self.restarts) {
+            bad(
+                "restarts",
+                format!("must be 1 to {MAX_RESTARTS}, got {}", self.restarts),
+            );
         }
     }
 

@@ -93,7 +93,7 @@ fn train_one(
     mut progress: impl FnMut(EpochReport),
 ) -> Result<TrainOutcome, NnError> {
     let mut trainer = Trainer::for_restart(data, latent_dim, config, restart)?;
-    let mut history = Vec::with_capacity(config.epochs);
+    let mut history = Vec::with_capacity(config.epochs.min(4096));
     let mut stopped_early = false;
     for epoch in 1..=config.epochs {
         let report = trainer.run_epoch()?;

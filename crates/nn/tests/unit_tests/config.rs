@@ -127,6 +127,21 @@ fn invalid_values_name_their_field() {
             "autoencoder.hidden",
         ),
         (AutoencoderConfig { epochs: 0, ..d() }, "autoencoder.epochs"),
+        // A billion epochs once reserved a report for each before the first (48 GB).
+        (
+            AutoencoderConfig {
+                epochs: 1_000_000_000,
+                ..d()
+            },
+            "autoencoder.epochs",
+        ),
+        (
+            AutoencoderConfig {
+                restarts: usize::MAX,
+                ..d()
+            },
+            "autoencoder.restarts",
+        ),
         (
             AutoencoderConfig {
                 batch_size: 0,
