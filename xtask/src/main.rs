@@ -229,8 +229,8 @@ struct StressArgs {
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
     methods: Vec<MethodArg>,
     /// Steps of the free-run condition (test trajectory, then no external force).
-    #[arg(long, allow_negative_numbers = true, default_value_t = 2000)]
-    free_steps: usize,
+    #[arg(long, allow_negative_numbers = true, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..=fem_core::integrator::MAX_FRAMES as u64))]
+    free_steps: u64,
     /// Held-out test trajectory to simulate.
     #[arg(long, allow_negative_numbers = true, default_value_t = 0)]
     trajectory: usize,
@@ -931,7 +931,7 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
     let results = pipeline::stress::stress(
         &mut p,
         &methods,
-        &Condition::defaults(free_steps),
+        &Condition::defaults(free_steps as usize),
         trajectory,
         &progress,
         &mut |r| println!("{r}"),

@@ -12,7 +12,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use fem_core::integrator::FullSpaceModel;
 
 use crate::pipeline::{Pipeline, Progress};
@@ -176,6 +176,15 @@ pub fn stress(
     on_result: &mut dyn FnMut(&StressResult),
 ) -> Result<Vec<StressResult>> {
     let base_scene = base.scene.clone();
+    if let Some(n) = conditions.iter().find_map(|c| match c {
+        Condition::FreeRun(n) if *n > fem_core::integrator::MAX_FRAMES => Some(n),
+        _ => None,
+    }) {
+        bail!(
+            "a free run of {n} steps is more than the {} a trajectory may have",
+            fem_core::integrator::MAX_FRAMES
+        );
+    }
     let mut results = Vec::new();
     for c in conditions {
         let scene = c.apply(&base_scene);
