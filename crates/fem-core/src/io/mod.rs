@@ -282,10 +282,27 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Removes the temporaries of [`write_atomic`] (`.NAME.*.tmp`) in `dir` that were last modified
-/// more than `older_than` ago: left behind by writers that were killed. A live writer holds its
-/// temporary for the seconds one write takes, so an age test is safe even when several processes
-/// share the folder (array jobs writing shards of one cache). Returns how many were removed.
+/// Whether `name` is the name [`write_atomic`] gives its temporaries, `.NAME.PID-CALL-NANOS.tmp`
+/// (NANOS nine digits): a user's own hidden `.notes.tmp` in the same folder is not one.
+fn is_write_atomic_temporary(name: &str) -> bool {
+    let Some(stem) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else {
+        return false;
+    };
+    let Some((named, stamp)) = stem.rsplit_once('.') else {
+        return false;
+    };
+    let parts: Vec<&str> = stamp.split('-').collect();
+    let digits = |p: &str| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit());
+    !named.is_empty()
+        && matches!(parts[..], [pid, call, nanos] if digits(pid) && digits(call) && digits(nanos) && nanos.len() == 9)
+}
+
+/// Removes the temporaries of [`write_atomic`] (`.NAME.PID-CALL-NANOS.tmp`) in `dir` that were
+/// last modified more than `older_than` ago: left behind by writers that were killed. A live
+/// writer holds its temporary for the seconds one write takes, so an age test is safe even when
+/// several processes share the folder (array jobs writing shards of one cache). Other files,
+/// hidden `.tmp` files of other programs included, are left alone. Returns how many were
+/// removed.
 pub fn remove_stale_temporaries(
     dir: &Path,
     older_than: std::time::Duration,
@@ -296,7 +313,7 @@ pub fn remove_stale_temporaries(
         let entry = entry?;
         let name = entry.file_name();
         let name = name.to_string_lossy();
-        if !(name.starts_with('.') && name.ends_with(".tmp") && entry.file_type()?.is_file()) {
+        if !(is_write_atomic_temporary(&name) && entry.file_type()?.is_file()) {
             continue;
         }
         let age = entry
@@ -328,6 +345,39 @@ mod tests {
             "{err}"
         );
         super::write_atomic(&dir.join("sub").join("a.ldm"), b"y").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Only write_atomic's own temporaries are stale temporaries.
+    #[test]
+    fn stale_temporaries_are_only_write_atomic_s() {
+        let dir = std::env::temp_dir().join(format!("stale-tmp-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Leave one behind as a killed writer would: its rename into a folder fails.
+        std::fs::create_dir_all(dir.join("a.art")).unwrap();
+        super::write_atomic(&dir.join("a.art"), b"x").unwrap_err();
+        let ours: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().collect();
+        assert_eq!(
+            ours.len(),
+            1,
+            "write_atomic removes its temporary on failure"
+        );
+        for name in [
+            ".a.art.123-0-000000042.tmp",
+            ".notes.tmp",
+            ".x.1-2-3.tmp",
+            "a.1-2-000000003.tmp",
+        ] {
+            let hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+            std::fs::File::create(dir.join(name))
+                .and_then(|f| f.set_modified(hour_ago))
+                .unwrap();
+        }
+        let minute = std::time::Duration::from_secs(60);
+        let removed = super::remove_stale_temporaries(&dir, minute).unwrap();
+        assert_eq!(removed, 1);
+        assert!(!dir.join(".a.art.123-0-000000042.tmp").exists());
+        assert!(dir.join(".notes.tmp").exists() && dir.join(".x.1-2-3.tmp").exists());
         std::fs::remove_dir_all(&dir).ok();
     }
 
