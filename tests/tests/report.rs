@@ -727,6 +727,13 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     let other = scene_model(&mut q, Method::PcaCubature, Rows::Used, &no_progress).unwrap();
     let said = run_verdict(&out.join("run"), &other, &stiffer);
     assert!(said.contains("is of other stages"), "{said}");
+    // Without a scene at hand (`view --model`), the stages alone tell the report's model.
+    assert!(pipeline::export::report_is_of(&out.join("run"), &model));
+    assert!(!pipeline::export::report_is_of(&out.join("run"), &other));
+    assert!(!pipeline::export::report_is_of(
+        &out.join("nowhere"),
+        &model
+    ));
     let said = run_verdict(&out.join("nowhere"), &model, &s);
     assert!(said.starts_with("not measured: no run report in"), "{said}");
     // The same stages under other solver settings, which no stage key holds.

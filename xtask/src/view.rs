@@ -2,7 +2,7 @@
 //! a model file, beside full space for the contrast.
 
 use std::net::{IpAddr, SocketAddr, TcpListener};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use latent_sim::model::{MeasuredError, Rows};
@@ -105,7 +105,17 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             // `run` writes its models beside its report.
             let report = path.with_file_name("report.md");
             if report.is_file() {
-                println!("the report beside it: {}", report.display());
+                let dir = report.parent().unwrap_or(Path::new("."));
+                if pipeline::export::report_is_of(dir, &model) {
+                    println!("the report beside it: {}", report.display());
+                } else {
+                    println!(
+                        "the report beside it ({}) is not of this model: a later run of another \
+                         scene, or of this one changed, wrote there (`cargo xtask run` the \
+                         model's scene again to measure it)",
+                        report.display()
+                    );
+                }
             }
             let methods = vec![
                 viewer::Method::new(name.clone(), model.simulator()?),

@@ -378,13 +378,7 @@ fn measured(
             path.display()
         ));
     }
-    let same_stages = model.provenance.stage_keys.iter().all(|k| {
-        let key = format!("{:016x}", k.key);
-        stages
-            .iter()
-            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
-    });
-    if !same_stages {
+    if !of_stages(&stages, model) {
         return Err(format!(
             "not measured: {} is of other stages (the scene changed since, or another scene \
              wrote there; {run})",
@@ -399,6 +393,29 @@ fn measured(
         ));
     }
     Ok((report, error))
+}
+
+/// Whether the stages a run report lists (its `stages`) include every stage `model` was made
+/// of, each with the same key.
+fn of_stages(stages: &[serde_json::Value], model: &ReducedModel) -> bool {
+    model.provenance.stage_keys.iter().all(|k| {
+        let key = format!("{:016x}", k.key);
+        stages
+            .iter()
+            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
+    })
+}
+
+/// Whether the `report.json` in `out` is of `model`'s stages (the run that wrote it used the
+/// stages the model was made of), when no scene is at hand to compare settings with: `view
+/// --model` names the report beside a model only then, not one a later run of another scene
+/// wrote into the same folder.
+pub fn report_is_of(out: &Path, model: &ReducedModel) -> bool {
+    std::fs::read(out.join("report.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|r| r["stages"].as_array().map(|s| of_stages(s, model)))
+        .unwrap_or(false)
 }
 
 /// Whether a line of a run's warnings concerns `method`'s model: it names the method (alone or
