@@ -479,6 +479,44 @@ fn several_trajectories_report_each_and_their_spread() {
     assert!(e.contains("at least 1"), "{e}");
 }
 
+/// A run of test trajectory 1 from an empty cache, where the cubature stage computes trajectory
+/// 0's reference after the run's own, lists the run's reference among its stages, as the same
+/// run on the warm cache does.
+#[test]
+fn a_report_names_its_own_reference_from_an_empty_cache() {
+    let out = scratch_dir("report-own-reference");
+    let s = scene(TINY);
+    let reference_key = |dir: &str| {
+        let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
+        let opts = RunOptions {
+            out: out.join(dir),
+            every: 0,
+            methods: Method::ALL.to_vec(),
+            trajectory: 1,
+        };
+        run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+        let computed = p
+            .outcomes
+            .iter()
+            .filter(|o| o.stage == pipeline::stage::Stage::Reference && !o.cached)
+            .count();
+        let json = std::fs::read(opts.out.join("report.json")).unwrap();
+        let report: serde_json::Value = serde_json::from_slice(&json).unwrap();
+        let stages = report["stages"].as_array().unwrap().clone();
+        let references: Vec<_> = stages
+            .iter()
+            .filter(|l| l["stage"] == "reference")
+            .collect();
+        assert_eq!(references.len(), 1, "{stages:?}");
+        (computed, references[0]["key"].clone())
+    };
+    let (cold_computed, cold) = reference_key("cold");
+    let (warm_computed, warm) = reference_key("warm");
+    // Both references computed the first time (the test is not vacuous), none the second.
+    assert_eq!((cold_computed, warm_computed), (2, 0));
+    assert_eq!(cold, warm);
+}
+
 /// The reference's compression reaches the report whether or not `full` ran: on its row when
 /// it did, on the first row otherwise (a `full-lbfgs` row too), the same values.
 #[test]

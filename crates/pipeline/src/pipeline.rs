@@ -907,7 +907,7 @@ impl<'a> Pipeline<'a> {
             .finish()
     }
 
-    fn reference_key(&self, trajectory: usize) -> u64 {
+    pub(crate) fn reference_key(&self, trajectory: usize) -> u64 {
         // Trajectory i depends on the test family's seed and i, not on how many trajectories
         // it has: keyed as a family of one, a scene whose `[test] schedules` grows (`run
         // --trajectories`) keeps its references and the stages keyed on trajectory 0's, and

@@ -15,6 +15,7 @@ use crate::pipeline::{Pipeline, Progress};
 use crate::plot::{Plot, Scale, Series};
 use crate::scene::Scene;
 use crate::simulate::{Method, Runner, SimulateOptions, StepParts, Trajectory, median, write_json};
+use crate::stage::Stage;
 
 /// The start of the name under which `run` records a method's trajectory error in its model
 /// file ([`MeasuredError::name`]), the test trajectory's number after it.
@@ -1006,7 +1007,7 @@ pub fn run(
         trajectory: opts.trajectory,
         frames: pipeline.scene.test().frames_per_schedule,
         time_step: pipeline.scene.time.step,
-        stages: stage_lines(&pipeline.outcomes),
+        stages: stage_lines(&pipeline.outcomes, pipeline.reference_key(opts.trajectory)),
         untrusted: assessment.untrusted,
         caveats: assessment.caveats,
         test_forces: &test_forces,
@@ -1059,11 +1060,18 @@ pub fn run(
     Ok(rows)
 }
 
-/// Each stage's last outcome, in the order the stages first came: a pipeline that ran several
-/// test trajectories holds one `reference` per trajectory, of which this run's is the last.
-fn stage_lines(outcomes: &[crate::pipeline::StageOutcome]) -> Vec<StageLine> {
+/// Each stage's last outcome, in the order the stages first came, and of the `reference`s
+/// (one per test trajectory the pipeline ran) the one keyed `reference`, this run's: the cubature
+/// stage computes trajectory 0's, after this run's when the cache is empty.
+fn stage_lines(outcomes: &[crate::pipeline::StageOutcome], reference: u64) -> Vec<StageLine> {
+    let ours = outcomes
+        .iter()
+        .any(|o| o.stage == Stage::Reference && o.key == reference);
     let mut lines: Vec<StageLine> = Vec::new();
-    for o in outcomes {
+    for o in outcomes
+        .iter()
+        .filter(|o| o.stage != Stage::Reference || o.key == reference || !ours)
+    {
         let line = StageLine {
             stage: o.stage.to_string(),
             key: format!("{:016x}", o.key),
