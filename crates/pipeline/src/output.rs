@@ -16,13 +16,28 @@ pub fn create_folder(path: &Path, name: &str, purpose: &str) -> Result<()> {
         .with_context(|| format!("cannot create {name} {}", path.display()))
 }
 
-/// [`create_folder`]'s check alone, creating nothing: a file in the folder's place is refused.
+/// [`create_folder`]'s check alone, creating nothing: a file in the folder's place, or in the
+/// place of a folder above it, and a link to nothing are refused naming the path at fault.
 pub fn check_folder(path: &Path, name: &str, purpose: &str) -> Result<()> {
-    if path.exists() && !path.is_dir() {
-        anyhow::bail!(
-            "{name} {} is a file, not a folder: give a folder {purpose}",
-            path.display()
-        );
+    // Without a trailing `/`, which makes a file's path "not a directory".
+    let path: PathBuf = path.components().collect();
+    for at in path.ancestors().filter(|a| !a.as_os_str().is_empty()) {
+        let Ok(meta) = at.symlink_metadata() else {
+            continue;
+        };
+        let whose = if at == path {
+            format!("{name} {}", at.display())
+        } else {
+            format!("{} (above {name} {})", at.display(), path.display())
+        };
+        if meta.is_symlink() && !at.exists() {
+            anyhow::bail!("{whose} is a link to nothing: give a folder {purpose}");
+        }
+        if !at.is_dir() {
+            anyhow::bail!("{whose} is a file, not a folder: give a folder {purpose}");
+        }
+        // The first that exists is a folder: the rest above it are too.
+        break;
     }
     Ok(())
 }
@@ -129,6 +144,44 @@ impl FrameWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file in a folder's place, above it, or behind a trailing `/`, and a link to nothing,
+    /// are named as such, not as "File exists" or "Not a directory".
+    #[test]
+    fn folders_that_are_not_are_named() {
+        let dir = std::env::temp_dir().join(format!("check-folder-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("afile");
+        std::fs::write(&file, "x").unwrap();
+        let said = |p: PathBuf| {
+            create_folder(&p, "the cache folder", "for the stages' artifacts")
+                .unwrap_err()
+                .to_string()
+        };
+        let mut slash = file.clone().into_os_string();
+        slash.push("/");
+        for p in [file.clone(), PathBuf::from(slash)] {
+            let e = said(p);
+            assert!(
+                e.ends_with(
+                    "afile is a file, not a folder: give a folder for the stages' artifacts"
+                ),
+                "{e}"
+            );
+        }
+        let e = said(file.join("sub"));
+        assert!(e.contains("afile (above the cache folder"), "{e}");
+        assert!(e.contains("is a file, not a folder"), "{e}");
+        #[cfg(unix)]
+        {
+            let link = dir.join("dangling");
+            std::os::unix::fs::symlink(dir.join("nowhere"), &link).unwrap();
+            let e = said(link);
+            assert!(e.contains("dangling is a link to nothing"), "{e}");
+        }
+        create_folder(&dir.join("a").join("b"), "the cache folder", "").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     /// Dates against ones known: the epoch, a leap day, the turn of 2000, and today's kind.
     #[test]

@@ -27,6 +27,25 @@ use crate::stage::Stage;
 /// seconds).
 pub const STALE_TEMPORARY_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
 
+/// Whether a file can be made in folder `dir`: one is created there under a name of
+/// [`fem_core::io::write_atomic`]'s temporaries (which a later sweep removes if this one is
+/// killed in between) and removed.
+fn writable(dir: &Path) -> std::io::Result<()> {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let probe = dir.join(format!(
+        ".write-probe.{}-0-{nanos:09}.tmp",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(dir)?;
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)?;
+    std::fs::remove_file(&probe)
+}
+
 /// What happened to one stage in a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StageOutcome {
@@ -981,6 +1000,14 @@ impl<'a> Pipeline<'a> {
                 Err(e) => tracing::warn!("{}; computing the stage again", e.problem()),
             }
         }
+        // A cache folder that cannot be written would fail the stage only once computed.
+        writable(&self.cache).with_context(|| {
+            format!(
+                "the cache folder {} cannot be written, and stage {stage} is not in it: give a \
+                 folder you may write (--cache)",
+                self.cache.display()
+            )
+        })?;
         (self.on_stage_start)(stage);
         let value = compute(self)?;
         artifact::save(&path, stage, key, self.mesh_hash, &value)
