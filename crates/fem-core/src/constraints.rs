@@ -45,7 +45,9 @@ pub struct PlaneSelector {
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BoxSelector {
+    #[serde(deserialize_with = "crate::exact::array")]
     pub min: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     pub max: [f64; 3],
 }
 
@@ -53,6 +55,7 @@ pub struct BoxSelector {
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SphereSelector {
+    #[serde(deserialize_with = "crate::exact::array")]
     pub center: [f64; 3],
     pub radius: f64,
 }

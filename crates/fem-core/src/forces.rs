@@ -32,6 +32,7 @@ pub struct ForceConfig {
     pub stiffness: Option<f64>,
     /// Keyframes `[t, x, y, z]`: the spring's target offset in m, or the point load's total force
     /// in N.
+    #[serde(deserialize_with = "crate::exact::rows")]
     pub keyframes: Vec<[f64; 4]>,
     /// Time the force switches on (s).
     #[serde(default)]

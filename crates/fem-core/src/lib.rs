@@ -21,6 +21,7 @@ pub mod assembly;
 pub mod constraints;
 pub mod element;
 pub mod error;
+pub mod exact;
 pub mod forces;
 pub mod integrator;
 pub mod io;

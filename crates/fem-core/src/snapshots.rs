@@ -72,9 +72,17 @@ pub struct ScheduleSection {
     pub seed: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kinds: Option<Vec<ScheduleKind>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "crate::exact::option"
+    )]
     pub offset: Option<[f64; 2]>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "crate::exact::option"
+    )]
     pub stiffness: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub patch_radius: Option<f64>,

@@ -42,6 +42,23 @@ pub const MAX_EPOCHS: usize = 1_000_000;
 /// The most networks one training may train from different seeds.
 pub const MAX_RESTARTS: usize = 100;
 
+/// `latent_dims` read with its length checked: a scene's TOML hands serde an array as a tuple
+/// and lets it stop at two values, so `[4, 8, 16]` was read as `[4, 8]` without a word (as
+/// `fem_core::exact` reads the other sections' lists). Binary formats read as before.
+fn two_or_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[usize; 2]>, D::Error> {
+    use serde::Deserialize;
+    if !d.is_human_readable() {
+        return Option::<[usize; 2]>::deserialize(d);
+    }
+    Option::<Vec<usize>>::deserialize(d)?
+        .map(|v| {
+            let n = v.len();
+            <[usize; 2]>::try_from(v)
+                .map_err(|_| serde::de::Error::invalid_length(n, &"a list of 2 values"))
+        })
+        .transpose()
+}
+
 /// One network, the default (left out of the serialised section, so that the stage keys of
 /// scenes that do not set it stay what they were).
 fn is_one(n: &usize) -> bool {
@@ -57,7 +74,11 @@ pub struct AutoencoderConfig {
     pub latent_dim: Option<usize>,
     /// Search d = lo..=hi in order for the smallest whose maximum vertex error is at most
     /// `max_vertex_error` (see [`crate::train_search`]).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "two_or_none"
+    )]
     pub latent_dims: Option<[usize; 2]>,
     /// The tolerance of the `latent_dims` search (absolute, in the data's units, e.g. metres).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -1169,6 +1169,22 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
             u32::from(c)
         )));
     }
+    // Decimal commas in a list (`acceleration = [0,0, -9,81, 0,0]`), which TOML reads as more
+    // values than the list takes: a comma between two digits names the first.
+    if message.starts_with("invalid length ") {
+        let list = code.split_once('=').map_or(code, |(_, v)| v);
+        let b = list.as_bytes();
+        let comma = (1..b.len().saturating_sub(1))
+            .find(|&i| b[i] == b',' && b[i - 1].is_ascii_digit() && b[i + 1].is_ascii_digit())?;
+        let digits = |c: char| c.is_ascii_digit();
+        let whole = &list[list[..comma].rfind(|c| !digits(c)).map_or(0, |i| i + 1)..comma];
+        let rest = &list[comma + 1..];
+        let fraction = &rest[..rest.find(|c| !digits(c)).unwrap_or(rest.len())];
+        return Some(Hint::Said(format!(
+            "decimal commas? TOML's decimal point is a dot, and a comma separates a list's \
+             values: write `{whole}.{fraction}`, not `{whole},{fraction}`"
+        )));
+    }
     // A decimal comma (`poisson_ratio = 0,4`) outside an array, where a comma separates numbers.
     let value = code.split_once('=').map(|(_, v)| v.trim());
     if let Some((whole, fraction)) = value.and_then(|v| v.split_once(','))

@@ -212,6 +212,20 @@ fn common_mistakes_say_what_to_write() {
             edit("poisson_ratio = 0.4", "poisson_ratio = 0,4"),
             "write `0.4`: TOML's decimal point is a dot",
         ),
+        // In a list, decimal commas make more values than it takes (it was cut to three).
+        (
+            edit("[0.0, -9.81, 0.0]", "[0,0, -9,81, 0,0]"),
+            "`gravity.acceleration`: TOML parse error",
+        ),
+        (
+            edit("[0.0, -9.81, 0.0]", "[0,0, -9,81, 0,0]"),
+            "invalid length 6, expected a list of 3 values\ndecimal commas? TOML's decimal point \
+             is a dot, and a comma separates a list's values: write `0.0`, not `0,0`",
+        ),
+        (
+            edit("[0.0, -9.81, 0.0]", "[0.0, -9.81, 0.0, 1.0]"),
+            "invalid length 4, expected a list of 3 values",
+        ),
         (
             edit("frames = 10", "frames = 1,000"),
             "write `1.000`: TOML's decimal point is a dot, never a comma, or `1000` if the comma \

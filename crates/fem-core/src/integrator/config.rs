@@ -58,6 +58,7 @@ pub const MAX_FRAMES: usize = 1_000_000;
 #[serde(deny_unknown_fields)]
 pub struct GravityConfig {
     /// Gravitational acceleration in m/s².
+    #[serde(deserialize_with = "crate::exact::array")]
     pub acceleration: [f64; 3],
 }
 

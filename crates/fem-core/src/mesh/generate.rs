@@ -16,11 +16,13 @@ pub struct BoxSpec {
     #[serde(default)]
     pub kind: GeneratedShape,
     /// Edge lengths of the box.
+    #[serde(deserialize_with = "crate::exact::array")]
     pub size: [f64; 3],
     /// Number of cells along each axis (each ≥ 1).
+    #[serde(deserialize_with = "crate::exact::array")]
     pub cells: [usize; 3],
     /// Minimum corner.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "crate::exact::array")]
     pub origin: [f64; 3],
 }
 
