@@ -756,6 +756,9 @@ impl<'a> Pipeline<'a> {
     /// Builds the scene's model; `cache` is the folder for artifacts.
     pub fn new(scene: &'a Scene, cache: impl AsRef<Path>) -> Result<Self> {
         let cache = cache.as_ref();
+        // A scene read from a file was checked; one built or changed in code is checked here,
+        // before a stage meets what it did not expect (an empty list of training kinds).
+        scene.check()?;
         let built = scene.build_model()?;
         let model = built.model;
         let body = BodyCounts {

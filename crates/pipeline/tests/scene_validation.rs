@@ -115,6 +115,19 @@ fn the_base_scene_is_valid() {
     builds(BASE, Path::new("."));
 }
 
+/// A scene changed in code is checked as a file's is, before a stage meets it (an empty list
+/// of training kinds reached the snapshot generator as an index out of bounds).
+#[test]
+fn a_scene_changed_in_code_is_checked() {
+    let mut scene = Scene::builtin();
+    scene.training.kinds = Some(Vec::new());
+    let err = pipeline::pipeline::Pipeline::new(&scene, scratch("changed-in-code").join("cache"))
+        .err()
+        .expect("an empty list of kinds is refused")
+        .to_string();
+    assert!(err.contains("training.kinds"), "{err}");
+}
+
 #[test]
 fn unknown_keys_are_errors_naming_the_key_and_its_section() {
     let cases = [
