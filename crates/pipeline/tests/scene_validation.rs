@@ -121,11 +121,10 @@ fn the_base_scene_is_valid() {
 fn a_scene_changed_in_code_is_checked() {
     let mut scene = Scene::builtin();
     scene.training.kinds = Some(Vec::new());
-    let err = pipeline::pipeline::Pipeline::new(&scene, scratch("changed-in-code").join("cache"))
-        .err()
-        .expect("an empty list of kinds is refused")
-        .to_string();
-    assert!(err.contains("training.kinds"), "{err}");
+    let Err(err) = pipeline::pipeline::Pipeline::new(&scene, scratch("changed-in-code")) else {
+        panic!("an empty list of kinds is refused");
+    };
+    assert!(err.to_string().contains("training.kinds"), "{err}");
 }
 
 #[test]
