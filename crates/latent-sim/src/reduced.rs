@@ -372,10 +372,16 @@ impl ReducedSpace {
         if k == 0 {
             return bad("the basis has no column".into());
         }
+        // A count read from a file: its products checked, not wrapped into a wrong figure.
+        let (Some(square), Some(three)) = (k.checked_mul(k), k.checked_mul(3)) else {
+            return bad(format!(
+                "the basis has {k} columns, more than memory can hold"
+            ));
+        };
         for (what, v, len) in [
-            ("reduced mass", mass, k * k),
-            ("reduced rest stiffness", rest_stiffness, k * k),
-            ("reduced gravity", gravity_axes, 3 * k),
+            ("reduced mass", mass, square),
+            ("reduced rest stiffness", rest_stiffness, square),
+            ("reduced gravity", gravity_axes, three),
         ] {
             if v.len() != len {
                 return bad(format!(
@@ -387,7 +393,7 @@ impl ReducedSpace {
                 return bad(format!("the {what} is not finite"));
             }
         }
-        if Some(rows.len()) != vertices.len().checked_mul(3 * k) {
+        if Some(rows.len()) != vertices.len().checked_mul(three) {
             return bad(format!(
                 "{} basis values for {} vertices of 3 × {k} rows",
                 rows.len(),

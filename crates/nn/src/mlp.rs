@@ -177,11 +177,10 @@ impl Mlp {
         }
         for l in 0..layers {
             let (n_in, n_out) = (sizes[l], sizes[l + 1]);
-            if weights[l].len() != n_in * n_out {
+            if Some(weights[l].len()) != n_in.checked_mul(n_out) {
                 return bad(format!(
-                    "layer {l} has {} weights, expected {n_out} × {n_in} = {}",
-                    weights[l].len(),
-                    n_in * n_out
+                    "layer {l} has {} weights, expected {n_out} × {n_in}",
+                    weights[l].len()
                 ));
             }
             if biases[l].len() != n_out {
