@@ -80,9 +80,20 @@ impl KeyBuilder {
         Self(fnv1a_continue(h, &stage.version().to_le_bytes()))
     }
 
-    /// Mixes in a serialisable value (a scene section, a list of pinned vertices, …).
+    /// Mixes in a serialisable value (a scene section, a list of pinned vertices, …). A
+    /// negative zero is mixed as zero: `[-0.0, -9.81, 0.0]` is the same gravity.
     pub fn mix<T: Serialize + ?Sized>(mut self, value: &T) -> Self {
-        let bytes = serde_json::to_vec(value).expect("scene values serialise to JSON");
+        let mut bytes = serde_json::to_vec(value).expect("scene values serialise to JSON");
+        let mut at = 0;
+        while let Some(i) = bytes[at..].windows(4).position(|w| w == b"-0.0") {
+            let i = at + i;
+            let number_ends = bytes.get(i + 4).is_none_or(|b| !b.is_ascii_digit());
+            let number_starts = i == 0 || !bytes[i - 1].is_ascii_alphanumeric();
+            if number_ends && number_starts {
+                bytes.remove(i);
+            }
+            at = i + 1;
+        }
         self.0 = fnv1a_continue(self.0, &(bytes.len() as u64).to_le_bytes());
         self.0 = fnv1a_continue(self.0, &bytes);
         self
@@ -257,6 +268,17 @@ mod tests {
         let d = std::env::temp_dir().join(format!("artifact-test-{}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         d.join(name)
+    }
+
+    /// A negative zero keys as zero; other numbers with a minus keep it.
+    #[test]
+    fn negative_zero_keys_as_zero() {
+        let key = |v: &[f64]| KeyBuilder::new(Stage::Pca).mix(v).finish();
+        assert_eq!(key(&[-0.0, -9.81, 0.0]), key(&[0.0, -9.81, 0.0]));
+        assert_eq!(key(&[-0.0]), key(&[0.0]));
+        assert_ne!(key(&[-0.01]), key(&[0.01]));
+        assert_ne!(key(&[-0.05, 1.0]), key(&[0.05, 1.0]));
+        assert_ne!(key(&[-10.0]), key(&[10.0]));
     }
 
     #[test]

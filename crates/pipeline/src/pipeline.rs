@@ -897,9 +897,17 @@ impl<'a> Pipeline<'a> {
     }
 
     pub fn pca_key(&self) -> u64 {
+        // The default rule written out is the default rule.
+        let mut pca = self.scene.pca.clone();
+        if pca.dimension.is_none()
+            && pca.max_vertex_error.is_none()
+            && pca.explained_energy == Some(pca::DEFAULT_EXPLAINED_ENERGY)
+        {
+            pca.explained_energy = None;
+        }
         KeyBuilder::new(Stage::Pca)
             .mix_key(self.snapshots_key())
-            .mix(&self.scene.pca)
+            .mix(&pca)
             .mix(&(
                 self.gravity_directions(),
                 GRAVITY_ONSET_MISSED,

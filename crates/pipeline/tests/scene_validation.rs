@@ -115,6 +115,23 @@ fn the_base_scene_is_valid() {
     builds(BASE, Path::new("."));
 }
 
+/// The default PCA rule written out keys the stage as the default left out does.
+#[test]
+fn a_default_written_out_keys_as_left_out() {
+    let scene = Scene::builtin();
+    let mut written = scene.clone();
+    written.pca.explained_energy = Some(pca::DEFAULT_EXPLAINED_ENERGY);
+    let mut other = scene.clone();
+    other.pca.explained_energy = Some(0.999);
+    let key = |s: &Scene| {
+        pipeline::pipeline::Pipeline::new(s, scratch("default-written-out"))
+            .map(|p| p.pca_key())
+            .unwrap()
+    };
+    assert_eq!(key(&scene), key(&written));
+    assert_ne!(key(&scene), key(&other));
+}
+
 /// A scene changed in code is checked as a file's is, before a stage meets it (an empty list
 /// of training kinds reached the snapshot generator as an index out of bounds).
 #[test]
