@@ -396,6 +396,14 @@ fn methods(names: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<Method>> {
     let names: Option<Vec<String>> = match names {
         None => None,
         Some(one) if one.is_instance_of::<pyo3::types::PyString>() => Some(vec![one.extract()?]),
+        // A sequence is reserved whole before it is read: a `range(10**12)` is refused first.
+        Some(many) if many.len().is_ok_and(|n| n > 4 * Method::ALL.len()) => {
+            return Err(Class::InvalidArgument.err(format!(
+                "methods lists {} items; there are {} methods",
+                many.len().unwrap_or_default(),
+                Method::ALL.len()
+            )));
+        }
         Some(many) => Some(many.extract().map_err(|_| {
             // A list with something else than a name in it: that item, else the whole.
             let item = many.try_iter().ok().and_then(|items| {

@@ -327,9 +327,11 @@ fn is_float32(py: Python<'_>, dtype: &Bound<'_, PyAny>) -> PyResult<bool> {
     }
 }
 
-/// Vertex indices from an int or a sequence (or integer array) of them, none negative; the
-/// error names the element that is not one (a bool, a float, an int past 64 bits).
-fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
+/// Vertex indices from an int or a sequence (or integer array) of them, none negative and no
+/// more of them than the mesh's `count` vertices (a `range(10**12)` or an endless generator is
+/// refused before it is read, not read until memory runs out); the error names the element that
+/// is not one (a bool, a float, an int past 64 bits).
+fn vertex_list(vertices: &Bound<'_, PyAny>, count: usize) -> PyResult<Vec<usize>> {
     use pyo3::types::{PyBool, PyInt, PyString};
     fn bad<T>(message: String) -> PyResult<T> {
         Err(Class::InvalidArgument.err(message))
@@ -397,8 +399,20 @@ fn vertex_list(vertices: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
                 describe(vertices)
             ));
         };
+        let too_many = || {
+            bad(format!(
+                "vertices lists more items than the mesh's {count} vertices: give each vertex \
+                 once"
+            ))
+        };
+        if vertices.len().is_ok_and(|n| n > count) {
+            return too_many();
+        }
         let mut values = Vec::new();
         for (i, item) in items.enumerate() {
+            if i == count {
+                return too_many();
+            }
             values.push(index(&item?, Some(i))?);
         }
         values
@@ -571,7 +585,7 @@ impl Simulator {
         vertices: &Bound<'_, PyAny>,
         stiffness: f64,
     ) -> PyResult<Handle> {
-        let vertices = vertex_list(vertices)?;
+        let vertices = vertex_list(vertices, self.vertex_count())?;
         let handle = self
             .with(
                 py,
@@ -646,6 +660,15 @@ impl Simulator {
                 )));
             }
         };
+        // A sequence is reserved whole before it is read: its length is checked first.
+        if let Ok(n) = keyframes.len()
+            && n > fem_core::integrator::MAX_FRAMES
+        {
+            return Err(Class::InvalidArgument.err(format!(
+                "keyframes has {n} rows, more than {}",
+                fem_core::integrator::MAX_FRAMES
+            )));
+        }
         let keyframes: Vec<[f64; 4]> = keyframes.extract().map_err(|_| {
             // Rows of numbers of another length are said by the first such row.
             let rows: Option<Vec<Vec<f64>>> = keyframes.extract().ok();
@@ -662,7 +685,7 @@ impl Simulator {
         })?;
         let force = ExternalForce {
             kind,
-            vertices: vertex_list(vertices)?,
+            vertices: vertex_list(vertices, self.vertex_count())?,
             stiffness,
             keyframes,
             start,

@@ -161,6 +161,12 @@ def test_invalid_arguments(sim: ld.Simulator) -> None:
         (lambda: sim.grab_near((10**400, 0.0, 0.0), 0.1, 1.0), r"got int as item 0, which is no float \(.*too large"),
         (lambda: sim.grab_near(itertools.count(), 0.1, 1.0), r"point must be 3 numbers \(x, y, z\), got count"),
         (lambda: sim.grab_near(range(10**12), 0.1, 1.0), r"point must be 3 numbers \(x, y, z\), got 1000000000000"),
+        # Lists reserved or read whole, once until memory ran out: refused by their length first.
+        (lambda: sim.grab(range(10**12), 1.0), f"more items than the mesh's {n} vertices"),
+        (lambda: sim.grab(itertools.count(), 1.0), f"more items than the mesh's {n} vertices"),
+        (lambda: sim.add_force("point", [0], range(10**12)), "keyframes has 1000000000000 rows"),
+        (lambda: sim.add_force("point", [0], range(2**62)), "keyframes has 4611686018427387904 rows"),
+        (lambda: ld.run_pipeline(TINY, methods=range(10**12)), "methods lists 1000000000000 items"),
         (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), np.zeros((3, 1))), r"got an array of shape \[3, 1\]"),
         (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), "abc"), "target must be 3 numbers"),
         (lambda: sim.move_handle(sim.grab([tip(sim)], 1.0), (0.0, math.inf, 0.0)), "target must be finite"),
