@@ -111,6 +111,36 @@ impl ForceConfig {
 }
 
 impl ExternalForce {
+    /// What makes this force unusable on a mesh of `num_vertices` vertices, if anything: no
+    /// vertex or one past the mesh, keyframes that are empty, not finite or out of time order,
+    /// a stiffness that is negative or not finite, a span that is not a number. A force built
+    /// in code is checked so before a model takes it ([`crate::integrator::FullSpaceModel::new`]);
+    /// a scene's is made right by [`ForceConfig::resolve`].
+    pub fn problem(&self, num_vertices: usize) -> Option<String> {
+        let k = &self.keyframes;
+        if self.vertices.is_empty() {
+            Some("acts on no vertex".into())
+        } else if let Some(v) = self.vertices.iter().find(|&&v| v >= num_vertices) {
+            Some(format!(
+                "vertex {v} is past the mesh's {num_vertices} vertices"
+            ))
+        } else if k.is_empty()
+            || k.iter().flatten().any(|x| !x.is_finite())
+            || k.windows(2).any(|w| w[1][0] < w[0][0])
+        {
+            Some("keyframes must be finite [t, x, y, z] rows in time order, at least one".into())
+        } else if !(self.stiffness.is_finite() && self.stiffness >= 0.0) {
+            Some(format!(
+                "the stiffness must be finite and not negative, got {}",
+                self.stiffness
+            ))
+        } else if self.start.is_nan() || self.end.is_nan() {
+            Some("start and end must be numbers (infinite for always)".into())
+        } else {
+            None
+        }
+    }
+
     pub fn is_active(&self, t: f64) -> bool {
         t >= self.start && t < self.end
     }

@@ -186,6 +186,9 @@ pub enum ReducedError {
     /// A force index past the forces there are.
     #[error("there is no force {index} (there are {count})")]
     NoSuchForce { index: usize, count: usize },
+    /// A force that cannot act on this model ([`fem_core::forces::ExternalForce::problem`]).
+    #[error("invalid force: {reason}")]
+    InvalidForce { reason: String },
     /// Keyframes that are empty, not finite or not in time order.
     #[error("keyframes must be finite [t, x, y, z] rows in time order, at least one")]
     Keyframes,

@@ -47,6 +47,28 @@ impl FullSpaceModel {
                 reason: "must be finite".into(),
             });
         }
+        // What a mesh file and a scene are checked for on reading; a model built in code may
+        // not have been.
+        let n = mesh.num_vertices();
+        let invalid =
+            |field: String, reason: String| Err(FemError::InvalidConfig { field, reason });
+        if let Some(t) = mesh.tets.iter().position(|t| t.iter().any(|&v| v >= n)) {
+            return invalid(
+                "mesh.tets".into(),
+                format!("tet {t} names a vertex past the mesh's {n} vertices"),
+            );
+        }
+        if let Some(&v) = pinned.last().filter(|&&v| v >= n) {
+            return invalid(
+                "pin".into(),
+                format!("vertex {v} is past the mesh's {n} vertices (counted from 0)"),
+            );
+        }
+        for (i, f) in forces.iter().enumerate() {
+            if let Some(reason) = f.problem(n) {
+                return invalid(format!("force[{i}]"), reason);
+            }
+        }
         let elements = Elements::new(&mesh);
         let mass = MassMatrix::new(
             &elements,

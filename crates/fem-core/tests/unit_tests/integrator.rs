@@ -932,3 +932,89 @@ fn gravity_onset_is_the_first_steps_of_a_fall_from_rest() {
     );
     assert!(gravity_onset(&m, &dynamic(3), 3).unwrap().is_empty());
 }
+
+/// A model built in code is refused naming its field for what a file or a scene is checked for
+/// on reading: a tet or a pin past the mesh, a force that cannot act (each once a panic in a
+/// step or in building the model).
+#[test]
+fn a_model_built_in_code_is_checked() {
+    let material = MaterialConfig::default();
+    let mesh = beam([2, 1, 1]);
+    let n = mesh.num_vertices();
+    let build =
+        |mesh: TetMesh, pinned: Vec<usize>, forces: Vec<ExternalForce>| match FullSpaceModel::new(
+            mesh,
+            &material,
+            pinned,
+            Vec3::zeros(),
+            forces,
+        ) {
+            Err(FemError::InvalidConfig { field, reason }) => format!("{field}: {reason}"),
+            other => panic!("expected an invalid configuration, got {:?}", other.is_ok()),
+        };
+    let mut torn = mesh.clone();
+    torn.tets[1][2] = n;
+    assert!(build(torn, vec![0], vec![]).starts_with("mesh.tets: tet 1 names a vertex past"));
+    assert!(
+        build(mesh.clone(), vec![0, n], vec![]).starts_with(&format!("pin: vertex {n} is past"))
+    );
+    let force = ExternalForce {
+        kind: ForceKind::Point,
+        vertices: vec![1],
+        stiffness: 0.0,
+        keyframes: vec![[0.0, 0.0, 1.0, 0.0]],
+        start: f64::NEG_INFINITY,
+        end: f64::INFINITY,
+    };
+    assert!(
+        FullSpaceModel::new(
+            mesh.clone(),
+            &material,
+            vec![0],
+            Vec3::zeros(),
+            vec![force.clone()]
+        )
+        .is_ok()
+    );
+    let cases = [
+        (
+            ExternalForce {
+                keyframes: vec![],
+                ..force.clone()
+            },
+            "keyframes must be",
+        ),
+        (
+            ExternalForce {
+                vertices: vec![n],
+                ..force.clone()
+            },
+            "past the mesh's",
+        ),
+        (
+            ExternalForce {
+                vertices: vec![],
+                ..force.clone()
+            },
+            "acts on no vertex",
+        ),
+        (
+            ExternalForce {
+                stiffness: f64::NAN,
+                ..force.clone()
+            },
+            "the stiffness must be finite",
+        ),
+        (
+            ExternalForce {
+                start: f64::NAN,
+                ..force.clone()
+            },
+            "start and end must be numbers",
+        ),
+    ];
+    for (bad, said) in cases {
+        let e = build(mesh.clone(), vec![0], vec![force.clone(), bad]);
+        assert!(e.contains(said) && e.starts_with("force[1]"), "{e}");
+    }
+}

@@ -352,8 +352,12 @@ impl<S: Subspace> ReducedSimulator<S> {
     /// the next step; its index is the number of forces before it.
     ///
     /// # Errors
+    /// [`ReducedError::InvalidForce`] for a force [`ExternalForce::problem`] refuses, and
     /// [`ReducedError::NoBasisRows`] as [`ReducedSpace::push_force`].
     pub fn add_force(&mut self, force: ExternalForce) -> Result<usize, ReducedError> {
+        if let Some(reason) = force.problem(self.model.mesh.num_vertices()) {
+            return Err(ReducedError::InvalidForce { reason });
+        }
         self.space.push_force(&force)?;
         self.model.forces.push(force);
         let index = self.model.forces.len() - 1;

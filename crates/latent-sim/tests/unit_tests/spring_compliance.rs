@@ -138,6 +138,13 @@ fn softening_is_the_default_and_vanishes_for_a_complete_basis() {
             end: f64::INFINITY,
         };
         let again = m.forces[0].clone();
+        // A force without keyframes is refused, not taken to panic at the next step.
+        let empty = ExternalForce {
+            keyframes: Vec::new(),
+            ..load.clone()
+        };
+        let e = red.add_force(empty).unwrap_err().to_string();
+        assert!(e.starts_with("invalid force: keyframes must be"), "{e}");
         red.add_force(load).unwrap();
         red.add_force(again).unwrap();
         // The energies of the three forces at some q, softened and not.
