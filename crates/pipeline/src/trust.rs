@@ -256,8 +256,8 @@ fn stretch_warning(r: &MethodReport) -> Option<String> {
          t = {time:.2} s: the pins or the loads pull the body apart, past what it models as a \
          solid (one vertex holding its weight, or loads far beyond its stiffness), and the \
          reduced methods are measured against that; more pinned vertices (a pin plane's \
-         `tolerance`, a `box`), a stiffer material (`youngs_modulus`) or lighter loads keep it \
-         whole"
+         `tolerance`, a `box`), a stiffer material (`youngs_modulus`) or lighter loads (the \
+         scene's `[[force]]`s, the test's own grab: `[test] stiffness`, `offset`) keep it whole"
     ))
 }
 

@@ -128,7 +128,9 @@ pub fn validate_located(
         let rel = v.abs() / mean;
         if rel < DEGENERATE_RELATIVE_VOLUME {
             return Err(invalid(format!(
-                "{}, on vertices {}, is degenerate (volume {v:.3e}, {rel:.1e} of the mean)",
+                "{}, on vertices {}, is degenerate (volume {v:.3e}, {rel:.1e} of the mean): \
+                 mesh it again with a quality bound, e.g. `tetgen -pq1.4` (not `-p` alone), \
+                 gmsh's `-optimize_netgen` or fTetWild",
                 tet(t),
                 vertices_of(&mesh.tets[t])
             )));

@@ -233,7 +233,8 @@ fn degenerate_tets_are_refused() {
         let reason = invalid_reason(format, path, result);
         assert!(
             reason.contains(&format!("tetrahedron {} of", flat + 1))
-                && reason.contains("degenerate"),
+                && reason.contains("degenerate")
+                && reason.contains("mesh it again with a quality bound"),
             "{}: {reason}",
             format.name()
         );
