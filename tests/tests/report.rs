@@ -517,6 +517,40 @@ fn a_report_names_its_own_reference_from_an_empty_cache() {
     assert_eq!(cold, warm);
 }
 
+/// A warm run reads no snapshots: with every stage after them cached, it runs without their
+/// artifact (deleted, the largest, to save disk) and computes nothing.
+#[test]
+fn a_warm_run_needs_no_snapshots() {
+    let out = scratch_dir("report-no-snapshots");
+    let s = scene(TINY);
+    let opts = RunOptions {
+        out: out.join("run"),
+        every: 0,
+        methods: Method::ALL.to_vec(),
+        trajectory: 0,
+    };
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
+    let cold = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    for entry in std::fs::read_dir(out.join("cache")).unwrap().flatten() {
+        if entry
+            .file_name()
+            .to_string_lossy()
+            .starts_with("snapshots-")
+        {
+            std::fs::remove_file(entry.path()).unwrap();
+        }
+    }
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
+    let warm = run(&mut p, &opts, &no_progress, &mut |_, _, _| {}).unwrap();
+    let computed: Vec<_> = p.outcomes.iter().filter(|o| !o.cached).collect();
+    assert!(computed.is_empty(), "{computed:?}");
+    for (a, b) in cold.iter().zip(&warm) {
+        assert_eq!(a.training_seconds, b.training_seconds, "{}", a.method);
+        assert_eq!(a.training_distance, b.training_distance, "{}", a.method);
+    }
+    assert!(warm.iter().any(|r| r.training_seconds > 0.0));
+}
+
 /// The reference's compression reaches the report whether or not `full` ran: on its row when
 /// it did, on the first row otherwise (a `full-lbfgs` row too), the same values.
 #[test]

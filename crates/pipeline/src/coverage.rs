@@ -9,15 +9,27 @@ pub use latent_sim::coverage::{OUTSIDE_TRAINING, TrainingPoses};
 
 use crate::pipeline::{Pipeline, Progress};
 
+/// What the stage `coverage` keeps of the snapshots: the ranges of their PCA coefficients, and
+/// how long the training schedules run, which `run` compares a test with. Without the second a
+/// warm `run` read every snapshot for two numbers (and computed them all again when only their
+/// artifact had been deleted).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Coverage {
+    pub poses: TrainingPoses,
+    /// Frames of each training schedule.
+    pub frames_per_schedule: usize,
+    /// Whether some schedules start from the body's fall under its weight
+    /// (`SnapshotSet::later_start`): they then run to the test's last frame.
+    pub later_start: bool,
+}
+
 /// The snapshots of `pipeline`'s scene projected on its PCA basis (the stages `snapshots` and
-/// `pca`, cached), as the ranges of their coefficients: what the stage `coverage` computes.
+/// `pca`, cached), as the ranges of their coefficients, and their schedules' length: what the
+/// stage `coverage` computes.
 ///
 /// # Errors
 /// When a stage fails.
-pub fn training_poses(
-    pipeline: &mut Pipeline<'_>,
-    progress: Progress<'_>,
-) -> Result<TrainingPoses> {
+pub fn training_poses(pipeline: &mut Pipeline<'_>, progress: Progress<'_>) -> Result<Coverage> {
     let snaps = pipeline.snapshots(progress)?;
     let fit = pipeline.pca(progress)?;
     let s = faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
@@ -34,16 +46,20 @@ pub fn training_poses(
             pipeline.scene.source
         )
     })?;
-    Ok(poses)
+    Ok(Coverage {
+        poses,
+        frames_per_schedule: snaps.frames_per_schedule,
+        later_start: snaps.later_start.is_some(),
+    })
 }
 
-impl crate::pipeline::StageSummary for TrainingPoses {
+impl crate::pipeline::StageSummary for Coverage {
     fn summary(&self) -> String {
         format!(
             "the ranges of the {} training poses' {} PCA coefficients, which `run` measures each \
              reduced frame against and a model file carries for its steps",
-            self.len(),
-            self.dim()
+            self.poses.len(),
+            self.poses.dim()
         )
     }
 }

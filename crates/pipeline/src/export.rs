@@ -191,7 +191,7 @@ pub(crate) fn reduced_model_with(
             stage_keys,
             errors,
         },
-        training: Some(TrainingPoses::clone(&poses)),
+        training: Some(TrainingPoses::clone(&poses.poses)),
     };
     ReducedModel::build(source)
         .map_err(|e| anyhow::anyhow!("{}: model of {}: {e}", scene.source, method.name()))

@@ -2085,10 +2085,7 @@ impl<'a> Pipeline<'a> {
     ///
     /// # Errors
     /// When a stage it needs fails.
-    pub fn coverage(
-        &mut self,
-        progress: Progress<'_>,
-    ) -> Result<Arc<crate::coverage::TrainingPoses>> {
+    pub fn coverage(&mut self, progress: Progress<'_>) -> Result<Arc<crate::coverage::Coverage>> {
         let key = self.coverage_key();
         self.stage(Stage::Coverage, key, |p| {
             crate::coverage::training_poses(p, progress)

@@ -1583,14 +1583,14 @@ pub fn measure(
     if !poses.is_empty() {
         let training = pipeline.coverage(stage_progress)?;
         // Schedules started from the body's fall run to the test's last frame.
-        let snaps = pipeline.snapshots(stage_progress)?;
-        let frames = match snaps.later_start {
-            Some(_) => pipeline.scene.test().frames_per_schedule,
-            None => snaps.frames_per_schedule,
+        let frames = if training.later_start {
+            pipeline.scene.test().frames_per_schedule
+        } else {
+            training.frames_per_schedule
         };
         training_seconds = frames as f64 * pipeline.scene.time.step;
         for (k, q) in poses.iter().enumerate() {
-            let d = training.distance(q);
+            let d = training.poses.distance(q);
             if d > training_distance {
                 training_distance = d;
                 training_distance_time = (k + 1) as f64 * pipeline.scene.time.step;

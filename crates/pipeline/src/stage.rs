@@ -124,7 +124,9 @@ impl Stage {
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
             // 3: with the snapshots' energy and the latent dimension.
             Stage::Complement => 3,
-            Stage::Coverage => 1,
+            // 2: with the training schedules' length (`Coverage`), which `run` read the
+            //    snapshots for.
+            Stage::Coverage => 2,
         }
     }
 
@@ -197,7 +199,7 @@ mod tests {
                 ("train", 6),
                 ("complement", 3),
                 ("reference", 11),
-                ("coverage", 1),
+                ("coverage", 2),
             ]
         );
         for s in Stage::ALL {

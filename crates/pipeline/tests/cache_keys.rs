@@ -560,7 +560,7 @@ struct Artifacts {
         Option<pipeline::pipeline::RuleValidation>,
     ),
     reference: Vec<Vec<f64>>,
-    coverage: latent_sim::coverage::TrainingPoses,
+    coverage: pipeline::coverage::Coverage,
 }
 
 /// Runs every stage of `scene` on `cache`; returns each stage's artifact path and whether it was
