@@ -551,6 +551,44 @@ fn a_warm_run_needs_no_snapshots() {
     assert!(warm.iter().any(|r| r.training_seconds > 0.0));
 }
 
+/// An artifact whose checksums pass and whose content does not fit the model (snapshots of
+/// other DOFs, a reference frame cut short) is computed again, not read into a panic.
+#[test]
+fn an_artifact_that_does_not_fit_is_computed_again() {
+    use pipeline::artifact::save;
+    use pipeline::stage::Stage;
+    let out = scratch_dir("report-unfit-artifact");
+    let s = scene(TINY);
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
+    let snaps = p.snapshots(&no_progress).unwrap();
+    let reference = p.reference(0, &no_progress).unwrap();
+    let (good_snaps, good_frames) = ((*snaps).clone(), reference.frames.clone());
+    // The mesh hash of the header, the 8 bytes after the key.
+    let header = |stage: Stage| {
+        let o = p.outcomes.iter().find(|o| o.stage == stage).unwrap();
+        let bytes = std::fs::read(&o.path).unwrap();
+        let key = o.key.to_le_bytes();
+        let at = bytes.windows(8).position(|w| w == key).unwrap() + 8;
+        (
+            o.path.clone(),
+            o.key,
+            u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()),
+        )
+    };
+    let (path, key, mesh) = header(Stage::Snapshots);
+    let mut bad = good_snaps.clone();
+    bad.dim += 1;
+    save(&path, Stage::Snapshots, key, mesh, &bad).unwrap();
+    let (path, key, mesh) = header(Stage::Reference);
+    let mut cut = (*reference).clone();
+    cut.frames[5].truncate(1);
+    save(&path, Stage::Reference, key, mesh, &cut).unwrap();
+    let mut p = Pipeline::new(&s, out.join("cache")).unwrap();
+    assert_eq!(*p.snapshots(&no_progress).unwrap(), good_snaps);
+    assert_eq!(p.reference(0, &no_progress).unwrap().frames, good_frames);
+    assert!(p.outcomes.iter().all(|o| !o.cached), "{:?}", p.outcomes);
+}
+
 /// The reference's compression reaches the report whether or not `full` ran: on its row when
 /// it did, on the first row otherwise (a `full-lbfgs` row too), the same values.
 #[test]

@@ -96,9 +96,39 @@ pub trait StageSummary {
         let _ = scene;
         self.summary()
     }
+
+    /// What makes a loaded artifact unusable by a model of `free` free DOFs, when its
+    /// checksums passed (tampered with, or written by a build whose layout changed without a
+    /// new version): then the stage is computed again instead of a later stage panicking.
+    fn problem(&self, free: usize) -> Option<String> {
+        let _ = free;
+        None
+    }
 }
 
 impl StageSummary for SnapshotSet {
+    fn problem(&self, free: usize) -> Option<String> {
+        let frames = self
+            .frames
+            .iter()
+            .try_fold(0usize, |a, &b| a.checked_add(b));
+        if self.dim != free {
+            Some(format!(
+                "snapshots of {} DOFs for a model of {free}",
+                self.dim
+            ))
+        } else if self.frames.len() != self.schedules.len() {
+            Some("a frame count per schedule expected".into())
+        } else if frames.and_then(|f| f.checked_mul(free)) != Some(self.data.len()) {
+            Some(format!(
+                "{} values for the frames it counts",
+                self.data.len()
+            ))
+        } else {
+            None
+        }
+    }
+
     fn summary(&self) -> String {
         let n = self.schedules.len();
         let mut s = format!(
@@ -361,6 +391,17 @@ impl StageSummary for Complement {
 }
 
 impl StageSummary for Reference {
+    fn problem(&self, free: usize) -> Option<String> {
+        let n = self.frames.len();
+        if let Some(k) = self.frames.iter().position(|f| f.len() != free) {
+            Some(format!("frame {k} is not {free} values"))
+        } else if self.step_seconds.len() != n || self.iterations.len() != n {
+            Some("a time and an iteration count per frame expected".into())
+        } else {
+            None
+        }
+    }
+
     fn summary(&self) -> String {
         let n = self.step_seconds.len().max(1) as f64;
         let mut s = format!(
@@ -1003,11 +1044,14 @@ impl<'a> Pipeline<'a> {
                 mesh: Some(self.mesh_hash),
             };
             match artifact::load::<T>(&path, expect) {
-                Ok(v) => {
-                    let summary = v.summary_in(self.scene);
-                    self.record(stage, key, true, start, path, summary);
-                    return Ok(v);
-                }
+                Ok(v) => match v.problem(self.model.dofs.num_free()) {
+                    None => {
+                        let summary = v.summary_in(self.scene);
+                        self.record(stage, key, true, start, path, summary);
+                        return Ok(v);
+                    }
+                    Some(p) => tracing::warn!("{}: {p}; computing the stage again", path.display()),
+                },
                 Err(e) => tracing::warn!("{}; computing the stage again", e.problem()),
             }
         }
