@@ -2266,6 +2266,14 @@ impl<'a> Pipeline<'a> {
         let key = self.reference_key(trajectory);
         self.stage(Stage::Reference, key, |p| {
             let cfg = p.scene.test();
+            // Said before the test's minutes, not when the last of its frames runs out of memory.
+            if let Some(problem) = trajectory_memory_problem(
+                cfg.frames_per_schedule,
+                p.model.dofs.num_free(),
+                machine_memory(),
+            ) {
+                bail!("{}: {problem}", p.scene.source);
+            }
             let model = p.test_model(trajectory)?;
             let time = TimeConfig {
                 frames: cfg.frames_per_schedule,
@@ -2381,6 +2389,26 @@ fn snapshot_memory_problem(
     ))
 }
 
+/// Why a test trajectory of `frames` frames of `dim` free coordinates cannot be held in
+/// `memory` bytes, if it cannot: `run` holds the reference and each method's trajectory beside
+/// it, so a reference may take an eighth of the machine.
+fn trajectory_memory_problem(frames: usize, dim: usize, memory: Option<u64>) -> Option<String> {
+    let memory = memory?;
+    let bytes = (frames as u128) * (dim as u128) * 8;
+    let limit = u128::from(memory) / 8;
+    let gib = |b: u128| b as f64 / f64::from(1u32 << 30);
+    (bytes > limit).then(|| {
+        format!(
+            "a test trajectory of {frames} frames of {dim} free coordinates takes {:.1} GiB, and \
+             `run` holds one per method beside it: more than this machine's {:.1} GiB of memory \
+             allow; at most {} `[test] frames_per_schedule` fit",
+            gib(bytes),
+            gib(u128::from(memory)),
+            limit / (dim.max(1) as u128 * 8)
+        )
+    })
+}
+
 /// Largest ‖u_v − (U q̂)_v‖ over vertices v and snapshot columns, with u the snapshots.
 fn max_vertex_distance(
     basis: faer::MatRef<'_, f64>,
@@ -2457,6 +2485,27 @@ mod tests {
             None
         );
         assert!(super::machine_memory().is_none_or(|m| m > gib / 4));
+    }
+
+    /// A test trajectory past an eighth of the machine's memory is refused before it is
+    /// simulated, with the frames that fit.
+    #[test]
+    fn test_trajectories_past_an_eighth_of_the_memory_are_refused() {
+        let gib = 1u64 << 30;
+        assert_eq!(
+            super::trajectory_memory_problem(100, 36_000, Some(24 * gib)),
+            None
+        );
+        let said = super::trajectory_memory_problem(1_000_000, 36_000, Some(24 * gib)).unwrap();
+        assert!(
+            said.contains("1000000 frames of 36000 free coordinates takes 268.2 GiB")
+                && said.contains("at most 11184 `[test] frames_per_schedule` fit"),
+            "{said}"
+        );
+        assert_eq!(
+            super::trajectory_memory_problem(usize::MAX, 36_000, None),
+            None
+        );
     }
 
     /// The complement stage's line names the count the neural methods take: the scene's when it
