@@ -938,6 +938,12 @@ fn stress(cx: &Context, args: StressArgs) -> Result<()> {
     )?;
     pipeline::stress::write(&out, &results)?;
     println!("\n{}", pipeline::stress::markdown(&results));
+    if !methods.iter().any(|m| m.is_full()) {
+        println!(
+            "(no full-space method among --methods: the table says whether each run stayed \
+             stable, not its error, which `--methods full,…` measures)"
+        );
+    }
     println!(
         "stress: {} (also stress.md)",
         out.join("stress.json").display()

@@ -1194,10 +1194,24 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
             .chars()
             .all(|c| c.is_ascii_digit())
         && !fraction.is_empty()
-        && fraction.chars().all(|c| c.is_ascii_digit())
+        && fraction.starts_with(|c: char| c.is_ascii_digit())
+        && {
+            // Digits, then an exponent if any (`1,0e5`).
+            let (digits, exponent) = fraction.split_at(
+                fraction
+                    .find(|c: char| !c.is_ascii_digit())
+                    .unwrap_or(fraction.len()),
+            );
+            !digits.is_empty()
+                && (exponent.is_empty()
+                    || exponent
+                        .strip_prefix(['e', 'E'])
+                        .map(|e| e.trim_start_matches(['+', '-']))
+                        .is_some_and(|e| !e.is_empty() && e.chars().all(|c| c.is_ascii_digit())))
+        }
     {
         // Three digits after the comma may be thousands (`frames = 1,000`).
-        let thousands = if fraction.len() == 3 {
+        let thousands = if fraction.len() == 3 && fraction.chars().all(|c| c.is_ascii_digit()) {
             format!(", or `{whole}{fraction}` if the comma separates thousands")
         } else {
             String::new()

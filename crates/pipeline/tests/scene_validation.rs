@@ -241,6 +241,10 @@ fn common_mistakes_say_what_to_write() {
             edit("poisson_ratio = 0.4", "poisson_ratio = 0,4"),
             "write `0.4`: TOML's decimal point is a dot",
         ),
+        (
+            edit("youngs_modulus = 1.0e5", "youngs_modulus = 1,0e5"),
+            "write `1.0e5`: TOML's decimal point is a dot",
+        ),
         // In a list, decimal commas make more values than it takes (it was cut to three).
         (
             edit("[0.0, -9.81, 0.0]", "[0,0, -9,81, 0,0]"),
@@ -264,6 +268,9 @@ fn common_mistakes_say_what_to_write() {
     for (text, hint) in cases {
         assert_names(&read_error(&text), &[hint]);
     }
+    // An exponent is no thousands.
+    let err = read_error(&edit("youngs_modulus = 1.0e5", "youngs_modulus = 1,0e5"));
+    assert!(!err.contains("thousands"), "{err}");
     // A dash inside a quoted name is text, not a minus to mend.
     let err = read_error(&edit("name = \"beam\"", "name = \"beam \u{2013} two\" 2"));
     assert!(!err.contains("ASCII minus"), "{err}");
