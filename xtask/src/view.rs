@@ -237,7 +237,7 @@ fn model_accuracy(errors: &[MeasuredError]) -> String {
     let trajectory = held_out().find(|e| e.name.starts_with(TRAJECTORY_ERROR));
     match (trajectory, held_out().next()) {
         (Some(e), _) => format!(
-            "measured when it was trained: {:.2} % ({}); `run`'s report.md lists what not to trust",
+            "measured when it was trained: {:.2} % ({}); `run`'s report.md says whether to trust it",
             100.0 * e.value,
             e.name
         ),
@@ -312,7 +312,7 @@ fn run_accuracy(
     };
     format!(
         "the last `run` of this scene measured these models, off its held-out test: {} ({}; its \
-         report.md lists what not to trust){rest}",
+         report.md says whether to trust them){rest}",
         figures.join(", "),
         report.display()
     )
