@@ -173,6 +173,23 @@ fn cubature_caveat(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
         })
 }
 
+/// A reduced method's one-step error (the step from each reference frame) measured over fewer
+/// frames than its trajectory's, because a step from the reference failed: the figure and the
+/// comparisons built on it cover those frames only (a tester's sliver mesh under classic
+/// Neo-Hookean: 8 of 100, said before only in the log).
+fn partial_step_error(r: &MethodReport) -> Option<String> {
+    let (measured, frames) = (r.step_frame_errors.len(), r.frame_errors.len());
+    (!r.method.is_full() && r.failure.is_none() && measured < frames).then(|| {
+        format!(
+            "{}: its one-step error covers the first {measured} of {frames} frames: the step \
+             to frame {} from the reference failed (the log says why), and the figure stands \
+             for those frames only",
+            r.method,
+            measured + 1
+        )
+    })
+}
+
 /// A cubature method under [`UNCOVERED_SUBSPACE_ERROR`] off whose error is more than this
 /// many times the same subspace's over every element, and at least [`RULE_CAVEAT_ERROR`], has
 /// its rule named among what is worth knowing.
@@ -823,6 +840,7 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
     }
     let mut caveats: Vec<String> = slower_than_full(rows).into_iter().collect();
     caveats.extend(rows.iter().filter_map(|r| cubature_caveat(r, rows)));
+    caveats.extend(rows.iter().filter_map(partial_step_error));
     while let Some((_, what)) = held_outside.first() {
         let what = what.clone();
         let (group, rest): (Vec<_>, Vec<_>) =
@@ -1087,6 +1105,32 @@ mod tests {
         assert!(assess(&untimed).caveats.is_empty());
         let one = assess(&slow[..2]).caveats;
         assert!(one[0].contains("here (0.6× its speed)"), "{}", one[0]);
+    }
+
+    /// A one-step error over fewer frames than the trajectory's is said with the count; one
+    /// over every frame, or a full-space row, is not.
+    #[test]
+    fn a_partial_one_step_error_is_said() {
+        let with = |method, steps: usize| MethodReport {
+            frame_errors: vec![0.01; 100],
+            step_frame_errors: vec![0.001; steps],
+            ..row(method, 0.01, 0.005)
+        };
+        let c = assess(&[
+            with(Method::Full, 0),
+            with(Method::Pca, 8),
+            with(Method::PcaCubature, 100),
+        ])
+        .caveats;
+        assert_eq!(c.len(), 1, "{c:#?}");
+        assert!(
+            c[0].starts_with(
+                "pca: its one-step error covers the first 8 of 100 frames: the step \
+                              to frame 9 from the reference failed"
+            ),
+            "{}",
+            c[0]
+        );
     }
 
     /// A full trajectory that stretches an element past the limit is named, with the pins
