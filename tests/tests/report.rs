@@ -549,6 +549,18 @@ fn a_warm_run_needs_no_snapshots() {
         assert_eq!(a.training_distance, b.training_distance, "{}", a.method);
     }
     assert!(warm.iter().any(|r| r.training_seconds > 0.0));
+    // The warm run's report lists no snapshots, and is still the model's.
+    let model = pipeline::export::scene_model(
+        &mut p,
+        Method::NeuralCubature,
+        latent_sim::model::Rows::Used,
+        &no_progress,
+    )
+    .unwrap();
+    assert_eq!(pipeline::export::report_is_of(&opts.out, &model), Ok(()));
+    let said = pipeline::export::run_verdict(&opts.out, &model, &s);
+    assert!(said.starts_with("measured by `cargo xtask run`"), "{said}");
+    assert!(p.outcomes.iter().all(|o| o.cached), "{:?}", p.outcomes);
 }
 
 /// An artifact whose checksums pass and whose content does not fit the model (snapshots of
@@ -838,12 +850,19 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
     let said = run_verdict(&out.join("run"), &other, &stiffer);
     assert!(said.contains("is of other stages"), "{said}");
     // Without a scene at hand (`view --model`), the stages alone tell the report's model.
-    assert!(pipeline::export::report_is_of(&out.join("run"), &model));
-    assert!(!pipeline::export::report_is_of(&out.join("run"), &other));
-    assert!(!pipeline::export::report_is_of(
-        &out.join("nowhere"),
-        &model
-    ));
+    assert_eq!(
+        pipeline::export::report_is_of(&out.join("run"), &model),
+        Ok(())
+    );
+    let why = pipeline::export::report_is_of(&out.join("run"), &other).unwrap_err();
+    assert!(
+        why.ends_with(
+            "is of other stages: a later run of another scene, or of this one changed, wrote there"
+        ),
+        "{why}"
+    );
+    let why = pipeline::export::report_is_of(&out.join("nowhere"), &model).unwrap_err();
+    assert!(why.ends_with("is missing or does not read"), "{why}");
     let said = run_verdict(&out.join("nowhere"), &model, &s);
     assert!(said.starts_with("not measured: no run report in"), "{said}");
     // The same stages under other solver settings, which no stage key holds.

@@ -229,7 +229,7 @@ struct StressArgs {
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
     methods: Vec<MethodArg>,
     /// Steps of the free-run condition (test trajectory, then no external force).
-    #[arg(long, allow_negative_numbers = true, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..=fem_core::integrator::MAX_FRAMES as u64))]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(0..=fem_core::integrator::MAX_FRAMES as u64))]
     free_steps: u64,
     /// Held-out test trajectory to simulate.
     #[arg(long, allow_negative_numbers = true, default_value_t = 0)]
@@ -667,11 +667,11 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     let (mut p, out) =
         cx.pipeline_into(&scene, &common, out.unwrap_or_else(|| cx.out(&scene, &[])))?;
     let progress = |d, t| cx.stage_progress(d, t);
-    // The training data and the basis first, so that the stage lines come in order before the
-    // methods run (a cached basis loads without its snapshots, which the run then needs for its
-    // training distances); full space alone needs neither.
+    // The basis first (and the training data, when it must be computed), so that the stage
+    // lines come in order before the methods run; a cached basis loads without its snapshots,
+    // which the run does not read (`coverage` keeps what it measures against). Full space
+    // alone needs neither.
     if methods.iter().any(|m| !m.is_full()) {
-        p.snapshots(&progress)?;
         p.pca(&progress)?;
     }
     let opts = RunOptions {

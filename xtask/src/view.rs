@@ -106,15 +106,12 @@ pub(crate) fn view(cx: &super::Context, args: ViewArgs) -> Result<()> {
             let report = path.with_file_name("report.md");
             if report.is_file() {
                 let dir = report.parent().unwrap_or(Path::new("."));
-                if pipeline::export::report_is_of(dir, &model) {
-                    println!("the report beside it: {}", report.display());
-                } else {
-                    println!(
-                        "the report beside it ({}) is not of this model: a later run of another \
-                         scene, or of this one changed, wrote there (`cargo xtask run` the \
-                         model's scene again to measure it)",
-                        report.display()
-                    );
+                match pipeline::export::report_is_of(dir, &model) {
+                    Ok(()) => println!("the report beside it: {}", report.display()),
+                    Err(why) => println!(
+                        "the report beside it is not known to be this model's: {why} (`cargo \
+                         xtask run` the model's scene again to measure it)"
+                    ),
                 }
             }
             let methods = vec![

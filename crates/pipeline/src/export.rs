@@ -396,26 +396,49 @@ fn measured(
 }
 
 /// Whether the stages a run report lists (its `stages`) include every stage `model` was made
-/// of, each with the same key.
+/// of, each with the same key; but the snapshots, which a warm run does not read (their key is
+/// in the basis's, which is compared).
 fn of_stages(stages: &[serde_json::Value], model: &ReducedModel) -> bool {
-    model.provenance.stage_keys.iter().all(|k| {
-        let key = format!("{:016x}", k.key);
-        stages
-            .iter()
-            .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
-    })
+    let snapshots = Stage::Snapshots.name();
+    model
+        .provenance
+        .stage_keys
+        .iter()
+        .filter(|k| k.stage != snapshots)
+        .all(|k| {
+            let key = format!("{:016x}", k.key);
+            stages
+                .iter()
+                .any(|s| s["stage"] == k.stage.as_str() && s["key"] == key.as_str())
+        })
 }
 
 /// Whether the `report.json` in `out` is of `model`'s stages (the run that wrote it used the
 /// stages the model was made of), when no scene is at hand to compare settings with: `view
 /// --model` names the report beside a model only then, not one a later run of another scene
-/// wrote into the same folder.
-pub fn report_is_of(out: &Path, model: &ReducedModel) -> bool {
-    std::fs::read(out.join("report.json"))
+/// wrote into the same folder. Otherwise why not: no report that reads, one written before
+/// reports named their stages' keys, or one of other stages.
+pub fn report_is_of(out: &Path, model: &ReducedModel) -> Result<(), String> {
+    let path = out.join("report.json");
+    let report = std::fs::read(&path)
         .ok()
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-        .and_then(|r| r["stages"].as_array().map(|s| of_stages(s, model)))
-        .unwrap_or(false)
+        .ok_or_else(|| format!("{} is missing or does not read", path.display()))?;
+    let stages = report["stages"].as_array().cloned().unwrap_or_default();
+    if stages.is_empty() || stages.iter().any(|s| s.get("key").is_none()) {
+        return Err(format!(
+            "{} was written before reports named their stages' keys",
+            path.display()
+        ));
+    }
+    if !of_stages(&stages, model) {
+        return Err(format!(
+            "{} is of other stages: a later run of another scene, or of this one changed, \
+             wrote there",
+            path.display()
+        ));
+    }
+    Ok(())
 }
 
 /// Whether a line of a run's warnings concerns `method`'s model: it names the method (alone or
