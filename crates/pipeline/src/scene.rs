@@ -1171,15 +1171,47 @@ fn parse_hint(text: &str, offset: usize, message: &str, field: Option<&str>) -> 
     }
     // Decimal commas in a list (`acceleration = [0,0, -9,81, 0,0]`), which TOML reads as more
     // values than the list takes: a comma between two digits names the first.
-    if message.starts_with("invalid length ") {
-        let list = code.split_once('=').map_or(code, |(_, v)| v);
+    if let Some(rest) = message.strip_prefix("invalid length ") {
+        // Only a list longer than it should be: decimal commas add values.
+        let number = |s: &str| {
+            s.split(|c: char| !c.is_ascii_digit())
+                .next()?
+                .parse::<usize>()
+                .ok()
+        };
+        let (got, expected) = (number(rest)?, number(rest.split_once("a list of ")?.1)?);
+        if got <= expected {
+            return None;
+        }
+        // The list the error is of: from its `[` to the end of its line (ASCII, so a byte after
+        // a digit or a comma is a character's start).
+        let from = (start - line_start).min(code.len());
+        let list = &code[from..];
+        let list = &list[..list.find(']').unwrap_or(list.len())];
         let b = list.as_bytes();
-        let comma = (1..b.len().saturating_sub(1))
-            .find(|&i| b[i] == b',' && b[i - 1].is_ascii_digit() && b[i + 1].is_ascii_digit())?;
-        let digits = |c: char| c.is_ascii_digit();
-        let whole = &list[list[..comma].rfind(|c| !digits(c)).map_or(0, |i| i + 1)..comma];
-        let rest = &list[comma + 1..];
-        let fraction = &rest[..rest.find(|c| !digits(c)).unwrap_or(rest.len())];
+        // Outside quoted strings, where a comma is text.
+        let quoted: Vec<bool> = b
+            .iter()
+            .scan(false, |q, &c| {
+                *q ^= c == b'"';
+                Some(*q)
+            })
+            .collect();
+        let tight: Vec<usize> = (1..b.len().saturating_sub(1))
+            .filter(|&i| {
+                b[i] == b',' && !quoted[i] && b[i - 1].is_ascii_digit() && b[i + 1].is_ascii_digit()
+            })
+            .collect();
+        // Read as decimal points, those commas must leave the length the list takes.
+        if got - tight.len() != expected {
+            return None;
+        }
+        let comma = *tight.first()?;
+        let before = &list[..comma];
+        let whole = &before[before.trim_end_matches(|c: char| c.is_ascii_digit()).len()..];
+        let after = &list[comma + 1..];
+        let fraction =
+            &after[..after.len() - after.trim_start_matches(|c: char| c.is_ascii_digit()).len()];
         return Some(Hint::Said(format!(
             "decimal commas? TOML's decimal point is a dot, and a comma separates a list's \
              values: write `{whole}.{fraction}`, not `{whole},{fraction}`"

@@ -268,6 +268,28 @@ fn common_mistakes_say_what_to_write() {
     for (text, hint) in cases {
         assert_names(&read_error(&text), &[hint]);
     }
+    // Only a list longer than it takes is hinted at, and only the list the error is of; a
+    // string of other letters in it is read, not cut in the middle of a letter.
+    for (from, to, length) in [
+        ("cells = [4, 1, 1]", "cells = [6,1,1,1]", "invalid length 4"),
+        ("size = [1.0, 0.2, 0.2]", "size = [1,2]", "invalid length 2"),
+        (
+            "acceleration = [0.0, -9.81, 0.0]",
+            "acceleration = [0.0, -9.81, 0.0, \"é1,5\"]",
+            "invalid",
+        ),
+        (
+            "size = [1.0, 0.2, 0.2], cells = [4, 1, 1]",
+            "size = [1,0, 0.2, 0.2], cells = [4, 1, 1, 1]",
+            "invalid length 4",
+        ),
+    ] {
+        let err = read_error(&edit(from, to));
+        assert!(
+            err.contains(length) && !err.contains("decimal commas"),
+            "{err}"
+        );
+    }
     // An exponent is no thousands.
     let err = read_error(&edit("youngs_modulus = 1.0e5", "youngs_modulus = 1,0e5"));
     assert!(!err.contains("thousands"), "{err}");
