@@ -594,7 +594,10 @@ impl Compression {
                 (o.travel, o.travel_time) = (travel, time);
             }
             let mut nonlinear_strain = 0.0;
-            let (mut stretch, mut stretched_volume) = (0.0_f64, 0.0);
+            // The largest stretch of an element of a tenth of the mean size or more, else of
+            // any: the figure said is not a sliver's beside the element that counts.
+            let mean_element = total / rest.len().max(1) as f64;
+            let (mut stretch, mut sized_stretch, mut stretched_volume) = (0.0_f64, 0.0_f64, 0.0);
             // The largest singular value of F is at most its Frobenius norm, so only the elements
             // whose norm passes the limit need it.
             for e in 0..model.elements.len() {
@@ -614,10 +617,15 @@ impl Compression {
                     .sqrt();
                 if largest > Self::STRETCHED {
                     stretch = stretch.max(largest);
+                    if rest[e] >= 0.1 * mean_element {
+                        sized_stretch = sized_stretch.max(largest);
+                    }
                     stretched_volume += rest[e];
                 }
             }
-            let mean_element = total / rest.len().max(1) as f64;
+            if sized_stretch > 0.0 {
+                stretch = sized_stretch;
+            }
             if stretched_volume >= mean_element && o.stretched.is_none_or(|(s, _)| stretch > s) {
                 o.stretched = Some((stretch, time));
             }

@@ -399,18 +399,20 @@ fn vertex_list(vertices: &Bound<'_, PyAny>, count: usize) -> PyResult<Vec<usize>
                 describe(vertices)
             ));
         };
+        // Repeats are taken once; more than 16 items a vertex are no list of the mesh's.
+        let most = count.saturating_mul(16);
         let too_many = || {
             bad(format!(
-                "vertices lists more items than the mesh's {count} vertices: give each vertex \
-                 once"
+                "vertices lists more than {most} items, 16 for each of the mesh's {count} \
+                 vertices: give each vertex once"
             ))
         };
-        if vertices.len().is_ok_and(|n| n > count) {
+        if vertices.len().is_ok_and(|n| n > most) {
             return too_many();
         }
         let mut values = Vec::new();
         for (i, item) in items.enumerate() {
-            if i == count {
+            if i == most {
                 return too_many();
             }
             values.push(index(&item?, Some(i))?);
