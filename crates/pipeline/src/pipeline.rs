@@ -31,17 +31,8 @@ pub const STALE_TEMPORARY_AGE: std::time::Duration = std::time::Duration::from_s
 /// [`fem_core::io::write_atomic`]'s temporaries (which a later sweep removes if this one is
 /// killed in between) and removed.
 fn writable(dir: &Path) -> std::io::Result<()> {
-    use std::sync::atomic::{AtomicU64, Ordering};
     // Unique per call, so that pipelines of one process probing at once do not collide.
-    static CALLS: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let probe = dir.join(format!(
-        ".write-probe.{}-{}-{nanos:09}.tmp",
-        std::process::id(),
-        CALLS.fetch_add(1, Ordering::Relaxed)
-    ));
+    let probe = fem_core::io::temporary_path(dir, "write-probe");
     std::fs::create_dir_all(dir)?;
     std::fs::OpenOptions::new()
         .write(true)

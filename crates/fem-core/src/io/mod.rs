@@ -233,8 +233,6 @@ fn unsupported_hint(ext: Option<&str>) -> String {
 /// path (threads, or array jobs on a shared file system) never write into one temporary file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     use std::io::Write;
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static CALLS: AtomicU64 = AtomicU64::new(0);
 
     let dir = path
         .parent()
@@ -253,14 +251,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let tmp = dir.join(format!(
-        ".{name}.{}-{}-{nanos:09}.tmp",
-        std::process::id(),
-        CALLS.fetch_add(1, Ordering::Relaxed)
-    ));
+    let tmp = temporary_path(dir, &name);
     let result = (|| {
         let mut f = std::fs::OpenOptions::new()
             .write(true)
@@ -280,6 +271,22 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+/// A temporary file's path in `dir` for a file named `name`, `.NAME.PID-CALL-NANOS.tmp`:
+/// unique per process, call and time, and one [`remove_stale_temporaries`] clears once its
+/// writer is gone.
+pub fn temporary_path(dir: &Path, name: &str) -> std::path::PathBuf {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static CALLS: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    dir.join(format!(
+        ".{name}.{}-{}-{nanos:09}.tmp",
+        std::process::id(),
+        CALLS.fetch_add(1, Ordering::Relaxed)
+    ))
 }
 
 /// Whether `name` is the name [`write_atomic`] gives its temporaries, `.NAME.PID-CALL-NANOS.tmp`
