@@ -861,6 +861,10 @@ fn collinear(points: &[fem_core::Vec3]) -> bool {
 /// Most unknown keys reported at once: the reading goes on past one by blanking it.
 const MAX_UNKNOWN_KEYS_SAID: usize = 8;
 
+/// Most unknown keys read past, of which the first [`MAX_UNKNOWN_KEYS_SAID`] in the file's order
+/// are said: the reading meets them section by section in the scene's own order, not the file's.
+const MAX_UNKNOWN_KEYS_READ: usize = 64;
+
 /// Reads a scene's TOML; each error names its field and what to write where it can. An unknown
 /// key (a typo) does not hide the ones after it: the reading goes on with the key read as the
 /// one it was a slip for, or set aside, until another kind of error, so a scene with three
@@ -911,7 +915,7 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
         else {
             break;
         };
-        if said.len() == MAX_UNKNOWN_KEYS_SAID {
+        if said.len() == MAX_UNKNOWN_KEYS_READ {
             more = true;
             break;
         }
@@ -937,6 +941,8 @@ fn read_toml(text: &str, source: &str) -> Result<Scene> {
         }
     }
     said.sort_by_key(|(line, _)| *line);
+    more |= said.len() > MAX_UNKNOWN_KEYS_SAID;
+    said.truncate(MAX_UNKNOWN_KEYS_SAID);
     let mut said: Vec<String> = said.into_iter().map(|(_, text)| text).collect();
     if more {
         said.push(format!(

@@ -374,6 +374,17 @@ fn every_typo_is_said_at_once() {
         ],
     );
     assert!(!err.contains("unrelated_8"), "{err}");
+    // The first eight in the file's order, though the reading meets `[time]` before a
+    // `[training]` written at the top.
+    let err = read_error(
+        &edit("frames = 10\n", &format!("frames = 10\n{many}"))
+            .replace("[material]", "[training]\nschedulez = 3\n\n[material]"),
+    );
+    assert_names(
+        &err,
+        &["`training.schedulez`", "`time.unrelated_6`", "and more"],
+    );
+    assert!(!err.contains("unrelated_7"), "{err}");
     // A key read as the one it was a slip for, where that one is given too, is not the user's
     // duplicate.
     let err = read_error(&edit("frames = 10", "frames = 10\nframs = 20"));
