@@ -887,8 +887,11 @@ impl<'a> Pipeline<'a> {
                     .join(", ")
             ),
         };
+        let slivers = fem_core::mesh::sliver_note(mesh)
+            .map(|n| format!("; {n}"))
+            .unwrap_or_default();
         format!(
-            "{}: {vertices} vertices and {} tets, {:.3} × {:.3} × {:.3} m; {pins}",
+            "{}: {vertices} vertices and {} tets, {:.3} × {:.3} × {:.3} m; {pins}{slivers}",
             self.scene.source,
             mesh.num_tets(),
             size.x,

@@ -60,6 +60,28 @@ impl TetMesh {
         tet_volume(self.tets[t].map(|v| self.vertices[v]))
     }
 
+    /// The smallest of the six dihedral angles of tet `t`, in degrees: near 0 for a sliver
+    /// (four corners nearly in a plane) or a needle, 70.5 for a regular tet.
+    pub fn min_dihedral_degrees(&self, t: usize) -> f64 {
+        let x = self.tets[t].map(|v| self.vertices[v]);
+        // The normals of the faces opposite each corner; two faces meet at the edge they share.
+        let normal = |a: usize, b: usize, c: usize| (x[b] - x[a]).cross(&(x[c] - x[a]));
+        let n = [
+            normal(1, 2, 3),
+            normal(0, 3, 2),
+            normal(0, 1, 3),
+            normal(0, 2, 1),
+        ];
+        let mut smallest = f64::INFINITY;
+        for i in 0..4 {
+            for j in i + 1..4 {
+                let cos = -n[i].dot(&n[j]) / (n[i].norm() * n[j].norm());
+                smallest = smallest.min(cos.clamp(-1.0, 1.0).acos());
+            }
+        }
+        smallest.to_degrees()
+    }
+
     /// Axis-aligned bounding box (min, max) of the body: of the vertices some tet uses (of every
     /// vertex when there is no tet). Every size the scene derives from it (pin planes, training
     /// and test offsets, patch radii) is the body's, whatever stray vertices a file also holds:
@@ -195,6 +217,35 @@ impl TetMesh {
 /// along its 20 cm edge): 2.4, 5.0 and 7.9 cm, against 10.8 cm from plate theory.
 pub const THIN_SHARE: f64 = 0.5;
 
+/// A tet with a dihedral angle below this (degrees) is a sliver or a needle.
+pub const SLIVER_DEGREES: f64 = 5.0;
+
+/// The share of the tets past which [`sliver_note`] speaks.
+pub const SLIVER_SHARE: f64 = 0.01;
+
+/// What to say of a mesh of which [`SLIVER_SHARE`] of the tets or more are slivers
+/// ([`SLIVER_DEGREES`]), as Delaunay tetrahedralizations without a quality bound make them: a
+/// note, not a warning (a tester's Delaunay bars, 5.4–5.7 % slivers down to 0.008°, ran every
+/// method within 2.4 %), which says where a stiffness or a failed step from such a mesh may
+/// come from. A sliver turns far in F for a small move of its corners (one stood at 6.4× for
+/// 7 mm), inverts easily under classic Neo-Hookean, and slows the full solves.
+pub fn sliver_note(mesh: &TetMesh) -> Option<String> {
+    let angles: Vec<f64> = (0..mesh.num_tets())
+        .map(|t| mesh.min_dihedral_degrees(t))
+        .collect();
+    let slivers = angles.iter().filter(|&&a| a < SLIVER_DEGREES).count();
+    let share = slivers as f64 / angles.len().max(1) as f64;
+    (share >= SLIVER_SHARE).then(|| {
+        let smallest = angles.iter().copied().fold(f64::INFINITY, f64::min);
+        format!(
+            "{:.1} % of its tets are slivers (a dihedral angle under {SLIVER_DEGREES}°, the \
+             smallest {smallest:.2}°): a quality bound when meshing (`tetgen -pq1.4`, gmsh's \
+             `-optimize_netgen`, fTetWild) removes them",
+            100.0 * share
+        )
+    })
+}
+
 /// What to say of a mesh about one element thick ([`THIN_SHARE`]): linear tetrahedra that thin
 /// lock in bending, so the body is far stiffer than its material, and every method is measured
 /// against that stiffness.
@@ -238,6 +289,48 @@ fn tet_volume([x0, x1, x2, x3]: [Vec3; 4]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::generate::{BoxSpec, box_mesh};
+
+    /// Dihedral angles of known tets: a right corner's smallest is acos(1/√3), a regular tet's
+    /// acos(1/3), a flat one's near 0; a mesh of such slivers is noted, a box's tets are not.
+    #[test]
+    fn dihedral_angles_and_slivers() {
+        use crate::Vec3;
+        let tet = |x: [Vec3; 4]| super::TetMesh {
+            vertices: x.to_vec(),
+            tets: vec![[0, 1, 2, 3]],
+        };
+        let corner = tet([Vec3::zeros(), Vec3::x(), Vec3::y(), Vec3::z()]);
+        let expect = (1.0 / 3.0_f64.sqrt()).acos().to_degrees();
+        assert!((corner.min_dihedral_degrees(0) - expect).abs() < 1e-9);
+        let s = 8.0_f64.sqrt();
+        let regular = tet([
+            Vec3::new(s / 3.0, 0.0, -1.0 / 3.0),
+            Vec3::new(-s / 6.0, 6.0_f64.sqrt() / 3.0, -1.0 / 3.0),
+            Vec3::new(-s / 6.0, -(6.0_f64.sqrt()) / 3.0, -1.0 / 3.0),
+            Vec3::new(0.0, 0.0, 1.0),
+        ]);
+        let expect = (1.0_f64 / 3.0).acos().to_degrees();
+        assert!((regular.min_dihedral_degrees(0) - expect).abs() < 1e-9);
+        let sliver = tet([
+            Vec3::zeros(),
+            Vec3::x(),
+            Vec3::new(1.0, 1.0, 0.001),
+            Vec3::y(),
+        ]);
+        assert!(sliver.min_dihedral_degrees(0) < 1.0);
+        let note = super::sliver_note(&sliver).expect("all slivers");
+        assert!(
+            note.starts_with("100.0 % of its tets are slivers"),
+            "{note}"
+        );
+        let bar = box_mesh(&BoxSpec {
+            size: [1.0, 0.1, 0.1],
+            cells: [10, 1, 1],
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(super::sliver_note(&bar), None);
+    }
 
     /// A plate one cell thick is said; the same plate four or six cells through its thickness
     /// is not.
