@@ -110,6 +110,15 @@ impl ForceConfig {
     }
 }
 
+/// Whether `keyframes` can drive a force: at least one row, every value finite, times in order.
+/// The one test of a force's keyframes built in code, its own or replaced
+/// ([`ExternalForce::problem`], the runtime's `add_force` and `set_keyframes`).
+pub fn keyframes_usable(keyframes: &[[f64; 4]]) -> bool {
+    !keyframes.is_empty()
+        && keyframes.iter().flatten().all(|x| x.is_finite())
+        && keyframes.windows(2).all(|w| w[1][0] >= w[0][0])
+}
+
 impl ExternalForce {
     /// What makes this force unusable on a mesh of `num_vertices` vertices, if anything: no
     /// vertex or one past the mesh, keyframes that are empty, not finite or out of time order,
@@ -117,17 +126,13 @@ impl ExternalForce {
     /// in code is checked so before a model takes it ([`crate::integrator::FullSpaceModel::new`]);
     /// a scene's is made right by [`ForceConfig::resolve`].
     pub fn problem(&self, num_vertices: usize) -> Option<String> {
-        let k = &self.keyframes;
         if self.vertices.is_empty() {
             Some("acts on no vertex".into())
         } else if let Some(v) = self.vertices.iter().find(|&&v| v >= num_vertices) {
             Some(format!(
                 "vertex {v} is past the mesh's {num_vertices} vertices"
             ))
-        } else if k.is_empty()
-            || k.iter().flatten().any(|x| !x.is_finite())
-            || k.windows(2).any(|w| w[1][0] < w[0][0])
-        {
+        } else if !keyframes_usable(&self.keyframes) {
             Some("keyframes must be finite [t, x, y, z] rows in time order, at least one".into())
         } else if !(self.stiffness.is_finite() && self.stiffness >= 0.0) {
             Some(format!(

@@ -367,11 +367,7 @@ pub(crate) fn add_force<B: Backend>(
     // Checked, not reordered: the order of a force's vertices is the order its terms are summed
     // in, which a replayed schedule keeps so that its trajectory is the same bit for bit.
     not_all_pinned(b, &vertex_set(b, &force.vertices)?)?;
-    let k = &force.keyframes;
-    if k.is_empty()
-        || k.iter().flatten().any(|x| !x.is_finite())
-        || k.windows(2).any(|w| w[1][0] < w[0][0])
-    {
+    if !fem_core::forces::keyframes_usable(&force.keyframes) {
         return Err(ReducedError::Keyframes.into());
     }
     // Not a number, backwards, or empty: never acting (a tester's start = end = +∞ was taken).

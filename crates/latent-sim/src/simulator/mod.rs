@@ -401,10 +401,7 @@ impl<S: Subspace> ReducedSimulator<S> {
             .forces
             .get_mut(index)
             .ok_or(ReducedError::NoSuchForce { index, count })?;
-        if keyframes.is_empty()
-            || keyframes.iter().flatten().any(|x| !x.is_finite())
-            || keyframes.windows(2).any(|w| w[1][0] < w[0][0])
-        {
+        if !fem_core::forces::keyframes_usable(keyframes) {
             return Err(ReducedError::Keyframes);
         }
         force.keyframes.clear();
