@@ -2368,43 +2368,45 @@ fn snapshot_memory_problem(
     frames_per_schedule: usize,
     memory: Option<u64>,
 ) -> Option<String> {
-    let memory = memory?;
-    let bytes = (frames as u128) * (dim as u128) * 8;
-    let limit = u128::from(memory) / 2;
-    if bytes <= limit {
-        return None;
-    }
+    let (bytes, limit, memory) = past_memory(frames, dim, memory?, 2)?;
     let per_schedule = (frames_per_schedule.max(1) as u128) * (dim as u128) * 8;
-    let gib = |b: u128| b as f64 / f64::from(1u32 << 30);
     Some(format!(
         "the training snapshots would take {:.1} GiB ({frames} frames of {dim} free \
          coordinates), more than half of this machine's {:.1} GiB of memory (the PCA stage works \
          on a copy): at most {} `[training] schedules` of {frames_per_schedule} frames fit, or \
          fewer `frames_per_schedule`",
         gib(bytes),
-        gib(u128::from(memory)),
+        gib(memory),
         limit / per_schedule.max(1)
     ))
+}
+
+/// The bytes of `frames` frames of `dim` free coordinates, the `1/share` of `memory` they may
+/// take, and `memory`, when they take more.
+fn past_memory(frames: usize, dim: usize, memory: u64, share: u128) -> Option<(u128, u128, u128)> {
+    let bytes = (frames as u128) * (dim as u128) * 8;
+    let limit = u128::from(memory) / share;
+    (bytes > limit).then_some((bytes, limit, u128::from(memory)))
+}
+
+/// `bytes` in GiB.
+fn gib(bytes: u128) -> f64 {
+    bytes as f64 / f64::from(1u32 << 30)
 }
 
 /// Why a test trajectory of `frames` frames of `dim` free coordinates cannot be held in
 /// `memory` bytes, if it cannot: `run` holds the reference and each method's trajectory beside
 /// it, so a reference may take an eighth of the machine.
 fn trajectory_memory_problem(frames: usize, dim: usize, memory: Option<u64>) -> Option<String> {
-    let memory = memory?;
-    let bytes = (frames as u128) * (dim as u128) * 8;
-    let limit = u128::from(memory) / 8;
-    let gib = |b: u128| b as f64 / f64::from(1u32 << 30);
-    (bytes > limit).then(|| {
-        format!(
-            "a test trajectory of {frames} frames of {dim} free coordinates takes {:.1} GiB, and \
+    let (bytes, limit, memory) = past_memory(frames, dim, memory?, 8)?;
+    Some(format!(
+        "a test trajectory of {frames} frames of {dim} free coordinates takes {:.1} GiB, and \
              `run` holds one per method beside it: more than this machine's {:.1} GiB of memory \
              allow; at most {} `[test] frames_per_schedule` fit",
-            gib(bytes),
-            gib(u128::from(memory)),
-            limit / (dim.max(1) as u128 * 8)
-        )
-    })
+        gib(bytes),
+        gib(memory),
+        limit / (dim.max(1) as u128 * 8)
+    ))
 }
 
 /// Largest ‖u_v − (U q̂)_v‖ over vertices v and snapshot columns, with u the snapshots.

@@ -565,6 +565,7 @@ impl Compression {
             .map(|t| mesh.signed_volume(t))
             .collect();
         let total: f64 = rest.iter().sum();
+        let mean_element = total / rest.len().max(1) as f64;
         // Only the linear material leaves out the strain that `linear_strain` measures.
         let linear = model.material.is_linear();
         let (mut u, mut ratios) = (vec![0.0; model.num_full()], Vec::new());
@@ -596,7 +597,6 @@ impl Compression {
             let mut nonlinear_strain = 0.0;
             // The largest stretch of an element of a tenth of the mean size or more, else of
             // any: the figure said is not a sliver's beside the element that counts.
-            let mean_element = total / rest.len().max(1) as f64;
             let (mut stretch, mut sized_stretch, mut stretched_volume) = (0.0_f64, 0.0_f64, 0.0);
             // The largest singular value of F is at most its Frobenius norm, so only the elements
             // whose norm passes the limit need it.
