@@ -145,12 +145,18 @@ impl FrameWriter {
 mod tests {
     use super::*;
 
+    /// A fresh folder `NAME-PID` in the system's temporary folder.
+    fn test_dir(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
     /// A file in a folder's place, above it, or behind a trailing `/`, and a link to nothing,
     /// are named as such, not as "File exists" or "Not a directory".
     #[test]
     fn folders_that_are_not_are_named() {
-        let dir = std::env::temp_dir().join(format!("check-folder-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = test_dir("check-folder");
         let file = dir.join("afile");
         std::fs::write(&file, "x").unwrap();
         let said = |p: PathBuf| {
@@ -196,8 +202,7 @@ mod tests {
     /// A file that cannot be written is named in the error, not only the system's reason.
     #[test]
     fn a_write_that_fails_names_the_file() {
-        let dir = std::env::temp_dir().join(format!("output-write-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = test_dir("output-write");
         let blocker = dir.join("a-file");
         std::fs::write(&blocker, "not a folder").unwrap();
         let target = blocker.join("curves").join("spectrum.csv");

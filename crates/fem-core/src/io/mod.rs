@@ -335,13 +335,23 @@ pub fn remove_stale_temporaries(
     Ok(removed)
 }
 
+/// A fresh folder for a reader test's files, `fem-core-NAME-PID` in the system's temporary
+/// folder.
+#[cfg(test)]
+pub(crate) fn test_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("fem-core-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 #[cfg(test)]
 mod tests {
+    use super::test_dir;
+
     /// A file where a folder of the path should be is named, not "File exists".
     #[test]
     fn a_file_in_the_way_of_a_folder_is_named() {
-        let dir = std::env::temp_dir().join(format!("write-atomic-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = test_dir("write-atomic");
         let file = dir.join("scene.toml");
         std::fs::write(&file, "x").unwrap();
         let err = super::write_atomic(&file.join("sub").join("a.ldm"), b"y").unwrap_err();
@@ -358,8 +368,7 @@ mod tests {
     /// Only write_atomic's own temporaries are stale temporaries.
     #[test]
     fn stale_temporaries_are_only_write_atomic_s() {
-        let dir = std::env::temp_dir().join(format!("stale-tmp-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = test_dir("stale-tmp");
         // Leave one behind as a killed writer would: its rename into a folder fails.
         std::fs::create_dir_all(dir.join("a.art")).unwrap();
         super::write_atomic(&dir.join("a.art"), b"x").unwrap_err();
@@ -392,8 +401,7 @@ mod tests {
     /// alone is the system's error.
     #[test]
     fn a_tetgen_half_alone_names_the_other() {
-        let dir = std::env::temp_dir().join(format!("tetgen-half-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = test_dir("tetgen-half");
         let node = dir.join("part.1.node");
         std::fs::write(&node, "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n").unwrap();
         let err = super::read_mesh(&node).unwrap_err().to_string();

@@ -284,12 +284,6 @@ mod tests {
         }
     }
 
-    fn temp_dir(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("fem-core-vtu-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     #[test]
     fn numbers_round_trip_exactly() {
         let values = [
@@ -393,7 +387,7 @@ mod tests {
 
     #[test]
     fn files_are_written_and_pvd_paths_are_relative() {
-        let dir = temp_dir("files");
+        let dir = crate::io::test_dir("vtu-files");
         let frame = dir.join("frames").join("frame_0.vtu");
         let mesh = tet();
         write_vtu(&frame, &mesh, &[("displacement", &mesh.vertices)], &[]).unwrap();
