@@ -352,10 +352,7 @@ fn measured(
     let path = out.join("report.json");
     let method = model.provenance.method.as_str();
     let run = "`cargo xtask run` measures it on a held-out test and says whether to trust it";
-    let Some(report) = std::fs::read(&path)
-        .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-    else {
+    let Some(report) = read_report(&path) else {
         return Err(format!(
             "not measured: no run report in {} ({run})",
             out.display()
@@ -395,6 +392,13 @@ fn measured(
     Ok((report, error))
 }
 
+/// The run report (`report.json`) at `path`, when it is there and reads as JSON.
+fn read_report(path: &Path) -> Option<serde_json::Value> {
+    std::fs::read(path)
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+}
+
 /// Whether the stages a run report lists (its `stages`) include every stage `model` was made
 /// of, each with the same key; but the snapshots, which a warm run does not read (their key is
 /// in the basis's, which is compared).
@@ -420,9 +424,7 @@ fn of_stages(stages: &[serde_json::Value], model: &ReducedModel) -> bool {
 /// reports named their stages' keys, or one of other stages.
 pub fn report_is_of(out: &Path, model: &ReducedModel) -> Result<(), String> {
     let path = out.join("report.json");
-    let report = std::fs::read(&path)
-        .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+    let report = read_report(&path)
         .ok_or_else(|| format!("{} is missing or does not read", path.display()))?;
     let stages = report["stages"].as_array().cloned().unwrap_or_default();
     if stages.is_empty() || stages.iter().any(|s| s.get("key").is_none()) {
