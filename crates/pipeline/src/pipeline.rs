@@ -355,7 +355,16 @@ impl StageSummary for TrainedModel {
                     " judged on whole training schedules held out, then the best count ({e}) \
                      again on every schedule"
                 ),
-                None => String::new(),
+                None => match self.retrain_missed {
+                    Some(e) => format!(
+                        " judged on whole training schedules held out (trained again on every \
+                         schedule for the best count ({}), it missed the snapshots by {e:.3e}, \
+                         past `[autoencoder] max_vertex_error`, and the judged network, which \
+                         met it, is kept)",
+                        self.best_epoch.max(1)
+                    ),
+                    None => String::new(),
+                },
             }
         )
     }
@@ -672,6 +681,11 @@ pub struct TrainedModel {
     /// and `best_epoch` are the judged run's).
     #[serde(default)]
     pub retrained_epochs: Option<usize>,
+    /// When the network trained again on every schedule missed the snapshots by more than
+    /// `[autoencoder] max_vertex_error`, which the judged one met: its worst vertex error (the
+    /// judged network is kept, and `retrained_epochs` is `None`).
+    #[serde(default)]
+    pub retrain_missed: Option<f64>,
 }
 
 /// The latent dimension when `[autoencoder]` names no rule: half the PCA dimension, at least
@@ -928,10 +942,14 @@ impl<'a> Pipeline<'a> {
         let key = self
             .physics_key(Stage::Snapshots, &training.solver(&self.scene.solver))
             .mix(&training);
-        // Schedules left at the default length may start later to reach the test's last frame.
+        // Schedules left at the default length may start later to reach the test's last frame,
+        // when the test lasts longer than they do (`later_start`); a shorter test changes
+        // nothing (since stop 76: a tester's test of 30 or 40 frames beside 60-frame schedules
+        // computed the snapshots again).
+        let until = self.scene.test().frames_per_schedule;
         match self.scene.training.frames_per_schedule {
-            None => key.mix(&self.scene.test().frames_per_schedule).finish(),
-            Some(_) => key.finish(),
+            None if until > training.frames_per_schedule => key.mix(&until).finish(),
+            _ => key.finish(),
         }
     }
 
@@ -943,6 +961,9 @@ impl<'a> Pipeline<'a> {
             && pca.explained_energy == Some(pca::DEFAULT_EXPLAINED_ENERGY)
         {
             pca.explained_energy = None;
+        }
+        if pca.patch_responses == Some(pca::DEFAULT_PATCH_RESPONSES) {
+            pca.patch_responses = None;
         }
         KeyBuilder::new(Stage::Pca)
             .mix_key(self.snapshots_key())
@@ -1764,8 +1785,16 @@ impl<'a> Pipeline<'a> {
         }
         // The rule kept after both ran on training schedules with the reduced solver (since
         // 2026-12-02, stop 60): its settings, and the choice's.
+        // Defaults written out are the defaults (`current-state` is what `auto` means).
+        let mut reduced = self.scene.reduced.clone();
+        if reduced.onset_directions == Some(self.default_onset_directions()) {
+            reduced.onset_directions = None;
+        }
+        if reduced.preconditioner == latent_sim::Preconditioning::CurrentState {
+            reduced.preconditioner = latent_sim::Preconditioning::Auto;
+        }
         key = key
-            .mix(&self.scene.reduced)
+            .mix(&reduced)
             .mix(&self.scene.reduced.solver(&self.scene.solver))
             .mix(&(VALIDATION_SCHEDULES, RULE_MARGIN));
         // Mixed in only when given, so that the keys of scenes without it stay as they were.
@@ -2023,9 +2052,25 @@ impl<'a> Pipeline<'a> {
             }
             let chosen = search.chosen_trial();
             let d = chosen.latent_dim;
+            if let (Some([lo, hi]), Some(tolerance)) = (cfg.latent_dims, cfg.max_vertex_error) {
+                latent_choice = Some(if search.tolerance_met {
+                    format!(
+                        "the smallest in [{lo}, {hi}] whose worst vertex error over the \
+                         snapshots met `[autoencoder] max_vertex_error` = {tolerance:e}"
+                    )
+                } else {
+                    format!(
+                        "none in [{lo}, {hi}] met `[autoencoder] max_vertex_error` = \
+                         {tolerance:e}: the closest, {:.3e} off; a wider range or more PCA \
+                         coefficients may",
+                        chosen.error
+                    )
+                });
+            }
             // Then every schedule, the held-out ones too, for as many epochs as the held-out
             // ones judged best: a schedule held out may be the only one that grabs a limb.
             let by_schedule = cfg.held_out_groups(q.ncols()).is_some();
+            let mut retrain_missed = None;
             let (model, error, retrained_epochs) = if by_schedule {
                 let epochs = chosen.outcome.best_epoch.max(1);
                 let all = nn::AutoencoderConfig {
@@ -2041,7 +2086,27 @@ impl<'a> Pipeline<'a> {
                 let outcome = nn::train(q.as_ref(), d, &all, |_| {})
                     .map_err(|e| anyhow::anyhow!("{}: stage train: {e}", p.scene.source))?;
                 let error = error_of(&outcome.model);
-                (outcome.model, error, Some(epochs))
+                tracing::info!(
+                    judged = chosen.error,
+                    retrained = error,
+                    "worst vertex errors over every snapshot"
+                );
+                // Both are judged on every snapshot, the held-out schedules' too. The network
+                // trained again is kept (it has seen every schedule) unless it breaks the
+                // tolerance the judged one met: on a few poses, trained again for a handful of
+                // epochs, it can miss them by twice as much (a tester's 80 poses: 1.95e-2
+                // against 9.3e-3, where `max_vertex_error` asked for 1e-2). Elsewhere the two
+                // differ by a few per cent either way (the catapult 6.45e-3 against 6.29e-3,
+                // the default scene 4.866e-2 against 4.868e-2).
+                let breaks = cfg
+                    .max_vertex_error
+                    .is_some_and(|t| search.tolerance_met && error > t);
+                if !breaks {
+                    (outcome.model, error, Some(epochs))
+                } else {
+                    retrain_missed = Some(error);
+                    (chosen.outcome.model.clone(), chosen.error, None)
+                }
             } else {
                 (chosen.outcome.model.clone(), chosen.error, None)
             };
@@ -2078,6 +2143,7 @@ impl<'a> Pipeline<'a> {
                 pca_k_matching,
                 train_seconds,
                 latent_choice,
+                retrain_missed,
                 hidden_chosen: p.scene.autoencoder.hidden.is_none(),
                 retrained_epochs,
             })
@@ -2185,13 +2251,19 @@ impl<'a> Pipeline<'a> {
     /// The scene's `[reduced] onset_directions`, or when absent
     /// [`latent_sim::DEFAULT_ONSET_DIRECTIONS`] under gravity and none without.
     pub fn onset_directions(&self) -> usize {
-        self.scene.reduced.onset_directions.unwrap_or_else(|| {
-            if self.scene.gravity.is_on() {
-                latent_sim::DEFAULT_ONSET_DIRECTIONS
-            } else {
-                0
-            }
-        })
+        self.scene
+            .reduced
+            .onset_directions
+            .unwrap_or_else(|| self.default_onset_directions())
+    }
+
+    /// [`Self::onset_directions`] when the scene gives none.
+    fn default_onset_directions(&self) -> usize {
+        if self.scene.gravity.is_on() {
+            latent_sim::DEFAULT_ONSET_DIRECTIONS
+        } else {
+            0
+        }
     }
 
     /// How many [`Complement`] directions the neural methods take: the scene's `[reduced]

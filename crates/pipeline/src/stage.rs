@@ -70,7 +70,9 @@ impl Stage {
             // 5: without `[autoencoder] latent_dim`, d is half the PCA dimension (was 6).
             // 6: the artifact says whether the hidden widths are the default's (a new field, which
             //    the stored format cannot default: scenes that name `hidden` keep their key).
-            Stage::Train => 6,
+            // 7: the judged network kept where the one trained again on every schedule misses
+            //    the snapshots by more (`retrain_missed`, a new field).
+            Stage::Train => 7,
             // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
             // 3: sequential sparse factorisation on small pools (round-off), current-state
             //    L-BFGS preconditioner (iterates within tolerance).

@@ -251,11 +251,25 @@ fn variants() -> Vec<Variant> {
             "[reduced]\npreconditioner = \"rest\"\n\n[training]",
             &[NEURAL],
         ),
+        // What `auto` means, written out.
+        v(
+            "reduced.preconditioner",
+            "[training]",
+            "[reduced]\npreconditioner = \"current-state\"\n\n[training]",
+            NONE,
+        ),
+        v(
+            "reduced.onset_directions",
+            "[training]",
+            "[reduced]\nonset_directions = 3\n\n[training]",
+            &[NEURAL],
+        ),
+        // The default under gravity, written out.
         v(
             "reduced.onset_directions",
             "[training]",
             "[reduced]\nonset_directions = 2\n\n[training]",
-            &[NEURAL],
+            NONE,
         ),
         v(
             "reduced.complement_directions",
@@ -391,6 +405,13 @@ fn variants() -> Vec<Variant> {
             add!("pca", "patch_responses = 4"),
             "",
             BASIS,
+        ),
+        // The default written out.
+        v(
+            "pca.patch_responses",
+            add!("pca", "patch_responses = 48"),
+            "",
+            NONE,
         ),
         // [autoencoder]
         v(
@@ -732,6 +753,38 @@ fn every_scene_field_has_a_variant() {
         missing.is_empty(),
         "scene fields with no variant: {missing:?}"
     );
+}
+
+/// Schedules left at their default length start later to reach the end of a longer test, so
+/// the test's length keys the snapshots then, and only then: a test shorter than the schedules
+/// changes nothing in them.
+#[test]
+fn a_shorter_test_does_not_key_default_length_snapshots() {
+    let dir = scratch("test-length");
+    let scene = |test_frames: usize| {
+        let text = BASE
+            .replace(
+                "schedules = 3\nframes_per_schedule = 6\n",
+                "schedules = 3\n",
+            )
+            .replace(
+                "frames_per_schedule = 8",
+                &format!("frames_per_schedule = {test_frames}"),
+            );
+        let scene = Scene::from_str(&text, Path::new("."), "base").unwrap();
+        assert_eq!(scene.training.frames_per_schedule, None);
+        scene
+    };
+    let key = |test_frames: usize| {
+        Pipeline::new(&scene(test_frames), &dir)
+            .unwrap()
+            .snapshots_key()
+    };
+    let default = scene(8).training().frames_per_schedule;
+    assert_eq!(key(default / 2), key(default - 1));
+    assert_eq!(key(default / 2), key(default));
+    assert_ne!(key(default), key(default + 1));
+    assert_ne!(key(default + 1), key(default + 2));
 }
 
 /// The same box given as a mesh file: a path is not content, so nothing recomputes; a file
