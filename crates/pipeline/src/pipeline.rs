@@ -1368,6 +1368,9 @@ impl<'a> Pipeline<'a> {
         shard: (usize, usize),
         progress: Progress<'_>,
     ) -> Result<SnapshotSet> {
+        if let Some(why) = self.scene.unsupported_in_stages() {
+            bail!("{}: {why}", self.scene.source);
+        }
         let total = shard_len(cfg.schedules, shard);
         // Said before the schedules' minutes, not when the last of them runs out of memory.
         let frames = total.saturating_mul(cfg.frames_per_schedule);
@@ -2395,6 +2398,9 @@ impl<'a> Pipeline<'a> {
     /// Every index has one: trajectory i depends only on the test family's seed and i, not on
     /// `[test] schedules`.
     pub fn test_model(&self, trajectory: usize) -> Result<FullSpaceModel> {
+        if let Some(why) = self.scene.unsupported_in_stages() {
+            bail!("{}: {why}", self.scene.source);
+        }
         let cfg = self.scene.test();
         let mut model = self.model.clone();
         let built = self.test_forces.borrow().get(&trajectory).cloned();

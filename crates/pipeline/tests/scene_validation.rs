@@ -552,8 +552,25 @@ fn a_scene_without_support_needs_pins() {
     // ... but a quasi-static one has no equilibrium.
     let err = read_error(&floating.replace("frames = 10", "frames = 10\nquasi_static = true"));
     assert_names(&err, &["`pin`", "quasi-static"]);
-    // A spring acting for the whole run holds it.
-    builds(&unpinned.replace("end = 0.5\n", ""), Path::new("."));
+    // A spring acting for the whole run holds it, where the scene's own forces act
+    // (`simulate`); the stages train and test with their own loads, and refuse it before
+    // they simulate a free fall.
+    let held = unpinned.replace("end = 0.5\n", "");
+    builds(&held, Path::new("."));
+    let scene = Scene::from_str(&held, Path::new("."), "bad.toml").unwrap();
+    let mut p = pipeline::pipeline::Pipeline::new(&scene, &scratch("held-by-a-spring")).unwrap();
+    let err = format!("{:#}", p.snapshots(&|_, _| {}).unwrap_err());
+    assert_names(
+        &err,
+        &[
+            "only force[0]'s spring holds the body",
+            "falls freely",
+            "add a [[pin]]",
+        ],
+    );
+    let err = format!("{:#}", p.test_model(0).unwrap_err());
+    assert_names(&err, &["only force[0]'s spring holds the body"]);
+    assert_eq!(p.model.forces.len(), 1);
 }
 
 #[test]
