@@ -200,10 +200,10 @@ impl TrainingMatrix {
         if fit < wanted {
             tracing::warn!(
                 "cubature: {fit} of {wanted} training poses fit `cubature.memory_limit_mb` = {} \
-                 ({dim} reduced coordinates × {columns} candidate elements of {m}, {} MiB a \
-                 pose); fitting on those",
+                 ({dim} reduced coordinates × {columns} candidate elements of {m}, {:.3} MiB \
+                 a pose); fitting on those",
                 config.memory_limit_mb,
-                per_pose.div_ceil(1 << 20)
+                per_pose as f64 / (1u64 << 20) as f64
             );
         }
         let candidates =

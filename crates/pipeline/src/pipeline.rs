@@ -151,57 +151,86 @@ impl StageSummary for SnapshotSet {
 
 impl StageSummary for PcaFit {
     fn summary(&self) -> String {
-        let why = match self.rule {
-            pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
-            pca::DimensionRule::ExplainedEnergy(f) if f >= 1.0 => {
-                "the smallest basis holding all of the snapshots' energy (`[pca] \
-                 explained_energy` = 1)"
-                    .to_string()
-            }
-            pca::DimensionRule::ExplainedEnergy(f) => format!(
-                "the smallest basis holding all but {:.1e} of the snapshots' energy (`[pca] \
-                 explained_energy` = {f})",
-                1.0 - f
-            ),
-            pca::DimensionRule::MaxVertexError(t) => format!(
-                "the smallest basis whose worst vertex error over the snapshots is at most {t} \
-                 (`[pca] max_vertex_error`)"
-            ),
-        };
-        let met = if self.tolerance_met {
-            ""
-        } else {
-            " (not reached within `[pca] max_dimension`)"
-        };
-        let k = self.chosen_k();
-        let mut line = match (self.appended, self.fall_missed) {
-            (0, Some(f)) => format!(
-                "k = {k}: {why}{met}; they hold the body's first step of its fall from rest under \
-                 gravity to {:.2} %, no gravity directions added (`[pca] gravity_directions`)",
-                100.0 * f
-            ),
-            (0, None) => format!("k = {k}: {why}{met}"),
-            (m, _) => format!(
-                "k = {k} + {m}: {why}{met}, plus {m} position{} of the body's fall from rest \
-                 under gravity (those columns miss{} its first step; \
-                 `[pca] gravity_directions`)",
-                if m == 1 { "" } else { "s" },
-                self.fall_missed
-                    .map(|f| format!(" {:.2} % of", 100.0 * f))
-                    .unwrap_or_default()
-            ),
-        };
-        if self.responses > 0 {
-            line += &format!(
-                "; plus {} static response{} to a load on a surface patch that the basis \
-                 missed, {} columns in all (`[pca] patch_responses`)",
-                self.responses,
-                if self.responses == 1 { "" } else { "s" },
-                self.basis.k()
-            );
-        }
-        line
+        pca_line(self, None)
     }
+
+    fn summary_in(&self, scene: &Scene) -> String {
+        let asked = scene.pca.gravity_directions.or(
+            // Absent, the default count is asked where the test appends any.
+            (self.appended > 0).then_some(DEFAULT_GRAVITY_DIRECTIONS),
+        );
+        pca_line(self, asked)
+    }
+}
+
+/// The `pca` stage's line; `gravity_asked`, the positions of the fall the stage was to append.
+fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>) -> String {
+    let why = match fit.rule {
+        pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
+        pca::DimensionRule::ExplainedEnergy(f) if f >= 1.0 => {
+            "the smallest basis holding all of the snapshots' energy (`[pca] \
+             explained_energy` = 1)"
+                .to_string()
+        }
+        pca::DimensionRule::ExplainedEnergy(f) => format!(
+            "the smallest basis holding all but {:.1e} of the snapshots' energy (`[pca] \
+             explained_energy` = {f})",
+            1.0 - f
+        ),
+        pca::DimensionRule::MaxVertexError(t) => format!(
+            "the smallest basis whose worst vertex error over the snapshots is at most {t} \
+             (`[pca] max_vertex_error`)"
+        ),
+    };
+    let met = if fit.tolerance_met {
+        ""
+    } else {
+        " (not reached within `[pca] max_dimension`)"
+    };
+    let k = fit.chosen_k();
+    let mut line = match (fit.appended, fit.fall_missed) {
+        (0, Some(f)) => format!(
+            "k = {k}: {why}{met}; they hold the body's first step of its fall from rest under \
+             gravity to {:.2} %, no gravity directions added (`[pca] gravity_directions`)",
+            100.0 * f
+        ),
+        (0, None) => format!("k = {k}: {why}{met}"),
+        (m, _) => format!(
+            "k = {k} + {m}: {why}{met}, plus {m} position{} of the body's fall from rest \
+             under gravity (those columns miss{} its first step; \
+             `[pca] gravity_directions`{})",
+            if m == 1 { "" } else { "s" },
+            fit.fall_missed
+                .map(|f| format!(" {:.2} % of", 100.0 * f))
+                .unwrap_or_default(),
+            match gravity_asked {
+                Some(asked) if asked > m => format!(
+                    " = {asked}, the other {} left out: under {} % of each lay outside \
+                     the basis, a direction of its round-off",
+                    asked - m,
+                    100.0 * GRAVITY_DIRECTION_NEW
+                ),
+                _ => String::new(),
+            }
+        ),
+    };
+    if fit.responses > 0 {
+        // At most a tenth of the columns before them (`PATCH_RESPONSE_SHARE`).
+        let most = (fit.basis.k() - fit.responses).div_ceil(PATCH_RESPONSE_SHARE);
+        line += &format!(
+            "; plus {} static response{} to a load on a surface patch that the basis \
+             missed{}, {} columns in all (`[pca] patch_responses`)",
+            fit.responses,
+            if fit.responses == 1 { "" } else { "s" },
+            if fit.responses >= most {
+                ", the most it takes (a tenth of the columns before them)".to_string()
+            } else {
+                String::new()
+            },
+            fit.basis.k()
+        );
+    }
+    line
 }
 
 impl RuleValidation {
@@ -1490,7 +1519,20 @@ impl<'a> Pipeline<'a> {
                 .collect();
             let mat =
                 faer::MatRef::from_column_major_slice(&snaps.data, snaps.dim, snaps.num_frames());
-            let err = |e: pca::PcaError| anyhow::anyhow!("{}: stage pca: {e}", p.scene.source);
+            let err = |e: pca::PcaError| match e {
+                // A fixed count past the poses the snapshots kept (schedules that stopped
+                // early keep fewer than the scene's check counted).
+                pca::PcaError::DimensionOutOfRange {
+                    requested,
+                    available,
+                } if p.scene.pca.dimension == Some(requested) => anyhow::anyhow!(
+                    "{}: `pca.dimension` = {requested} is more than the {available} training \
+                     poses the snapshots hold can span: give at most {available}, or more \
+                     `[training] schedules` or `frames_per_schedule`",
+                    p.scene.source
+                ),
+                e => anyhow::anyhow!("{}: stage pca: {e}", p.scene.source),
+            };
             let mut fit = PcaBasis::fit(mat, Some(&mass), &p.scene.pca, 3).map_err(err)?;
             if p.scene.pca.norm == pca::BasisNorm::Step {
                 let op = fem_core::step_norm::StepOperator::new(&p.model, p.scene.time.step)?;

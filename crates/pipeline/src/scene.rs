@@ -336,6 +336,23 @@ impl Scene {
         }
         let mut pca_errors = Vec::new();
         self.pca.check(&mut pca_errors);
+        let training = self.training();
+        let poses = training
+            .schedules
+            .saturating_mul(training.frames_per_schedule);
+        if let Some(k) = self.pca.dimension
+            && k > poses
+        {
+            errors.push(FemError::InvalidConfig {
+                field: "pca.dimension".into(),
+                reason: format!(
+                    "{k} is more than the {poses} training poses ([training] schedules × \
+                     frames_per_schedule = {} × {}) can span: give at most {poses}, or more \
+                     schedules or frames",
+                    training.schedules, training.frames_per_schedule
+                ),
+            });
+        }
         for e in pca_errors {
             errors.push(match e {
                 pca::PcaError::InvalidConfig { field, reason } => {

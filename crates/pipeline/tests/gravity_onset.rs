@@ -111,6 +111,14 @@ fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
     let asked = large.replace("dimension = 60", "dimension = 60\ngravity_directions = 2");
     let (fit, _) = fit_of(&asked, "onset-asked");
     assert!(fit.appended >= 1, "{}", fit.summary());
+    // Positions the basis holds already are left out, and the line says how many of those asked.
+    let scene = Scene::from_str(&asked, Path::new("."), "onset-asked").unwrap();
+    let line = fit.summary_in(&scene);
+    let left_out = format!(
+        "`[pca] gravity_directions` = 2, the other {} left out",
+        2 - fit.appended
+    );
+    assert_eq!(line.contains(&left_out), fit.appended < 2, "{line}");
 }
 
 /// A quasi-static scene has one position of its "fall", the static sag K₀⁻¹f_g: however many

@@ -77,6 +77,14 @@ fn responses_are_appended_where_the_basis_misses_them() {
             && line.contains(&format!("{} columns in all", fit.basis.k())),
         "{line}"
     );
+    // At most a tenth of the columns before them, which the line says when reached.
+    let most = (fit.basis.k() - fit.responses).div_ceil(10);
+    assert!(fit.responses <= most, "{line}");
+    assert_eq!(
+        line.contains("the most it takes (a tenth of the columns before them)"),
+        fit.responses == most,
+        "{line}"
+    );
     // The basis stays M-orthonormal with them.
     let (k, mass) = (fit.basis.k(), fit.basis.mass().unwrap());
     for i in 0..k {

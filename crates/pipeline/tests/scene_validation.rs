@@ -558,7 +558,7 @@ fn a_scene_without_support_needs_pins() {
     let held = unpinned.replace("end = 0.5\n", "");
     builds(&held, Path::new("."));
     let scene = Scene::from_str(&held, Path::new("."), "bad.toml").unwrap();
-    let mut p = pipeline::pipeline::Pipeline::new(&scene, &scratch("held-by-a-spring")).unwrap();
+    let mut p = pipeline::pipeline::Pipeline::new(&scene, scratch("held-by-a-spring")).unwrap();
     let err = format!("{:#}", p.snapshots(&|_, _| {}).unwrap_err());
     assert_names(
         &err,
@@ -1103,4 +1103,27 @@ fn unreadable_scene_files_say_why() {
     let err = Scene::from_file(&utf16).unwrap_err().to_string();
     assert!(err.contains("save the scene (TOML) as UTF-8"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A fixed PCA dimension past what the training poses can span is refused before the
+/// snapshots are computed, naming the field and the most it can be.
+#[test]
+fn a_pca_dimension_past_the_training_poses_is_refused() {
+    let text = format!(
+        "{BASE}\n[training]\nschedules = 4\nframes_per_schedule = 20\n\n[pca]\ndimension = 81\n"
+    );
+    let err = read_error(&text);
+    assert_names(
+        &err,
+        &[
+            "pca.dimension",
+            "81 is more than the 80 training poses",
+            "4 × 20",
+            "at most 80",
+        ],
+    );
+    builds(
+        &text.replace("dimension = 81", "dimension = 80"),
+        Path::new("."),
+    );
 }
