@@ -369,7 +369,13 @@ pub fn bench(
 }
 
 fn write(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<()> {
-    write_json(&out.join("bench.json"), &rows)?;
+    let mut json = Vec::with_capacity(rows.len());
+    for row in rows {
+        let mut value = serde_json::to_value(row)?;
+        crate::run::null_if_full_space(&mut value, row.report.method);
+        json.push(value);
+    }
+    write_json(&out.join("bench.json"), &json)?;
     crate::output::write_file(&out.join("bench.md"), markdown(rows).as_bytes())?;
     crate::output::write_file(&out.join("bench.svg"), plot(scene, rows).as_bytes())?;
     Ok(())
@@ -485,6 +491,24 @@ mod tests {
             latent_dims: vec![2],
             tolerances: vec![0.1],
             complement_dims: Vec::new(),
+        }
+    }
+
+    /// `bench.json` holds `null`, not 0, for what a full-space row has none of, as
+    /// `report.json` does.
+    #[test]
+    fn bench_json_holds_null_for_what_full_space_has_none_of() {
+        let out = std::env::temp_dir().join(format!("bench-json-{}", std::process::id()));
+        std::fs::create_dir_all(&out).unwrap();
+        let mut full = row(10.0, 0.0);
+        full.report.method = Method::Full;
+        write(&out, "s", &[full, row(0.1, 0.02)]).unwrap();
+        let text = std::fs::read_to_string(out.join("bench.json")).unwrap();
+        let _ = std::fs::remove_dir_all(&out);
+        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        for key in crate::run::NOT_OF_FULL_SPACE {
+            assert!(json[0][key].is_null(), "{key}: {text}");
+            assert!(json[1][key].is_number(), "{key}: {text}");
         }
     }
 

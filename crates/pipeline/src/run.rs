@@ -56,18 +56,25 @@ fn scene_file(source: &str) -> String {
 }
 
 /// The rows as `report.json` holds them: [`NOT_OF_FULL_SPACE`] `null` on full-space rows.
-fn report_rows(rows: &[MethodReport]) -> Result<Vec<serde_json::Value>> {
+pub(crate) fn report_rows(rows: &[MethodReport]) -> Result<Vec<serde_json::Value>> {
     rows.iter()
         .map(|r| {
             let mut row = serde_json::to_value(r)?;
-            if r.method.is_full() {
-                for key in NOT_OF_FULL_SPACE {
-                    row[key] = serde_json::Value::Null;
-                }
-            }
+            null_if_full_space(&mut row, r.method);
             Ok(row)
         })
         .collect()
+}
+
+/// Sets [`NOT_OF_FULL_SPACE`] to `null` in `row`, a method's row as JSON (or a row that holds
+/// its fields, as `bench.json`'s do), when `method` is full space: as `report.json`, so do
+/// `suite.json` and `bench.json` (which held 0 there until stop 76).
+pub(crate) fn null_if_full_space(row: &mut serde_json::Value, method: Method) {
+    if method.is_full() {
+        for key in NOT_OF_FULL_SPACE {
+            row[key] = serde_json::Value::Null;
+        }
+    }
 }
 
 /// `report.json`'s `format`: what the file is, for a program that finds it among others.

@@ -277,9 +277,15 @@ pub fn meshes(dir: &Path, max_vertices: Option<usize>) -> Result<Vec<PathBuf>> {
 pub fn write(out: &Path, rows: &[SuiteRow]) -> Result<()> {
     crate::output::create_folder(out, "the output folder", "for the results")?;
     crate::output::write_file(&out.join("suite.md"), markdown(rows).as_bytes())?;
+    let mut json = Vec::with_capacity(rows.len());
+    for row in rows {
+        let mut value = serde_json::to_value(row)?;
+        value["methods"] = serde_json::Value::Array(crate::run::report_rows(&row.methods)?);
+        json.push(value);
+    }
     crate::output::write_file(
         &out.join("suite.json"),
-        serde_json::to_string_pretty(&rows)?.as_bytes(),
+        serde_json::to_string_pretty(&json)?.as_bytes(),
     )?;
     Ok(())
 }
@@ -634,6 +640,39 @@ mod tests {
             ..at(0.05, 0.01)
         };
         assert_eq!(standing(&failed, &p), "—");
+    }
+
+    /// `suite.json` holds `null`, not 0, for what a full-space row has none of, as
+    /// `report.json` does; a reduced row keeps its figures.
+    #[test]
+    fn suite_json_holds_null_for_what_full_space_has_none_of() {
+        let out = std::env::temp_dir().join(format!("suite-json-{}", std::process::id()));
+        let method = |method, subspace_error| MethodReport {
+            method,
+            subspace_error,
+            ..Default::default()
+        };
+        let row = SuiteRow {
+            scene: "s".into(),
+            vertices: 10,
+            tets: 20,
+            pipeline_seconds: 1.0,
+            methods: vec![method(Method::Full, 0.0), method(Method::Pca, 0.25)],
+            trajectories: Vec::new(),
+            trajectories_seconds: None,
+            trajectories_failure: None,
+            failure: None,
+        };
+        write(&out, &[row]).unwrap();
+        let text = std::fs::read_to_string(out.join("suite.json")).unwrap();
+        let _ = std::fs::remove_dir_all(&out);
+        let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let methods = &json[0]["methods"];
+        for key in crate::run::NOT_OF_FULL_SPACE {
+            assert!(methods[0][key].is_null(), "{key}: {text}");
+            assert!(methods[1][key].is_number(), "{key}: {text}");
+        }
+        assert_eq!(methods[1]["subspace_error"], 0.25);
     }
 
     /// A mesh whose pipeline stopped is said below the table, which stays one table (a note
