@@ -65,7 +65,7 @@ enum Command {
     /// Stage `snapshots`: simulate the training schedules.
     Snapshots(SnapshotsArgs),
     /// Stage `pca`: the mass-orthonormal basis (runs `snapshots` first if needed); writes its
-    /// spectrum and error curve to out/SCENE/pca/.
+    /// spectrum (and, under `[pca] max_vertex_error`, its error curve) to out/SCENE/pca/.
     Pca(StageArgs),
     /// Stage `cubature`: optimized cubature for the PCA subspace (runs earlier stages if needed);
     /// writes its error curve to out/SCENE/cubature/.
@@ -228,7 +228,8 @@ struct StressArgs {
     /// Methods to stress.
     #[arg(long, value_enum, value_delimiter = ',', num_args = 1.., default_values_t = [MethodArg::Full, MethodArg::FullNewton, MethodArg::FullLbfgs, MethodArg::Pca, MethodArg::PcaCubature, MethodArg::Neural, MethodArg::NeuralCubature])]
     methods: Vec<MethodArg>,
-    /// Steps of the free-run condition (test trajectory, then no external force).
+    /// Steps in all of the free-run condition: the test trajectory, then no external force up to
+    /// this many (the test's frames or fewer: no free step).
     #[arg(long, allow_negative_numbers = true, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(0..=fem_core::integrator::MAX_FRAMES as u64))]
     free_steps: u64,
     /// Held-out test trajectory to simulate.
@@ -1047,7 +1048,7 @@ fn stage_out(cx: &Context, scene: &Scene, args: &StageArgs, stage: &str) -> Resu
     output_folder(args.out.clone().unwrap_or_else(|| cx.out(scene, &[stage])))
 }
 
-/// `pca`: the basis, its spectrum and error curve.
+/// `pca`: the basis, its spectrum and (under the vertex-error rule) its error curve.
 fn pca(cx: &Context, args: &StageArgs) -> Result<()> {
     let scene = cx.scene(&args.common)?;
     let mut p = cx.pipeline(&scene, &args.common)?;
@@ -1056,7 +1057,11 @@ fn pca(cx: &Context, args: &StageArgs) -> Result<()> {
     let fit = p.pca(&|d, t| cx.stage_progress(d, t))?;
     print!("{}", pipeline::stage_report::describe_pca(&fit));
     pipeline::stage_report::write_pca_curves(&dir, &fit)?;
-    println!("spectrum and error curve: {}", dir.display());
+    if fit.max_vertex_error_per_k.is_empty() {
+        println!("spectrum: {}", dir.join("spectrum.csv").display());
+    } else {
+        println!("spectrum and error curve: {}", dir.display());
+    }
     Ok(())
 }
 
