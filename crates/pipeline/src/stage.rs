@@ -122,8 +122,9 @@ impl Stage {
             // 3: the positions of the fall under gravity appended (`PcaFit::appended`, a new
             //    field the old artifacts lack).
             // 4: static responses to patch loads appended (`PcaFit::responses`).
-            // 5: faer's kernels at a fixed parallelism, `FAER_TASKS` (round-off; every stage
-            //    after it too, whose keys hold this one's).
+            // 5: faer's kernels at a fixed parallelism, `FAER_TASKS` (the same as before on
+            //    two threads, round-off on others; every stage after it too, whose keys hold
+            //    this one's).
             Stage::Pca => 5,
             // 2: with what the PCA basis leaves out of the snapshots, for the default count.
             // 3: with the snapshots' energy and the latent dimension.
