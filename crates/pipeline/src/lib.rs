@@ -3,6 +3,11 @@
 //!
 //! `cargo xtask` only parses flags, shows progress bars and dispatches here, so tests and other
 //! programs drive exactly the code a user runs. Long work reports progress through callbacks.
+//!
+//! [`pipeline::Pipeline::new`] sets faer's global parallelism to
+//! [`pipeline::FAER_TASKS`] tasks, so that the stages compute the same to the bit on any
+//! number of threads; a program that uses faer itself and wants another setting sets it again
+//! after building a pipeline.
 
 pub mod artifact;
 pub mod bench;

@@ -159,7 +159,10 @@ impl StageSummary for PcaFit {
             // Absent, the default count is asked where the test appends any.
             (self.appended > 0).then_some(DEFAULT_GRAVITY_DIRECTIONS),
         );
-        pca_line(self, asked)
+        // A quasi-static scene's fall has one position, its static sag
+        // (`fem_core::step_norm::gravity_onset`): the others were never offered.
+        let offered = asked.map(|a| if scene.time.quasi_static { a.min(1) } else { a });
+        pca_line(self, offered)
     }
 }
 
@@ -205,10 +208,20 @@ fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>) -> String {
                 .unwrap_or_default(),
             match gravity_asked {
                 Some(asked) if asked > m => format!(
-                    " = {asked}, the other {} left out: under {} % of each lay outside \
-                     the basis, a direction of its round-off",
-                    asked - m,
-                    100.0 * GRAVITY_DIRECTION_NEW
+                    " = {asked}, {} left out: under {} % of {} lay outside the basis, so \
+                     {} only add its round-off",
+                    if asked - m == 1 {
+                        "one".to_string()
+                    } else {
+                        (asked - m).to_string()
+                    },
+                    100.0 * GRAVITY_DIRECTION_NEW,
+                    if asked - m == 1 { "it" } else { "each" },
+                    if asked - m == 1 {
+                        "it would"
+                    } else {
+                        "they would"
+                    },
                 ),
                 _ => String::new(),
             }
@@ -1541,12 +1554,24 @@ impl<'a> Pipeline<'a> {
                 pca::PcaError::DimensionOutOfRange {
                     requested,
                     available,
-                } if p.scene.pca.dimension == Some(requested) => anyhow::anyhow!(
-                    "{}: `pca.dimension` = {requested} is more than the {available} training \
-                     poses the snapshots hold can span: give at most {available}, or more \
-                     `[training] schedules` or `frames_per_schedule`",
-                    p.scene.source
-                ),
+                } if p.scene.pca.dimension == Some(requested) => {
+                    if available < snaps.num_frames() {
+                        anyhow::anyhow!(
+                            "{}: `pca.dimension` = {requested} is more than the mesh's \
+                             {available} free coordinates: give at most {available}, or a finer \
+                             mesh",
+                            p.scene.source
+                        )
+                    } else {
+                        anyhow::anyhow!(
+                            "{}: `pca.dimension` = {requested} is more than the {available} \
+                             training poses the snapshots hold can span: give at most \
+                             {available}, or more `[training] schedules` or \
+                             `frames_per_schedule`",
+                            p.scene.source
+                        )
+                    }
+                }
                 e => anyhow::anyhow!("{}: stage pca: {e}", p.scene.source),
             };
             let mut fit = PcaBasis::fit(mat, Some(&mass), &p.scene.pca, 3).map_err(err)?;
@@ -2122,8 +2147,8 @@ impl<'a> Pipeline<'a> {
                 } else {
                     format!(
                         "none in [{lo}, {hi}] met `[autoencoder] max_vertex_error` = \
-                         {tolerance:e}: the closest, {:.3e} off; a wider range or more PCA \
-                         coefficients may",
+                         {tolerance:e}: d = {d} came closest in the search, {:.3e} off; a wider \
+                         range, or more PCA coefficients, may meet it",
                         chosen.error
                     )
                 });

@@ -420,6 +420,11 @@ impl Scene {
             return None;
         }
         let spring = self.holding_spring()?;
+        // Stages whose schedules all fall under no gravity leave a dynamic body floating.
+        let weightless = self.training().gravity_scale == 0.0 && self.test().gravity_scale == 0.0;
+        if weightless && !self.time.quasi_static {
+            return None;
+        }
         let why = self.unsupported_without_forces()?;
         Some(format!(
             "the scene pins no vertex and only force[{spring}]'s spring holds the body, but the \

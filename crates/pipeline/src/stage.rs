@@ -198,10 +198,10 @@ mod tests {
             [
                 ("snapshots", 13),
                 ("snapshots-shard", 13),
-                ("pca", 4),
+                ("pca", 5),
                 ("cubature", 6),
                 ("cubature-neural", 8),
-                ("train", 6),
+                ("train", 7),
                 ("complement", 3),
                 ("reference", 11),
                 ("coverage", 2),

@@ -114,11 +114,12 @@ fn a_basis_that_holds_the_fall_is_left_as_it_is_unless_asked() {
     // Positions the basis holds already are left out, and the line says how many of those asked.
     let scene = Scene::from_str(&asked, Path::new("."), "onset-asked").unwrap();
     let line = fit.summary_in(&scene);
-    let left_out = format!(
-        "`[pca] gravity_directions` = 2, the other {} left out",
-        2 - fit.appended
+    assert_eq!(
+        line.contains("`[pca] gravity_directions` = 2, one left out: under 0.1 % of it"),
+        fit.appended == 1,
+        "{line}"
     );
-    assert_eq!(line.contains(&left_out), fit.appended < 2, "{line}");
+    assert!(!line.contains("left out") || fit.appended == 1, "{line}");
 }
 
 /// A quasi-static scene has one position of its "fall", the static sag K₀⁻¹f_g: however many
@@ -130,4 +131,8 @@ fn a_quasi_static_scene_gets_its_static_sag_at_most() {
         .replace("dimension = 3", "dimension = 3\ngravity_directions = 3");
     let (fit, _) = fit_of(&text, "onset-static");
     assert_eq!((fit.appended, fit.basis.k()), (1, 4), "{}", fit.summary());
+    // The two positions that were never offered are not said to be left out.
+    let scene = Scene::from_str(&text, Path::new("."), "onset-static").unwrap();
+    let line = fit.summary_in(&scene);
+    assert!(!line.contains("left out"), "{line}");
 }

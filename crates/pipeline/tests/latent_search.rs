@@ -43,12 +43,15 @@ max_vertex_error = 0.01
     );
     let (d, error) = *trained.trials.last().unwrap();
     assert_eq!(trained.latent_dim, d);
-    if let Some(missed) = trained.retrain_missed {
-        assert!(missed > 0.01, "{line}");
-        assert_eq!(trained.max_vertex_error, error, "{line}");
-        assert!(
-            line.contains("the judged network, which met it, is kept"),
-            "{line}"
-        );
-    }
+    // On this scene the network trained again misses the tolerance (1.95e-2): the judged one
+    // is kept, and said so.
+    let missed = trained
+        .retrain_missed
+        .expect("the retrained network breaks the tolerance");
+    assert!(missed > 0.01, "{line}");
+    assert_eq!(trained.max_vertex_error, error, "{line}");
+    assert!(
+        line.contains("the judged network, which met it, is kept"),
+        "{line}"
+    );
 }

@@ -571,6 +571,11 @@ fn a_scene_without_support_needs_pins() {
     let err = format!("{:#}", p.test_model(0).unwrap_err());
     assert_names(&err, &["only force[0]'s spring holds the body"]);
     assert_eq!(p.model.forces.len(), 1);
+    // Where neither the schedules nor the test fall under gravity, the body floats there.
+    let weightless =
+        format!("{held}\n[training]\ngravity_scale = 0.0\n\n[test]\ngravity_scale = 0.0\n");
+    let scene = Scene::from_str(&weightless, Path::new("."), "bad.toml").unwrap();
+    assert_eq!(scene.unsupported_in_stages(), None);
 }
 
 #[test]
@@ -1125,5 +1130,18 @@ fn a_pca_dimension_past_the_training_poses_is_refused() {
     builds(
         &text.replace("dimension = 81", "dimension = 80"),
         Path::new("."),
+    );
+    // Past the mesh's free coordinates (20 vertices, 4 pinned: 48), the stage says so.
+    let scene = Scene::from_str(
+        &text.replace("dimension = 81", "dimension = 60"),
+        Path::new("."),
+        "bad.toml",
+    )
+    .unwrap();
+    let mut p = pipeline::pipeline::Pipeline::new(&scene, scratch("pca-past-the-mesh")).unwrap();
+    let err = format!("{:#}", p.pca(&|_, _| {}).unwrap_err());
+    assert_names(
+        &err,
+        &["`pca.dimension` = 60 is more than the mesh's 48 free coordinates"],
     );
 }

@@ -46,12 +46,27 @@ fn one_thread_and_two_compute_the_same_stages() {
             let pca = p.pca(&none).unwrap();
             let cubature = p.cubature(&none).unwrap().rule.clone();
             let train = p.train(&none).unwrap().model.clone();
-            (snapshots, pca.basis.clone(), cubature, train)
+            let complement = p.complement(&none).unwrap().directions.clone();
+            let neural = p.cubature_neural(&none).unwrap().rule.clone();
+            (
+                snapshots,
+                pca.basis.clone(),
+                cubature,
+                train,
+                complement,
+                neural,
+            )
         })
     };
-    let (one, two) = (stages(1), stages(2));
-    assert!(one.0 == two.0, "snapshots");
-    assert!(one.1 == two.1, "pca");
-    assert!(one.2 == two.2, "cubature");
-    assert!(one.3 == two.3, "train");
+    // Three threads: past two, the full-space factorisation runs in parallel too.
+    let one = stages(1);
+    for threads in [2, 3] {
+        let other = stages(threads);
+        assert!(one.0 == other.0, "snapshots on {threads} threads");
+        assert!(one.1 == other.1, "pca on {threads} threads");
+        assert!(one.2 == other.2, "cubature on {threads} threads");
+        assert!(one.3 == other.3, "train on {threads} threads");
+        assert!(one.4 == other.4, "complement on {threads} threads");
+        assert!(one.5 == other.5, "cubature-neural on {threads} threads");
+    }
 }
