@@ -405,9 +405,13 @@ impl Scene {
 
     /// The first `[[force]]` spring acting for the whole run, which holds a body no pin holds.
     fn holding_spring(&self) -> Option<usize> {
-        self.force.iter().position(|f| {
-            f.kind == ForceKind::Spring && f.start <= 0.0 && f.end.is_none_or(|e| e.is_infinite())
-        })
+        (0..self.force.len()).find(|&i| self.holding_spring_at(i))
+    }
+
+    /// Whether `force[i]` is a spring acting for the whole run.
+    fn holding_spring_at(&self, i: usize) -> bool {
+        let f = &self.force[i];
+        f.kind == ForceKind::Spring && f.start <= 0.0 && f.end.is_none_or(|e| e.is_infinite())
     }
 
     /// Where the training schedules and the test leave the scene's own `[[force]]` out (they
@@ -463,13 +467,43 @@ impl Scene {
         if pinned.is_empty() {
             return; // reported by `check` (or selection errors), not again per piece
         }
-        let Some(why) = self.unsupported_because() else {
+        let Some(why) = self.unsupported_without_forces() else {
             return;
         };
         let mut held = vec![false; count];
         for &v in pinned {
             if let Some(h) = held.get_mut(piece[v]) {
                 *h = true;
+            }
+        }
+        // A spring acting for the whole run holds the pieces it grabs, in the scene's own
+        // trajectory (`simulate`), and no other: before stop 76 one such spring anywhere let
+        // every unpinned piece through. The stages pull with their own loads, so there only
+        // the pins hold a piece.
+        let mut by_spring = vec![None; count];
+        for (i, f) in self.force.iter().enumerate() {
+            if self.holding_spring_at(i)
+                && let Ok(vertices) = f.select.select(mesh, &format!("force[{i}].select"))
+            {
+                for v in vertices {
+                    if let Some(h) = by_spring.get_mut(piece[v]) {
+                        h.get_or_insert(i);
+                    }
+                }
+            }
+        }
+        for (c, spring) in by_spring.iter().enumerate() {
+            if let (Some(i), false) = (spring, held[c]) {
+                let line = format!(
+                    "piece {} of the {count} disconnected pieces of the mesh is held by force[{i}]'s \
+                     spring and no pin: the training schedules and the test pull, poke and drag \
+                     with their own loads, not the scene's [[force]] sections, so there {why} \
+                     (a [[pin]] that selects a vertex of it holds it in every stage)",
+                    c + 1
+                );
+                crate::pipeline::warn_once(&format!("{}: {line}", self.source));
+                warnings.push(line);
+                held[c] = true;
             }
         }
         for (c, _) in held.iter().enumerate().filter(|(_, h)| !**h) {

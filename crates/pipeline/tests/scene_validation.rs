@@ -763,6 +763,22 @@ fn every_piece_of_a_disconnected_mesh_needs_a_pin() {
     );
     // Without gravity the loose piece may float.
     builds(&one.replace("[0.0, -9.81, 0.0]", "[0.0, 0.0, 0.0]"), &dir);
+    // A spring for the whole run on the pinned piece does not hold the other (it did before
+    // stop 76: any such spring let every piece through).
+    let err = build_error(&one.replace("end = 0.5\n", ""), &dir);
+    assert_names(&err, &["piece 2 of the 2", "falls freely"]);
+    // On the other piece, it holds it in the scene's own trajectory, and the stages, which
+    // leave the scene's forces out, are warned of.
+    let held = one
+        .replace("end = 0.5\n", "")
+        .replace("center = [1.0, 0.1, 0.1]", "center = [1.0, 1.1, 0.1]");
+    let scene = Scene::from_str(&held, &dir, "ok.toml").unwrap();
+    let built = scene.build_model().unwrap_or_else(|e| panic!("{e:#}"));
+    assert!(
+        built.warnings.iter().any(|w| w.contains("piece 2 of the 2 disconnected pieces of the mesh is held by force[0]'s spring and no pin")),
+        "{:?}",
+        built.warnings
+    );
 }
 
 /// A broken table header is reported at its line, not under the section before it.
