@@ -564,6 +564,26 @@ impl Compression {
     /// clamped at one edge fell 0.286 m under gravity as linear, 0.095 m as stable Neo-Hookean.
     pub const LINEAR_STRAIN: f64 = 0.05;
 
+    /// ½‖HᵀH‖ of an element's deformation gradient `f` (H = F − I): the part of the Green
+    /// strain linear elasticity leaves out, about θ²/√2 for a rotation θ.
+    pub fn left_out_strain(f: &fem_core::Mat3) -> f64 {
+        let h = f - fem_core::Mat3::identity();
+        0.5 * (h.transpose() * h).norm()
+    }
+
+    /// [`Self::left_out_strain`] averaged over `model`'s body by rest volume, in the full
+    /// displacement `u`: what [`Self::linear_strain`] takes the largest of over frames.
+    pub fn mean_left_out_strain(model: &FullSpaceModel, u: &[f64]) -> f64 {
+        let mesh = &model.mesh;
+        let (mut sum, mut total) = (0.0, 0.0);
+        for e in 0..model.elements.len() {
+            let volume = mesh.signed_volume(e).abs();
+            sum += Self::left_out_strain(&model.elements.deformation_gradient(e, u)) * volume;
+            total += volume;
+        }
+        if total > 0.0 { sum / total } else { 0.0 }
+    }
+
     /// Over `frames` of free displacements of `model`, each taken `step` seconds after the last
     /// (the first at `step`). None without frames.
     pub fn of(model: &FullSpaceModel, frames: &[Vec<f64>], step: f64) -> Option<Self> {
@@ -610,8 +630,7 @@ impl Compression {
             for e in 0..model.elements.len() {
                 let f = model.elements.deformation_gradient(e, &u);
                 if linear {
-                    let h = f - fem_core::Mat3::identity();
-                    nonlinear_strain += 0.5 * (h.transpose() * h).norm() * rest[e] / total;
+                    nonlinear_strain += Self::left_out_strain(&f) * rest[e] / total;
                 }
                 if f.norm() <= Self::STRETCHED {
                     continue;
