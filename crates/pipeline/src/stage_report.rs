@@ -144,15 +144,20 @@ impl FittedCubature {
     /// Writes `error.csv` (elements, relative force error on the training poses) and `error.svg`.
     pub fn write_error_curve(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut csv = String::from("elements,relative_error,held_out_error\n");
-        for (n, e) in &self.rule.error_curve {
+        // One row per step of the greedy path: NNLS may drop elements, so a count can come
+        // back (a tester's 584 rows held 500 counts), and `step` keys the rows. The held-out
+        // error was measured when the path first reached its count, and goes on that row.
+        let mut csv = String::from("step,elements,relative_error,held_out_error\n");
+        let mut said = std::collections::BTreeSet::new();
+        for (step, (n, e)) in self.rule.error_curve.iter().enumerate() {
             let held = self
                 .held_out_curve
                 .iter()
                 .find(|&&(m, _)| m == *n)
+                .filter(|_| said.insert(*n))
                 .map(|&(_, h)| h.to_string())
                 .unwrap_or_default();
-            csv.push_str(&format!("{n},{e},{held}\n"));
+            csv.push_str(&format!("{},{n},{e},{held}\n", step + 1));
         }
         crate::output::write_file(&dir.join("error.csv"), csv.as_bytes())?;
         let series = vec![
