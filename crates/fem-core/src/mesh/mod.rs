@@ -112,13 +112,9 @@ impl TetMesh {
 
     /// Boundary triangles: faces that belong to exactly one tet, oriented outward.
     pub fn surface_triangles(&self) -> Vec<[usize; 3]> {
-        // Faces opposite vertex i of a positively oriented tet ((x1−x0)×(x2−x0)·(x3−x0) > 0),
-        // counter-clockwise seen from outside: (b−a)×(c−a) points away from the fourth vertex.
-        // (Before 2026-12-02 they were the reverse, inward.)
-        const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
         let mut faces: Vec<([usize; 3], [usize; 3])> = Vec::with_capacity(self.tets.len() * 4);
         for t in &self.tets {
-            for f in FACES {
+            for f in TET_FACES {
                 let tri = [t[f[0]], t[f[1]], t[f[2]]];
                 let mut key = tri;
                 key.sort_unstable();
@@ -147,13 +143,6 @@ impl TetMesh {
     pub fn vertex_components(&self) -> (Vec<usize>, usize) {
         let n = self.vertices.len();
         let mut parent: Vec<usize> = (0..n).collect();
-        fn root(parent: &mut [usize], mut v: usize) -> usize {
-            while parent[v] != v {
-                parent[v] = parent[parent[v]];
-                v = parent[v];
-            }
-            v
-        }
         let mut used = vec![false; n];
         for tet in &self.tets {
             let a = root(&mut parent, tet[0]);
@@ -250,10 +239,8 @@ pub fn sliver_note(mesh: &TetMesh) -> Option<String> {
 /// lock in bending, so the body is far stiffer than its material, and every method is measured
 /// against that stiffness.
 pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
-    let mut on_surface = vec![false; mesh.num_vertices()];
-    for v in mesh.surface_vertices() {
-        on_surface[v] = true;
-    }
+    let triangles = mesh.surface_triangles();
+    let on_surface = on_triangles(mesh.num_vertices(), &triangles);
     let tets = mesh.num_tets();
     let thin = mesh
         .tets
@@ -261,7 +248,7 @@ pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
         .filter(|t| t.iter().all(|&v| on_surface[v]))
         .count();
     if tets > 0 && (thin as f64) < THIN_SHARE * tets as f64 {
-        let (share, centre, count) = thickest_thin_part(mesh)?;
+        let (share, centre, count) = thickest_thin_part(mesh, &triangles, &on_surface)?;
         return (share >= THIN_PART_SHARE).then(|| {
             format!(
                 "a part about one element thick around ({:.3}, {:.3}, {:.3}) holds {:.0} % of \
@@ -309,15 +296,18 @@ pub const THIN_PART_SHARE: f64 = 0.05;
 /// The largest part one element thick: the tets that reach across the body, each with two
 /// surface corners whose outward normals point apart (cosine below −½) and away from each
 /// other, joined through their shared faces. Its share of the body's volume, its
-/// volume-weighted centre and its tets; `None` for a mesh without such tets.
-fn thickest_thin_part(mesh: &TetMesh) -> Option<(f64, Vec3, usize)> {
+/// volume-weighted centre and its tets; `None` for a mesh without such tets. `triangles` are
+/// the mesh's [`TetMesh::surface_triangles`], `on_surface` whether each vertex is on one.
+fn thickest_thin_part(
+    mesh: &TetMesh,
+    triangles: &[[usize; 3]],
+    on_surface: &[bool],
+) -> Option<(f64, Vec3, usize)> {
     let mut normal = vec![Vec3::zeros(); mesh.num_vertices()];
-    let mut on_surface = vec![false; mesh.num_vertices()];
-    for [a, b, c] in mesh.surface_triangles() {
+    for &[a, b, c] in triangles {
         let n = (mesh.vertices[b] - mesh.vertices[a]).cross(&(mesh.vertices[c] - mesh.vertices[a]));
         for v in [a, b, c] {
             normal[v] += n;
-            on_surface[v] = true;
         }
     }
     for n in &mut normal {
@@ -345,28 +335,14 @@ fn thickest_thin_part(mesh: &TetMesh) -> Option<(f64, Vec3, usize)> {
     let mut faces: Vec<([usize; 3], usize)> = Vec::with_capacity(4 * spanning.len());
     for (i, &t) in spanning.iter().enumerate() {
         let v = mesh.tets[t];
-        for skip in 0..4 {
-            let mut face = [0; 3];
-            let mut k = 0;
-            for (j, &x) in v.iter().enumerate() {
-                if j != skip {
-                    face[k] = x;
-                    k += 1;
-                }
-            }
+        for f in TET_FACES {
+            let mut face = f.map(|j| v[j]);
             face.sort_unstable();
             faces.push((face, i));
         }
     }
     faces.sort_unstable();
     let mut parent: Vec<usize> = (0..spanning.len()).collect();
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
     for pair in faces.windows(2) {
         if pair[0].0 == pair[1].0 {
             let (a, b) = (root(&mut parent, pair[0].1), root(&mut parent, pair[1].1));
@@ -383,11 +359,32 @@ fn thickest_thin_part(mesh: &TetMesh) -> Option<(f64, Vec3, usize)> {
         part.1 += volume * centre;
         part.2 += 1;
     }
-    let total: f64 = (0..mesh.num_tets())
-        .map(|t| mesh.signed_volume(t).abs())
-        .sum();
+    let total = mesh.volume();
     let (volume, moment, tets) = parts.into_values().max_by(|a, b| a.0.total_cmp(&b.0))?;
     (total > 0.0 && volume > 0.0).then(|| (volume / total, moment / volume, tets))
+}
+
+/// The faces opposite each corner of a positively oriented tet ((x1−x0)×(x2−x0)·(x3−x0) > 0),
+/// counter-clockwise seen from outside: (b−a)×(c−a) points away from the fourth vertex.
+/// (Before 2026-12-02 [`TetMesh::surface_triangles`] wound them the reverse, inward.)
+const TET_FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+
+/// Whether each of `n` vertices is a corner of one of `triangles`.
+fn on_triangles(n: usize, triangles: &[[usize; 3]]) -> Vec<bool> {
+    let mut on = vec![false; n];
+    for &v in triangles.iter().flatten() {
+        on[v] = true;
+    }
+    on
+}
+
+/// The root of `i`'s set in the union–find forest `parent`, halving the path on the way.
+fn root(parent: &mut [usize], mut i: usize) -> usize {
+    while parent[i] != i {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    i
 }
 
 /// det[x1−x0, x2−x0, x3−x0] / 6: the signed volume of the tet with corners `x`.
@@ -490,7 +487,11 @@ mod tests {
         );
         assert_eq!(super::thin_warning(&block(0)), None);
         // A fin one cell long: 1.4 % of the volume, under 2 % with the tets beneath it.
-        let (share, _, _) = super::thickest_thin_part(&block(1)).expect("a fin");
+        let fin = block(1);
+        let triangles = fin.surface_triangles();
+        let on_surface = super::on_triangles(fin.num_vertices(), &triangles);
+        let (share, _, _) =
+            super::thickest_thin_part(&fin, &triangles, &on_surface).expect("a fin");
         assert!(share < 0.02, "{share}");
         assert_eq!(super::thin_warning(&block(1)), None);
         for (kind, size, cells) in [
