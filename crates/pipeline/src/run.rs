@@ -574,13 +574,13 @@ impl Compression {
     /// [`Self::left_out_strain`] averaged over `model`'s body by rest volume, in the full
     /// displacement `u`: what [`Self::linear_strain`] takes the largest of over frames.
     pub fn mean_left_out_strain(model: &FullSpaceModel, u: &[f64]) -> f64 {
-        let mesh = &model.mesh;
-        let (mut sum, mut total) = (0.0, 0.0);
-        for e in 0..model.elements.len() {
-            let volume = mesh.signed_volume(e).abs();
-            sum += Self::left_out_strain(&model.elements.deformation_gradient(e, u)) * volume;
-            total += volume;
-        }
+        let rest = &model.elements.volume;
+        let total: f64 = rest.iter().sum();
+        let sum: f64 = rest
+            .iter()
+            .enumerate()
+            .map(|(e, w)| Self::left_out_strain(&model.elements.deformation_gradient(e, u)) * w)
+            .sum();
         if total > 0.0 { sum / total } else { 0.0 }
     }
 

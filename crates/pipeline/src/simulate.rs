@@ -209,17 +209,11 @@ impl Summary {
     /// ([`crate::run::Compression::LINEAR_STRAIN`]), as `run` says it of its reference: a
     /// tester's bar at α = 5 grew 209 % in volume under `simulate` without a word.
     pub fn linear_warning(&self) -> Option<String> {
-        let (strain, time) = self
-            .linear_strain
-            .filter(|(s, _)| *s >= crate::run::Compression::LINEAR_STRAIN)?;
-        Some(format!(
-            "the simulation turns or stretches the body past small strains under the linear \
-             material: the strain it leaves out (½HᵀH of the Green strain, H = F − I) averages \
-             {strain:.2} over the body at t = {time:.2} s, where linear elasticity lengthens a \
-             body that only turns, so these frames are not the body's motion; a nonlinear \
-             material (`[material] model = \"stable-neo-hookean\"`, or \"corotated\" for the \
-             same stiffness at small strains) models it"
-        ))
+        crate::trust::past_small_strains(
+            "the simulation",
+            self.linear_strain?,
+            "these frames are not the body's motion",
+        )
     }
 }
 

@@ -285,20 +285,35 @@ fn stretch_warning(r: &MethodReport) -> Option<String> {
 ///
 /// [`Compression::LINEAR_STRAIN`]: crate::run::Compression::LINEAR_STRAIN
 fn linear_warning(r: &MethodReport) -> Option<String> {
-    let (strain, time) = r
-        .compression
-        .as_ref()?
-        .linear_strain
-        .filter(|(s, _)| *s >= crate::run::Compression::LINEAR_STRAIN)?;
-    let who = reference_subject(r);
-    Some(format!(
-        "{who} turns or stretches the body past small strains under the linear material: \
-         the strain it leaves out (½HᵀH of the Green strain, H = F − I) averages {strain:.2} \
-         over the body at t = {time:.2} s, where linear elasticity lengthens a body that only \
-         turns, so the reference is not the body's motion, however close the reduced methods \
-         come to it; a nonlinear material (`[material] model = \"stable-neo-hookean\"`, or \
-         \"corotated\" for the same stiffness at small strains) models it"
-    ))
+    past_small_strains(
+        &reference_subject(r),
+        r.compression.as_ref()?.linear_strain?,
+        "the reference is not the body's motion, however close the reduced methods come to it",
+    )
+}
+
+/// What to say of `who`, a simulation under the linear material, when the largest strain it
+/// leaves out over its frames (`linear_strain`: [`Compression::linear_strain`]'s figure and
+/// time) is [`Compression::LINEAR_STRAIN`] or more: `so` says what that makes of its frames.
+/// Said by `run` of its reference and by `simulate` of its run.
+///
+/// [`Compression::linear_strain`]: crate::run::Compression::linear_strain
+/// [`Compression::LINEAR_STRAIN`]: crate::run::Compression::LINEAR_STRAIN
+pub(crate) fn past_small_strains(
+    who: &str,
+    (strain, time): (f64, f64),
+    so: &str,
+) -> Option<String> {
+    (strain >= crate::run::Compression::LINEAR_STRAIN).then(|| {
+        format!(
+            "{who} turns or stretches the body past small strains under the linear material: \
+             the strain it leaves out (½HᵀH of the Green strain, H = F − I) averages \
+             {strain:.2} over the body at t = {time:.2} s, where linear elasticity lengthens a \
+             body that only turns, so {so}; a nonlinear material (`[material] model = \
+             \"stable-neo-hookean\"`, or \"corotated\" for the same stiffness at small \
+             strains) models it"
+        )
+    })
 }
 
 /// The warning of the row that carries the buckling analysis when the body buckles under its
