@@ -431,10 +431,10 @@ impl Scene {
         }
         let why = self.unsupported_without_forces()?;
         Some(format!(
-            "the scene pins no vertex and only force[{spring}]'s spring holds the body, but the \
-             training schedules and the test pull, poke and drag with their own loads, not the \
-             scene's [[force]] sections, so there {why}: add a [[pin]] section (`simulate \
-             --method full` follows the scene's own forces without the stages)"
+            "the scene pins no vertex and only force[{spring}]'s spring holds the body, but {}: \
+             add a [[pin]] section (`simulate --method full` follows the scene's own forces \
+             without the stages)",
+            stages_drop_forces(&why)
         ))
     }
 
@@ -496,10 +496,10 @@ impl Scene {
             if let (Some(i), false) = (spring, held[c]) {
                 let line = format!(
                     "piece {} of the {count} disconnected pieces of the mesh is held by force[{i}]'s \
-                     spring and no pin: the training schedules and the test pull, poke and drag \
-                     with their own loads, not the scene's [[force]] sections, so there {why} \
-                     (a [[pin]] that selects a vertex of it holds it in every stage)",
-                    c + 1
+                     spring and no pin: {} (a [[pin]] that selects a vertex of it holds it in \
+                     every stage)",
+                    c + 1,
+                    stages_drop_forces(&why)
                 );
                 crate::pipeline::warn_once(&format!("{}: {line}", self.source));
                 warnings.push(line);
@@ -942,6 +942,15 @@ fn collinear(points: &[fem_core::Vec3]) -> bool {
         let r = p - a;
         (r - axis * r.dot(&axis)).norm() <= 1e-6 * extent
     })
+}
+
+/// Why a spring that holds a body or a piece of it holds nothing in the stages, where `why`
+/// (what the body does unheld) then happens.
+fn stages_drop_forces(why: &str) -> String {
+    format!(
+        "the training schedules and the test pull, poke and drag with their own loads, not the \
+         scene's [[force]] sections, so there {why}"
+    )
 }
 
 /// Most unknown keys reported at once: the reading goes on past one by blanking it.
