@@ -728,7 +728,7 @@ fn run(cx: &Context, args: RunArgs) -> Result<()> {
     );
     // `--trajectories N` ran several draws already.
     if count.is_none() {
-        print!("{}", pipeline::run::ONE_DRAW);
+        print!("{}", pipeline::run::one_draw(&scene));
     }
     Ok(())
 }

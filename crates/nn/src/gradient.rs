@@ -212,6 +212,22 @@ impl GradientEngine {
     }
 
     /// Σ‖dec(enc(s)) − s‖² over the scaled block `x` (any length), chunk sums added in order.
+    /// The loss training monitors: the mean squared error over `validation` when it holds
+    /// samples, else over `train` (both scaled blocks).
+    pub(crate) fn mean_squared_error(
+        &mut self,
+        ae: &Autoencoder,
+        validation: &[f64],
+        train: &[f64],
+    ) -> f64 {
+        let x = if validation.is_empty() {
+            train
+        } else {
+            validation
+        };
+        self.sum_squared_error(ae, x) / x.len() as f64
+    }
+
     pub(crate) fn sum_squared_error(&mut self, ae: &Autoencoder, x: &[f64]) -> f64 {
         let k = ae.input_dim();
         let mut total = 0.0;

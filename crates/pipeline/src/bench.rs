@@ -425,6 +425,27 @@ pub fn markdown(rows: &[BenchRow]) -> String {
             if r.pareto { "★" } else { "" }
         ));
     }
+    // A front drawn through variants far off the full trajectory reads as speed-ups of
+    // stand-ins (a tester's sweep starred `pca-cubature k=2` at 5642×, 67 % off).
+    let off: Vec<String> = rows
+        .iter()
+        .filter(|r| {
+            !r.report.method.is_full()
+                && r.report.failure.is_none()
+                && (r.report.mean_rel_error >= crate::trust::UNTRUSTED_ERROR
+                    || r.report.mean_rel_error.is_nan())
+        })
+        .map(|r| format!("{} ({:.0} %)", r.variant, 100.0 * r.report.mean_rel_error))
+        .collect();
+    if !off.is_empty() {
+        s.push_str(&format!(
+            "\n{:.0} % or more off the full trajectory on average, not a stand-in for it at any \
+             speed (★ marks the front of every variant): {}; `cargo xtask run` on the scene says \
+             why\n",
+            100.0 * crate::trust::UNTRUSTED_ERROR,
+            off.join(", ")
+        ));
+    }
     s
 }
 
@@ -512,6 +533,26 @@ mod tests {
         }
     }
 
+    /// Variants 20 % off or more are named under the table, the front drawn as it is.
+    #[test]
+    fn variants_far_off_the_full_trajectory_are_named() {
+        let mut far = row(0.001, 0.67);
+        far.variant = "pca-cubature k=2".into();
+        far.pareto = true;
+        let mut near = row(0.5, 0.02);
+        near.variant = "pca-cubature k=40".into();
+        let table = markdown(&[far, near.clone()]);
+        assert!(
+            table.contains("20 % or more off the full trajectory on average"),
+            "{table}"
+        );
+        assert!(
+            table.contains("variant): pca-cubature k=2 (67 %);"),
+            "{table}"
+        );
+        assert!(!markdown(&[near]).contains("or more off"));
+    }
+
     fn row(ms: f64, err: f64) -> BenchRow {
         BenchRow {
             variant: String::new(),
@@ -548,6 +589,7 @@ mod tests {
                 failure: None,
                 machine_gfma: None,
                 restart: None,
+                restart_failed: None,
                 compression: None,
                 buckling: None,
                 scene_warnings: Vec::new(),

@@ -239,9 +239,21 @@ fn test_lines(forces: &[TestForce]) -> String {
 }
 
 /// That a run's test is one draw of its family, under its loads in `report.md` and after a
-/// plain run's summary (not after `--trajectories N`'s, which ran several).
-pub const ONE_DRAW: &str = "one draw of the test family: `cargo xtask run --trajectories 4` runs four, with each \
-     method's spread\n";
+/// plain run's summary (not after `--trajectories N`'s, which ran several), with the command
+/// for `scene` (its file named: without `--scene` the command ran the built-in scene instead).
+pub fn one_draw(scene: &Scene) -> String {
+    let file = if scene.source.starts_with('<') {
+        String::new()
+    } else if scene.source.contains(char::is_whitespace) {
+        format!(" --scene '{}'", scene.source)
+    } else {
+        format!(" --scene {}", scene.source)
+    };
+    format!(
+        "one draw of the test family: `cargo xtask run{file} --trajectories 4` runs four, with \
+         each method's spread\n"
+    )
+}
 
 /// One stage of [`RunReport::stages`].
 #[derive(Debug, Clone, serde::Serialize)]
@@ -362,6 +374,11 @@ pub struct MethodReport {
     /// dynamics make of a small early error.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub restart: Option<Restart>,
+    /// Why that full simulation could not run, where it failed (an element its state inverts
+    /// under the classic Neo-Hookean, a solve that did not converge): said among the figures
+    /// not to be trusted, where only a log line said it before stop 77.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub restart_failed: Option<String>,
     /// On the full-space row: how far the test trajectory compresses its elements, which says
     /// whether the full simulation itself gives way ([`crate::trust::COLLAPSED_SHARE`]). When
     /// `full` did not run, [`run`] puts the reference's on the first row instead, so the
@@ -963,6 +980,13 @@ pub fn run(
     if let Some(m) = Method::repeated(&opts.methods) {
         anyhow::bail!("the methods name {m} twice; name each method once");
     }
+    // A latent dimension the PCA basis cannot hold is refused before any method runs.
+    if opts.methods.iter().any(|m| m.is_neural()) {
+        let k = pipeline.pca(stage_progress)?.basis.k();
+        if let Some(problem) = crate::pipeline::latent_dim_refusal(&pipeline.scene.autoencoder, k) {
+            anyhow::bail!("{}: {problem}", pipeline.scene.source);
+        }
+    }
     let mut rows = Vec::new();
     for &method in &opts.methods {
         // `full` already is the scene's solver: a row forcing the same solver would repeat it.
@@ -1023,10 +1047,13 @@ pub fn run(
         progress(&label, 0, 1);
         match restart(pipeline, &rows[i], opts.trajectory, frame, stage_progress) {
             Ok(r) => rows[i].restart = Some(r),
-            Err(e) => tracing::warn!(
-                "the full simulation from {}'s state was not measured: {e:#}",
-                rows[i].method
-            ),
+            Err(e) => {
+                tracing::warn!(
+                    "the full simulation from {}'s state was not measured: {e:#}",
+                    rows[i].method
+                );
+                rows[i].restart_failed = Some(format!("{e:#}"));
+            }
         }
         progress(&label, 1, 1);
     }
@@ -1077,9 +1104,10 @@ pub fn run(
     crate::output::write_file(
         &opts.out.join("report.md"),
         format!(
-            "# {title}\n\nscene: {}\n\n{}{ONE_DRAW}\n{}",
+            "# {title}\n\nscene: {}\n\n{}{}\n{}",
             scene_file(&pipeline.scene.source),
             test_lines(&test_forces),
+            one_draw(pipeline.scene),
             report_markdown(&rows)
         )
         .as_bytes(),
@@ -1160,7 +1188,7 @@ fn heading(scene: &Scene, trajectory: usize) -> String {
 
 /// What `cargo xtask run` shows after the stages: the test's loads ([`TestForce`]), the table,
 /// where a reduced step's time goes, the warnings of [`crate::trust`], and where the report, the
-/// frames and the model are (a plain run adds [`ONE_DRAW`]).
+/// frames and the model are (a plain run adds [`one_draw`]).
 pub fn summary(
     scene: &Scene,
     opts: &RunOptions,
@@ -1478,6 +1506,7 @@ pub fn measure(
             failure: None,
             machine_gfma: None,
             restart: None,
+            restart_failed: None,
             compression: Compression::of(&model, &reference.frames, pipeline.scene.time.step),
             buckling: None,
             scene_warnings: Vec::new(),
@@ -1664,6 +1693,7 @@ pub fn measure(
         failure,
         machine_gfma,
         restart: None,
+        restart_failed: None,
         compression: None,
         buckling: None,
         scene_warnings: Vec::new(),

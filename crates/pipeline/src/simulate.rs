@@ -78,6 +78,11 @@ impl Method {
         }
     }
 
+    /// Whether the method steps through the trained autoencoder.
+    pub fn is_neural(self) -> bool {
+        matches!(self, Method::Neural | Method::NeuralCubature)
+    }
+
     /// Whether the method simulates in full space.
     pub fn is_full(self) -> bool {
         matches!(self, Method::Full | Method::FullLbfgs | Method::FullNewton)
@@ -148,6 +153,9 @@ pub struct Summary {
     pub scene: String,
     pub method: Method,
     pub solver: SolverMethod,
+    /// `[solver] max_iterations` of a full-space run (the reduced methods take at least
+    /// `REDUCED_MIN_ITERATIONS`).
+    pub max_iterations: usize,
     pub vertices: usize,
     pub tets: usize,
     pub free_dofs: usize,
@@ -196,6 +204,20 @@ impl Summary {
             self.frames_written,
             out.display()
         );
+        let switched: Vec<usize> = self
+            .steps
+            .iter()
+            .filter(|r| r.solver_switched)
+            .map(|r| r.step)
+            .collect();
+        if let Some(line) = crate::trust::solver_switches(
+            self.solver,
+            self.max_iterations,
+            &switched,
+            self.steps.len().saturating_sub(1),
+        ) {
+            s.push_str(&format!("{line}\n"));
+        }
         if self.frames_written > 0 {
             s.push_str(&format!(
                 "open {} in ParaView\n",
@@ -581,6 +603,7 @@ pub fn simulate(
         scene: scene.name.clone(),
         method: opts.method,
         solver: solver.method,
+        max_iterations: solver.max_iterations,
         vertices: model.mesh.num_vertices(),
         tets: model.mesh.num_tets(),
         free_dofs: model.dofs.num_free(),

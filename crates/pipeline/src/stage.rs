@@ -72,7 +72,10 @@ impl Stage {
             //    the stored format cannot default: scenes that name `hidden` keep their key).
             // 7: the judged network kept where the one trained again on every schedule misses
             //    the snapshots by more (`retrain_missed`, a new field).
-            Stage::Train => 7,
+            // 8: without a validation split the weights are kept by their own training loss
+            //    measured after the epoch (was the epoch's running mean, the weights before its
+            //    steps), and the start (PCA's truncation, with the skip) is a candidate.
+            Stage::Train => 8,
             // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
             // 3: sequential sparse factorisation on small pools (round-off), current-state
             //    L-BFGS preconditioner (iterates within tolerance).
@@ -99,7 +102,9 @@ impl Stage {
             //     (`fem_core::snapshots::NEAR_PINS`).
             Stage::Snapshots | Stage::SnapshotsShard => 13,
             // 9: a solve that fails partway keeps the frames before it (`stopped`).
-            Stage::Reference => 11,
+            // 12: the steps whose solver stopped short and the other finished (`switched`, a
+            //     new field).
+            Stage::Reference => 12,
             // 2: the held-out error along the greedy path is stored with the rule.
             // 3: forces fitted in the step's compliance norm (other rules).
             // 4: the held-out error over all the test's frames, from the rule's own columns
@@ -201,9 +206,9 @@ mod tests {
                 ("pca", 5),
                 ("cubature", 6),
                 ("cubature-neural", 8),
-                ("train", 7),
+                ("train", 8),
                 ("complement", 3),
-                ("reference", 11),
+                ("reference", 12),
                 ("coverage", 2),
             ]
         );

@@ -316,6 +316,31 @@ pub(crate) fn past_small_strains(
     })
 }
 
+/// What to say of the full-space steps on which the first solver (`method`, capped at
+/// `[solver] max_iterations` = `max_iterations`) stopped short and the other one finished from
+/// where it stopped: `switched` holds those steps' numbers (from 1) among `steps`. Said by
+/// `run` of its reference and by `simulate` of a full-space run, whose times include both
+/// solvers' work (a tester's `max_iterations = 3` switched on 26 steps of 30 without a word).
+pub(crate) fn solver_switches(
+    method: fem_core::optim::SolverMethod,
+    max_iterations: usize,
+    switched: &[usize],
+    steps: usize,
+) -> Option<String> {
+    use fem_core::optim::SolverMethod;
+    let first = switched.first()?;
+    let (one, other) = match method {
+        SolverMethod::Newton => ("Newton", "L-BFGS"),
+        SolverMethod::Lbfgs => ("L-BFGS", "Newton"),
+    };
+    Some(format!(
+        "{one} stopped short of `[solver] tolerance` on {} of the {steps} steps (at `[solver] \
+         max_iterations` = {max_iterations}, or where its line search failed), and {other} \
+         finished each from where it stopped, the first at step {first}",
+        switched.len()
+    ))
+}
+
 /// The warning of the row that carries the buckling analysis when the body buckles under its
 /// own weight as it is pinned ([`crate::run::Buckling::buckles`]): a plate standing on its
 /// edge, a column too slender for its height. Under gravity its shape runs away from rest
@@ -772,7 +797,24 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         if r.training_distance > OUTSIDE_TRAINING {
             // A time no schedule reached: a body that keeps moving under gravity (sagging,
             // toppling) goes where the shorter schedules never took it.
-            let what = if r.training_seconds > 0.0
+            // The same subspace over every element kept within the training poses: the rule
+            // takes the pose there, and more schedules do not bring it back (a tester's
+            // 20-element rule: 35.0 → 34.4 % with twice the schedules, 1.05 % at 100 elements).
+            let every_stayed = over_every_element(r.method).and_then(|every| {
+                rows.iter().find(|x| {
+                    x.method == every
+                        && x.failure.is_none()
+                        && x.training_distance <= OUTSIDE_TRAINING
+                })
+            });
+            let what = if let Some(every) = every_stayed {
+                format!(
+                    "where {} over every element stays within them ({:.0} % at most): the \
+                     cubature rule takes the pose there, not the training data; {LARGER_RULE}",
+                    every.method,
+                    pct(every.training_distance)
+                )
+            } else if r.training_seconds > 0.0
                 && r.training_distance_time > r.training_seconds + 1e-9
             {
                 format!(
@@ -841,6 +883,14 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                 "{}: {:.0} % from the full trajectory on average, not a stand-in for it; {why}",
                 r.method,
                 pct(r.mean_rel_error)
+            ));
+        }
+        if let Some(e) = &r.restart_failed {
+            out.push(format!(
+                "{}: the full simulation started from its state part way through the test could \
+                 not run ({e}), so how much of its drift the full dynamics would make is not \
+                 measured",
+                r.method
             ));
         }
         out.extend(restart_warning(r, rows, falling));
@@ -1853,10 +1903,37 @@ mod tests {
             "{}",
             w[0]
         );
-        let text = assess(&[far_and_off]).text("");
+        let text = assess(std::slice::from_ref(&far_and_off)).text("");
         assert!(
             text.starts_with("\nnot to be trusted:\n- neural-cubature"),
             "{text}"
+        );
+        // Where the same subspace over every element stayed within the training poses, the
+        // rule takes the pose there: a larger rule, not more schedules.
+        let w = assess(&[row(Method::Neural, 0.01, 0.01), far_and_off]).untrusted;
+        let line = w
+            .iter()
+            .find(|l| l.starts_with("neural-cubature: at t"))
+            .unwrap_or_else(|| panic!("{w:#?}"));
+        assert!(
+            line.contains("where neural over every element stays within them (0 % at most)"),
+            "{line}"
+        );
+        assert!(line.contains("`max_elements`"), "{line}");
+        assert!(!line.contains("`[training] schedules`"), "{line}");
+        // A restart that could not run is said, not only logged.
+        let failed = MethodReport {
+            restart_failed: Some("element 69 is inverted".into()),
+            ..row(Method::PcaCubature, 0.3, 0.01)
+        };
+        let w = assess(&[failed]).untrusted;
+        assert!(
+            w.iter().any(|l| l.starts_with(
+                "pca-cubature: the full simulation started from its \
+                                            state part way through the test could not run \
+                                            (element 69 is inverted)"
+            )),
+            "{w:#?}"
         );
         // Several methods given the same advice: one caveat naming them, with the ranges of
         // their figures; a method given other advice keeps its own.

@@ -188,7 +188,11 @@ pub fn check_point_load(
     for v in values {
         let load = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         if load > limit {
-            return Err(RuntimeError::TooLarge { load, body, limit });
+            return Err(RuntimeError::TooLarge {
+                load,
+                body,
+                limit: printed_limit(limit),
+            });
         }
     }
     Ok(())
@@ -203,10 +207,17 @@ fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeErro
         return Err(RuntimeError::TooStiff {
             stiffness,
             body,
-            limit,
+            limit: printed_limit(limit),
         });
     }
     Ok(())
+}
+
+/// A limit as its error prints it (four significant digits), rounded down so that the value
+/// printed passes the check: 1.00995e11 printed as 1.010e11 was refused when written back.
+fn printed_limit(limit: f64) -> f64 {
+    let unit = 10f64.powi(limit.log10().floor() as i32 - 3);
+    (limit / unit).floor() * unit
 }
 
 /// A spring on `vertices` (sorted, unique) with offset `offset` now and `base` (see [`Entry`]).

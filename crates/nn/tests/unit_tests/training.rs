@@ -159,6 +159,9 @@ fn early_stopping_restores_the_best_weights() {
         seed: 5,
         // The returned model must be exactly the best epoch's (anchoring would move it).
         anchor_origin: false,
+        // A random start, which the first epochs beat (with the skip, PCA's truncation may be
+        // the best fit of noise: `training_keeps_its_start_when_no_epoch_beats_it`).
+        skip: false,
         ..AutoencoderConfig::default()
     };
     let mut seen = 0;
@@ -205,17 +208,58 @@ fn without_validation_the_training_loss_is_monitored() {
         batch_size: 10,
         validation_fraction: 0.0,
         patience: 0,
+        // The kept weights as trained (anchoring would move them).
+        anchor_origin: false,
         ..AutoencoderConfig::default()
     };
     let outcome = train(data.as_ref(), 2, &config, |_| {}).unwrap();
     assert!(outcome.validation_indices.is_empty());
     assert!(outcome.history.iter().all(|r| r.validation_loss.is_none()));
-    let best = outcome
-        .history
-        .iter()
-        .map(|r| r.train_loss)
-        .fold(f64::INFINITY, f64::min);
-    assert_eq!(outcome.best_loss, best);
+    // The loss kept is the kept weights' own on the whole training set (the epoch's running
+    // mean, taken before each step, belongs to the weights the epoch started from).
+    assert_eq!(
+        outcome.model.loss(data.as_ref()).unwrap(),
+        outcome.best_loss
+    );
+    assert!(outcome.best_epoch > 0);
+    let last = outcome.history.last().unwrap().train_loss;
+    assert!(outcome.best_loss < last, "{} {last}", outcome.best_loss);
+}
+
+#[test]
+fn training_keeps_its_start_when_no_epoch_beats_it() {
+    // One batch an epoch at a rate far too high: every Adam step leaves PCA's truncation (the
+    // skip's start) for something worse, and the start is kept, not the first step's weights.
+    let data = manifold_data(40, 4);
+    let config = AutoencoderConfig {
+        hidden: Some(vec![16]),
+        epochs: 12,
+        batch_size: 64,
+        learning_rate: 0.5,
+        validation_fraction: 0.0,
+        patience: 0,
+        anchor_origin: false,
+        ..AutoencoderConfig::default()
+    };
+    let outcome = train(data.as_ref(), 3, &config, |_| {}).unwrap();
+    assert_eq!(outcome.best_epoch, 0);
+    assert!(outcome.history.iter().all(|r| !r.improved));
+    // The start is the truncation to the first 3 scaled coefficients.
+    let start = nn::Autoencoder::with_architecture(
+        10,
+        3,
+        &[16],
+        config.activation,
+        Some(nn::InputScaling::centre_uniform(data.as_ref())),
+        config.seed,
+    )
+    .unwrap()
+    .with_skip()
+    .unwrap();
+    assert_eq!(
+        outcome.model.loss(data.as_ref()).unwrap(),
+        start.loss(data.as_ref()).unwrap()
+    );
 }
 
 #[test]
