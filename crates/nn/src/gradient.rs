@@ -211,7 +211,6 @@ impl GradientEngine {
         self.sums[..chunks].iter().sum()
     }
 
-    /// Σ‖dec(enc(s)) − s‖² over the scaled block `x` (any length), chunk sums added in order.
     /// The loss training monitors: the mean squared error over `validation` when it holds
     /// samples, else over `train` (both scaled blocks).
     pub(crate) fn mean_squared_error(
@@ -228,6 +227,7 @@ impl GradientEngine {
         self.sum_squared_error(ae, x) / x.len() as f64
     }
 
+    /// Σ‖dec(enc(s)) − s‖² over the scaled block `x` (any length), chunk sums added in order.
     pub(crate) fn sum_squared_error(&mut self, ae: &Autoencoder, x: &[f64]) -> f64 {
         let k = ae.input_dim();
         let mut total = 0.0;

@@ -38,7 +38,8 @@ pub struct TrainOutcome {
     pub model: Autoencoder,
     /// One report per epoch run.
     pub history: Vec<EpochReport>,
-    /// The 1-based epoch whose weights are in `model`.
+    /// The 1-based epoch whose weights are in `model`; 0 where no epoch beat the weights
+    /// training started from (with the linear skip, PCA's truncation to d), which are kept.
     pub best_epoch: usize,
     /// The monitored loss of `model` (validation loss if there is a split, else training loss),
     /// before the origin is anchored.
@@ -101,7 +102,10 @@ fn train_one(
         let report = trainer.run_epoch()?;
         progress(report);
         history.push(report);
-        if config.patience > 0 && epoch - trainer.best_epoch() >= config.patience {
+        // The clock runs from the best trained epoch, not from the start: a network that
+        // leaves the truncation and takes longer than `patience` to come back below it still
+        // trains (the start stays the candidate to beat when it stops).
+        if config.patience > 0 && epoch - trainer.best_trained_epoch() >= config.patience {
             stopped_early = epoch < config.epochs;
             break;
         }
@@ -164,6 +168,8 @@ pub struct Trainer {
     x_val: Vec<f64>,
     batch: usize,
     best: Best,
+    /// The lowest monitored loss of the epochs run and its epoch (early stopping's clock).
+    best_trained: (f64, usize),
     train_indices: Vec<usize>,
     validation_indices: Vec<usize>,
 }
@@ -278,6 +284,7 @@ impl Trainer {
                 epoch: 0,
                 model: model.clone(),
             },
+            best_trained: (f64::INFINITY, 0),
             model,
             epochs: config.epochs,
             epoch: 0,
@@ -338,6 +345,9 @@ impl Trainer {
                 },
             });
         }
+        if monitored < self.best_trained.0 {
+            self.best_trained = (monitored, epoch);
+        }
         let improved = monitored < self.best.loss;
         if improved {
             self.best.loss = monitored;
@@ -364,9 +374,16 @@ impl Trainer {
         (&self.best.model, self.best.loss)
     }
 
-    /// The 1-based epoch of [`Trainer::best`] (0 before the first epoch).
+    /// The 1-based epoch of [`Trainer::best`] (0 before the first epoch, and where no epoch
+    /// beat the start).
     pub fn best_epoch(&self) -> usize {
         self.best.epoch
+    }
+
+    /// The 1-based epoch with the lowest monitored loss of those run (0 before the first),
+    /// whether or not it beat the start: early stopping's clock.
+    pub fn best_trained_epoch(&self) -> usize {
+        self.best_trained.1
     }
 
     /// Epochs run so far.

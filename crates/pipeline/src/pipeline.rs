@@ -375,20 +375,20 @@ impl TrainedModel {
     /// skip and the input scaling (AutoDef's) lost to it on three meshes of three (the X
     /// 2.25e-2 against 2.16e-2, the bar 7.3e-2 against 4.3e-2) without a word.
     fn behind_pca(&self) -> String {
-        if self.max_vertex_error.is_nan()
-            || self.max_vertex_error <= 1.01 * self.pca_error_at_latent_dim
-        {
+        // False for NaN on either side: no PCA error at d (d > k without the skip) says nothing.
+        let behind = self.max_vertex_error > 1.01 * self.pca_error_at_latent_dim;
+        if !behind {
             return String::new();
         }
-        let start = if self.model.has_skip() {
+        let start = if self.model.has_skip() || self.latent_dim > self.pca_k {
             ""
         } else {
             ": `[autoencoder] skip = true` (the default) starts the network from it and learns \
              the correction"
         };
         format!(
-            ", closer than the autoencoder, whose neural methods then start behind `pca` at \
-             that size{start}"
+            ", closer than the autoencoder, whose neural methods then start behind a PCA basis \
+             of that size{start}"
         )
     }
 }
@@ -554,7 +554,7 @@ pub fn latent_dim_refusal(cfg: &nn::AutoencoderConfig, k: usize) -> Option<Strin
             "`autoencoder.latent_dim` = {d} is larger than the PCA basis (k = {k}), and the \
              linear skip needs d ≤ k: set `latent_dim` to at most {k}, or keep more PCA \
              coefficients (`[pca] dimension` of {d} or more, within `max_dimension`, one 9 more \
-             in `explained_energy`, or a smaller `max_vertex_error`)"
+             in `[pca] explained_energy`, or a smaller `[pca] max_vertex_error`)"
         )),
         (None, Some([lo, hi])) if hi > k => Some(format!(
             "`autoencoder.latent_dims` = [{lo}, {hi}] reaches past the PCA basis (k = {k}), and \

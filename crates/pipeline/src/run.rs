@@ -242,12 +242,14 @@ fn test_lines(forces: &[TestForce]) -> String {
 /// plain run's summary (not after `--trajectories N`'s, which ran several), with the command
 /// for `scene` (its file named: without `--scene` the command ran the built-in scene instead).
 pub fn one_draw(scene: &Scene) -> String {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "._/+-=:,@".contains(c);
     let file = if scene.source.starts_with('<') {
         String::new()
-    } else if scene.source.contains(char::is_whitespace) {
-        format!(" --scene '{}'", scene.source)
-    } else {
+    } else if scene.source.chars().all(plain) {
         format!(" --scene {}", scene.source)
+    } else {
+        // Quoted for a shell, a quote inside closing and reopening it.
+        format!(" --scene '{}'", scene.source.replace('\'', "'\\''"))
     };
     format!(
         "one draw of the test family: `cargo xtask run{file} --trajectories 4` runs four, with \

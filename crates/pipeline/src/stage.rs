@@ -74,7 +74,8 @@ impl Stage {
             //    the snapshots by more (`retrain_missed`, a new field).
             // 8: without a validation split the weights are kept by their own training loss
             //    measured after the epoch (was the epoch's running mean, the weights before its
-            //    steps), and the start (PCA's truncation, with the skip) is a candidate.
+            //    steps), and the start (PCA's truncation, with the skip) is a candidate;
+            //    early stopping's clock runs from the best trained epoch.
             Stage::Train => 8,
             // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
             // 3: sequential sparse factorisation on small pools (round-off), current-state

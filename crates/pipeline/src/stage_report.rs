@@ -55,11 +55,13 @@ impl TrainedModel {
     /// the snapshots beside PCA's at the same dimension and the PCA dimension that matches it.
     pub fn describe(&self) -> String {
         format!(
-            "autoencoder {k} → {d} → {k}, hidden layers {:?}: best epoch {} of {}{}, {:.1} s\n\
+            "autoencoder {k} → {d} → {k}, hidden layers {:?}: {}{}, {:.1} s\n\
              max vertex error over the snapshots: autoencoder (d = {d}) {:.3e}, PCA with {d} columns {:.3e}; PCA needs {} columns to match\n",
             self.model.hidden_widths(),
-            self.best_epoch,
-            self.history.len(),
+            match (self.best_epoch, self.history.len()) {
+                (0, n) => format!("kept its start, none of {n} epochs closer"),
+                (e, n) => format!("best epoch {e} of {n}"),
+            },
             if self.stopped_early {
                 " (stopped early)"
             } else {

@@ -333,10 +333,14 @@ pub(crate) fn solver_switches(
         SolverMethod::Newton => ("Newton", "L-BFGS"),
         SolverMethod::Lbfgs => ("L-BFGS", "Newton"),
     };
+    let which = match switched.len() {
+        1 => format!("it from where it stopped, at step {first}"),
+        _ => format!("each from where it stopped, the first at step {first}"),
+    };
     Some(format!(
         "{one} stopped short of `[solver] tolerance` on {} of the {steps} steps (at `[solver] \
          max_iterations` = {max_iterations}, or where its line search failed), and {other} \
-         finished each from where it stopped, the first at step {first}",
+         finished {which}",
         switched.len()
     ))
 }
@@ -800,11 +804,15 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             // The same subspace over every element kept within the training poses: the rule
             // takes the pose there, and more schedules do not bring it back (a tester's
             // 20-element rule: 35.0 → 34.4 % with twice the schedules, 1.05 % at 100 elements).
+            // It must follow the full trajectory itself (one that lags stays within them for
+            // that) and stay clearly nearer, at most half as far out.
             let every_stayed = over_every_element(r.method).and_then(|every| {
                 rows.iter().find(|x| {
                     x.method == every
                         && x.failure.is_none()
                         && x.training_distance <= OUTSIDE_TRAINING
+                        && 2.0 * x.training_distance <= r.training_distance
+                        && judged_error(x) <= UNCOVERED_SUBSPACE_ERROR
                 })
             });
             let what = if let Some(every) = every_stayed {

@@ -134,7 +134,7 @@ fn an_autoencoder_behind_pca_at_its_dimension_is_said() {
         "{line}"
     );
     assert!(
-        line.contains("closer than the autoencoder, whose neural methods then start behind `pca`"),
+        line.contains("closer than the autoencoder, whose neural methods then start behind a PCA"),
         "{line}"
     );
     assert!(line.contains("`[autoencoder] skip = true`"), "{line}");

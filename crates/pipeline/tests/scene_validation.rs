@@ -603,6 +603,12 @@ fn pins_that_select_nothing_are_errors_reported_together() {
         &edit("stiffness = 200.0", "stiffness = 1.0e11"),
         Path::new("."),
     );
+    // The limit printed, written back, passes (printed rounded up, 1.010e11 for 1.00995e11,
+    // it was refused with the same message).
+    builds(
+        &edit("stiffness = 200.0", "stiffness = 1.039e11"),
+        Path::new("."),
+    );
     // A point load the runtime would refuse, too (a tester's 1e300 N failed its first step with
     // a line-search message that named no field).
     let point = |load: &str| {
@@ -1160,4 +1166,21 @@ fn a_pca_dimension_past_the_training_poses_is_refused() {
         &err,
         &["`pca.dimension` = 60 is more than the mesh's 48 free coordinates"],
     );
+}
+
+/// The command a report offers for four drags names the scene file, quoted for a shell where
+/// it must be (without `--scene` it ran the built-in scene), and none for the built-in scene.
+#[test]
+fn the_one_draw_command_names_the_scene_file() {
+    let line = |source: &str| {
+        let scene = Scene::from_str(BASE, Path::new("."), source).unwrap();
+        pipeline::run::one_draw(&scene)
+    };
+    assert!(
+        line("scenes/bar.toml")
+            .contains("`cargo xtask run --scene scenes/bar.toml --trajectories 4`")
+    );
+    assert!(line("my bar.toml").contains("--scene 'my bar.toml' --trajectories 4"));
+    assert!(line("it's.toml").contains(r"--scene 'it'\''s.toml'"));
+    assert!(line("<built-in cantilever>").contains("`cargo xtask run --trajectories 4`"));
 }

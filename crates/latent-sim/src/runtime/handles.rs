@@ -188,11 +188,7 @@ pub fn check_point_load(
     for v in values {
         let load = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         if load > limit {
-            return Err(RuntimeError::TooLarge {
-                load,
-                body,
-                limit: printed_limit(limit),
-            });
+            return Err(RuntimeError::TooLarge { load, body, limit });
         }
     }
     Ok(())
@@ -207,7 +203,7 @@ fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeErro
         return Err(RuntimeError::TooStiff {
             stiffness,
             body,
-            limit: printed_limit(limit),
+            limit,
         });
     }
     Ok(())
@@ -215,7 +211,12 @@ fn spring_stiffness<B: Backend>(b: &B, stiffness: f64) -> Result<(), RuntimeErro
 
 /// A limit as its error prints it (four significant digits), rounded down so that the value
 /// printed passes the check: 1.00995e11 printed as 1.010e11 was refused when written back.
-fn printed_limit(limit: f64) -> f64 {
+/// Whoever builds the error (the runtime, a scene's check) gets it, since the error's text
+/// rounds.
+pub(crate) fn printed_limit(limit: f64) -> f64 {
+    if !(limit.is_finite() && limit > 0.0) {
+        return limit;
+    }
     let unit = 10f64.powi(limit.log10().floor() as i32 - 3);
     (limit / unit).floor() * unit
 }

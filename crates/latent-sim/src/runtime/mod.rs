@@ -158,9 +158,10 @@ pub enum RuntimeError {
         "a spring of stiffness {stiffness:.3e} N/m is more than {max:e} times the body's own \
          stiffness at its size (E × its bounding-box diagonal = {body:.3e} N/m): it would hold its \
          vertices no more firmly than a softer one while swamping every solve; give at most \
-         {limit:.3e} N/m \
+         {shown:.3e} N/m \
          (the body's own stiffness is already a firm grip)",
-        max = handles::MAX_SPRING_STIFFNESS
+        max = handles::MAX_SPRING_STIFFNESS,
+        shown = handles::printed_limit(*.limit)
     )]
     TooStiff {
         stiffness: f64,
@@ -171,8 +172,9 @@ pub enum RuntimeError {
     #[error(
         "a point load of {load:.3e} N is more than {max:e} times the force that strains the body \
          by its own size (E × the square of its bounding-box diagonal = {body:.3e} N): it would \
-         only overflow the solves; give at most {limit:.3e} N",
-        max = handles::MAX_POINT_LOAD
+         only overflow the solves; give at most {shown:.3e} N",
+        max = handles::MAX_POINT_LOAD,
+        shown = handles::printed_limit(*.limit)
     )]
     TooLarge { load: f64, body: f64, limit: f64 },
     /// A point load given a stiffness, which only a spring has.
