@@ -778,7 +778,14 @@ fn the_report_says_where_the_test_grabs_and_how_far_it_pulls() {
         "({:.1} % of the bounding-box diagonal)",
         100.0 * share
     )));
-    assert!(md.contains("one draw of the test family: `cargo xtask run --trajectories 4`"));
+    // The command names the scene file it was run on (without it, the built-in scene ran).
+    assert!(
+        md.contains(&format!(
+            "one draw of the test family: `cargo xtask run --scene {} --trajectories 4`",
+            s.source
+        )),
+        "{md}"
+    );
 }
 
 /// `export` says what `run` measured of the model it writes, from the run's `report.json`

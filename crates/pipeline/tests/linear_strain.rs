@@ -4,11 +4,10 @@
 use std::path::Path;
 
 mod common;
-use common::scratch;
+use common::{scratch, simulate_full};
 
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
-use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
 
 /// A 1 m bar of the linear material, clamped at x = 0, under a quasi-static tip load of
 /// `load` N across it.
@@ -43,17 +42,7 @@ fn a_linear_simulation_past_small_strains_is_said() {
         let scene = Scene::from_str(&bar(load), Path::new("."), "bar.toml").unwrap();
         let dir = scratch(&format!("linear-{load}"));
         let mut p = Pipeline::new(&scene, &dir).unwrap();
-        let opts = SimulateOptions {
-            method: Method::Full,
-            trajectory: Trajectory::Scene,
-            out: dir.join("sim"),
-            frames: None,
-            every: 0,
-            solver: None,
-        };
-        simulate(&mut p, &opts, &|_, _| {}, &mut |_, _| {})
-            .unwrap()
-            .summary
+        simulate_full(&mut p, &dir).0
     };
     // PL²/2EI ≈ 1.2 rad at the tip: far past small strains.
     let far = run(2.0);

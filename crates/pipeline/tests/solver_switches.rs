@@ -5,11 +5,10 @@
 use std::path::Path;
 
 mod common;
-use common::scratch;
+use common::{scratch, simulate_full};
 
 use pipeline::pipeline::{Pipeline, StageSummary};
 use pipeline::scene::Scene;
-use pipeline::simulate::{Method, SimulateOptions, Trajectory, simulate};
 
 /// A soft 1 m bar clamped at x = 0, falling under gravity for 6 steps, its full-space L-BFGS
 /// capped at `cap` iterations a step (`None`: the default).
@@ -41,20 +40,10 @@ fn steps_finished_by_the_other_solver_are_said() {
         let scene = Scene::from_str(&bar(cap), Path::new("."), "bar.toml").unwrap();
         let dir = scratch(&format!("switches-{cap:?}"));
         let mut p = Pipeline::new(&scene, &dir).unwrap();
-        let opts = SimulateOptions {
-            method: Method::Full,
-            trajectory: Trajectory::Scene,
-            out: dir.join("sim"),
-            frames: None,
-            every: 0,
-            solver: None,
-        };
-        let summary = simulate(&mut p, &opts, &|_, _| {}, &mut |_, _| {})
-            .unwrap()
-            .summary;
+        let (summary, out) = simulate_full(&mut p, &dir);
         let reference = p.reference(0, &|_, _| {}).unwrap();
         (
-            summary.describe(&opts.out),
+            summary.describe(&out),
             reference.summary_in(&scene),
             summary.steps.iter().filter(|r| r.solver_switched).count(),
             reference.switched.clone(),

@@ -17,6 +17,25 @@ pub fn scratch(name: &str) -> PathBuf {
     d
 }
 
+/// The scene's own trajectory simulated in full space, writing no frames, and where they
+/// would go (`dir/sim`).
+#[allow(dead_code)] // Not every test binary simulates.
+pub fn simulate_full(p: &mut Pipeline<'_>, dir: &Path) -> (pipeline::simulate::Summary, PathBuf) {
+    use pipeline::simulate::{SimulateOptions, Trajectory, simulate};
+    let opts = SimulateOptions {
+        method: Method::Full,
+        trajectory: Trajectory::Scene,
+        out: dir.join("sim"),
+        frames: None,
+        every: 0,
+        solver: None,
+    };
+    let summary = simulate(p, &opts, &|_, _| {}, &mut |_, _| {})
+        .unwrap()
+        .summary;
+    (summary, opts.out)
+}
+
 /// `method` run once on test trajectory 0 and compared with the reference, writing no frames
 /// (`out` is where they would go).
 #[allow(dead_code)] // Not every test binary measures a method.
