@@ -97,6 +97,19 @@ const LARGER_RULE: &str = "a larger rule narrows that: a smaller `[cubature] tol
                            larger `max_elements` where the cubature stage's line says the \
                            element budget stopped it";
 
+/// For a neural method whose subspace misses the test at least twice as far as the PCA
+/// basis's (the `pca` row's subspace error), how many times as far: its latent dimension, not
+/// the basis, is then what to grow.
+fn latent_short_of_pca(r: &MethodReport, rows: &[MethodReport]) -> Option<f64> {
+    use crate::simulate::Method;
+    if !r.method.is_neural() {
+        return None;
+    }
+    let pca = rows.iter().find(|x| x.method == Method::Pca)?;
+    (pca.subspace_error > 0.0 && r.subspace_error >= 2.0 * pca.subspace_error)
+        .then(|| r.subspace_error / pca.subspace_error)
+}
+
 /// The method of the same subspace over every element, for a cubature method.
 fn over_every_element(method: crate::simulate::Method) -> Option<crate::simulate::Method> {
     use crate::simulate::Method;
@@ -568,14 +581,22 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
              element follows far closer (below)"
                 .to_string()
         } else if let Some((ratio, time)) = strained {
+            // A neural method whose latent space, not the PCA basis, misses the test: the
+            // basis's advice left a tester's d = 2 where it was (7.06 → 7.37 %; d = 8: 4.16 %).
+            let larger = match latent_short_of_pca(r, rows) {
+                Some(times) => format!(
+                    "a larger `[autoencoder] latent_dim` (its subspace misses the test {times:.0} \
+                     times as far as the PCA basis's)"
+                ),
+                None => format!("a larger subspace ({LARGER_PCA})"),
+            };
             format!(
                 "and its subspace holds the reference only by straining it: the reference's \
                  pose at t = {time:.2} s, put in the subspace, carries {ratio:.1} times its \
                  elastic energy (a part turned further than a linear basis turns without \
                  stretching, or a body giving way), which a step that lowers the energy does \
                  not follow; training schedules that reach such poses (`[training] schedules`, \
-                 `kinds`, `offset`) or a larger subspace ({LARGER_PCA}) hold them with less \
-                 strain"
+                 `kinds`, `offset`) or {larger} hold them with less strain"
             )
         } else if buckles {
             // A body that buckles under its own weight: a step's small error decides where its
@@ -1579,6 +1600,40 @@ mod tests {
                 "{w}"
             );
         }
+        assert!(
+            strained.contains("a larger subspace (in `[pca]`"),
+            "{strained}"
+        );
+        // A neural method whose latent space misses the test far more than the PCA basis: its
+        // latent dimension, not the basis (a tester's d = 2 was sent to `[pca]`).
+        let neural = with_restart(
+            MethodReport {
+                projected_strain: Some((18.9, 0.36)),
+                ..MethodReport {
+                    method: Method::Neural,
+                    ..chain.clone()
+                }
+            },
+            0.08,
+            0.18,
+        );
+        let pca = MethodReport {
+            subspace_error: 0.002,
+            ..row(Method::Pca, 0.01, 0.002)
+        };
+        let a = assess(&[pca, neural]);
+        let w = a
+            .untrusted
+            .iter()
+            .find(|w| w.starts_with("neural:") && w.contains("only by straining it"))
+            .unwrap_or_else(|| panic!("{a:#?}"));
+        assert!(
+            w.contains(
+                "or a larger `[autoencoder] latent_dim` (its subspace misses the test 6 times"
+            ),
+            "{w}"
+        );
+        assert!(!w.contains("in `[pca]`"), "{w}");
     }
 
     /// A drift of the steps' own names its cause before "a larger subspace": the cubature rule
