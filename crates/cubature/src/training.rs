@@ -201,9 +201,12 @@ impl TrainingMatrix {
             tracing::warn!(
                 "cubature: {fit} of {wanted} training poses fit `cubature.memory_limit_mb` = {} \
                  ({dim} reduced coordinates × {columns} candidate elements of {m}, {:.3} MiB \
-                 a pose); fitting on those",
+                 a pose); fitting on those (`memory_limit_mb` = {} keeps all {wanted}; a \
+                 tester's rule fitted on 16 of 150 missed the test's forces by 6.3 % against \
+                 1.7 %)",
                 config.memory_limit_mb,
-                per_pose as f64 / (1u64 << 20) as f64
+                per_pose as f64 / (1u64 << 20) as f64,
+                (per_pose * wanted as u128).div_ceil(1 << 20)
             );
         }
         let candidates =
