@@ -133,6 +133,32 @@ fn training_ends_at_its_total_even_when_it_stops_early() {
     }
 }
 
+/// A latent-dimension search counts the epochs of every network it may train as one count that
+/// only grows, and ends at its total (a tester's bar restarted at each network).
+#[test]
+fn a_latent_search_counts_on_from_network_to_network() {
+    let text = tiny()
+        .replace(
+            "latent_dim = 2\n",
+            "latent_dims = [1, 3]\nmax_vertex_error = 1e-12\n",
+        )
+        .replace("epochs = 150\n", "epochs = 20\npatience = 0\n");
+    let s = scene(&text);
+    let mut p = Pipeline::new(&s, scratch_dir("progress-search")).unwrap();
+    p.pca(&no_progress).unwrap();
+    let rec = Recorder::default();
+    let trained = p.train(&|d, t| rec.record(d, t)).unwrap();
+    assert_eq!(
+        trained.trials.len(),
+        3,
+        "no d meets 1e-12: all three trained"
+    );
+    let calls = rec.calls();
+    assert!(calls.iter().all(|&(_, t)| t == 60), "{calls:?}");
+    assert!(calls.windows(2).all(|w| w[0].0 < w[1].0), "{calls:?}");
+    assert_eq!(calls.last(), Some(&(60, 60)));
+}
+
 /// `run` counts each reduced method's steps to the trajectory's frames (full space is the
 /// reference stage's trajectory); the stages it computes on the way (into an empty cache) each
 /// complete.

@@ -2191,10 +2191,20 @@ impl<'a> Pipeline<'a> {
                     }
                 }
             }
+            // One count over every network a search may train (d = lo, lo + 1, …), so that it
+            // grows from network to network instead of starting again at each (a tester's bar
+            // read "529 … 494 … 342 … 165 of 1000", a stall to the eye); a search that meets
+            // its tolerance early ends the count there.
+            let (first, networks) = match (cfg.latent_dim, cfg.latent_dims) {
+                (None, Some([lo, hi])) => (lo, hi.saturating_sub(lo) + 1),
+                (d, _) => (d.unwrap_or(0), 1),
+            };
             let reported = std::cell::Cell::new((0, 0));
-            let search = nn::train_search(q.as_ref(), &cfg, error_of, |_, r| {
-                reported.set((r.epoch, r.epochs));
-                progress(r.epoch, r.epochs)
+            let search = nn::train_search(q.as_ref(), &cfg, error_of, |d, r| {
+                let done = d.saturating_sub(first) * r.epochs + r.epoch;
+                let total = networks * r.epochs;
+                reported.set((done, total));
+                progress(done, total)
             })
             .map_err(|e| anyhow::anyhow!("{}: stage train: {e}", p.scene.source))?;
             // Training that stops early for want of improvement ends before its last epoch:
