@@ -120,29 +120,29 @@ fn over_every_element(method: crate::simulate::Method) -> Option<crate::simulate
     }
 }
 
+/// The row of the same subspace over every element, for a cubature method's row `r`, when it
+/// ran without failing: what the cubature rule's share of `r`'s figures is measured against.
+fn every_element_row<'a>(r: &MethodReport, rows: &'a [MethodReport]) -> Option<&'a MethodReport> {
+    let every = over_every_element(r.method)?;
+    rows.iter()
+        .find(|x| x.method == every && x.failure.is_none())
+}
+
 /// The same subspace over every element for a cubature method's row, when it ran and its steps
 /// are at most half as far off: then the rule, not the subspace, makes the steps' error.
 fn rule_made_step_error<'a>(
     r: &MethodReport,
     rows: &'a [MethodReport],
 ) -> Option<&'a MethodReport> {
-    let every = over_every_element(r.method)?;
     // A step error of 0 is none measured (no step could be taken from the reference).
-    rows.iter().find(|x| {
-        x.method == every
-            && x.failure.is_none()
-            && x.step_error > 0.0
-            && 2.0 * x.step_error <= r.step_error
-    })
+    every_element_row(r, rows).filter(|x| x.step_error > 0.0 && 2.0 * x.step_error <= r.step_error)
 }
 
 /// The advice for a cubature method whose rule, not its subspace, makes much of its error:
 /// its error against the same subspace's over every element, when both ran.
 fn cubature_warning(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
-    let every = over_every_element(r.method)?;
-    let e = rows
-        .iter()
-        .find(|x| x.method == every && x.failure.is_none())?;
+    let e = every_element_row(r, rows)?;
+    let every = e.method;
     let excess = r.mean_rel_error - e.mean_rel_error;
     (r.failure.is_none()
         && r.mean_rel_error > UNCOVERED_SUBSPACE_ERROR
@@ -169,10 +169,8 @@ fn cubature_caveat(r: &MethodReport, rows: &[MethodReport]) -> Option<String> {
     if cubature_warning(r, rows).is_some() || r.failure.is_some() {
         return None;
     }
-    let every = over_every_element(r.method)?;
-    let e = rows
-        .iter()
-        .find(|x| x.method == every && x.failure.is_none())?;
+    let e = every_element_row(r, rows)?;
+    let every = e.method;
     (r.mean_rel_error >= RULE_CAVEAT_ERROR
         && r.mean_rel_error > RULE_SHARE_CAVEAT * e.mean_rel_error)
         .then(|| {
@@ -827,14 +825,10 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             // 20-element rule: 35.0 → 34.4 % with twice the schedules, 1.05 % at 100 elements).
             // It must follow the full trajectory itself (one that lags stays within them for
             // that) and stay clearly nearer, at most half as far out.
-            let every_stayed = over_every_element(r.method).and_then(|every| {
-                rows.iter().find(|x| {
-                    x.method == every
-                        && x.failure.is_none()
-                        && x.training_distance <= OUTSIDE_TRAINING
-                        && 2.0 * x.training_distance <= r.training_distance
-                        && judged_error(x) <= UNCOVERED_SUBSPACE_ERROR
-                })
+            let every_stayed = every_element_row(r, rows).filter(|x| {
+                x.training_distance <= OUTSIDE_TRAINING
+                    && 2.0 * x.training_distance <= r.training_distance
+                    && judged_error(x) <= UNCOVERED_SUBSPACE_ERROR
             });
             let what = if let Some(every) = every_stayed {
                 format!(
