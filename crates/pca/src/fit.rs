@@ -63,6 +63,40 @@ impl PcaFit {
             .k()
             .saturating_sub(self.appended + self.responses)
     }
+
+    /// What stopped the rule short of its target, where it was not met ([`Self::tolerance_met`]
+    /// false): `max_dimension` or the snapshots' numerical rank.
+    pub fn shortfall(&self) -> Option<Shortfall> {
+        if self.tolerance_met {
+            return None;
+        }
+        let k = self.chosen_k();
+        Some(match self.rule {
+            // The spectrum is whole, so the count the rule asks for is known.
+            DimensionRule::ExplainedEnergy(f) => Shortfall::Cap {
+                wanted: Some(energy_dimension(
+                    self.basis.singular_values(),
+                    self.numerical_rank,
+                    f,
+                )),
+            },
+            // Only roundoff lies past the rank: a larger cap adds nothing there.
+            DimensionRule::MaxVertexError(_) if k >= self.numerical_rank => Shortfall::Rank,
+            // The scan stopped at the cap: how far past it the tolerance lies is not known.
+            _ => Shortfall::Cap { wanted: None },
+        })
+    }
+}
+
+/// Why a PCA rule's target was not reached ([`PcaFit::shortfall`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shortfall {
+    /// `max_dimension` stopped the basis; `wanted`, the dimension the rule asks for where the
+    /// spectrum says it (the explained-energy rule).
+    Cap { wanted: Option<usize> },
+    /// The snapshots span no more directions than the basis has: only more (or more varied)
+    /// training poses reach the target.
+    Rank,
 }
 
 impl PcaBasis {

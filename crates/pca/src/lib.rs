@@ -54,4 +54,4 @@ pub use config::{
     DimensionRule, MAX_GRAVITY_DIRECTIONS, MAX_PATCH_RESPONSES, PcaConfig,
 };
 pub use error::PcaError;
-pub use fit::PcaFit;
+pub use fit::{PcaFit, Shortfall};

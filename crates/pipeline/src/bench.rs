@@ -592,6 +592,7 @@ mod tests {
                 compression: None,
                 buckling: None,
                 scene_warnings: Vec::new(),
+                basis_cap: None,
             },
             offline_seconds: 0.0,
             pareto: false,

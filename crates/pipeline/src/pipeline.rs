@@ -185,12 +185,23 @@ fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>) -> String {
              (`[pca] max_vertex_error`)"
         ),
     };
-    let met = if fit.tolerance_met {
-        ""
-    } else {
-        " (not reached within `[pca] max_dimension`)"
-    };
     let k = fit.chosen_k();
+    // Where the rule was stopped short, the basis has as many coefficients as the cap.
+    let met = match fit.shortfall() {
+        None => String::new(),
+        Some(pca::Shortfall::Cap { wanted: Some(w) }) => format!(
+            " (stopped at `[pca] max_dimension` = {k}; the rule asks for {w}, which a \
+             `max_dimension` of {w} lets it keep)"
+        ),
+        Some(pca::Shortfall::Cap { wanted: None }) => {
+            format!(" (not reached within `[pca] max_dimension` = {k})")
+        }
+        Some(pca::Shortfall::Rank) => format!(
+            " (not reached: the snapshots span {k} independent directions and the basis holds \
+             them all; a larger tolerance, or training schedules that move the body in other \
+             ways)"
+        ),
+    };
     let mut line = match (fit.appended, fit.fall_missed) {
         (0, Some(f)) => format!(
             "k = {k}: {why}{met}; they hold the body's first step of its fall from rest under \

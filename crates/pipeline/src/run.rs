@@ -395,6 +395,44 @@ pub struct MethodReport {
     /// ([`crate::pipeline::Pipeline::warnings`]), which the warnings list first.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub scene_warnings: Vec<String>,
+    /// On the row that carries the compression, where the run has reduced methods: a PCA basis
+    /// that `[pca] max_dimension` stopped short of its rule's target, which every reduced
+    /// method inherits ([`pca::PcaFit::shortfall`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub basis_cap: Option<BasisCap>,
+}
+
+/// A PCA basis stopped by `[pca] max_dimension` before its rule's target
+/// ([`MethodReport::basis_cap`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BasisCap {
+    /// `[pca] max_dimension`, the coefficients the rule kept.
+    pub max_dimension: usize,
+    /// The rule as the scene wrote it, e.g. "`[pca] explained_energy` = 0.9999999".
+    pub rule: String,
+    /// The coefficients the rule asks for, where the spectrum says it (the explained-energy
+    /// rule; the max-vertex-error scan stops at the cap).
+    pub wanted: Option<usize>,
+}
+
+impl BasisCap {
+    /// Of a fit whose rule `max_dimension` stopped; None where the rule was met or the
+    /// snapshots' rank stopped it (no cap reaches further there).
+    pub fn of(fit: &pca::PcaFit) -> Option<Self> {
+        let pca::Shortfall::Cap { wanted } = fit.shortfall()? else {
+            return None;
+        };
+        let rule = match fit.rule {
+            pca::DimensionRule::ExplainedEnergy(f) => format!("`[pca] explained_energy` = {f}"),
+            pca::DimensionRule::MaxVertexError(t) => format!("`[pca] max_vertex_error` = {t}"),
+            pca::DimensionRule::Count(_) => return None,
+        };
+        Some(Self {
+            max_dimension: fit.chosen_k(),
+            rule,
+            wanted,
+        })
+    }
 }
 
 /// Whether the body can stand under its own weight as it is pinned: the linearised buckling
@@ -1027,6 +1065,10 @@ pub fn run(
             .buckling
             .get_or_init(|| Buckling::of(&pipeline.model));
         row.scene_warnings = pipeline.warnings.clone();
+        if opts.methods.iter().any(|m| !m.is_full()) {
+            let fit = pipeline.pca(stage_progress)?;
+            row.basis_cap = BasisCap::of(&fit);
+        }
         let time = &pipeline.scene.time;
         if let Some(b) = &row.buckling
             && !time.quasi_static
@@ -1512,6 +1554,7 @@ pub fn measure(
             compression: Compression::of(&model, &reference.frames, pipeline.scene.time.step),
             buckling: None,
             scene_warnings: Vec::new(),
+            basis_cap: None,
         });
     }
     let machine_gfma = Some(nn::peak::fma_rate(PROBE_TIME).multiply_adds_per_second / 1e9);
@@ -1699,6 +1742,7 @@ pub fn measure(
         compression: None,
         buckling: None,
         scene_warnings: Vec::new(),
+        basis_cap: None,
     })
 }
 

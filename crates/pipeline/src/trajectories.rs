@@ -184,6 +184,7 @@ pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
                 rows.iter_mut().for_each(|r| {
                     r.buckling = None;
                     r.scene_warnings.clear();
+                    r.basis_cap = None;
                 });
             }
             crate::trust::assess(&rows).text(&format!("trajectory {i}, "))

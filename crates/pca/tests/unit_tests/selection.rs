@@ -1,7 +1,7 @@
 //! Dimension selection: each rule picks the smallest k meeting its target, checked by brute force.
 
 use faer::Mat;
-use pca::{DimensionRule, PcaBasis, PcaConfig};
+use pca::{DimensionRule, PcaBasis, PcaConfig, Shortfall};
 
 use super::{Rng, brute_force_max_vertex_error, decaying_snapshots};
 
@@ -52,6 +52,22 @@ fn explained_energy_rule_is_capped() {
     let fit = PcaBasis::fit(s.as_ref(), None, &config, 3).unwrap();
     assert_eq!(fit.chosen_k(), 3);
     assert!(!fit.tolerance_met);
+    // The count the rule asks for, which the cap written back lets it reach.
+    let Some(Shortfall::Cap {
+        wanted: Some(wanted),
+    }) = fit.shortfall()
+    else {
+        panic!("{:?}", fit.shortfall());
+    };
+    assert!(wanted > 3, "{wanted}");
+    let raised = PcaConfig {
+        max_dimension: wanted,
+        ..config
+    };
+    let fit = PcaBasis::fit(s.as_ref(), None, &raised, 3).unwrap();
+    assert!(fit.tolerance_met);
+    assert_eq!(fit.chosen_k(), wanted);
+    assert_eq!(fit.shortfall(), None);
 }
 
 #[test]
@@ -166,6 +182,8 @@ fn unmet_tolerance_returns_the_cap() {
     assert!(!fit.tolerance_met);
     assert_eq!(fit.max_vertex_error_per_k.len(), 5);
     assert!(fit.max_vertex_error_per_k.iter().all(|&e| e > 1e-300));
+    // The scan stopped at the cap: how many the tolerance needs is not known.
+    assert_eq!(fit.shortfall(), Some(Shortfall::Cap { wanted: None }));
 }
 
 #[test]
@@ -197,6 +215,16 @@ fn low_rank_data_has_a_zero_tail_and_small_k() {
     assert!(by_error.tolerance_met);
     assert!(by_error.chosen_k() <= r, "k = {}", by_error.chosen_k());
     assert!(brute_force_max_vertex_error(&by_error.basis, s.as_ref(), 3) <= 1e-10 * scale);
+    // A tolerance below roundoff stops at the rank, under the cap: no cap reaches it.
+    let past_rank = PcaBasis::fit(
+        s.as_ref(),
+        Some(&mass),
+        &PcaConfig::by_max_vertex_error(1e-300),
+        3,
+    )
+    .unwrap();
+    assert_eq!(past_rank.chosen_k(), r);
+    assert_eq!(past_rank.shortfall(), Some(Shortfall::Rank));
 
     for fraction in [1.0, 1.0 - 1e-12] {
         let by_energy = PcaBasis::fit(
