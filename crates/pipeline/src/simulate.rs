@@ -517,7 +517,7 @@ pub fn simulate(
 ) -> Result<SimulationResult> {
     let scene = pipeline.scene;
     let (model, time, solver) = setup(pipeline, opts)?;
-    let frames = time.frames;
+    let (frames, step) = (time.frames, time.step);
     let mut runner = Runner::new(
         pipeline,
         opts.method,
@@ -623,16 +623,60 @@ pub fn simulate(
     write_json(&opts.out.join("summary.json"), &summary)?;
     if let Some(e) = failure {
         anyhow::bail!(
-            "{}: simulation with method {} stopped: {e}; frames up to step {done} (the last good state) are in {}",
+            "{}: simulation with method {} stopped: {e}; frames up to step {done} (the last good state) are in {}; {}",
             scene.source,
             opts.method.name(),
-            opts.out.display()
+            opts.out.display(),
+            stopped_remedy(model, scene.material.youngs_modulus, step)
         );
     }
     Ok(SimulationResult {
         summary,
         final_displacement: runner.displacement(),
     })
+}
+
+/// What to change where a step of the scene could not be solved: the scene's loads that
+/// strain the body past its own size first (a point load at least the force E·L² that does, L
+/// the bounding-box diagonal; a spring whose target lies at least L away), then the step. An
+/// advice follower's point load at the scene's limit, 1e6 times E·L², failed its first step
+/// with no word of what to change (stop 77).
+fn stopped_remedy(model: &FullSpaceModel, youngs_modulus: f64, step: f64) -> String {
+    use fem_core::forces::ForceKind;
+    let rest = &model.mesh.vertices;
+    let body = latent_sim::body_force(rest, youngs_modulus);
+    let size = (body / youngs_modulus).sqrt();
+    let norm = |k: &[f64; 4]| (k[1] * k[1] + k[2] * k[2] + k[3] * k[3]).sqrt();
+    let mut loads: Vec<String> = Vec::new();
+    for (i, f) in model.forces.iter().enumerate() {
+        let largest = f.keyframes.iter().map(norm).fold(0.0, f64::max);
+        match f.kind {
+            ForceKind::Point if largest >= body => loads.push(format!(
+                "`force[{i}]`'s point load reaches {largest:.3e} N, {:.1e} times the {body:.3e} N \
+                 (E times the squared bounding-box diagonal) that strains the body by its own \
+                 size",
+                largest / body
+            )),
+            ForceKind::Spring if largest >= size => loads.push(format!(
+                "`force[{i}]`'s spring pulls its target {largest:.3e} m away, {:.1} times the \
+                 body's {size:.3e} m bounding-box diagonal",
+                largest / size
+            )),
+            _ => {}
+        }
+    }
+    if loads.is_empty() {
+        format!(
+            "a smaller `[time] step` (now {step} s) makes each step's solve easier, and lighter \
+             loads or a stiffer material (`[material] youngs_modulus`) a gentler motion"
+        )
+    } else {
+        format!(
+            "{}: lighter `keyframes` keep the motion within what the material models, and a \
+             smaller `[time] step` (now {step} s) makes each step's solve easier",
+            loads.join("; ")
+        )
+    }
 }
 
 /// Median of a list: its middle value, or the mean of the middle two when it has an even
