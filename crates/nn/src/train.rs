@@ -25,6 +25,10 @@ pub struct EpochReport {
     pub train_loss: f64,
     /// The (scaled) MSE on the validation split after the epoch; `None` without a split.
     pub validation_loss: Option<f64>,
+    /// The loss the epoch is judged by: the validation loss, or without a split the training
+    /// MSE measured again on the weights the epoch ends with.
+    #[serde(default)]
+    pub monitored_loss: f64,
     /// Whether this epoch set a new best monitored loss: validation if any, else training
     /// measured on the weights the epoch ends with (the weights training starts from are the
     /// candidate to beat).
@@ -52,6 +56,9 @@ pub struct TrainOutcome {
     pub validation_indices: Vec<usize>,
     /// Which of the `restarts` networks this is (0-based: trained from seed `seed + restart`).
     pub restart: usize,
+    /// The monitored loss of the weights training started from, epoch 0's candidate (infinite
+    /// where it was not finite).
+    pub start_loss: f64,
 }
 
 /// Trains an autoencoder with latent dimension `latent_dim` on `data` (k × N PCA coefficients, one
@@ -114,6 +121,7 @@ fn train_one(
         best,
         train_indices,
         validation_indices,
+        start_loss,
         ..
     } = trainer;
     let Best {
@@ -134,6 +142,7 @@ fn train_one(
         train_indices,
         validation_indices,
         restart,
+        start_loss,
     })
 }
 
@@ -170,6 +179,8 @@ pub struct Trainer {
     best: Best,
     /// The lowest monitored loss of the epochs run and its epoch (early stopping's clock).
     best_trained: (f64, usize),
+    /// The monitored loss of the weights training started from.
+    start_loss: f64,
     train_indices: Vec<usize>,
     validation_indices: Vec<usize>,
 }
@@ -274,17 +285,19 @@ impl Trainer {
         // The weights training starts from are epoch 0's candidate: with the linear skip they
         // are PCA's truncation to d, which no epoch may come out worse than unnoticed.
         let start_loss = engine.mean_squared_error(&model, &x_val, &x_train);
+        let start_loss = if start_loss.is_finite() {
+            start_loss
+        } else {
+            f64::INFINITY
+        };
         Ok(Self {
             best: Best {
-                loss: if start_loss.is_finite() {
-                    start_loss
-                } else {
-                    f64::INFINITY
-                },
+                loss: start_loss,
                 epoch: 0,
                 model: model.clone(),
             },
             best_trained: (f64::INFINITY, 0),
+            start_loss,
             model,
             epochs: config.epochs,
             epoch: 0,
@@ -360,6 +373,7 @@ impl Trainer {
             epochs: self.epochs,
             train_loss,
             validation_loss,
+            monitored_loss: monitored,
             improved,
         })
     }

@@ -788,6 +788,8 @@ pub struct TrainedModel {
     /// Columns of the PCA basis it was trained on (its input size).
     pub pca_k: usize,
     pub history: Vec<nn::EpochReport>,
+    /// The monitored loss of the weights the judged run started from, epoch 0's candidate.
+    pub start_loss: f64,
     pub best_epoch: usize,
     pub stopped_early: bool,
     /// Every latent dimension tried with its maximum vertex error.
@@ -2319,6 +2321,7 @@ impl<'a> Pipeline<'a> {
                 latent_dim: d,
                 pca_k: basis.k(),
                 history: chosen.outcome.history.clone(),
+                start_loss: chosen.outcome.start_loss,
                 best_epoch: chosen.outcome.best_epoch,
                 stopped_early: chosen.outcome.stopped_early,
                 trials: search

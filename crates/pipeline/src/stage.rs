@@ -76,7 +76,9 @@ impl Stage {
             //    measured after the epoch (was the epoch's running mean, the weights before its
             //    steps), and the start (PCA's truncation, with the skip) is a candidate;
             //    early stopping's clock runs from the best trained epoch.
-            Stage::Train => 8,
+            // 9: each epoch's monitored loss and the start's are kept, for `loss.csv` (new
+            //    fields).
+            Stage::Train => 9,
             // 2: Newton factorises the exact Hessian first (different iterates within tolerance).
             // 3: sequential sparse factorisation on small pools (round-off), current-state
             //    L-BFGS preconditioner (iterates within tolerance).
@@ -207,7 +209,7 @@ mod tests {
                 ("pca", 5),
                 ("cubature", 6),
                 ("cubature-neural", 8),
-                ("train", 8),
+                ("train", 9),
                 ("complement", 3),
                 ("reference", 12),
                 ("coverage", 2),

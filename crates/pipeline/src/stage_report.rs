@@ -78,13 +78,32 @@ impl TrainedModel {
         )
     }
 
-    /// Writes `loss.csv` (epoch, training and validation loss) and `loss.svg` into `dir`.
+    /// Writes `loss.csv` and `loss.svg` into `dir`. The CSV has a row per epoch, and epoch 0
+    /// for the weights training started from: the training loss (the epoch's running mean,
+    /// taken before each step), the validation loss, the monitored loss that judged the epoch
+    /// (the validation loss, or without a split the training loss measured again after the
+    /// epoch) and whether its weights are the judged run's kept ones.
     pub fn write_loss_curve(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        let mut csv = String::from("epoch,train_loss,validation_loss\n");
+        let split = self.history.iter().any(|r| r.validation_loss.is_some());
+        let kept = |epoch: usize| u8::from(epoch == self.best_epoch);
+        let mut csv = String::from("epoch,train_loss,validation_loss,monitored_loss,kept\n");
+        let start = if split {
+            self.start_loss.to_string()
+        } else {
+            String::new()
+        };
+        csv.push_str(&format!("0,,{start},{},{}\n", self.start_loss, kept(0)));
         for r in &self.history {
             let v = r.validation_loss.map(|v| v.to_string()).unwrap_or_default();
-            csv.push_str(&format!("{},{},{}\n", r.epoch, r.train_loss, v));
+            csv.push_str(&format!(
+                "{},{},{},{},{}\n",
+                r.epoch,
+                r.train_loss,
+                v,
+                r.monitored_loss,
+                kept(r.epoch)
+            ));
         }
         crate::output::write_file(&dir.join("loss.csv"), csv.as_bytes())?;
         let mut series = vec![plot::Series {
@@ -97,15 +116,39 @@ impl TrainedModel {
             line: true,
             ..Default::default()
         }];
-        if self.history.iter().any(|r| r.validation_loss.is_some()) {
+        // The monitored loss from the start (epoch 0): the validation loss, or the training
+        // loss after each epoch.
+        series.push(plot::Series {
+            name: if split {
+                "validation".into()
+            } else {
+                "training, after the epoch".into()
+            },
+            points: std::iter::once((0.0, self.start_loss))
+                .chain(
+                    self.history
+                        .iter()
+                        .map(|r| (r.epoch as f64, r.monitored_loss)),
+                )
+                .filter(|(_, l)| l.is_finite() && *l > 0.0)
+                .collect(),
+            line: true,
+            ..Default::default()
+        });
+        // The weights kept: the start's, or the best epoch's.
+        let kept = if self.best_epoch == 0 {
+            Some(self.start_loss)
+        } else {
+            self.history
+                .iter()
+                .find(|r| r.epoch == self.best_epoch)
+                .map(|r| r.monitored_loss)
+        };
+        if let Some(loss) = kept.filter(|l| l.is_finite() && *l > 0.0) {
             series.push(plot::Series {
-                name: "validation".into(),
-                points: self
-                    .history
-                    .iter()
-                    .filter_map(|r| Some((r.epoch as f64, r.validation_loss?)))
-                    .collect(),
-                line: true,
+                name: format!("kept (epoch {})", self.best_epoch),
+                points: vec![(self.best_epoch as f64, loss)],
+                line: false,
                 ..Default::default()
             });
         }

@@ -146,3 +146,52 @@ fn an_autoencoder_behind_pca_at_its_dimension_is_said() {
     let line = trained.summary();
     assert!(!line.contains("closer than the autoencoder"), "{line}");
 }
+
+/// `loss.csv` has epoch 0 (the start) and a row per epoch, each with the loss that judged it,
+/// and marks the kept weights: the lowest monitored loss, the start's where no epoch beat it
+/// (the loss that picked the kept epoch, measured after it, was missing before stop 78).
+#[test]
+fn the_loss_curve_marks_the_kept_weights_by_the_loss_that_judged_them() {
+    for (name, settings) in [
+        ("held-out", "latent_dim = 4\nepochs = 40"),
+        (
+            "no split",
+            "latent_dim = 4\nepochs = 40\nvalidation_fraction = 0",
+        ),
+    ] {
+        let scene = bar(12, settings);
+        let dir = scratch(&format!("loss-curve-{}", name.replace(' ', "-")));
+        let mut p = Pipeline::new(&scene, &dir).unwrap();
+        let trained = p.train(&|_, _| {}).unwrap();
+        trained.write_loss_curve(&dir).unwrap();
+        let csv = std::fs::read_to_string(dir.join("loss.csv")).unwrap();
+        let mut lines = csv.lines();
+        assert_eq!(
+            lines.next(),
+            Some("epoch,train_loss,validation_loss,monitored_loss,kept"),
+            "{name}"
+        );
+        let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+        assert_eq!(rows.len(), trained.history.len() + 1, "{name}");
+        assert_eq!(rows[0][0], "0", "{name}");
+        let monitored: Vec<f64> = rows.iter().map(|r| r[3].parse().unwrap()).collect();
+        let kept: Vec<usize> = rows
+            .iter()
+            .filter(|r| r[4] == "1")
+            .map(|r| r[0].parse().unwrap())
+            .collect();
+        assert_eq!(kept, [trained.best_epoch], "{name}: {csv}");
+        // The first lowest monitored loss is the kept one.
+        let lowest = monitored.iter().copied().fold(f64::INFINITY, f64::min);
+        let first = monitored.iter().position(|&m| m == lowest).unwrap();
+        assert_eq!(first, trained.best_epoch, "{name}: {csv}");
+        // With held-out schedules it is their loss; without, not the running mean.
+        let split = rows[1][2].parse::<f64>().ok();
+        assert_eq!(split.is_some(), name == "held-out", "{name}: {csv}");
+        if let Some(v) = split {
+            assert_eq!(v, monitored[1], "{name}");
+        } else {
+            assert_ne!(rows[1][1], rows[1][3], "{name}: {csv}");
+        }
+    }
+}
