@@ -971,7 +971,14 @@ impl<'a> Pipeline<'a> {
             .iter()
             .cloned()
             .chain(fem_core::mesh::size_warning((hi - lo).norm()))
-            .chain(fem_core::mesh::thin_warning(&model.mesh))
+            .chain(fem_core::mesh::thin_warning(
+                &model.mesh,
+                if scene.mesh.generate.is_some() {
+                    fem_core::mesh::REFINE_GENERATED
+                } else {
+                    fem_core::mesh::REFINE_MESHER
+                },
+            ))
             .chain(crate::scene::weight_warning(scene, (hi - lo).into()))
             .chain(crate::scene::density_warning(scene.material.density))
             .collect();

@@ -235,10 +235,18 @@ pub fn sliver_note(mesh: &TetMesh) -> Option<String> {
     })
 }
 
+/// How to mesh finer, in [`thin_warning`], for a mesh read from a file.
+pub const REFINE_MESHER: &str = "a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a`";
+
+/// How to mesh finer, in [`thin_warning`], for a mesh the scene generates (an advice follower's
+/// generated plate was told gmsh's and TetGen's options).
+pub const REFINE_GENERATED: &str = "more `[mesh] generate` cells";
+
 /// What to say of a mesh about one element thick ([`THIN_SHARE`]): linear tetrahedra that thin
 /// lock in bending, so the body is far stiffer than its material, and every method is measured
-/// against that stiffness.
-pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
+/// against that stiffness. `refine` says how to mesh finer ([`REFINE_MESHER`],
+/// [`REFINE_GENERATED`]).
+pub fn thin_warning(mesh: &TetMesh, refine: &str) -> Option<String> {
     let triangles = mesh.surface_triangles();
     let on_surface = on_triangles(mesh.num_vertices(), &triangles);
     let tets = mesh.num_tets();
@@ -256,8 +264,8 @@ pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
                  opposite one): linear tetrahedra that thin bend far too stiffly (a fin meshed \
                  one to two elements thick, about twice too stiffly), so the full simulation, \
                  and every method measured against it, is stiffer there than the material; \
-                 three or more elements across its thickness (a smaller gmsh \
-                 `Mesh.MeshSizeMax` there, TetGen's `-a`) bend closer to it",
+                 three or more elements across its thickness ({refine} there) bend closer \
+                 to it",
                 centre.x,
                 centre.y,
                 centre.z,
@@ -281,7 +289,7 @@ pub fn thin_warning(mesh: &TetMesh) -> Option<String> {
              thick, 5.0 cm three cells thick, 7.9 cm four cells thick and twice as fine along \
              it; plate theory: 10.8 cm), so the full simulation, and every method measured \
              against it, is stiffer than the material; more elements across the thickness, and \
-             finer along it (a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a`), bend closer to it"
+             finer along it ({refine}), bend closer to it"
         )
     })
 }
@@ -451,11 +459,21 @@ mod tests {
             })
             .unwrap()
         };
-        let w = super::thin_warning(&plate([12, 8, 1])).expect("one cell thick");
+        let w = super::thin_warning(&plate([12, 8, 1]), super::REFINE_GENERATED)
+            .expect("one cell thick");
         assert!(w.contains("have all four corners on its surface"), "{w}");
         assert!(w.contains("(100 %)"), "{w}");
-        assert_eq!(super::thin_warning(&plate([12, 8, 4])), None);
-        assert_eq!(super::thin_warning(&plate([6, 6, 6])), None);
+        // A generated mesh is told its own setting, a mesher's file the meshers'.
+        assert!(w.contains("(more `[mesh] generate` cells)"), "{w}");
+        assert!(!w.contains("gmsh"), "{w}");
+        assert_eq!(
+            super::thin_warning(&plate([12, 8, 4]), super::REFINE_MESHER),
+            None
+        );
+        assert_eq!(
+            super::thin_warning(&plate([6, 6, 6]), super::REFINE_MESHER),
+            None
+        );
     }
 
     /// A block with a fin one cell thick (14 % of its volume; 19 % with the row of the block's
@@ -480,12 +498,17 @@ mod tests {
             });
             m
         };
-        let w = super::thin_warning(&block(12)).expect("a fin one cell thick");
+        let w =
+            super::thin_warning(&block(12), super::REFINE_MESHER).expect("a fin one cell thick");
         assert!(
             w.starts_with("a part about one element thick around (0.596, 0.403, 0.050) holds 19 %"),
             "{w}"
         );
-        assert_eq!(super::thin_warning(&block(0)), None);
+        assert!(
+            w.contains("(a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a` there)"),
+            "{w}"
+        );
+        assert_eq!(super::thin_warning(&block(0), super::REFINE_MESHER), None);
         // A fin one cell long: 1.4 % of the volume, under 2 % with the tets beneath it.
         let fin = block(1);
         let triangles = fin.surface_triangles();
@@ -493,7 +516,7 @@ mod tests {
         let (share, _, _) =
             super::thickest_thin_part(&fin, &triangles, &on_surface).expect("a fin");
         assert!(share < 0.02, "{share}");
-        assert_eq!(super::thin_warning(&block(1)), None);
+        assert_eq!(super::thin_warning(&block(1), super::REFINE_MESHER), None);
         for (kind, size, cells) in [
             (GeneratedShape::Box, [1.0, 0.1, 0.1], [40, 2, 2]),
             (GeneratedShape::Box, [1.0, 0.2, 0.2], [40, 8, 8]),
@@ -506,7 +529,11 @@ mod tests {
                 ..Default::default()
             })
             .unwrap();
-            assert_eq!(super::thin_warning(&m), None, "{kind:?} {cells:?}");
+            assert_eq!(
+                super::thin_warning(&m, super::REFINE_MESHER),
+                None,
+                "{kind:?} {cells:?}"
+            );
         }
     }
 
