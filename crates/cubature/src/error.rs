@@ -42,11 +42,16 @@ pub enum CubatureError {
         "the cubature training data needs {needed_mb} MiB for the fewest poses a fit uses \
          ({poses} poses × {dim} reduced coordinates × {elements} candidate elements), above \
          `cubature.memory_limit_mb` = {limit_mb}; set `cubature.memory_limit_mb` to at least \
-         {needed_mb} (a smaller `cubature.max_elements` also takes fewer candidates, 8 for \
-         each element of the rule)"
+         {needed_mb} ({all_mb} keeps all {all_poses} poses, which a rule fitted on fewer misses \
+         the forces of more often; a smaller `cubature.max_elements` also takes fewer \
+         candidates, 8 for each element of the rule)"
     )]
     MemoryLimit {
         needed_mb: u64,
+        /// MiB that keep every pose the fit asks for, with these candidates.
+        all_mb: u64,
+        /// The poses the fit asks for (`cubature.max_poses` or fewer given).
+        all_poses: usize,
         limit_mb: u64,
         poses: usize,
         dim: usize,

@@ -181,8 +181,11 @@ impl TrainingMatrix {
         let fit = (limit / per_pose).min(wanted as u128) as usize;
         if fit < wanted.min(MIN_POSES) {
             let needed = per_pose * wanted.min(MIN_POSES) as u128;
+            let mib = |bytes: u128| bytes.div_ceil(1 << 20).min(u64::MAX as u128) as u64;
             return Err(CubatureError::MemoryLimit {
-                needed_mb: needed.div_ceil(1 << 20).min(u64::MAX as u128) as u64,
+                needed_mb: mib(needed),
+                all_mb: mib(per_pose * wanted as u128),
+                all_poses: wanted,
                 limit_mb: config.memory_limit_mb,
                 poses: wanted.min(MIN_POSES),
                 dim,

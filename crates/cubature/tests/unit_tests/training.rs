@@ -219,7 +219,22 @@ fn the_memory_limit_shrinks_the_pose_subsample_and_below_the_minimum_is_an_error
                 e.to_string()
                     .contains(&format!("`cubature.memory_limit_mb` to at least {needed}")),
                 "{e}"
-            )
+            );
+            // The value that keeps every pose, which written back fits them all.
+            let all = (40 * per_pose).div_ceil(1 << 20) as u64;
+            assert!(
+                e.to_string()
+                    .contains(&format!("({all} keeps all 40 poses, which")),
+                "{e}"
+            );
+            let roomy = CubatureConfig {
+                memory_limit_mb: all,
+                ..Default::default()
+            };
+            let fitted =
+                TrainingMatrix::build(&model, &basis, k, Poses::linear(q.as_ref()), &roomy)
+                    .unwrap();
+            assert_eq!(fitted.num_poses(), 40);
         }
         other => panic!("expected a memory-limit error, got {other:?}"),
     }
