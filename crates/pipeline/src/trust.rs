@@ -376,11 +376,19 @@ fn buckling_warning(r: &MethodReport) -> Option<String> {
     let stiffer = b
         .standing_modulus
         .map(|e| {
+            let firm = crate::run::Buckling::MARGIN * e;
             format!(
-                " (`[material] youngs_modulus` of {:.2e} Pa or more, {} times the {least}{e:.2e} \
-                 Pa at which it would just stand)",
-                crate::run::Buckling::MARGIN * e,
-                crate::run::Buckling::MARGIN
+                " (`[material] youngs_modulus` of {firm:.2e} Pa or more, {} times the \
+                 {least}{e:.2e} Pa at which it would just stand{})",
+                crate::run::Buckling::MARGIN,
+                if firm > STIFFEST_MATERIAL {
+                    format!(
+                        ": no material is that stiff, past diamond's {STIFFEST_MATERIAL:.1e} Pa, \
+                         so pins are what to change"
+                    )
+                } else {
+                    String::new()
+                }
             )
         })
         .unwrap_or_default();
@@ -401,6 +409,12 @@ fn buckling_warning(r: &MethodReport) -> Option<String> {
         b.sag
     ))
 }
+
+/// The stiffest material's Young's modulus (diamond, about 1.2e12 Pa): a body that would
+/// need more to stand is held too little by its pins, and a modulus past it is not advised (an
+/// advice follower's bar pinned at one vertex was offered 6.6e14 Pa beside the pin line that
+/// held it at once).
+pub const STIFFEST_MATERIAL: f64 = 1.2e12;
 
 /// A test trajectory that carries the body this share of its bounding-box diagonal or more
 /// moves far beyond what its drag asks (target offsets of 2–10 % of the diagonal by default).
@@ -506,18 +520,29 @@ fn fall_warning(rows: &[MethodReport]) -> Option<String> {
         Some(u) => format!("{u}. Else, if the body should stand as pinned"),
         None => "If the body should stand as pinned".to_string(),
     };
+    let remedy = if b.firm_modulus > STIFFEST_MATERIAL {
+        format!(
+            "pins that hold more of it keep it up (no material is stiff enough: it would take \
+             `[material] youngs_modulus` of {:.1e} Pa, past diamond's {STIFFEST_MATERIAL:.1e})",
+            b.firm_modulus
+        )
+    } else {
+        format!(
+            "a stiffer material (`[material] youngs_modulus` of {:.1e} Pa or more) or pins \
+             that hold more of it keep it up",
+            b.firm_modulus
+        )
+    };
     Some(format!(
         "{who} moves the body up to {:.3} m at t = {:.2} s, {:.0} % of its {:.3} m \
          bounding-box diagonal, far beyond what the drag asks: its own weight carries it (the \
          linear response to gravity at rest already moves it {:.0} % of its size){through}\
-         {inverted}{drift}. {stand}, a stiffer material (`[material] youngs_modulus` of {:.1e} \
-         Pa or more) or pins that hold more of it keep it up{meant}",
+         {inverted}{drift}. {stand}, {remedy}{meant}",
         c.travel,
         c.travel_time,
         pct(c.travel / b.size),
         b.size,
         pct(b.sag / b.size),
-        b.firm_modulus,
         who = reference_subject(carrier),
     ))
 }
@@ -1418,6 +1443,20 @@ mod tests {
             w[0].contains("youngs_modulus` of 1.0e6 Pa or more"),
             "{}",
             w[0]
+        );
+        // A modulus no material has is not advised: the pins are (a bar held at one vertex).
+        let mut one_vertex = full(0.44, 0.17);
+        if let Some(b) = &mut one_vertex.buckling {
+            b.firm_modulus = 6.6e14;
+        }
+        let w1 = said(&[one_vertex, amplified.clone()]);
+        assert!(
+            w1[0].contains(
+                "pins that hold more of it keep it up (no material is stiff enough: it would \
+                 take `[material] youngs_modulus` of 6.6e14 Pa, past diamond's 1.2e12)"
+            ) && !w1[0].contains("a stiffer material"),
+            "{}",
+            w1[0]
         );
         // The restart's advice of a gentler pull gives way to the cause.
         let restart = assess(&[full(0.44, 0.17), amplified.clone()])
