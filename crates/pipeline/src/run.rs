@@ -1396,7 +1396,7 @@ const REASON_SHARE: f64 = 0.25;
 /// up to 50 % on a shared machine, as the standing line says), and [`standing_reasons`] says
 /// so; above it the difference may still be the machine's, which the standing line's advice
 /// (`cargo xtask bench`) settles.
-const STEP_TIME_SPREAD: f64 = 0.1;
+pub(crate) const STEP_TIME_SPREAD: f64 = 0.1;
 
 /// Where a reduced step's time goes, mean ms per step, as a markdown table under a heading
 /// (empty when no reduced method ran).
