@@ -559,6 +559,7 @@ mod tests {
                 method: Method::Pca,
                 dim: 1,
                 cubature_elements: 1,
+                latent: None,
                 ms_per_step: ms,
                 ms_min: ms,
                 ms_median: ms,

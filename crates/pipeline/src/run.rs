@@ -279,6 +279,10 @@ pub struct MethodReport {
     pub dim: usize,
     /// Elements the elastic energy is evaluated on.
     pub cubature_elements: usize,
+    /// A neural method's latent dimension d and the PCA dimension k it decodes to (None for
+    /// the others): `[autoencoder] latent_dim` can grow to k.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latent: Option<(usize, usize)>,
     /// Mean wall time per step (the median over repeated runs of each run's mean): what a
     /// trajectory costs per step, its occasional expensive steps included (a preconditioner
     /// rebuild every few steps can double a reduced method's mean over its median step). Hz,
@@ -1360,17 +1364,22 @@ fn standing_reasons(n: &MethodReport, p: &MethodReport) -> String {
             && n.subspace_error - p.subspace_error
                 >= REASON_SHARE * (n.mean_rel_error - p.mean_rel_error);
         let cause = if subspace {
-            "its subspace holds the test less well (more `[reduced] complement_directions` or \
-             a larger `[autoencoder] latent_dim` close it)"
+            format!(
+                "its subspace holds the test less well (more `[reduced] complement_directions` \
+                 or {} close it)",
+                crate::trust::larger_latent(n)
+            )
         } else if n.step_error > 0.0
             && p.step_error > 0.0
             && ratio(n.step_error, p.step_error) > REASON_RATIO
         {
             "its steps add more error from the same start (the cubature rule: stage \
              `cubature-neural`'s force error against stage `cubature`'s, or the solve)"
+                .to_string()
         } else {
             "neither its subspace nor its steps are far enough from pca-cubature's to explain \
              it, so the test's dynamics made more of a small difference"
+                .to_string()
         };
         let (n_subspace, p_subspace) =
             distinct(100.0 * n.subspace_error, 100.0 * p.subspace_error, 2);
@@ -1535,6 +1544,7 @@ pub fn measure(
         return Ok(MethodReport {
             method,
             dim: model.dofs.num_free(),
+            latent: None,
             cubature_elements: model.elements.len(),
             ms_per_step: full_ms,
             ms_min: full_ms,
@@ -1720,9 +1730,18 @@ pub fn measure(
             }
         }
     }
+    // A neural method's latent dimension and the basis it decodes to, for advice that names
+    // them.
+    let latent = if method.is_neural() {
+        let d = pipeline.train(stage_progress)?.latent_dim;
+        Some((d, pipeline.pca(stage_progress)?.basis.k()))
+    } else {
+        None
+    };
     Ok(MethodReport {
         method,
         dim,
+        latent,
         cubature_elements,
         ms_per_step: ms,
         ms_min: means.iter().copied().fold(f64::INFINITY, f64::min),

@@ -97,6 +97,23 @@ const LARGER_RULE: &str = "a larger rule narrows that: a smaller `[cubature] tol
                            larger `max_elements` where the cubature stage's line says the \
                            element budget stopped it";
 
+/// "a larger `[autoencoder] latent_dim`" with the value to try where the row says its d and k:
+/// twice d, at most k, the PCA basis's size (a tester doubled d = 19 to 38, past k = 37, and
+/// was refused). At d = k the latent space already holds the basis's span: a larger basis, then.
+pub(crate) fn larger_latent(r: &MethodReport) -> String {
+    match r.latent {
+        Some((d, k)) if d >= k => format!(
+            "a larger PCA basis (`[autoencoder] latent_dim` = {d} is already the basis's size: \
+             {LARGER_PCA})"
+        ),
+        Some((d, k)) => format!(
+            "a larger `[autoencoder] latent_dim` (now {d}; {}, at most the PCA basis's {k})",
+            (2 * d).min(k)
+        ),
+        None => "a larger `[autoencoder] latent_dim`".to_string(),
+    }
+}
+
 /// For a neural method whose subspace misses the test at least twice as far as the PCA
 /// basis's (the `pca` row's subspace error), how many times as far: its latent dimension, not
 /// the basis, is then what to grow.
@@ -608,8 +625,9 @@ fn restart_warning(r: &MethodReport, rows: &[MethodReport], falling: bool) -> Op
             // basis's advice left a tester's d = 2 where it was (7.06 → 7.37 %; d = 8: 4.16 %).
             let larger = match latent_short_of_pca(r, rows) {
                 Some(times) => format!(
-                    "a larger `[autoencoder] latent_dim` (its subspace misses the test {times:.0} \
-                     times as far as the PCA basis's)"
+                    "{} (its subspace misses the test {times:.0} times as far as the PCA \
+                     basis's)",
+                    larger_latent(r)
                 ),
                 None => format!("a larger subspace ({LARGER_PCA})"),
             };
@@ -1735,6 +1753,25 @@ mod tests {
                 "or a larger `[autoencoder] latent_dim` (its subspace misses the test 6 times"
             ),
             "{w}"
+        );
+        // With its d and k, the value to try, at most k; at d = k, the basis.
+        let named = |latent| {
+            larger_latent(&MethodReport {
+                latent: Some(latent),
+                ..row(Method::Neural, 0.05, 0.012)
+            })
+        };
+        assert_eq!(
+            named((19, 37)),
+            "a larger `[autoencoder] latent_dim` (now 19; 37, at most the PCA basis's 37)"
+        );
+        assert!(named((4, 37)).contains("(now 4; 8, at most"));
+        assert!(
+            named((37, 37)).starts_with(
+                "a larger PCA basis (`[autoencoder] latent_dim` = 37 is already the basis's size"
+            ),
+            "{}",
+            named((37, 37))
         );
         assert!(!w.contains("in `[pca]`"), "{w}");
     }
