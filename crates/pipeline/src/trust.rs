@@ -1095,6 +1095,17 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
             &what,
         ));
     }
+    // The settings that keep more PCA coefficients are spelled out once: a tester's list gave
+    // the same paragraph for each of four methods.
+    let mut said = false;
+    for line in out.iter_mut().chain(caveats.iter_mut()) {
+        if line.contains(LARGER_PCA) {
+            if said {
+                *line = line.replace(LARGER_PCA, "the settings said above");
+            }
+            said = true;
+        }
+    }
     Assessment {
         untrusted: out,
         caveats,
@@ -1830,6 +1841,28 @@ mod tests {
             named((37, 37))
         );
         assert!(!w.contains("in `[pca]`"), "{w}");
+    }
+
+    /// The settings that keep more PCA coefficients are spelled out in the first line that
+    /// advises them; the others point to it.
+    #[test]
+    fn the_larger_basis_settings_are_spelled_out_once() {
+        let rows = [
+            row(Method::Full, 0.0, 0.0),
+            row(Method::Pca, 0.25, 0.2),
+            row(Method::PcaCubature, 0.25, 0.2),
+            row(Method::Neural, 0.25, 0.2),
+        ];
+        let w = assess(&rows).untrusted;
+        let spelled = w.iter().filter(|l| l.contains(LARGER_PCA)).count();
+        let pointed = w
+            .iter()
+            .filter(|l| l.contains("the settings said above"))
+            .count();
+        assert_eq!(spelled, 1, "{w:#?}");
+        assert_eq!(pointed, 2, "{w:#?}");
+        let first = w.iter().position(|l| l.contains(LARGER_PCA)).unwrap();
+        assert!(w[first].starts_with("pca: "), "{w:#?}");
     }
 
     /// A drift of the steps' own names its cause before "a larger subspace": the cubature rule
