@@ -513,10 +513,16 @@ fn method_progress(bar: &ProgressBar, say_ends: bool) -> impl FnMut(&str, usize,
             } else {
                 format!("{seconds:.1} s")
             };
-            let line = format!(
-                "{m:>10}: {total} {} in {took}",
-                if total == 1 { "run" } else { "steps" },
-            );
+            // A subspace's errors put the reference's frames in it, one by one; the one-step
+            // errors step from them.
+            let unit = if total == 1 {
+                "run"
+            } else if m.ends_with(" subspace") {
+                "frames"
+            } else {
+                "steps"
+            };
+            let line = format!("{m:>10}: {total} {unit} in {took}");
             if bar.is_hidden() {
                 println!("{line}");
             } else {

@@ -1706,8 +1706,11 @@ pub fn measure(
                     &states,
                     (&reference.frames, &energies),
                     h,
+                    &mut |k, n| progress(&format!("{} subspace", method.name()), k, n),
                 )?,
-                step_errors(method, runner, &states, &reference.frames)?,
+                step_errors(method, runner, &states, &reference.frames, &mut |k, n| {
+                    progress(&format!("{} one-step", method.name()), k, n)
+                })?,
             ),
             None => ((Vec::new(), None), Vec::new()),
         }
@@ -1808,12 +1811,14 @@ fn subspace_errors(
     states: &[Vec<f64>],
     (frames, reference): (&[Vec<f64>], &[f64]),
     time_step: f64,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SubspaceFit> {
     let mut free = vec![0.0; basis.n()];
     let (mut u, mut r) = (vec![0.0; model.num_full()], vec![0.0; model.num_full()]);
     let mut errors = ErrorAccumulator::default();
     let mut buf = fem_core::assembly::AssemblyBuffers::default();
     let mut projected = Vec::with_capacity(frames.len());
+    progress(0, frames.len());
     for (j, f) in frames.iter().enumerate() {
         runner.set_state(j + 1, &states[j + 1], &states[j])?;
         let q = runner
@@ -1824,6 +1829,7 @@ fn subspace_errors(
         model.dofs.scatter(f, &mut r);
         errors.add_full(&model.mass, &u, &r);
         projected.push(model.elastic_energy(&u, &mut buf));
+        progress(j + 1, frames.len());
     }
     let strain = largest_strain_ratio(reference, &projected)
         .map(|(ratio, j)| (ratio, (j + 1) as f64 * time_step));
@@ -1893,9 +1899,11 @@ fn step_errors(
     runner: &mut Runner,
     states: &[Vec<f64>],
     frames: &[Vec<f64>],
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<f64>> {
     let mut errors = ErrorAccumulator::default();
     for (j, f) in frames.iter().enumerate() {
+        progress(j, frames.len());
         // Before the first step the body was at rest too.
         runner.set_state(j, &states[j], &states[j.saturating_sub(1)])?;
         if let Err(e) = runner.step() {
@@ -1908,6 +1916,8 @@ fn step_errors(
         }
         errors.add(runner.model(), &runner.displacement(), f);
     }
+    // Said ended even where a step failed.
+    progress(frames.len(), frames.len());
     Ok(errors.rel)
 }
 
