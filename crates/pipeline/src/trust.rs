@@ -962,9 +962,9 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
         {
             out.push(format!(
                 "{}: its subspace alone is {:.1} % from the test trajectory, so the training \
-                 data does not cover the test's motion: add schedules or the test's kinds \
-                 (`[training] schedules`, `kinds`), or keep more PCA coefficients \
-                 ({LARGER_PCA})",
+                 data does not cover the test's motion: add schedules (`[training] \
+                 schedules`), the test's kind to `[training] kinds` where it is not there (the \
+                 default kinds have a drag), or keep more PCA coefficients ({LARGER_PCA})",
                 r.method,
                 pct(r.subspace_error)
             ));
@@ -999,9 +999,9 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                     r.training_seconds
                 )
             } else {
-                "add training schedules that reach such poses (`[training] schedules`, \
-                 `kinds`, or larger amplitudes: the upper end of `offset`, a fraction of the \
-                 bounding-box diagonal)"
+                "add training schedules that reach such poses (`[training] schedules`, the \
+                 test's kind to `kinds` where it is not there, or larger amplitudes: the upper \
+                 end of `offset`, a fraction of the bounding-box diagonal)"
                     .to_string()
             };
             // Where the run has measured the trajectory close to the full one, it is a caveat:
