@@ -151,7 +151,7 @@ impl StageSummary for SnapshotSet {
 
 impl StageSummary for PcaFit {
     fn summary(&self) -> String {
-        pca_line(self, None)
+        pca_line(self, None, false)
     }
 
     fn summary_in(&self, scene: &Scene) -> String {
@@ -162,12 +162,14 @@ impl StageSummary for PcaFit {
         // A quasi-static scene's fall has one position, its static sag
         // (`fem_core::step_norm::gravity_onset`): the others were never offered.
         let offered = asked.map(|a| if scene.time.quasi_static { a.min(1) } else { a });
-        pca_line(self, offered)
+        pca_line(self, offered, scene.pca.gravity_directions.is_none())
     }
 }
 
-/// The `pca` stage's line; `gravity_asked`, the positions of the fall the stage was to append.
-fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>) -> String {
+/// The `pca` stage's line; `gravity_asked`, the positions of the fall the stage was to append,
+/// `defaulted` where the scene did not name them (a tester read "`[pca] gravity_directions` =
+/// 3" as a setting its scene did not have).
+fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>, defaulted: bool) -> String {
     let why = match fit.rule {
         pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
         pca::DimensionRule::ExplainedEnergy(f) if f >= 1.0 => {
@@ -219,8 +221,9 @@ fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>) -> String {
                 .unwrap_or_default(),
             match gravity_asked {
                 Some(asked) if asked > m => format!(
-                    " = {asked}, {} left out: under {} % of {} lay outside the basis, so \
+                    " = {asked}{}, {} left out: under {} % of {} lay outside the basis, so \
                      {} only add its round-off",
+                    if defaulted { ", the default" } else { "" },
                     if asked - m == 1 {
                         "one".to_string()
                     } else {
