@@ -888,9 +888,15 @@ fn an_exported_model_is_told_what_the_run_measured_of_it() {
         "full: the full-space simulation of the test moves the body",
         "the full-space reference squeezes 6 % of the body's volume",
         "the scene: its own weight strains the body",
+        "the PCA basis: `[pca] max_dimension` = 8 stopped it at that many coefficients",
     ] {
         assert!(names(line, "pca-cubature"), "{line}");
     }
+    // The basis every reduced method shares is none of a full-space model's.
+    assert!(!names(
+        "the PCA basis: `[pca] max_dimension` = 8 stopped it",
+        "full"
+    ));
     for line in [
         "pca: its subspace alone is 28.8 % from the test trajectory",
         "neural-cubature: its cubature rule adds 17 percentage points",

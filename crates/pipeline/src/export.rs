@@ -445,11 +445,14 @@ pub fn report_is_of(out: &Path, model: &ReducedModel) -> Result<(), String> {
 
 /// Whether a line of a run's warnings concerns `method`'s model: it names the method (alone or
 /// in a list, "pca, neural-cubature: …"), the test's full simulation (on whichever full-space
-/// row carried it, "full-newton: …", or "the full-space reference: …") or the scene.
+/// row carried it, "full-newton: …", or "the full-space reference: …"), the scene, or (for a
+/// reduced method) the PCA basis every reduced method shares.
 pub fn names(line: &str, method: &str) -> bool {
     let who = line.split(':').next().unwrap_or("");
     who.split(", ")
         .any(|n| n == method || Method::ALL.iter().any(|m| m.is_full() && m.name() == n))
         || who == "the scene"
         || who.starts_with("the full-space")
+        // Every reduced method's basis.
+        || (who == "the PCA basis" && Method::ALL.iter().any(|m| !m.is_full() && m.name() == method))
 }

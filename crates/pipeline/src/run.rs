@@ -279,10 +279,10 @@ pub struct MethodReport {
     pub dim: usize,
     /// Elements the elastic energy is evaluated on.
     pub cubature_elements: usize,
-    /// A neural method's latent dimension d and the PCA dimension k it decodes to (None for
-    /// the others): `[autoencoder] latent_dim` can grow to k.
+    /// A neural method's latent dimension and the PCA dimension it decodes to (None for the
+    /// others): `[autoencoder] latent_dim` can grow to the latter.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub latent: Option<(usize, usize)>,
+    pub latent: Option<Latent>,
     /// Mean wall time per step (the median over repeated runs of each run's mean): what a
     /// trajectory costs per step, its occasional expensive steps included (a preconditioner
     /// rebuild every few steps can double a reduced method's mean over its median step). Hz,
@@ -404,6 +404,14 @@ pub struct MethodReport {
     /// method inherits ([`pca::PcaFit::shortfall`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub basis_cap: Option<BasisCap>,
+}
+
+/// A neural method's latent dimension d and the PCA dimension k it decodes to
+/// ([`MethodReport::latent`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct Latent {
+    pub latent_dim: usize,
+    pub pca_dim: usize,
 }
 
 /// A PCA basis stopped by `[pca] max_dimension` before its rule's target
@@ -1736,8 +1744,10 @@ pub fn measure(
     // A neural method's latent dimension and the basis it decodes to, for advice that names
     // them.
     let latent = if method.is_neural() {
-        let d = pipeline.train(stage_progress)?.latent_dim;
-        Some((d, pipeline.pca(stage_progress)?.basis.k()))
+        Some(Latent {
+            latent_dim: pipeline.train(stage_progress)?.latent_dim,
+            pca_dim: pipeline.pca(stage_progress)?.basis.k(),
+        })
     } else {
         None
     };

@@ -627,7 +627,12 @@ pub fn simulate(
             scene.source,
             opts.method.name(),
             opts.out.display(),
-            stopped_remedy(model, scene.material.youngs_modulus, step)
+            stopped_remedy(
+                model,
+                scene.material.youngs_modulus,
+                step,
+                matches!(opts.trajectory, Trajectory::Scene)
+            )
         );
     }
     Ok(SimulationResult {
@@ -640,15 +645,22 @@ pub fn simulate(
 /// strain the body past its own size first (a point load at least the force E·L² that does, L
 /// the bounding-box diagonal; a spring whose target lies at least L away), then the step. An
 /// advice follower's point load at the scene's limit, 1e6 times E·L², failed its first step
-/// with no word of what to change (stop 77).
-fn stopped_remedy(model: &FullSpaceModel, youngs_modulus: f64, step: f64) -> String {
+/// with no word of what to change (stop 77). The loads are named as the scene's `[[force]]`s
+/// only where they are (`scene_forces`; a test trajectory's are its drag's).
+fn stopped_remedy(
+    model: &FullSpaceModel,
+    youngs_modulus: f64,
+    step: f64,
+    scene_forces: bool,
+) -> String {
     use fem_core::forces::ForceKind;
     let rest = &model.mesh.vertices;
     let body = latent_sim::body_force(rest, youngs_modulus);
     let size = (body / youngs_modulus).sqrt();
     let norm = |k: &[f64; 4]| (k[1] * k[1] + k[2] * k[2] + k[3] * k[3]).sqrt();
     let mut loads: Vec<String> = Vec::new();
-    for (i, f) in model.forces.iter().enumerate() {
+    let forces = if scene_forces { &model.forces[..] } else { &[] };
+    for (i, f) in forces.iter().enumerate() {
         let largest = f.keyframes.iter().map(norm).fold(0.0, f64::max);
         match f.kind {
             ForceKind::Point if largest >= body => loads.push(format!(

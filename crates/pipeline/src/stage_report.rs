@@ -82,12 +82,14 @@ impl TrainedModel {
     /// for the weights training started from: the training loss (the epoch's running mean,
     /// taken before each step), the validation loss, the monitored loss that judged the epoch
     /// (the validation loss, or without a split the training loss measured again after the
-    /// epoch) and whether its weights are the judged run's kept ones.
+    /// epoch) and `best`, 1 on the judged run's best: the weights kept, or where the network
+    /// was trained again on every schedule ([`TrainedModel::retrained_epochs`]), the epoch
+    /// count it was trained for.
     pub fn write_loss_curve(&self, dir: &Path) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let split = self.history.iter().any(|r| r.validation_loss.is_some());
         let kept = |epoch: usize| u8::from(epoch == self.best_epoch);
-        let mut csv = String::from("epoch,train_loss,validation_loss,monitored_loss,kept\n");
+        let mut csv = String::from("epoch,train_loss,validation_loss,monitored_loss,best\n");
         let start = if split {
             self.start_loss.to_string()
         } else {
@@ -135,7 +137,7 @@ impl TrainedModel {
             line: true,
             ..Default::default()
         });
-        // The weights kept: the start's, or the best epoch's.
+        // The judged run's best: the start's, or the best epoch's.
         let kept = if self.best_epoch == 0 {
             Some(self.start_loss)
         } else {
@@ -146,7 +148,10 @@ impl TrainedModel {
         };
         if let Some(loss) = kept.filter(|l| l.is_finite() && *l > 0.0) {
             series.push(plot::Series {
-                name: format!("kept (epoch {})", self.best_epoch),
+                name: match self.retrained_epochs {
+                    Some(n) => format!("best (epoch {n}; the network kept trained again for {n})"),
+                    None => format!("kept (epoch {})", self.best_epoch),
+                },
                 points: vec![(self.best_epoch as f64, loss)],
                 line: false,
                 ..Default::default()

@@ -172,8 +172,8 @@ pub fn run_more(
 
 /// The warnings and caveats of [`crate::trust::assess`] for trajectories `from`.. of `runs`,
 /// each headed by its trajectory (empty where a run has none). The buckling of the scene's
-/// gravity and what building the model warned of, the same for every trajectory, are said with
-/// trajectory 0's only.
+/// gravity, what building the model warned of and how a step's time compares with full space,
+/// the same for every trajectory, are said with trajectory 0's only.
 pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
     runs.iter()
         .enumerate()
@@ -185,6 +185,8 @@ pub fn warnings(runs: &[Vec<MethodReport>], from: usize) -> String {
                     r.buckling = None;
                     r.scene_warnings.clear();
                     r.basis_cap = None;
+                    // How a step's time compares with full space is trajectory 0's to say.
+                    r.speedup = None;
                 });
             }
             crate::trust::assess(&rows).text(&format!("trajectory {i}, "))

@@ -148,10 +148,10 @@ fn an_autoencoder_behind_pca_at_its_dimension_is_said() {
 }
 
 /// `loss.csv` has epoch 0 (the start) and a row per epoch, each with the loss that judged it,
-/// and marks the kept weights: the lowest monitored loss, the start's where no epoch beat it
-/// (the loss that picked the kept epoch, measured after it, was missing before stop 78).
+/// and marks the judged run's best: the lowest monitored loss, the start's where no epoch beat
+/// it (the loss that picked the kept epoch, measured after it, was missing before stop 78).
 #[test]
-fn the_loss_curve_marks_the_kept_weights_by_the_loss_that_judged_them() {
+fn the_loss_curve_marks_the_best_epoch_by_the_loss_that_judged_it() {
     for (name, settings) in [
         ("held-out", "latent_dim = 4\nepochs = 40"),
         (
@@ -168,7 +168,7 @@ fn the_loss_curve_marks_the_kept_weights_by_the_loss_that_judged_them() {
         let mut lines = csv.lines();
         assert_eq!(
             lines.next(),
-            Some("epoch,train_loss,validation_loss,monitored_loss,kept"),
+            Some("epoch,train_loss,validation_loss,monitored_loss,best"),
             "{name}"
         );
         let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();

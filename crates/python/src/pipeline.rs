@@ -527,7 +527,8 @@ fn in_run_pipeline<T: Send>(
 /// each ``Stage`` as it ends (from the thread running the pipeline; an exception it raises is
 /// raised, and stops the run at once as Ctrl-C does).
 /// ``on_progress``: called with the stage computing (``("snapshots", 3, 32)``) or the method
-/// running (``("run neural-cubature", 40, 100)``), how far it got and of how much, on its first
+/// running (``("run neural-cubature", 40, 100)``; then its errors, ``"run neural-cubature
+/// subspace"`` and ``"run neural-cubature one-step"``), how far it got and of how much, on its first
 /// and last report and at most once a second between; one call at a time, from the
 /// pipeline's threads (a slow callback slows the run); its exceptions as ``on_stage``'s. What
 /// the library warns of while it works (a

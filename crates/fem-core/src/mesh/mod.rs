@@ -264,8 +264,7 @@ pub fn thin_warning(mesh: &TetMesh, refine: &str) -> Option<String> {
                  opposite one): linear tetrahedra that thin bend far too stiffly (a fin meshed \
                  one to two elements thick, about twice too stiffly), so the full simulation, \
                  and every method measured against it, is stiffer there than the material; \
-                 three or more elements across its thickness ({refine} there) bend closer \
-                 to it",
+                 three or more elements across its thickness ({refine}) bend closer to it",
                 centre.x,
                 centre.y,
                 centre.z,
@@ -505,7 +504,7 @@ mod tests {
             "{w}"
         );
         assert!(
-            w.contains("(a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a` there)"),
+            w.contains("(a smaller gmsh `Mesh.MeshSizeMax`, TetGen's `-a`) bend closer"),
             "{w}"
         );
         assert_eq!(super::thin_warning(&block(0), super::REFINE_MESHER), None);
