@@ -5,12 +5,10 @@
 use std::path::Path;
 
 mod common;
-use common::scratch;
+use common::{scratch, try_simulate_full};
 
 use pipeline::pipeline::Pipeline;
 use pipeline::scene::Scene;
-use pipeline::simulate::Method;
-use pipeline::simulate::{SimulateOptions, Trajectory, simulate};
 
 /// A soft 1 m bar clamped at x = 0 whose free end a point load of `load` N pushes up from the
 /// first step, for 3 steps.
@@ -39,15 +37,7 @@ fn simulate_full(load: f64) -> anyhow::Result<()> {
     let scene = Scene::from_str(&bar(load), Path::new("."), "bar.toml").unwrap();
     let dir = scratch(&format!("stopped-{load:e}"));
     let mut p = Pipeline::new(&scene, &dir).unwrap();
-    let opts = SimulateOptions {
-        method: Method::Full,
-        trajectory: Trajectory::Scene,
-        out: dir.join("sim"),
-        frames: None,
-        every: 0,
-        solver: None,
-    };
-    simulate(&mut p, &opts, &|_, _| {}, &mut |_, _| {}).map(|_| ())
+    try_simulate_full(&mut p, &dir).map(|_| ())
 }
 
 #[test]

@@ -21,6 +21,15 @@ pub fn scratch(name: &str) -> PathBuf {
 /// would go (`dir/sim`).
 #[allow(dead_code)] // Not every test binary simulates.
 pub fn simulate_full(p: &mut Pipeline<'_>, dir: &Path) -> (pipeline::simulate::Summary, PathBuf) {
+    try_simulate_full(p, dir).unwrap()
+}
+
+/// [`simulate_full`], its error returned.
+#[allow(dead_code)] // Not every test binary simulates.
+pub fn try_simulate_full(
+    p: &mut Pipeline<'_>,
+    dir: &Path,
+) -> anyhow::Result<(pipeline::simulate::Summary, PathBuf)> {
     use pipeline::simulate::{SimulateOptions, Trajectory, simulate};
     let opts = SimulateOptions {
         method: Method::Full,
@@ -30,10 +39,8 @@ pub fn simulate_full(p: &mut Pipeline<'_>, dir: &Path) -> (pipeline::simulate::S
         every: 0,
         solver: None,
     };
-    let summary = simulate(p, &opts, &|_, _| {}, &mut |_, _| {})
-        .unwrap()
-        .summary;
-    (summary, opts.out)
+    let summary = simulate(p, &opts, &|_, _| {}, &mut |_, _| {})?.summary;
+    Ok((summary, opts.out))
 }
 
 /// `method` run once on test trajectory 0 and compared with the reference, writing no frames
