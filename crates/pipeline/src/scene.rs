@@ -112,13 +112,24 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
     (strain > HEAVY_BODY).then(|| {
         // The bounding box's diagonal, as the fall and buckling warnings measure a body.
         let size = extent.iter().map(|x| x * x).sum::<f64>().sqrt();
+        // The modulus at which ρgH/E comes to the limit is a floor: a body lying across
+        // gravity bends far more than its height says (an advice follower's 1 m bar, 10 cm
+        // tall, passed at 4e3 Pa and still fell 4.9 m; its fall line asked 1.3e7 Pa).
+        let floor = m.density * g_norm * height / HEAVY_BODY;
+        let stiffer = format!(
+            "a stiffer `[material] youngs_modulus` of at least {floor:.1e} Pa (where ρgH/E is \
+             {HEAVY_BODY}; a slender body lying across gravity needs more, which `run`'s lines \
+             measure from its sag)"
+        );
         let remedy = match unit_sentence(size) {
-            Some(units) => format!("{units}; else a stiffer `[material] youngs_modulus`"),
-            None => {
-                "A stiffer `[material] youngs_modulus` (or pins that hold more of it) keeps it up"
-                    .into()
-            }
+            Some(units) => format!("{units}; else {stiffer}"),
+            None => format!("{stiffer}, or pins that hold more of it, keep it up"),
         };
+        // Sentence case.
+        let mut chars = remedy.chars();
+        let remedy: String = chars
+            .next()
+            .map_or(String::new(), |c| c.to_uppercase().chain(chars).collect());
         format!(
             "its own weight strains the body by about ρgH/E = {strain:.2} (ρ = {} kg/m³, g = \
              {g_norm:.2} m/s², H = {height:.3} m its height along gravity, E = {:.1e} Pa), more \

@@ -1060,6 +1060,11 @@ fn the_models_warnings_are_kept_for_the_report() {
     assert!(quiet.is_empty(), "{quiet:?}");
     let tall = scene(&edit("size = [1.0, 0.2, 0.2]", "size = [1.0, 3.0, 0.2]"));
     let w = only_warning(&tall, &dir.join("b"), &["ρgH/E = 0.29"]);
+    // The modulus named brings ρgH/E to the limit, as a floor: 1000 · 9.81 · 3 / 0.25.
+    assert!(
+        w.contains("`[material] youngs_modulus` of at least 1.2e5 Pa (where ρgH/E is 0.25;"),
+        "{w}"
+    );
     let row = pipeline::run::MethodReport {
         scene_warnings: vec![w.clone()],
         ..Default::default()
