@@ -64,6 +64,13 @@ impl PcaFit {
             .saturating_sub(self.appended + self.responses)
     }
 
+    /// The smallest k holding `fraction` of the snapshots' energy, from the whole spectrum (at
+    /// most the numerical rank): what the explained-energy rule would choose at `fraction`,
+    /// before any cap.
+    pub fn energy_dimension(&self, fraction: f64) -> usize {
+        energy_dimension(self.basis.singular_values(), self.numerical_rank, fraction)
+    }
+
     /// What stopped the rule short of its target, where it was not met ([`Self::tolerance_met`]
     /// false): `max_dimension` or the snapshots' numerical rank.
     pub fn shortfall(&self) -> Option<Shortfall> {
@@ -74,11 +81,7 @@ impl PcaFit {
         Some(match self.rule {
             // The spectrum is whole, so the count the rule asks for is known.
             DimensionRule::ExplainedEnergy(f) => Shortfall::Cap {
-                wanted: Some(energy_dimension(
-                    self.basis.singular_values(),
-                    self.numerical_rank,
-                    f,
-                )),
+                wanted: Some(self.energy_dimension(f)),
             },
             // Only roundoff lies past the rank: a larger cap adds nothing there.
             DimensionRule::MaxVertexError(_) if k >= self.numerical_rank => Shortfall::Rank,

@@ -171,17 +171,34 @@ impl StageSummary for PcaFit {
 /// 3" as a setting its scene did not have).
 fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>, defaulted: bool) -> String {
     let why = match fit.rule {
-        pca::DimensionRule::Count(k) => format!("`[pca] dimension` = {k}"),
+        pca::DimensionRule::Count(k) => format!(
+            "`[pca] dimension` = {k}, holding all but {:.1e} of the snapshots' energy",
+            1.0 - fit.basis.explained_energy(k)
+        ),
         pca::DimensionRule::ExplainedEnergy(f) if f >= 1.0 => {
             "the smallest basis holding all of the snapshots' energy (`[pca] \
              explained_energy` = 1)"
                 .to_string()
         }
-        pca::DimensionRule::ExplainedEnergy(f) => format!(
-            "the smallest basis holding all but {:.1e} of the snapshots' energy (`[pca] \
-             explained_energy` = {f})",
-            1.0 - f
-        ),
+        pca::DimensionRule::ExplainedEnergy(f) => {
+            // The next value the advice of a larger basis names, with the count it keeps.
+            let next = 1.0 - (1.0 - f) / 10.0;
+            let more = if fit.tolerance_met && next < 1.0 {
+                // As many decimals as it has nines (0.99999999, not 0.9999999900000001).
+                let digits = (-(1.0 - next).log10()).round().clamp(1.0, 16.0) as usize;
+                format!(
+                    "; one 9 more, {next:.digits$}, keeps {}",
+                    fit.energy_dimension(next)
+                )
+            } else {
+                String::new()
+            };
+            format!(
+                "the smallest basis holding all but {:.1e} of the snapshots' energy (`[pca] \
+                 explained_energy` = {f}{more})",
+                1.0 - f
+            )
+        }
         pca::DimensionRule::MaxVertexError(t) => format!(
             "the smallest basis whose worst vertex error over the snapshots is at most {t} \
              (`[pca] max_vertex_error`)"

@@ -136,3 +136,28 @@ fn a_quasi_static_scene_gets_its_static_sag_at_most() {
     let line = fit.summary_in(&scene);
     assert!(!line.contains("left out"), "{line}");
 }
+
+/// The `pca` line says what the rule's next value would keep: a count, the energy it leaves
+/// out; the explained-energy rule, the columns one 9 more keeps (the advice of a larger basis
+/// names the rule, and a tester asked for its next value).
+#[test]
+fn the_pca_line_says_what_the_next_value_keeps() {
+    let (fit, _) = fit_of(SCENE, "next-count");
+    let line = fit.summary();
+    assert!(
+        line.contains("`[pca] dimension` = 3, holding all but ")
+            && line.contains(" of the snapshots' energy"),
+        "{line}"
+    );
+    let energy = SCENE.replace("dimension = 3", "explained_energy = 0.999");
+    let (fit, _) = fit_of(&energy, "next-energy");
+    let line = fit.summary();
+    let next = fit.energy_dimension(0.9999);
+    assert!(next >= fit.chosen_k(), "{line}");
+    assert!(
+        line.contains(&format!(
+            "(`[pca] explained_energy` = 0.999; one 9 more, 0.9999, keeps {next})"
+        )),
+        "{line}"
+    );
+}

@@ -37,6 +37,8 @@ fn explained_energy_rule_picks_the_smallest_k() {
             k - 1
         );
         assert_eq!(fit.basis.explained_energy(k), kept(k));
+        // The count any fraction would give, from this fit's spectrum.
+        assert_eq!(fit.energy_dimension(fraction), k);
     }
 }
 
