@@ -555,8 +555,8 @@ impl Scene {
     /// What holds a body the pins hold at a point or along a line: the first pin plane that,
     /// with a tolerance of [`WIDER_PIN`] of the body's extent along its axis, holds more of the
     /// body's vertices than the pins do now and not all on one line, and how many; else the
-    /// first sphere pin with the radius that takes in [`WIDER_SPHERE_SHARE`] of them; else a
-    /// `box`. `piece` is [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
+    /// first sphere pin with the radius that takes in [`WIDER_SPHERE_SHARE`] of them; else the
+    /// first box pin grown until it does; else a `box`. `piece` is [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
     fn wider_pin(&self, mesh: &TetMesh, piece: &[usize], pinned: &[usize]) -> String {
         let (lo, hi) = mesh.bounding_box();
         let in_body = |v: &usize| of_body(piece, *v);
@@ -620,10 +620,53 @@ impl Scene {
                 })
             })
         };
+        // A box pin (an advice follower's caught four vertices on one line and was told to use
+        // a `box`): the box grown on every side by 1 %, 2 %, 4 %, … of the body's diagonal,
+        // its corners on a grid of a ten-thousandth of it (rounded outward, so that the box as
+        // printed takes in what it was chosen for), until it holds more of the body off one line.
+        let diagonal = (hi - lo).norm();
+        let grid = 10f64.powf((1e-4 * diagonal).log10().floor());
+        let decimals = (-grid.log10()).round().max(0.0) as usize;
+        let boxed = || {
+            self.pin.iter().enumerate().find_map(|(i, p)| {
+                let b = p.aabb.as_ref()?;
+                (0..8).find_map(|step| {
+                    let grow = 0.01 * diagonal * f64::from(1u32 << step);
+                    let min = b.min.map(|x| ((x - grow) / grid).floor() * grid);
+                    let max = b.max.map(|x| ((x + grow) / grid).ceil() * grid);
+                    let selection = VertexSelection {
+                        aabb: Some(fem_core::constraints::BoxSelector { min, max }),
+                        ..Default::default()
+                    };
+                    let at: Vec<fem_core::Vec3> = selection
+                        .select(mesh, "pin")
+                        .ok()?
+                        .into_iter()
+                        .filter(in_body)
+                        .map(|v| mesh.vertices[v])
+                        .collect();
+                    let held = at.len();
+                    let show = |v: [f64; 3]| {
+                        format!(
+                            "[{:.decimals$}, {:.decimals$}, {:.decimals$}]",
+                            v[0], v[1], v[2]
+                        )
+                    };
+                    (held > held_now && !collinear(&at)).then(|| {
+                        format!(
+                            "pin[{i}]'s `box` grown to `min = {}, max = {}` holds {held} \
+                             vertices off one line",
+                            show(min),
+                            show(max)
+                        )
+                    })
+                })
+            })
+        };
         // A tester's mesh in millimetres read as metres was told of a 5 m tolerance before the
         // warning of its size, and a 5 m tolerance once `[mesh] scale` was set holds everything.
         let units = self.mesh.scale.is_none() && unit_hint((hi - lo).norm()).is_some();
-        match wider.or_else(sphere) {
+        match wider.or_else(sphere).or_else(boxed) {
             Some(advice) if units => format!(
                 "{advice} (lengths in metres as the mesh is read now: if it is not in metres and \
                  you set `[mesh] scale`, scale them, a sphere's centre too)"
@@ -1623,6 +1666,29 @@ mod tests {
         let scene_scaled = Scene::from_str(&scaled, Path::new("."), "w.toml").unwrap();
         let one_scaled = scene_scaled.wider_pin(&mesh_mm, &piece, &face[..1]);
         assert!(!one_scaled.contains("`[mesh] scale`"), "{one_scaled}");
+        // A box pin along an edge (two vertices on one line): the box grown until it holds
+        // more, off the line, and as printed, written back, it holds them.
+        let edge = text.replace(
+            "plane = { axis = \"x\", side = \"min\", tolerance = 0.0 }",
+            "box = { min = [-0.001, -0.001, -1.0], max = [0.001, 0.001, 1.0] }",
+        );
+        let scene_edge = Scene::from_str(&edge, Path::new("."), "w.toml").unwrap();
+        let on_edge: Vec<usize> = (0..mesh.num_vertices())
+            .filter(|&v| mesh.vertices[v].x == 0.0 && mesh.vertices[v].y == 0.0)
+            .collect();
+        assert_eq!(on_edge.len(), 2);
+        let grown = scene_edge.wider_pin(&mesh, &piece, &on_edge);
+        let printed = grown
+            .strip_prefix("pin[0]'s `box` grown to `")
+            .and_then(|r| r.split('`').next())
+            .unwrap_or_else(|| panic!("{grown}"));
+        assert!(grown.ends_with("holds 8 vertices off one line"), "{grown}");
+        let written = edge.replace(
+            "box = { min = [-0.001, -0.001, -1.0], max = [0.001, 0.001, 1.0] }",
+            &format!("box = {{ {printed} }}"),
+        );
+        let rebuilt = Scene::from_str(&written, Path::new("."), "w.toml").unwrap();
+        assert_eq!(rebuilt.build_model().unwrap().held_vertices, 8, "{written}");
         // A sphere pin at one corner: the radius that takes in four vertices off one line (the
         // corner's three neighbours at 0.2, 0.2 and 0.25 m).
         let text = text.replace(
