@@ -294,15 +294,42 @@ fn reference_subject(r: &MethodReport) -> String {
 /// the pins or the loads pull the body apart, which the volume alone does not show (a body
 /// hung from one vertex keeps its elements' volumes while those at the vertex lengthen).
 fn stretch_warning(r: &MethodReport) -> Option<String> {
-    let (stretch, time) = r.compression.as_ref()?.stretched?;
+    let c = r.compression.as_ref()?;
+    let (stretch, time) = c.stretched?;
     let who = reference_subject(r);
+    // Where its weight carries the body far ([`carried_by_weight`]'s test), the weight is what
+    // stretches it: an advice follower's bar, 17 times stretched, stayed so with three times
+    // the pinned vertices and a test pull ten times lighter; only the modulus helped.
+    let weight = r.buckling.filter(|b| {
+        b.size > 0.0
+            && b.sag >= crate::run::Buckling::VALID_SAG * b.size
+            && c.travel >= FAR_TRAVEL * b.size
+    });
+    let remedy = match weight {
+        Some(b) if b.firm_modulus <= STIFFEST_MATERIAL => format!(
+            "its own weight does it here (the linear response to gravity at rest moves it {:.0} \
+             % of its size): a stiffer material (`[material] youngs_modulus` of {:.1e} Pa or \
+             more) keeps it whole, where more pinned vertices or lighter pulls do not",
+            100.0 * b.sag / b.size,
+            b.firm_modulus
+        ),
+        Some(b) => format!(
+            "its own weight does it here (the linear response to gravity at rest moves it {:.0} \
+             % of its size), and no material is stiff enough to stop it: pins that hold more of \
+             it (a pin plane's `tolerance`, a `box`) or a lighter load (`[gravity]`) keep it \
+             whole",
+            100.0 * b.sag / b.size
+        ),
+        None => "more pinned vertices (a pin plane's `tolerance`, a `box`), a stiffer material \
+                 (`youngs_modulus`) or lighter loads (the scene's `[[force]]`s, the test's own \
+                 grab: `[test] stiffness`, `offset`) keep it whole"
+            .to_string(),
+    };
     Some(format!(
         "{who} stretches an element to {stretch:.1} times its length along one direction at \
          t = {time:.2} s: the pins or the loads pull the body apart, past what it models as a \
          solid (one vertex holding its weight, or loads far beyond its stiffness), and the \
-         reduced methods are measured against that; more pinned vertices (a pin plane's \
-         `tolerance`, a `box`), a stiffer material (`youngs_modulus`) or lighter loads (the \
-         scene's `[[force]]`s, the test's own grab: `[test] stiffness`, `offset`) keep it whole"
+         reduced methods are measured against that; {remedy}"
     ))
 }
 
@@ -1470,6 +1497,32 @@ mod tests {
             pulled[0].contains("a pin plane's `tolerance`"),
             "{}",
             pulled[0]
+        );
+        // Where its weight carries it far, the weight is named and the modulus leads; the pins
+        // and lighter pulls that did nothing are not offered.
+        let mut heavy = full(Some((17.0, 0.9)));
+        if let Some(c) = &mut heavy.compression {
+            c.travel = 4.9;
+        }
+        heavy.buckling = Some(crate::run::Buckling {
+            load_factor: None,
+            sag: 6.5,
+            size: 1.01,
+            standing_modulus: None,
+            firm_modulus: 1.3e7,
+            converged: true,
+        });
+        let by_weight = assess(&[heavy])
+            .untrusted
+            .into_iter()
+            .find(|w| w.contains("stretches an element"))
+            .unwrap();
+        assert!(
+            by_weight.contains(
+                "its own weight does it here (the linear response to gravity at rest moves it \
+                 644 % of its size): a stiffer material (`[material] youngs_modulus` of 1.3e7 Pa"
+            ) && !by_weight.contains("`[test] stiffness`"),
+            "{by_weight}"
         );
     }
 
