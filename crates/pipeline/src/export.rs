@@ -454,5 +454,12 @@ pub fn names(line: &str, method: &str) -> bool {
         || who == "the scene"
         || who.starts_with("the full-space")
         // Every reduced method's basis.
-        || (who == "the PCA basis" && Method::ALL.iter().any(|m| !m.is_full() && m.name() == method))
+        || (who == "the PCA basis" && reduced(method))
+}
+
+/// Whether `method` names a reduced method (every one of which works in the PCA basis).
+fn reduced(method: &str) -> bool {
+    Method::ALL
+        .iter()
+        .any(|m| !m.is_full() && m.name() == method)
 }

@@ -151,7 +151,7 @@ impl StageSummary for SnapshotSet {
 
 impl StageSummary for PcaFit {
     fn summary(&self) -> String {
-        pca_line(self, None, false)
+        pca_line(self, None, false, None)
     }
 
     fn summary_in(&self, scene: &Scene) -> String {
@@ -162,34 +162,51 @@ impl StageSummary for PcaFit {
         // A quasi-static scene's fall has one position, its static sag
         // (`fem_core::step_norm::gravity_onset`): the others were never offered.
         let offered = asked.map(|a| if scene.time.quasi_static { a.min(1) } else { a });
-        pca_line(self, offered, scene.pca.gravity_directions.is_none())
+        pca_line(
+            self,
+            offered,
+            scene.pca.gravity_directions.is_none(),
+            Some(scene.pca.max_dimension),
+        )
     }
 }
 
 /// The `pca` stage's line; `gravity_asked`, the positions of the fall the stage was to append,
 /// `defaulted` where the scene did not name them (a tester read "`[pca] gravity_directions` =
 /// 3" as a setting its scene did not have).
-fn pca_line(fit: &PcaFit, gravity_asked: Option<usize>, defaulted: bool) -> String {
+fn pca_line(
+    fit: &PcaFit,
+    gravity_asked: Option<usize>,
+    defaulted: bool,
+    max_dimension: Option<usize>,
+) -> String {
     let why = match fit.rule {
-        pca::DimensionRule::Count(k) => format!(
-            "`[pca] dimension` = {k}, holding all but {:.1e} of the snapshots' energy",
-            1.0 - fit.basis.explained_energy(k)
-        ),
+        pca::DimensionRule::Count(k) => match 1.0 - fit.basis.explained_energy(k) {
+            left if left > 0.0 => format!(
+                "`[pca] dimension` = {k}, holding all but {left:.1e} of the snapshots' energy"
+            ),
+            _ => format!("`[pca] dimension` = {k}, holding all of the snapshots' energy"),
+        },
         pca::DimensionRule::ExplainedEnergy(f) if f >= 1.0 => {
             "the smallest basis holding all of the snapshots' energy (`[pca] \
              explained_energy` = 1)"
                 .to_string()
         }
         pca::DimensionRule::ExplainedEnergy(f) => {
-            // The next value the advice of a larger basis names, with the count it keeps.
-            let next = 1.0 - (1.0 - f) / 10.0;
-            let more = if fit.tolerance_met && next < 1.0 {
-                // As many decimals as it has nines (0.99999999, not 0.9999999900000001).
-                let digits = (-(1.0 - next).log10()).round().clamp(1.0, 16.0) as usize;
-                format!(
-                    "; one 9 more, {next:.digits$}, keeps {}",
-                    fit.energy_dimension(next)
-                )
+            // The next value the advice of a larger basis names ("one 9 more": a tenth of the
+            // energy left out), printed with one decimal more than `f` as written (0.995 →
+            // 0.9995, 0.9999999 → 0.99999999, not 0.9999999900000001), and the count at the
+            // value printed.
+            let decimals = format!("{f}").split('.').nth(1).map_or(0, str::len) + 1;
+            let printed = format!("{:.decimals$}", 1.0 - (1.0 - f) / 10.0);
+            let next: f64 = printed.parse().unwrap_or(1.0);
+            let more = if fit.tolerance_met && next < 1.0 && next > f {
+                let n = fit.energy_dimension(next);
+                let past = match max_dimension {
+                    Some(cap) if n > cap => format!(", past `max_dimension` = {cap}"),
+                    _ => String::new(),
+                };
+                format!("; one 9 more, {printed}, keeps {n}{past}")
             } else {
                 String::new()
             };

@@ -115,9 +115,10 @@ pub fn weight_warning(scene: &Scene, extent: [f64; 3]) -> Option<String> {
         // The modulus at which ρgH/E comes to the limit is a floor: a body lying across
         // gravity bends far more than its height says (an advice follower's 1 m bar, 10 cm
         // tall, passed at 4e3 Pa and still fell 4.9 m; its fall line asked 1.3e7 Pa).
-        let floor = m.density * g_norm * height / HEAVY_BODY;
+        // Rounded up to the figures printed, so that the value written back passes.
+        let floor = up_to_four_figures(m.density * g_norm * height / HEAVY_BODY);
         let stiffer = format!(
-            "a stiffer `[material] youngs_modulus` of at least {floor:.1e} Pa (where ρgH/E is \
+            "a stiffer `[material] youngs_modulus` of at least {floor:.3e} Pa (where ρgH/E is \
              {HEAVY_BODY}; a slender body lying across gravity needs more, which `run`'s lines \
              measure from its sag)"
         );
@@ -556,7 +557,8 @@ impl Scene {
     /// with a tolerance of [`WIDER_PIN`] of the body's extent along its axis, holds more of the
     /// body's vertices than the pins do now and not all on one line, and how many; else the
     /// first sphere pin with the radius that takes in [`WIDER_SPHERE_SHARE`] of them; else the
-    /// first box pin grown until it does; else a `box`. `piece` is [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
+    /// first box pin grown until it does; else a `box`. `piece` is
+    /// [`TetMesh::vertex_components`]'s labels, `pinned` the pins' vertices.
     fn wider_pin(&self, mesh: &TetMesh, piece: &[usize], pinned: &[usize]) -> String {
         let (lo, hi) = mesh.bounding_box();
         let in_body = |v: &usize| of_body(piece, *v);
@@ -626,14 +628,21 @@ impl Scene {
         // printed takes in what it was chosen for), until it holds more of the body off one line.
         let diagonal = (hi - lo).norm();
         let grid = 10f64.powf((1e-4 * diagonal).log10().floor());
-        let decimals = (-grid.log10()).round().max(0.0) as usize;
+        let decimals = (-grid.log10()).round().clamp(0.0, 17.0) as usize;
+        // A corner as printed, and its value read back: what is counted is what is written.
+        let corner = |v: [f64; 3], round: fn(f64) -> f64| {
+            let text = v.map(|x| format!("{:.decimals$}", round(x / grid) * grid));
+            let value = text.clone().map(|t| t.parse::<f64>().unwrap_or(f64::NAN));
+            (format!("[{}]", text.join(", ")), value)
+        };
         let boxed = || {
             self.pin.iter().enumerate().find_map(|(i, p)| {
                 let b = p.aabb.as_ref()?;
+                (diagonal > 0.0).then_some(())?;
                 (0..8).find_map(|step| {
                     let grow = 0.01 * diagonal * f64::from(1u32 << step);
-                    let min = b.min.map(|x| ((x - grow) / grid).floor() * grid);
-                    let max = b.max.map(|x| ((x + grow) / grid).ceil() * grid);
+                    let (min_text, min) = corner(b.min.map(|x| x - grow), f64::floor);
+                    let (max_text, max) = corner(b.max.map(|x| x + grow), f64::ceil);
                     let selection = VertexSelection {
                         aabb: Some(fem_core::constraints::BoxSelector { min, max }),
                         ..Default::default()
@@ -646,18 +655,10 @@ impl Scene {
                         .map(|v| mesh.vertices[v])
                         .collect();
                     let held = at.len();
-                    let show = |v: [f64; 3]| {
-                        format!(
-                            "[{:.decimals$}, {:.decimals$}, {:.decimals$}]",
-                            v[0], v[1], v[2]
-                        )
-                    };
                     (held > held_now && !collinear(&at)).then(|| {
                         format!(
-                            "pin[{i}]'s `box` grown to `min = {}, max = {}` holds {held} \
-                             vertices off one line",
-                            show(min),
-                            show(max)
+                            "pin[{i}]'s `box` grown to `min = {min_text}, max = {max_text}` \
+                             holds {held} vertices off one line"
                         )
                     })
                 })
@@ -669,7 +670,8 @@ impl Scene {
         match wider.or_else(sphere).or_else(boxed) {
             Some(advice) if units => format!(
                 "{advice} (lengths in metres as the mesh is read now: if it is not in metres and \
-                 you set `[mesh] scale`, scale them, a sphere's centre too)"
+                 you set `[mesh] scale`, scale them, a sphere's centre and a box's corners \
+                 too)"
             ),
             Some(advice) => advice,
             None => "a pin plane's larger `tolerance`, or a `box`, holds it fixed".to_string(),
@@ -1656,7 +1658,10 @@ mod tests {
         let one_mm = scene_mm.wider_pin(&mesh_mm, &piece, &face[..1]);
         assert!(
             one_mm.starts_with("pin[0]'s plane with `tolerance = 2.000e1`")
-                && one_mm.ends_with("you set `[mesh] scale`, scale them, a sphere's centre too)"),
+                && one_mm.ends_with(
+                    "you set `[mesh] scale`, scale them, a sphere's centre and a box's corners \
+                     too)"
+                ),
             "{one_mm}"
         );
         // Not where no length is advised, nor once the scene sets a scale.
@@ -1667,28 +1672,58 @@ mod tests {
         let one_scaled = scene_scaled.wider_pin(&mesh_mm, &piece, &face[..1]);
         assert!(!one_scaled.contains("`[mesh] scale`"), "{one_scaled}");
         // A box pin along an edge (two vertices on one line): the box grown until it holds
-        // more, off the line, and as printed, written back, it holds them.
-        let edge = text.replace(
-            "plane = { axis = \"x\", side = \"min\", tolerance = 0.0 }",
-            "box = { min = [-0.001, -0.001, -1.0], max = [0.001, 0.001, 1.0] }",
-        );
-        let scene_edge = Scene::from_str(&edge, Path::new("."), "w.toml").unwrap();
-        let on_edge: Vec<usize> = (0..mesh.num_vertices())
-            .filter(|&v| mesh.vertices[v].x == 0.0 && mesh.vertices[v].y == 0.0)
-            .collect();
-        assert_eq!(on_edge.len(), 2);
-        let grown = scene_edge.wider_pin(&mesh, &piece, &on_edge);
-        let printed = grown
-            .strip_prefix("pin[0]'s `box` grown to `")
-            .and_then(|r| r.split('`').next())
-            .unwrap_or_else(|| panic!("{grown}"));
-        assert!(grown.ends_with("holds 8 vertices off one line"), "{grown}");
-        let written = edge.replace(
-            "box = { min = [-0.001, -0.001, -1.0], max = [0.001, 0.001, 1.0] }",
-            &format!("box = {{ {printed} }}"),
-        );
-        let rebuilt = Scene::from_str(&written, Path::new("."), "w.toml").unwrap();
-        assert_eq!(rebuilt.build_model().unwrap().held_vertices, 8, "{written}");
+        // more, off the line, and as printed, written back, it holds what was said; also off
+        // the origin, at negative coordinates, where corners are rounded outward.
+        for origin in [[0.0, 0.0, 0.0], [-3.65, -1.2, 0.35]] {
+            let [x, y, z] = origin;
+            let pin = format!(
+                "box = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}",
+                x - 0.001,
+                y - 0.001,
+                z - 1.0,
+                x + 0.001,
+                y + 0.001,
+                z + 1.0
+            );
+            let edge = text
+                .replace(
+                    "plane = { axis = \"x\", side = \"min\", tolerance = 0.0 }",
+                    &pin,
+                )
+                .replace(
+                    "cells = [4, 1, 1] }",
+                    &format!("cells = [4, 1, 1], origin = [{x}, {y}, {z}] }}"),
+                );
+            let scene_edge = Scene::from_str(&edge, Path::new("."), "w.toml").unwrap();
+            let mesh = scene_edge.build_model().unwrap().model.mesh;
+            let (piece, _) = mesh.vertex_components();
+            let on_edge: Vec<usize> = (0..mesh.num_vertices())
+                .filter(|&v| mesh.vertices[v].x == x && mesh.vertices[v].y == y)
+                .collect();
+            assert_eq!(on_edge.len(), 2, "{origin:?}");
+            let grown = scene_edge.wider_pin(&mesh, &piece, &on_edge);
+            let printed = grown
+                .strip_prefix("pin[0]'s `box` grown to `")
+                .and_then(|r| r.split('`').next())
+                .unwrap_or_else(|| panic!("{grown}"));
+            let said: usize = grown
+                .rsplit("holds ")
+                .next()
+                .and_then(|r| r.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("{grown}"));
+            assert!(
+                said > 2 && grown.ends_with("vertices off one line"),
+                "{grown}"
+            );
+            let written = edge.replace(&pin, &format!("box = {{ {printed} }}"));
+            let rebuilt = Scene::from_str(&written, Path::new("."), "w.toml").unwrap();
+            assert_eq!(
+                rebuilt.build_model().unwrap().held_vertices,
+                said,
+                "{written}"
+            );
+        }
         // A sphere pin at one corner: the radius that takes in four vertices off one line (the
         // corner's three neighbours at 0.2, 0.2 and 0.25 m).
         let text = text.replace(

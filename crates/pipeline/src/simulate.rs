@@ -623,7 +623,8 @@ pub fn simulate(
     write_json(&opts.out.join("summary.json"), &summary)?;
     if let Some(e) = failure {
         anyhow::bail!(
-            "{}: simulation with method {} stopped: {e}; frames up to step {done} (the last good state) are in {}; {}",
+            "{}: simulation with method {} stopped: {e}; frames up to step {done} (the last good \
+             state) are in {}; {}",
             scene.source,
             opts.method.name(),
             opts.out.display(),

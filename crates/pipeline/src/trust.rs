@@ -307,17 +307,19 @@ fn stretch_warning(r: &MethodReport) -> Option<String> {
     });
     let remedy = match weight {
         Some(b) if b.firm_modulus <= STIFFEST_MATERIAL => format!(
-            "its own weight does it here (the linear response to gravity at rest moves it {:.0} \
-             % of its size): a stiffer material (`[material] youngs_modulus` of {:.1e} Pa or \
-             more) keeps it whole, where more pinned vertices or lighter pulls do not",
+            "its own weight carries it far here (the linear response to gravity at rest moves \
+             it {:.0} % of its size): a stiffer material (`[material] youngs_modulus` of {:.1e} \
+             Pa or more) keeps it whole, or pins that hold more of it where they hold it by \
+             little (a pin plane's `tolerance`, a `box`); a lighter pull does not reach its \
+             weight",
             100.0 * b.sag / b.size,
             b.firm_modulus
         ),
         Some(b) => format!(
-            "its own weight does it here (the linear response to gravity at rest moves it {:.0} \
-             % of its size), and no material is stiff enough to stop it: pins that hold more of \
-             it (a pin plane's `tolerance`, a `box`) or a lighter load (`[gravity]`) keep it \
-             whole",
+            "its own weight carries it far here (the linear response to gravity at rest moves \
+             it {:.0} % of its size), and no material is stiff enough to stop it: pins that hold \
+             more of it (a pin plane's `tolerance`, a `box`) or a lighter load (`[gravity]`) \
+             keep it whole",
             100.0 * b.sag / b.size
         ),
         None => "more pinned vertices (a pin plane's `tolerance`, a `box`), a stiffer material \
@@ -1500,30 +1502,60 @@ mod tests {
         );
         // Where its weight carries it far, the weight is named and the modulus leads; the pins
         // and lighter pulls that did nothing are not offered.
-        let mut heavy = full(Some((17.0, 0.9)));
-        if let Some(c) = &mut heavy.compression {
-            c.travel = 4.9;
-        }
-        heavy.buckling = Some(crate::run::Buckling {
-            load_factor: None,
-            sag: 6.5,
-            size: 1.01,
-            standing_modulus: None,
-            firm_modulus: 1.3e7,
-            converged: true,
-        });
-        let by_weight = assess(&[heavy])
+        let heavy_row = || {
+            let mut heavy = full(Some((17.0, 0.9)));
+            if let Some(c) = &mut heavy.compression {
+                c.travel = 4.9;
+            }
+            heavy.buckling = Some(crate::run::Buckling {
+                load_factor: None,
+                sag: 6.5,
+                size: 1.01,
+                standing_modulus: None,
+                firm_modulus: 1.3e7,
+                converged: true,
+            });
+            heavy
+        };
+        let by_weight = assess(&[heavy_row()])
             .untrusted
             .into_iter()
             .find(|w| w.contains("stretches an element"))
             .unwrap();
         assert!(
             by_weight.contains(
-                "its own weight does it here (the linear response to gravity at rest moves it \
-                 644 % of its size): a stiffer material (`[material] youngs_modulus` of 1.3e7 Pa"
+                "its own weight carries it far here (the linear response to gravity at rest \
+                 moves it 644 % of its size): a stiffer material (`[material] youngs_modulus` of \
+                 1.3e7 Pa"
             ) && !by_weight.contains("`[test] stiffness`"),
             "{by_weight}"
         );
+        // A body that only a modulus past any material's would hold: the pins and the load.
+        let mut hopeless = heavy_row();
+        if let Some(b) = &mut hopeless.buckling {
+            b.firm_modulus = 6.6e14;
+        }
+        let w = assess(&[hopeless])
+            .untrusted
+            .into_iter()
+            .find(|w| w.contains("stretches an element"))
+            .unwrap();
+        assert!(
+            w.contains("no material is stiff enough to stop it: pins that hold more of it")
+                && !w.contains("6.6e14"),
+            "{w}"
+        );
+        // A body its weight hardly sags is not said to be stretched by it.
+        let mut light = heavy_row();
+        if let Some(b) = &mut light.buckling {
+            b.sag = 0.01;
+        }
+        let w = assess(&[light])
+            .untrusted
+            .into_iter()
+            .find(|w| w.contains("stretches an element"))
+            .unwrap();
+        assert!(!w.contains("its own weight carries"), "{w}");
     }
 
     /// A body whose buckling search stopped short is warned of when the bound it found is

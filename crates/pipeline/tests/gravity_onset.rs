@@ -149,15 +149,18 @@ fn the_pca_line_says_what_the_next_value_keeps() {
             && line.contains(" of the snapshots' energy"),
         "{line}"
     );
-    let energy = SCENE.replace("dimension = 3", "explained_energy = 0.999");
-    let (fit, _) = fit_of(&energy, "next-energy");
-    let line = fit.summary();
-    let next = fit.energy_dimension(0.9999);
-    assert!(next >= fit.chosen_k(), "{line}");
-    assert!(
-        line.contains(&format!(
-            "(`[pca] explained_energy` = 0.999; one 9 more, 0.9999, keeps {next})"
-        )),
-        "{line}"
-    );
+    // Printed with one decimal more than written, counted at the value printed.
+    for (f, next) in [("0.999", "0.9999"), ("0.995", "0.9995"), ("0.6", "0.96")] {
+        let energy = SCENE.replace("dimension = 3", &format!("explained_energy = {f}"));
+        let (fit, _) = fit_of(&energy, &format!("next-energy-{f}"));
+        let line = fit.summary();
+        let n = fit.energy_dimension(next.parse().unwrap());
+        assert!(n >= fit.chosen_k(), "{line}");
+        assert!(
+            line.contains(&format!(
+                "(`[pca] explained_energy` = {f}; one 9 more, {next}, keeps {n})"
+            )),
+            "{line}"
+        );
+    }
 }
