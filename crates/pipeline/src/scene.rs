@@ -563,16 +563,9 @@ impl Scene {
         let (lo, hi) = mesh.bounding_box();
         let in_body = |v: &usize| of_body(piece, *v);
         let held_now = pinned.iter().filter(|v| in_body(v)).count();
-        let wider = self.pin.iter().enumerate().find_map(|(i, p)| {
-            let plane = p.plane.as_ref()?;
-            let a = plane.axis.index();
-            let tolerance = WIDER_PIN * (hi[a] - lo[a]);
-            let mut wide = plane.clone();
-            wide.tolerance = Some(tolerance);
-            let selection = VertexSelection {
-                plane: Some(wide),
-                ..Default::default()
-            };
+        // How many of the body's vertices `selection` holds, where that is more than the pins
+        // hold now and not all on one line.
+        let holds_more = |selection: VertexSelection| {
             let at: Vec<fem_core::Vec3> = selection
                 .select(mesh, "pin")
                 .ok()?
@@ -580,15 +573,24 @@ impl Scene {
                 .filter(in_body)
                 .map(|v| mesh.vertices[v])
                 .collect();
-            let held = at.len();
-            (held > held_now && !collinear(&at)).then(|| {
-                format!(
-                    "pin[{i}]'s plane with `tolerance = {tolerance:.3e}` ({:.0} % of the body's \
-                     extent along {}) holds {held} vertices, or a `box` holds it fixed",
-                    100.0 * WIDER_PIN,
-                    ["x", "y", "z"][a],
-                )
-            })
+            (at.len() > held_now && !collinear(&at)).then_some(at.len())
+        };
+        let wider = self.pin.iter().enumerate().find_map(|(i, p)| {
+            let plane = p.plane.as_ref()?;
+            let a = plane.axis.index();
+            let tolerance = WIDER_PIN * (hi[a] - lo[a]);
+            let mut wide = plane.clone();
+            wide.tolerance = Some(tolerance);
+            let held = holds_more(VertexSelection {
+                plane: Some(wide),
+                ..Default::default()
+            })?;
+            Some(format!(
+                "pin[{i}]'s plane with `tolerance = {tolerance:.3e}` ({:.0} % of the body's \
+                 extent along {}) holds {held} vertices, or a `box` holds it fixed",
+                100.0 * WIDER_PIN,
+                ["x", "y", "z"][a],
+            ))
         });
         // A sphere pin around the point (a tester's, at a single vertex, was told of a plane's
         // tolerance it did not have): the radius that takes in the nearest
@@ -643,24 +645,14 @@ impl Scene {
                     let grow = 0.01 * diagonal * f64::from(1u32 << step);
                     let (min_text, min) = corner(b.min.map(|x| x - grow), f64::floor);
                     let (max_text, max) = corner(b.max.map(|x| x + grow), f64::ceil);
-                    let selection = VertexSelection {
+                    let held = holds_more(VertexSelection {
                         aabb: Some(fem_core::constraints::BoxSelector { min, max }),
                         ..Default::default()
-                    };
-                    let at: Vec<fem_core::Vec3> = selection
-                        .select(mesh, "pin")
-                        .ok()?
-                        .into_iter()
-                        .filter(in_body)
-                        .map(|v| mesh.vertices[v])
-                        .collect();
-                    let held = at.len();
-                    (held > held_now && !collinear(&at)).then(|| {
-                        format!(
-                            "pin[{i}]'s `box` grown to `min = {min_text}, max = {max_text}` \
-                             holds {held} vertices off one line"
-                        )
-                    })
+                    })?;
+                    Some(format!(
+                        "pin[{i}]'s `box` grown to `min = {min_text}, max = {max_text}` holds \
+                         {held} vertices off one line"
+                    ))
                 })
             })
         };
