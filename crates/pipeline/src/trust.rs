@@ -1029,7 +1029,35 @@ pub fn assess(rows: &[MethodReport]) -> Assessment {
                 pct(r.subspace_error)
             ));
         }
-        if r.training_distance > OUTSIDE_TRAINING {
+        // A trajectory that carried a vertex further from the full one than any swing about
+        // the pins reaches blew up: no training pose or extrapolation explains that (a paper
+        // reproducer's one-element rule moved the X four times its size, and was told its
+        // cubature rule extrapolated).
+        let size = rows.iter().find_map(|x| x.buckling.map(|b| b.size));
+        let blew_up = size.filter(|&s| s > 0.0 && r.max_vertex_error > BEYOND_SWING * s);
+        if let Some(size) = blew_up {
+            let remedy = if over_every_element(r.method).is_some() {
+                format!(
+                    "its cubature rule ({} element{}) may leave the body without stiffness \
+                     along some directions: {LARGER_RULE}",
+                    r.cubature_elements,
+                    if r.cubature_elements == 1 { "" } else { "s" }
+                )
+            } else {
+                "a smaller `[time] step` or a tighter `[reduced] tolerance` keeps its solves \
+                 closer"
+                    .to_string()
+            };
+            out.push(format!(
+                "{}: a vertex ends up {:.3} m from its full-space position, {:.1} times the \
+                 body's {size:.3} m bounding-box diagonal: the reduced trajectory blew up, \
+                 which no training data explains; {remedy}",
+                r.method,
+                r.max_vertex_error,
+                r.max_vertex_error / size
+            ));
+        }
+        if blew_up.is_none() && r.training_distance > OUTSIDE_TRAINING {
             // A time no schedule reached: a body that keeps moving under gravity (sagging,
             // toppling) goes where the shorter schedules never took it.
             // The same subspace over every element kept within the training poses: the rule
@@ -1974,6 +2002,47 @@ mod tests {
             named((37, 37))
         );
         assert!(!w.contains("in `[pca]`"), "{w}");
+    }
+
+    /// A reduced trajectory that carries a vertex more than twice the body's size from the full
+    /// one blew up: said so, with the rule named for a cubature method, and not called an
+    /// extrapolation; one within that is not.
+    #[test]
+    fn a_reduced_trajectory_that_blows_up_is_not_called_an_extrapolation() {
+        let full = MethodReport {
+            buckling: Some(crate::run::Buckling {
+                load_factor: None,
+                sag: 0.01,
+                size: 0.277,
+                standing_modulus: None,
+                firm_modulus: 1e6,
+                converged: true,
+            }),
+            ..row(Method::Full, 0.0, 0.0)
+        };
+        let method = |max_vertex_error| MethodReport {
+            max_vertex_error,
+            cubature_elements: 1,
+            training_distance: 0.94,
+            training_distance_time: 0.5,
+            ..row(Method::PcaCubature, 1.5, 0.01)
+        };
+        let w = assess(&[full.clone(), method(1.16)]).untrusted;
+        let line = w
+            .iter()
+            .find(|l| l.contains("blew up"))
+            .unwrap_or_else(|| panic!("{w:#?}"));
+        assert!(
+            line.starts_with(
+                "pca-cubature: a vertex ends up 1.160 m from its full-space position, 4.2 times \
+                 the body's 0.277 m bounding-box diagonal"
+            ) && line.contains("its cubature rule (1 element) may leave"),
+            "{line}"
+        );
+        assert!(w.iter().all(|l| !l.contains("extrapolates")), "{w:#?}");
+        let held = assess(&[full, method(0.3)]).untrusted;
+        assert!(held.iter().all(|l| !l.contains("blew up")), "{held:#?}");
+        assert!(held.iter().any(|l| l.contains("extrapolates")), "{held:#?}");
     }
 
     /// The settings that keep more PCA coefficients are spelled out in the first printed line
