@@ -719,7 +719,33 @@ impl<S: Subspace> ReducedSimulator<S> {
         }
         self.lbfgs.reset();
         z.copy_from_slice(&self.state.z);
-        let mut s = newton(&mut obj, z, params)?;
+        // A retry that fails too is said as both solvers' failure, with every iteration spent
+        // (a paper reproducer's scene of `[reduced] method = "lbfgs"` read "Newton did not
+        // converge", as the full-space simulator's message once did).
+        const BOTH: &str = "L-BFGS, then reduced Newton from the step's start";
+        let mut s = newton(&mut obj, z, params).map_err(|e| match e {
+            FemError::NotConverged {
+                step,
+                iterations,
+                residual,
+                tolerance,
+                ..
+            } => FemError::NotConverged {
+                solver: BOTH,
+                step,
+                iterations: iterations + spent,
+                residual,
+                tolerance,
+            },
+            FemError::LineSearchFailed {
+                step, iteration, ..
+            } => FemError::LineSearchFailed {
+                solver: BOTH,
+                step,
+                iteration: iteration + spent,
+            },
+            e => e,
+        })?;
         s.iterations += spent;
         Ok(s)
     }

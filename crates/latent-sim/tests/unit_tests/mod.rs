@@ -1300,4 +1300,13 @@ fn a_preconditioner_that_stops_serving_is_rebuilt_within_the_solve() {
     let (rebuilt, fell_back, _) = step(&mut red, 3);
     assert!(!rebuilt && fell_back);
     assert!(!step(&mut red, 500).0);
+    // Held to one iteration, neither finishes: the failure is said as both solvers', with
+    // every iteration spent (it read "Newton did not converge" under an L-BFGS scene).
+    red.solver.max_iterations = 1;
+    let e = red.step().unwrap_err().to_string();
+    assert!(
+        e.starts_with("L-BFGS, then reduced Newton from the step's start did not converge")
+            && e.contains("after 2 iterations"),
+        "{e}"
+    );
 }
