@@ -151,35 +151,30 @@ impl StageSummary for SnapshotSet {
 
 impl StageSummary for PcaFit {
     fn summary(&self) -> String {
-        pca_line(self, None, false, None)
+        pca_line(self, None)
     }
 
     fn summary_in(&self, scene: &Scene) -> String {
-        let asked = scene.pca.gravity_directions.or(
-            // Absent, the default count is asked where the test appends any.
-            (self.appended > 0).then_some(DEFAULT_GRAVITY_DIRECTIONS),
-        );
-        // A quasi-static scene's fall has one position, its static sag
-        // (`fem_core::step_norm::gravity_onset`): the others were never offered.
-        let offered = asked.map(|a| if scene.time.quasi_static { a.min(1) } else { a });
-        pca_line(
-            self,
-            offered,
-            scene.pca.gravity_directions.is_none(),
-            Some(scene.pca.max_dimension),
-        )
+        pca_line(self, Some(scene))
     }
 }
 
-/// The `pca` stage's line; `gravity_asked`, the positions of the fall the stage was to append,
-/// `defaulted` where the scene did not name them (a tester read "`[pca] gravity_directions` =
-/// 3" as a setting its scene did not have).
-fn pca_line(
-    fit: &PcaFit,
-    gravity_asked: Option<usize>,
-    defaulted: bool,
-    max_dimension: Option<usize>,
-) -> String {
+/// The `pca` stage's line; with the `scene` it was fitted for, also how many positions of the
+/// fall it was to append (said as the default's where the scene did not name them: a tester
+/// read "`[pca] gravity_directions` = 3" as a setting its scene did not have) and whether the
+/// next value of its rule passes `max_dimension`.
+fn pca_line(fit: &PcaFit, scene: Option<&Scene>) -> String {
+    let gravity_asked = scene.and_then(|scene| {
+        let asked = scene.pca.gravity_directions.or(
+            // Absent, the default count is asked where the test appends any.
+            (fit.appended > 0).then_some(DEFAULT_GRAVITY_DIRECTIONS),
+        );
+        // A quasi-static scene's fall has one position, its static sag
+        // (`fem_core::step_norm::gravity_onset`): the others were never offered.
+        asked.map(|a| if scene.time.quasi_static { a.min(1) } else { a })
+    });
+    let defaulted = scene.is_some_and(|s| s.pca.gravity_directions.is_none());
+    let max_dimension = scene.map(|s| s.pca.max_dimension);
     let why = match fit.rule {
         pca::DimensionRule::Count(k) => match 1.0 - fit.basis.explained_energy(k) {
             left if left > 0.0 => format!(

@@ -638,9 +638,11 @@ impl Scene {
             (format!("[{}]", text.join(", ")), value)
         };
         let boxed = || {
+            if diagonal.is_nan() || diagonal <= 0.0 {
+                return None;
+            }
             self.pin.iter().enumerate().find_map(|(i, p)| {
                 let b = p.aabb.as_ref()?;
-                (diagonal > 0.0).then_some(())?;
                 (0..8).find_map(|step| {
                     let grow = 0.01 * diagonal * f64::from(1u32 << step);
                     let (min_text, min) = corner(b.min.map(|x| x - grow), f64::floor);

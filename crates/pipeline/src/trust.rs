@@ -1530,6 +1530,13 @@ mod tests {
         );
         // Where its weight carries it far, the weight is named and the modulus leads; the pins
         // and lighter pulls that did nothing are not offered.
+        let stretch_line = |r: MethodReport| {
+            assess(&[r])
+                .untrusted
+                .into_iter()
+                .find(|w| w.contains("stretches an element"))
+                .unwrap()
+        };
         let heavy_row = || {
             let mut heavy = full(Some((17.0, 0.9)));
             if let Some(c) = &mut heavy.compression {
@@ -1545,11 +1552,7 @@ mod tests {
             });
             heavy
         };
-        let by_weight = assess(&[heavy_row()])
-            .untrusted
-            .into_iter()
-            .find(|w| w.contains("stretches an element"))
-            .unwrap();
+        let by_weight = stretch_line(heavy_row());
         assert!(
             by_weight.contains(
                 "its own weight carries it far here (the linear response to gravity at rest \
@@ -1563,11 +1566,7 @@ mod tests {
         if let Some(b) = &mut hopeless.buckling {
             b.firm_modulus = 6.6e14;
         }
-        let w = assess(&[hopeless])
-            .untrusted
-            .into_iter()
-            .find(|w| w.contains("stretches an element"))
-            .unwrap();
+        let w = stretch_line(hopeless);
         assert!(
             w.contains("no material is stiff enough to stop it: pins that hold more of it")
                 && !w.contains("6.6e14"),
@@ -1578,11 +1577,7 @@ mod tests {
         if let Some(b) = &mut light.buckling {
             b.sag = 0.01;
         }
-        let w = assess(&[light])
-            .untrusted
-            .into_iter()
-            .find(|w| w.contains("stretches an element"))
-            .unwrap();
+        let w = stretch_line(light);
         assert!(!w.contains("its own weight carries"), "{w}");
     }
 
